@@ -5,18 +5,29 @@ import tempfile
 from contextlib import contextmanager
 
 
-@contextmanager
-def atomic_path(path, suffix=None):
-    """Yield a temporary path beside `path`; rename it onto `path` only if the block succeeds.
+def temp_name(path):
+    """A fresh hidden temporary name beside `path` that keeps its extension.
 
-    The temporary name keeps the extension (Blender and PIL pick formats by extension).
+    Blender and PIL pick formats by extension; the leading dot and '.tmp' mark it as stale
+    if a run is killed (render.remove_stale_temporaries deletes those).
     """
     path = os.fspath(path)
     d = os.path.dirname(path) or "."
     os.makedirs(d, exist_ok=True)
     base, ext = os.path.splitext(os.path.basename(path))
-    fd, tmp = tempfile.mkstemp(prefix="." + base + ".", suffix=".tmp" + (suffix or ext), dir=d)
+    fd, tmp = tempfile.mkstemp(prefix="." + base + ".", suffix=".tmp" + ext, dir=d)
     os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; finished files get the usual mode
+    return tmp
+
+
+@contextmanager
+def atomic_path(path):
+    """Yield a temporary path beside `path`; rename it onto `path` only if the block succeeds."""
+    path = os.fspath(path)
+    tmp = temp_name(path)
     try:
         yield tmp
         os.replace(tmp, path)

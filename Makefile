@@ -1,0 +1,52 @@
+# 3DArticCyclists — `make demo` runs the pipeline on built-in defaults, `make test` the tests.
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+OUT ?= out
+DEMO := $(OUT)/demo
+BLENDER ?= blender
+
+.PHONY: setup test test-all demo bench bikes views contact-sheet addon clean
+
+setup: $(STAMP)
+
+$(STAMP): requirements.txt
+	@$(PYTHON) -c 'import sys; assert sys.version_info[:2] == (3, 11), "Python 3.11 is required (bpy 5.0.1 is cp311)"'
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -r requirements.txt
+	@$(PY) -c 'import torch, bpy; assert torch.__version__.startswith("2.13.0"), torch.__version__'
+	touch $(STAMP)
+
+test: setup
+	$(PY) -m pytest
+
+test-all: setup
+	$(PY) -m pytest -m ""
+
+# The demo: a few procedural bikes, their 36 views per part, a contact sheet.
+demo: setup
+	$(PY) blender_scripts/make_bikes.py --out $(DEMO) --count 3 --seed 0 --no-extras
+	for b in $(DEMO)/bikes/*/; do $(PY) blender_scripts/render_views.py --bike $$b --parts all || exit 1; done
+	$(PY) -m splatting contact-sheet --bikes $(DEMO)/bikes --out $(DEMO)/contact_sheet.png
+	@echo "demo: bikes and views in $(DEMO)/bikes, contact sheet $(DEMO)/contact_sheet.png"
+
+bench: setup
+	$(PY) -m bench.run --out $(OUT)/bench
+
+# The full procedural library (23 bicycles over >= 5 styles + scooter + motorcycle).
+bikes: setup
+	$(PY) blender_scripts/make_bikes.py --out $(OUT) --count 23 --seed 0
+
+views: bikes
+	for b in $(OUT)/bikes/*/; do $(PY) blender_scripts/render_views.py --bike $$b --parts all || exit 1; done
+
+contact-sheet: setup
+	$(PY) blender_scripts/make_bikes.py --out $(OUT) --count 23 --seed 0
+	for b in $(OUT)/bikes/*/; do $(PY) blender_scripts/render_views.py --bike $$b --parts whole --views 3 || exit 1; done
+	$(PY) -m splatting contact-sheet --bikes $(OUT)/bikes --view 3 --out docs/img/bikes.png
+
+clean:
+	rm -rf $(OUT)
