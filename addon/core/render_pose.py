@@ -1,0 +1,116 @@
+"""The Blender oracle: pose the articulated mesh with an 8-DoF pose and render it from a camera.
+
+This is the ground truth every Gaussian-space result is checked against (DESIGN.md).
+"""
+import json
+import math
+import os
+
+import numpy as np
+
+from . import frames, render
+from .script import UserError
+
+POSE_FIELDS = ("theta_p_deg", "theta_s_deg", "theta_x_deg", "theta_y_deg", "theta_z_deg", "t_x_m", "t_y_m", "t_z_m")
+
+
+def parse_pose(text):
+    """'p,s,X,Y,Z,tx,ty,tz' (degrees, metres) -> list of 8 finite floats."""
+    try:
+        vals = [float(v) for v in str(text).split(",")]
+    except ValueError:
+        raise UserError(f"--pose must be 8 comma-separated numbers p,s,X,Y,Z,tx,ty,tz, got '{text}'")
+    if len(vals) != 8:
+        raise UserError(f"--pose needs 8 values (p,s,X,Y,Z,tx,ty,tz), got {len(vals)}")
+    bad = [POSE_FIELDS[i] for i, v in enumerate(vals) if not math.isfinite(v)]
+    if bad:
+        raise UserError(f"--pose has a non-finite value in {bad[0]}")
+    return vals
+
+
+def global_matrix(pose):
+    """H_g = T(t) Rz Ry Rx in the canonical frame (4x4)."""
+    ax, ay, az = (math.radians(v) for v in pose[2:5])
+    cx, sx, cy, sy, cz, sz = math.cos(ax), math.sin(ax), math.cos(ay), math.sin(ay), math.cos(az), math.sin(az)
+    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    H = np.eye(4)
+    H[:3, :3] = Rz @ Ry @ Rx
+    H[:3, 3] = pose[5:8]
+    return H
+
+
+def load_camera(spec, bike_dir):
+    """'FILE:cameraNNNN' (a SHERF cameras.json) or 'FILE' holding one {"K","R","T"}.
+
+    A FILE that does not exist as given is looked up in the bike's views/whole/.
+    """
+    path, _, name = spec.partition(":") if not os.path.isfile(spec) else (spec, "", "")
+    if not os.path.isfile(path):
+        alt = os.path.join(bike_dir, "views", "whole", path)
+        if not os.path.isfile(alt):
+            raise UserError(f"no camera file: {path}")
+        path = alt
+    try:
+        with open(path) as f:
+            data = json.load(f)
+    except json.JSONDecodeError as e:
+        raise UserError(f"{path} is not valid JSON: {e}")
+    cam = data.get(name) if name else data
+    if cam is None:
+        raise UserError(f"{path} has no camera '{name}'")
+    try:
+        K, R, T = (np.asarray(cam[k], float) for k in ("K", "R", "T"))
+        K, R, T = K.reshape(3, 3), R.reshape(3, 3), T.reshape(3)
+    except (KeyError, ValueError, TypeError):
+        raise UserError(f"camera '{name or path}' needs K (3x3), R (3x3) and T (3)")
+    return K, R, T
+
+
+def render_pose(bike_dir, pose, camera, out, keypoints_out=None, settings=None, lights_follow=True):
+    import bpy
+
+    from .articulation import apply_pose, posed_keypoints
+    from .atomic import temp_name, write_json
+    from .bike_asset import open_bike
+
+    K, R, T = load_camera(camera, bike_dir)
+    bike = open_bike(bike_dir)
+    scene = bpy.context.scene
+    size = int(round(2 * K[0, 2]))
+    if abs(K[0, 0] - K[1, 1]) > 1e-6 * K[0, 0] or abs(2 * K[1, 2] - size) > 0.5:
+        raise UserError("render_pose supports square pixels with the principal point at the image centre")
+    s = settings or render.RenderSettings()
+    from dataclasses import replace
+
+    s = replace(s, size=size)
+    render.configure_cycles(scene, s)
+    render.setup_lighting(scene)
+    apply_pose(bike["armature"], pose[0], pose[1], tuple(pose[2:5]), tuple(pose[5:8]))
+    if lights_follow:
+        # the Gaussians carry the shading they were trained with; moving the sun with the bike
+        # keeps that shading, so the comparison measures geometry and not relighting
+        import mathutils
+
+        Hb = mathutils.Matrix(frames.matrix_to_blender(global_matrix(pose)).tolist())
+        for o in scene.objects:
+            if o.type == "LIGHT":
+                o.matrix_world = Hb @ o.matrix_world
+    render.show_only(scene, list(bike["parts"].values()))
+    cam = render.ensure_camera(scene, size, K[0, 0])
+    render.place_camera(cam, R, T)
+    bpy.context.view_layer.update()
+    base, _ = os.path.splitext(out)
+    paths = {"rgba": out, "img": base + "_rgb.jpg", "mask": base + "_mask.png"}
+    tmp = temp_name(out)
+    try:
+        render.render_still(scene, tmp)
+        render.derive_outputs(tmp, paths)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    if keypoints_out:
+        write_json(keypoints_out, {"frame": "canonical", "units": "m", "pose": dict(zip(POSE_FIELDS, pose)),
+                                   "keypoints": {k: list(map(float, v)) for k, v in posed_keypoints(bike["armature"]).items()}})
+    return paths

@@ -1,0 +1,105 @@
+"""`make bench`: measure every stage on this machine -> out/bench/results.json + report.md + charts.
+
+Each stage module exposes run(results, ...) and adds only the keys it measured in this run
+(DESIGN.md's benchmark contract); a stage that fails is reported and its keys stay absent.
+"""
+import argparse
+import importlib
+import json
+import os
+import platform
+import sys
+import time
+import traceback
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+# name -> (module, how to call run)
+STAGES = {
+    "raster": ("bench.raster", lambda m, r, out: m.run(r)),
+    "bike_pose": ("bench.bike_pose", lambda m, r, out: m.run(r)),
+    "render": ("bench.render", lambda m, r, out: m.run(r, out)),
+    "train_parts": ("bench.train_parts", lambda m, r, out: m.run(r, os.path.join(out, "bikes"))),
+}
+
+PAPER = {
+    "render_view_s_median": "17–20 s per image",
+    "bike_pose_ms_100k": "320 ms per pose",
+    "ik_iter_ms": "860 ms per iteration",
+    "rider_repose_ms": "1740 ms per frame",
+}
+TARGETS = {
+    "render_view_s_median": "≤ 1.5 s",
+    "render_psnr_vs_ref_db": "≥ 35 dB",
+    "raster_fwdbwd_s": "≤ 0.3 s at 50k",
+    "train_parts": "≥ 30 dB in ≤ 600 s per part",
+    "bike_pose_ms_100k": "≤ 5 ms",
+}
+
+
+def fmt(v):
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    if isinstance(v, dict):
+        return ", ".join(f"{k}: {fmt(x)}" for k, x in v.items())
+    if isinstance(v, list):
+        return f"{len(v)} rows (see below)"
+    return str(v)
+
+
+def report(results, out_dir, timings):
+    lines = ["# Benchmark report", "", f"Machine: {platform.machine()}, {os.cpu_count()} cores, "
+             f"Python {platform.python_version()}; measured {time.strftime('%Y-%m-%d %H:%M')}.", "",
+             "| key | this run | target | paper |", "| --- | --- | --- | --- |"]
+    for k, v in results.items():
+        lines.append(f"| `{k}` | {fmt(v)} | {TARGETS.get(k, '')} | {PAPER.get(k, '')} |")
+    if results.get("train_parts"):
+        lines += ["", "## Per-part training (held-out views)", "", "| bike | part | PSNR | SSIM | Gaussians | wall s |",
+                  "| --- | --- | --- | --- | --- | --- |"]
+        for r in results["train_parts"]:
+            lines.append(f"| {r['bike']} | {r['part']} | {r['psnr']:.2f} | {r['ssim']:.4f} | {r['gaussians']} | {r['wall_s']:.0f} |")
+    lines += ["", "## Stage wall times", ""] + [f"- {k}: {v:.0f} s" for k, v in timings.items()]
+    charts = sorted(f for f in os.listdir(out_dir) if f.endswith(".png"))
+    if charts:
+        lines += ["", "## Charts", ""] + [f"![{c}]({c})" for c in charts]
+    with open(os.path.join(out_dir, "report.md"), "w") as f:
+        f.write("\n".join(lines) + "\n")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m bench.run", description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench"))
+    ap.add_argument("--stages", default=",".join(STAGES), help=f"comma list of {', '.join(STAGES)}")
+    args = ap.parse_args(argv)
+    stages = [s.strip() for s in args.stages.split(",") if s.strip()]
+    unknown = [s for s in stages if s not in STAGES]
+    if unknown:
+        sys.stderr.write(f"bench: error: unknown stage '{unknown[0]}' (choose from {', '.join(STAGES)})\n")
+        return 2
+    os.makedirs(args.out, exist_ok=True)
+    results, timings, failed = {}, {}, []
+    for name in stages:
+        mod_name, call = STAGES[name]
+        print(f"== bench stage {name}", flush=True)
+        t = time.time()
+        try:
+            call(importlib.import_module(mod_name), results, args.out)
+        except Exception:
+            traceback.print_exc()
+            failed.append(name)
+        timings[name] = time.time() - t
+        tmp = os.path.join(args.out, ".results.json.tmp")
+        with open(tmp, "w") as f:
+            json.dump(results, f, indent=1)
+        os.replace(tmp, os.path.join(args.out, "results.json"))
+    report(results, args.out, timings)
+    print(json.dumps(results, indent=1))
+    if failed:
+        sys.stderr.write(f"bench: stages failed: {', '.join(failed)}\n")
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
