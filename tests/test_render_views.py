@@ -160,7 +160,7 @@ def test_kill_and_resume(bike, tmp_path):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--bike", "/no/such/bike"], "no bike folder"),
+    (["--bike", "/no/such/bike"], "not found"),
     (["--parts", "wheels"], "unknown part"),
     (["--views", "0,99"], "out of range"),
     (["--views", "a,b"], "comma-separated"),

@@ -1,4 +1,5 @@
 """The render_views stage: a bike folder -> views/<part>/ for each part and the whole bike."""
+import json
 import os
 from dataclasses import replace
 
@@ -38,7 +39,7 @@ def render_bike(bike_dir, parts="all", views=None, samples=None, denoise=None, s
     from .bike_asset import open_bike  # opens bike.blend; UserError if missing/unreadable
 
     if not os.path.isdir(bike_dir):
-        raise UserError(f"no bike folder: {bike_dir}")
+        raise UserError(f"bike folder not found: {bike_dir}")
     view_list = parse_views(views)
     bike = open_bike(bike_dir)
     part_objs = bike["parts"]
@@ -61,13 +62,15 @@ def render_bike(bike_dir, parts="all", views=None, samples=None, denoise=None, s
     render.configure_cycles(scene, settings)
     render.setup_lighting(scene)
     kp = bike["keypoints"]
+    with open(os.path.join(bike_dir, "keypoints.json")) as f:
+        kp_parts = json.load(f).get("parts", {})  # which keypoints each part carries
     results = {}
     for part in chosen:
         if part == render.WHOLE:
-            objs, names = list(part_objs.values()), list(kp["keypoints"])
+            objs, names = list(part_objs.values()), list(kp)
         else:
-            objs, names = [part_objs[part]], kp.get("parts", {}).get(part, [])
-        part_kp = {k: kp["keypoints"][k] for k in names if k in kp["keypoints"]}
+            objs, names = [part_objs[part]], kp_parts.get(part, [])
+        part_kp = {k: kp[k] for k in names if k in kp}
         out = os.path.join(bike_dir, "views", part)
         results[part] = render.render_part(scene, objs, out, part_kp, views=view_list, settings=settings,
                                            progress=progress, label=f"{os.path.basename(os.path.normpath(bike_dir))}/{part}")
