@@ -46,7 +46,7 @@ def worker(bike_dir, work_dir):
     objs = list(bike["parts"].values())
     scene = bpy.context.scene
     render.setup_lighting(scene)
-    kp = bike["keypoints"]["keypoints"]
+    kp = bike["keypoints"]
 
     def render_views(settings, views, tag):
         render.configure_cycles(scene, settings)

@@ -28,19 +28,6 @@ def parse_pose(text):
     return vals
 
 
-def global_matrix(pose):
-    """H_g = T(t) Rz Ry Rx in the canonical frame (4x4)."""
-    ax, ay, az = (math.radians(v) for v in pose[2:5])
-    cx, sx, cy, sy, cz, sz = math.cos(ax), math.sin(ax), math.cos(ay), math.sin(ay), math.cos(az), math.sin(az)
-    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    H = np.eye(4)
-    H[:3, :3] = Rz @ Ry @ Rx
-    H[:3, 3] = pose[5:8]
-    return H
-
-
 def load_camera(spec, bike_dir):
     """'FILE:cameraNNNN' (a SHERF cameras.json) or 'FILE' holding one {"K","R","T"}.
 
@@ -71,7 +58,7 @@ def load_camera(spec, bike_dir):
 def render_pose(bike_dir, pose, camera, out, keypoints_out=None, settings=None, lights_follow=True):
     import bpy
 
-    from .articulation import apply_pose, posed_keypoints
+    from .articulation import apply_pose, global_matrix, posed_keypoints
     from .atomic import temp_name, write_json
     from .bike_asset import open_bike
 
@@ -93,7 +80,7 @@ def render_pose(bike_dir, pose, camera, out, keypoints_out=None, settings=None, 
         # keeps that shading, so the comparison measures geometry and not relighting
         import mathutils
 
-        Hb = mathutils.Matrix(frames.matrix_to_blender(global_matrix(pose)).tolist())
+        Hb = mathutils.Matrix(frames.matrix_to_blender(global_matrix(pose[2:5], pose[5:8])).tolist())
         for o in scene.objects:
             if o.type == "LIGHT":
                 o.matrix_world = Hb @ o.matrix_world

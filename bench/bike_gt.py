@@ -1,0 +1,148 @@
+"""Gaussian-space bike vs Blender at the same 8-DoF pose (issue 4's ground truth).
+
+For random poses (θs in ±60°, θp over the full circle, yaw over the full circle, roll and
+pitch in ±15°, translations that keep the bike in view) and random ring cameras, render the
+composed part Gaussians with the project's rasterizer and the articulated mesh with Blender
+(blender_scripts/render_pose.py's core, lights following the bike), then compare mask IoU
+(alpha > 0.5), PSNR (RGB on black, whole 512² image) and the posed keypoints.
+Key: bike_gt = {poses, iou_mean, psnr_mean, iou_min, psnr_min}; table and worst-case picture
+beside results.json.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def sample_poses(n, seed=0):
+    rng = np.random.default_rng(seed)
+    poses = np.stack([
+        rng.uniform(0, 360, n),      # theta_p: full circle
+        rng.uniform(-60, 60, n),     # theta_s
+        rng.uniform(-15, 15, n),     # roll (about X)
+        rng.uniform(0, 360, n),      # yaw (about Y, up)
+        rng.uniform(-15, 15, n),     # pitch (about Z)
+        rng.uniform(-0.3, 0.3, n),   # t_x
+        rng.uniform(-0.1, 0.1, n),   # t_y
+        rng.uniform(-0.3, 0.3, n),   # t_z
+    ], 1)
+    cams = rng.integers(0, 36, n)
+    return poses, cams
+
+
+def blender_worker(bike_dir, poses_json, out_dir, samples):
+    """Runs under bpy: one render + posed keypoints per pose."""
+    sys.path.insert(0, ROOT)
+    from dataclasses import replace
+
+    from addon.core import render
+    from addon.core.render_pose import render_pose
+
+    with open(poses_json) as f:
+        job = json.load(f)
+    s = replace(render.RenderSettings(), samples=samples)
+    for i, (pose, cam) in enumerate(zip(job["poses"], job["cameras"])):
+        out = os.path.join(out_dir, f"gt_{i:03d}.png")
+        if os.path.isfile(out) and os.path.isfile(out[:-4] + "_kp.json"):
+            continue
+        render_pose(bike_dir, pose, f"{os.path.join(bike_dir, 'views', 'whole', 'cameras.json')}:camera{cam:04d}",
+                    out, out[:-4] + "_kp.json", s)
+        print(f"  blender pose {i + 1}/{len(job['poses'])}", flush=True)
+
+
+def find_bike(bikes_dir):
+    for b in sorted(os.listdir(bikes_dir)) if os.path.isdir(bikes_dir) else []:
+        d = os.path.join(bikes_dir, b)
+        g = os.path.join(d, "gaussians")
+        if os.path.isfile(os.path.join(g, "frame.ply")) and os.path.isfile(os.path.join(g, "steering.ply")):
+            return d
+    return None
+
+
+def compare(bike_dir, poses, cams, gt_dir):
+    import torch
+    from PIL import Image
+
+    from splatting.bike import BikeModel
+    from splatting.cameras import load_cameras
+    from splatting.rasterize import render_gaussians
+
+    model = BikeModel.load(bike_dir)
+    ring, _ = load_cameras(os.path.join(bike_dir, "views", "whole", "cameras.json"))
+    rows, renders = [], []
+    with torch.no_grad():
+        for i, (pose, cam) in enumerate(zip(poses, cams)):
+            posed = model.pose(torch.tensor(pose, dtype=torch.float64))
+            out = render_gaussians(posed.gaussians, ring[int(cam)])
+            rgb = out["rgb"].clamp(0, 1).numpy()
+            alpha = out["alpha"].numpy()
+            gt = np.asarray(Image.open(os.path.join(gt_dir, f"gt_{i:03d}.png")).convert("RGBA")).astype(np.float64) / 255
+            gt_rgb = gt[..., :3] * gt[..., 3:4]
+            m_gt, m = gt[..., 3] > 0.5, alpha > 0.5
+            iou = float((m & m_gt).sum() / max(1, (m | m_gt).sum()))
+            mse = float(((rgb - gt_rgb) ** 2).mean())
+            psnr = 10 * np.log10(1.0 / max(mse, 1e-12))
+            with open(os.path.join(gt_dir, f"gt_{i:03d}_kp.json")) as f:
+                kp_gt = json.load(f)["keypoints"]
+            kp_err = max(float(np.linalg.norm(posed.keypoints[k].numpy() - np.asarray(kp_gt[k]))) for k in kp_gt)
+            rows.append({"pose": [round(float(v), 3) for v in pose], "camera": int(cam), "iou": iou,
+                         "psnr": float(psnr), "kp_err_mm": kp_err * 1000})
+            renders.append((gt_rgb, rgb))
+    return rows, renders
+
+
+def side_by_side(gt, pred, path):
+    from PIL import Image
+
+    diff = np.abs(gt - pred).mean(-1, keepdims=True).repeat(3, -1) * 4
+    strip = np.concatenate([gt, pred, np.clip(diff, 0, 1)], 1)
+    Image.fromarray((strip * 255).round().astype(np.uint8)).save(path)
+
+
+def run(results, out_dir, n_poses=20, seed=0, samples=16):
+    bike_dir = find_bike(os.path.join(out_dir, "bikes"))
+    if bike_dir is None:
+        print("  bike_gt: no bike with trained part Gaussians under", os.path.join(out_dir, "bikes"), "- skipped")
+        return None
+    poses, cams = sample_poses(n_poses, seed)
+    gt_dir = os.path.join(out_dir, "bike_gt")
+    os.makedirs(gt_dir, exist_ok=True)
+    job = os.path.join(gt_dir, "poses.json")
+    with open(job, "w") as f:
+        json.dump({"poses": poses.tolist(), "cameras": cams.tolist()}, f)
+    subprocess.run([sys.executable, __file__, "--worker", bike_dir, job, gt_dir, str(samples)], check=True)
+    rows, renders = compare(bike_dir, poses, cams, gt_dir)
+    iou, ps = np.array([r["iou"] for r in rows]), np.array([r["psnr"] for r in rows])
+    worst = int(np.argmin(ps))
+    side_by_side(*renders[worst], os.path.join(out_dir, "bike_gt_worst.png"))
+    results["bike_gt"] = {"poses": len(rows), "iou_mean": float(iou.mean()), "psnr_mean": float(ps.mean()),
+                          "iou_min": float(iou.min()), "psnr_min": float(ps.min()),
+                          "kp_err_max_mm": float(max(r["kp_err_mm"] for r in rows))}
+    lines = ["| # | pose p,s,X,Y,Z,tx,ty,tz | camera | IoU | PSNR dB | keypoint err mm |", "|---|---|---|---|---|---|"]
+    for i, r in enumerate(rows):
+        lines.append(f"| {i} | {', '.join(f'{v:.1f}' for v in r['pose'][:5])}, {', '.join(f'{v:.2f}' for v in r['pose'][5:])} "
+                     f"| {r['camera']} | {r['iou']:.4f} | {r['psnr']:.2f} | {r['kp_err_mm']:.4f} |")
+    lines.append(f"\nWorst case: pose {worst} (GT | Gaussians | 4x |diff|) in bike_gt_worst.png; bike {os.path.basename(bike_dir)}.")
+    with open(os.path.join(out_dir, "bike_gt_table.md"), "w") as f:
+        f.write("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return rows
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description="bike ground-truth comparison (worker runs under bpy)")
+    ap.add_argument("--worker", nargs=4, metavar=("BIKE", "POSES_JSON", "OUT_DIR", "SAMPLES"))
+    ap.add_argument("--out", help="bench output folder holding bikes/ (standalone run)")
+    a = ap.parse_args()
+    if a.worker:
+        blender_worker(a.worker[0], a.worker[1], a.worker[2], int(a.worker[3]))
+    else:
+        sys.path.insert(0, ROOT)
+        res = {}
+        run(res, a.out)
+        print(json.dumps(res, indent=1))
