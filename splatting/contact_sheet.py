@@ -17,7 +17,7 @@ def add_arguments(p):
 
 
 def contact_sheet(bikes_dir, out, view=3, cols=6, tile=256):
-    from PIL import Image, ImageDraw
+    from PIL import Image, ImageDraw, ImageFont
 
     pattern = os.path.join(bikes_dir, "*", "views", "whole", "rgba", f"camera{view:04d}", "0000.png")
     files = sorted(glob.glob(pattern))
@@ -25,7 +25,8 @@ def contact_sheet(bikes_dir, out, view=3, cols=6, tile=256):
         raise UserError(f"no rendered views match {pattern}")
     rows = math.ceil(len(files) / cols)
     cols = min(cols, len(files))
-    label_h = 18
+    label_h = 22
+    font = ImageFont.load_default(size=15)
     sheet = Image.new("RGB", (cols * tile, rows * (tile + label_h)), (236, 238, 240))
     draw = ImageDraw.Draw(sheet)
     for i, f in enumerate(files):
@@ -42,7 +43,7 @@ def contact_sheet(bikes_dir, out, view=3, cols=6, tile=256):
         crop = crop.resize((tile, tile), Image.LANCZOS)
         x, y = (i % cols) * tile, (i // cols) * (tile + label_h)
         sheet.paste(crop, (x, y), crop)
-        draw.text((x + 4, y + tile + 2), label, fill=(30, 30, 30))
+        draw.text((x + 6, y + tile + 2), label, fill=(30, 30, 30), font=font)
     with atomic_path(out) as tmp:
         sheet.save(tmp, format="PNG")
     return len(files)
