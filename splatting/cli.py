@@ -14,6 +14,7 @@ COMMANDS = {
     "train": ("splatting.train", "train one part's Gaussians on its 36 rendered views"),
     "pose-bike": ("splatting.pose_bike", "re-pose a bike's part Gaussians with the 8-DoF pose"),
     "contact-sheet": ("splatting.contact_sheet", "one view of every bike in a library on one PNG"),
+    "rider": ("splatting.rider.command", "list the rider roster; export a rider mesh (rest or posed)"),
 }
 
 

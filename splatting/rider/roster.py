@@ -1,0 +1,61 @@
+"""The rider roster (`blend_assets/riders.yaml`): selectable people and their anny phenotypes."""
+import re
+from pathlib import Path
+
+import yaml
+
+from ..errors import UserError
+
+ROSTER_PATH = Path(__file__).resolve().parents[2] / "blend_assets" / "riders.yaml"
+PHENOTYPE_KEYS = ("gender", "age", "muscle", "weight", "height", "proportions")
+COLOR_KEYS = ("skin", "top", "bottom", "shoes", "helmet")
+_HEX = re.compile(r"^#[0-9a-fA-F]{6}$")
+
+
+def load_roster(path=ROSTER_PATH):
+    """List of rider dicts, validated (UserError on a bad file)."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise UserError(f"rider roster not found: {path}") from None
+    except yaml.YAMLError as e:
+        raise UserError(f"bad YAML in {path}: {str(e).splitlines()[0]}") from None
+    riders = (data or {}).get("riders") if isinstance(data, dict) else None
+    if not isinstance(riders, list) or not riders:
+        raise UserError(f"{path}: expected a top-level 'riders:' list")
+    seen = set()
+    for r in riders:
+        rid = r.get("id") if isinstance(r, dict) else None
+        if not isinstance(rid, str) or not rid:
+            raise UserError(f"{path}: every rider needs a string 'id'")
+        if rid in seen:
+            raise UserError(f"{path}: duplicate rider id {rid!r}")
+        seen.add(rid)
+        ph = r.get("phenotype") or {}
+        for k in PHENOTYPE_KEYS:
+            v = ph.get(k)
+            if not isinstance(v, (int, float)) or not 0.0 <= v <= 1.0:
+                raise UserError(f"{path}: rider {rid}: phenotype.{k} must be a number in [0, 1]")
+        cols = r.get("colors") or {}
+        for k in COLOR_KEYS:
+            if not isinstance(cols.get(k), str) or not _HEX.match(cols[k]):
+                raise UserError(f"{path}: rider {rid}: colors.{k} must be '#rrggbb'")
+        if not isinstance(r.get("height_m"), (int, float)):
+            raise UserError(f"{path}: rider {rid}: height_m must be a number")
+    return riders
+
+
+def get_spec(rider_id, path=ROSTER_PATH):
+    for r in load_roster(path):
+        if r["id"] == rider_id:
+            return r
+    ids = ", ".join(r["id"] for r in load_roster(path))
+    raise UserError(f"unknown rider id {rider_id!r} (known: {ids})")
+
+
+def describe(r):
+    """One line, id first."""
+    return (f"{r['id']}  {r['sex']:<6} {r['age_years']:>2} y  {r['height_m']:.2f} m  "
+            f"{r['build']:<8} top {r['colors']['top']} bottom {r['colors']['bottom']} "
+            f"helmet {r['colors']['helmet']}")
