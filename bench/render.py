@@ -119,14 +119,26 @@ def chart(data, path):
     plt.close(fig)
 
 
+def bench_bike(out_dir):
+    """The benchmark's bike: road_00 of seed 0 (built once, reused by later stages)."""
+    subprocess.run([sys.executable, os.path.join(ROOT, "blender_scripts", "make_bikes.py"), "--out", out_dir,
+                    "--count", "1", "--seed", "0", "--no-extras"], check=True)
+    bikes = os.path.join(out_dir, "bikes")
+    return os.path.join(bikes, sorted(os.listdir(bikes))[0])
+
+
+def render_all_views(out_dir):
+    """All parts' 36 views of the benchmark bike with the default settings (resumable), for training."""
+    bike_dir = bench_bike(out_dir)
+    subprocess.run([sys.executable, os.path.join(ROOT, "blender_scripts", "render_views.py"), "--bike", bike_dir,
+                    "--parts", "all"], check=True)
+
+
 def run(results, out_dir):
     import statistics
 
-    bikes = os.path.join(out_dir, "bikes")
     py = sys.executable
-    subprocess.run([py, os.path.join(ROOT, "blender_scripts", "make_bikes.py"), "--out", out_dir,
-                    "--count", "1", "--seed", "0", "--no-extras"], check=True)
-    bike_dir = os.path.join(bikes, sorted(os.listdir(bikes))[0])
+    bike_dir = bench_bike(out_dir)
     work = os.path.join(out_dir, "render_work")
     if os.path.isdir(work):
         import shutil

@@ -20,7 +20,9 @@ STAGES = {
     "raster": ("bench.raster", lambda m, r, out: m.run(r)),
     "bike_pose": ("bench.bike_pose", lambda m, r, out: m.run(r)),
     "render": ("bench.render", lambda m, r, out: m.run(r, out)),
+    "views": ("bench.render", lambda m, r, out: m.render_all_views(out)),
     "train_parts": ("bench.train_parts", lambda m, r, out: m.run(r, os.path.join(out, "bikes"))),
+    "bike_gt": ("bench.bike_gt", lambda m, r, out: m.run(r, out)),
 }
 
 PAPER = {
