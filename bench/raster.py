@@ -1,0 +1,98 @@
+"""Rasterizer forward+backward benchmark: `raster_fwdbwd_s` = {"10k", "50k", "100k"} seconds.
+
+A synthetic bike-like part (two wheels, tubes, a few mm-to-cm Gaussians) about 1.7 m long around
+the origin, seen by ring view 3 (12 m away, focal 2085, 512^2): it spans ~300 px like the real
+parts. Median of a few iterations of rasterize + L1 loss + backward, 2 threads (as on the target
+machine). Run alone: `python -m bench.raster [--threads N] [--sizes 10k,50k]`.
+
+OMP_WAIT_POLICY=PASSIVE: on the shared 2-core machine, torch's OpenMP threads otherwise spin at
+every barrier while the other core runs someone else's process; measured 2.2 s -> 0.3 s per 50k
+iteration with 2 threads under load. It only takes effect if set before torch is first imported.
+"""
+import argparse
+import math
+import os
+import statistics
+import time
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+import torch  # noqa: E402
+
+SIZES = {"10k": 10_000, "50k": 50_000, "100k": 100_000}
+
+
+def bike_like_gaussians(n, sh_degree=3, seed=0, dtype=torch.float32):
+    """Means on two wheels (tori) and six tubes in the Z = 0 plane, bike-part-sized scales."""
+    g = torch.Generator().manual_seed(seed)
+    rnd = lambda *s: torch.rand(*s, generator=g, dtype=torch.float64)
+    n_wheel = n * 6 // 10
+    # wheels: radius 0.35 m centred at x = +-0.55, y = 0.35; tyre tube radius 2 cm
+    t = rnd(n_wheel) * 2 * math.pi
+    cx = torch.where(rnd(n_wheel) < 0.5, torch.tensor(-0.55), torch.tensor(0.55)).double()
+    p = rnd(n_wheel) * 2 * math.pi
+    rr = 0.35 + 0.02 * torch.cos(p)
+    wheel = torch.stack([cx + rr * torch.cos(t), 0.35 + rr * torch.sin(t), 0.02 * torch.sin(p)], 1)
+    # tubes: frame triangle, fork, handlebar, seat post; radius 1.5 cm
+    segs = torch.tensor([[-0.55, 0.35, 0, 0.0, 0.35, 0], [0.0, 0.35, 0, -0.15, 0.9, 0],
+                         [-0.15, 0.9, 0, 0.45, 0.85, 0], [0.0, 0.35, 0, 0.45, 0.85, 0],
+                         [0.45, 0.85, 0, 0.55, 0.35, 0], [0.45, 0.95, -0.25, 0.45, 0.95, 0.25]],
+                        dtype=torch.float64)
+    m = n - n_wheel
+    k = torch.randint(0, len(segs), (m,), generator=g)
+    s = rnd(m, 1)
+    tube = segs[k, :3] * (1 - s) + segs[k, 3:] * s + (rnd(m, 3) - 0.5) * 0.03
+    means = torch.cat([wheel, tube]) - torch.tensor([0.0, 0.5, 0.0], dtype=torch.float64)
+    # scales: log-uniform 1 mm .. 2 cm per axis (0.2 .. 3.5 px std at 12 m)
+    scales = torch.exp(math.log(1e-3) + rnd(n, 3) * math.log(20.0))
+    quats = torch.randn(n, 4, generator=g, dtype=torch.float64)
+    opac = 0.1 + 0.9 * rnd(n)
+    sh = torch.randn(n, (sh_degree + 1) ** 2, 3, generator=g, dtype=torch.float64) * 0.2
+    return [x.to(dtype) for x in (means, quats, scales, opac, sh)]
+
+
+def time_fwdbwd(n, iters=7, warmup=2, camera=None):
+    from splatting.cameras import ring_camera
+    from splatting.rasterize import rasterize
+
+    cam = camera or ring_camera(30.0)
+    params = [p.requires_grad_(True) for p in bike_like_gaussians(n)]
+    target = torch.zeros(cam.height, cam.width, 3)
+    times = []
+    for i in range(warmup + iters):
+        t0 = time.perf_counter()
+        out = rasterize(*params, cam)
+        loss = (out["rgb"] - target).abs().mean()
+        loss.backward()
+        dt = time.perf_counter() - t0
+        for p in params:
+            p.grad = None
+        if i >= warmup:
+            times.append(dt)
+    return statistics.median(times), min(times), out
+
+
+def run(results, threads=2, sizes=None):
+    old = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        res = {}
+        for key in sizes or SIZES:
+            s, fastest, out = time_fwdbwd(SIZES[key])
+            res[key] = round(s, 4)
+            cover = (out["alpha"] > 0.5).float().mean().item()
+            print(f"raster fwd+bwd {key:>5} Gaussians, 512^2, {threads} thread(s): {s:.3f} s/iter median, "
+                  f"{fastest:.3f} min "
+                  f"(alpha>0.5 on {100 * cover:.1f}% of pixels; OMP_WAIT_POLICY="
+                  f"{os.environ.get('OMP_WAIT_POLICY', 'unset')}, load avg {os.getloadavg()[0]:.1f})", flush=True)
+        results["raster_fwdbwd_s"] = res
+    finally:
+        torch.set_num_threads(old)
+    return results
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--sizes", default=",".join(SIZES))
+    a = ap.parse_args()
+    print(run({}, a.threads, a.sizes.split(",")))
