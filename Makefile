@@ -1,5 +1,7 @@
 # 3DArticCyclists — `make demo` runs the pipeline on built-in defaults, `make test` the tests.
 SHELL := /bin/bash
+# passive OpenMP waits: spinning threads made torch 5-8x slower on 2 shared cores (docs/rasterizer.md)
+export OMP_WAIT_POLICY ?= PASSIVE
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
