@@ -50,5 +50,9 @@ contact-sheet: setup
 	for b in $(OUT)/bikes/*/; do $(PY) blender_scripts/render_views.py --bike $$b --parts whole --views 3 || exit 1; done
 	$(PY) -m splatting contact-sheet --bikes $(OUT)/bikes --view 3 --out docs/img/bikes.png
 
+# Blender 4.2+ extension zip that also installs as a legacy add-on in Blender 3.x.
+addon: setup
+	$(PY) blender_scripts/build_addon.py
+
 clean:
 	rm -rf $(OUT)

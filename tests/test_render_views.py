@@ -134,7 +134,8 @@ def test_kill_and_resume(bike, tmp_path):
     shutil.copytree(bike, b, ignore=shutil.ignore_patterns("views"))
     views = list(range(12))
     arg = ",".join(map(str, views))
-    cmd = [PY, SCRIPT, "--bike", str(b), "--parts", "frame", "--views", arg, *FAST]
+    # at 128 px: also checks that cameras.json's K follows --size
+    cmd = [PY, SCRIPT, "--bike", str(b), "--parts", "frame", "--views", arg, "--size", "128", *FAST]
     p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT, start_new_session=True)
     rgba_dir = b / "views" / "frame" / "rgba"
     t0 = time.time()

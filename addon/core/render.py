@@ -274,9 +274,10 @@ def render_part(scene, part_objs, views_dir, keypoints, views=None, settings=Ren
     show_only(scene, part_objs)
     lo, hi = world_bbox(part_objs)
     orbit = [0.0, float((lo[1] + hi[1]) / 2), 0.0]
-    cams = rig.ring(orbit)
+    focal = rig.FOCAL * settings.size / rig.SIZE  # a smaller image keeps the same field of view
+    cams = rig.ring(orbit, size=settings.size, focal=focal)
     write_json(os.path.join(views_dir, "cameras.json"), cams)
-    write_json(os.path.join(views_dir, "transforms.json"), rig.transforms_json(cams))
+    write_json(os.path.join(views_dir, "transforms.json"), rig.transforms_json(cams, settings.size, focal))
     write_json(os.path.join(views_dir, "keypoints.json"),
                {"frame": "canonical", "units": "m", "keypoints": keypoints})
     ply = os.path.join(views_dir, "points.ply")
@@ -285,7 +286,7 @@ def render_part(scene, part_objs, views_dir, keypoints, views=None, settings=Ren
         pts, nrm = sample_surface(tris, n_points, seed=settings.seed)
         write_points_ply(ply, pts, nrm)
 
-    cam = ensure_camera(scene, settings.size, rig.FOCAL * settings.size / rig.SIZE)
+    cam = ensure_camera(scene, settings.size, focal)
     names = sorted(k for k in cams if k.startswith("camera"))
     todo = [i for i in (range(len(names)) if views is None else views)]
     done = 0

@@ -1,0 +1,204 @@
+"""Curation accuracy on messy inputs made from procedural bikes (whose truth is known).
+
+Each case: a procedural bicycle, its parts' materials renamed so that only this test knows
+which part a face came from ("t<part>_<k>"), junk added (ground plane, stray cube, camera,
+light), a random rotation, a random scale factor in [0.01, 100], a Y-up or Z-up convention,
+everything joined into one mesh and exported as .glb or .obj.  Curation (the add-on's
+operators, bpy 5.0 module) must recover the pose within 2 deg, the scale within 1 %, every
+keypoint within 1 cm and the part label of >= 98 % of the surface area.
+
+The truth transform from the imported model to the canonical frame is measured, not assumed:
+area-weighted centroids of each truth material in the imported scene are matched to the same
+centroids in the canonical bike (a similarity Procrustes fit), so exporter/importer axis
+conventions need no special knowledge.
+"""
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from addon.core.frames import to_canonical  # noqa: E402
+from addon.core.procedural import build, layout, spec as specs  # noqa: E402
+
+PART_OF = {"f": "frame", "s": "steering", "c": "crank"}
+
+
+def _register():
+    import addon
+    if not hasattr(bpy.types.Scene, "articcyc_wheel_diameter"):
+        addon.register()
+
+
+def _rotation(rng):
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    w, x, y, z = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def _tris(obj):
+    """World-space triangles (k, 3, 3) and the material name of each."""
+    me = obj.data
+    me.calc_loop_triangles()
+    mw = np.array(obj.matrix_world)
+    V = np.empty(len(me.vertices) * 3)
+    me.vertices.foreach_get("co", V)
+    V = V.reshape(-1, 3) @ mw[:3, :3].T + mw[:3, 3]
+    T = np.empty(len(me.loop_triangles) * 3, np.int64)
+    me.loop_triangles.foreach_get("vertices", T)
+    mi = np.empty(len(me.loop_triangles), np.int64)
+    me.loop_triangles.foreach_get("material_index", mi)
+    names = np.array([(me.materials[i].name if i < len(me.materials) and me.materials[i] else "") for i in range(max(len(me.materials), 1))])
+    return V[T.reshape(-1, 3)], names[mi] if len(me.materials) else np.full(len(mi), "")
+
+
+def _area_centroids(objs):
+    """{truth material: (area, area-weighted centroid)} over mesh objects (world frame)."""
+    acc = {}
+    for o in objs:
+        tri, mats = _tris(o)
+        a = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        c = tri.mean(1)
+        for m in np.unique(mats):
+            key = m.split(".")[0]
+            sel = mats == m
+            A, S = acc.get(key, (0.0, np.zeros(3)))
+            acc[key] = (A + a[sel].sum(), S + (c[sel] * a[sel, None]).sum(0))
+    return {k: (A, S / A) for k, (A, S) in acc.items() if A > 0}
+
+
+def _similarity(src, dst):
+    """s, R, t with dst ~ s R src + t (Umeyama), proper rotation."""
+    ms, md = src.mean(0), dst.mean(0)
+    xs, xd = src - ms, dst - md
+    U, S, Vt = np.linalg.svd(xd.T @ xs)
+    d = np.sign(np.linalg.det(U @ Vt))
+    D = np.diag([1, 1, d])
+    R = U @ D @ Vt
+    s = (S * np.diag(D)).sum() / (xs ** 2).sum()
+    return s, R, md - s * R @ ms
+
+
+def make_messy(sp, rng, path, fmt):
+    """Write one messy model file; returns the canonical truth centroids per material."""
+    from addon.core.scene import reset_scene
+    reset_scene()
+    res = build.build_bike(sp)
+    for name, o in res["parts"].items():
+        mats = {}
+        for k, slot in enumerate(o.material_slots):
+            m = bpy.data.materials.new(f"t{name[0]}_{k}")
+            m.diffuse_color = tuple(rng.uniform(0, 1, 3)) + (1.0,)
+            mats[k] = m
+            o.data.materials[k] = m
+    for o in list(res["parts"].values()):
+        mw = o.matrix_world.copy()
+        o.parent = None
+        o.matrix_world = mw
+    bpy.data.objects.remove(res["armature"], do_unlink=True)
+    truth = {k: (A, to_canonical(c)) for k, (A, c) in _area_centroids(res["parts"].values()).items()}
+    junk_mat = bpy.data.materials.new("tj_0")
+    bpy.ops.mesh.primitive_plane_add(size=float(rng.uniform(3, 8)))
+    bpy.context.active_object.data.materials.append(junk_mat)
+    d = rng.uniform(1.6, 3.0) * rng.choice([-1, 1])
+    bpy.ops.mesh.primitive_cube_add(size=float(rng.uniform(0.1, 0.5)), location=(float(d), float(rng.uniform(-2, 2)), 0.5))
+    bpy.context.active_object.data.materials.append(junk_mat)
+    bpy.ops.object.camera_add(location=(4.0, -6.0, 2.0))
+    bpy.ops.object.light_add(type="POINT", location=(0.0, 0.0, 4.0))
+    from mathutils import Matrix
+    R = _rotation(rng)
+    s = float(10 ** rng.uniform(-2, 2))
+    t = rng.normal(size=3) * s
+    if rng.random() < 0.5:  # a Y-up model: the bike's up along +Y before the random rotation
+        R = R @ np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]]).T
+    Mx = np.eye(4)
+    Mx[:3, :3] = s * R
+    Mx[:3, 3] = t
+    for o in bpy.data.objects:
+        o.matrix_world = Matrix(Mx.tolist()) @ o.matrix_world
+    meshes = [o for o in bpy.context.scene.objects if o.type == "MESH"]
+    for o in bpy.context.scene.objects:
+        o.select_set(o.type == "MESH")
+    bpy.context.view_layer.objects.active = meshes[0]
+    bpy.ops.object.join()
+    bpy.context.active_object.name = "model"
+    if fmt == "glb":
+        bpy.ops.export_scene.gltf(filepath=str(path))
+    else:
+        bpy.ops.wm.obj_export(filepath=str(path), up_axis=rng.choice(["Y", "Z"]),
+                              forward_axis="NEGATIVE_Z" if rng.random() < 0.5 else "Y")
+    return truth
+
+
+def run_case(sp, seed, tmp_path, fmt):
+    rng = np.random.default_rng(seed)
+    path = tmp_path / f"{sp['bike_id']}_{seed}.{fmt}"
+    truth_c = make_messy(sp, rng, path, fmt)
+    from addon.core.scene import reset_scene
+    reset_scene()
+    _register()
+    bpy.ops.articcyc.import_model(filepath=str(path))
+    imported = _area_centroids([o for o in bpy.context.scene.objects if o.type == "MESH"])
+    keys = sorted(k for k in imported if k in truth_c and not k.startswith("tj"))
+    sA, RA, tA = _similarity(np.array([imported[k][1] for k in keys]), np.array([truth_c[k][1] for k in keys]))
+    truth_area = sum(truth_c[k][0] for k in truth_c)
+    bpy.ops.articcyc.auto_curate(wheel_diameter=sp["wheel_diameter_m"])
+    rec = json.loads(bpy.context.scene["articcyc_curation"])
+    M = np.array(rec["model_to_canonical"])
+    sM = np.cbrt(np.linalg.det(M[:3, :3]))
+    RM = M[:3, :3] / sM
+    rot_err = math.degrees(math.acos(np.clip((np.trace(RM @ RA.T) - 1) / 2, -1, 1)))
+    scale_err = abs(sM / sA - 1) * 100
+    from addon.core.curation import scene_io
+    kp = scene_io.read_keypoint_empties()
+    kt = layout.keypoints(sp)
+    kp_err = {k: float(np.linalg.norm(np.asarray(kp[k]) - kt[k]) * 100) if k in kp else float("inf") for k in kt}
+    good = 0.0
+    for part in ("frame", "steering", "crank"):
+        o = bpy.data.objects.get(part)
+        if o is None:
+            continue
+        for mname, (A, _) in _area_centroids([o]).items():
+            if PART_OF.get(mname[1:2]) == part and mname.startswith("t") and not mname.startswith("tj"):
+                good += A
+    label_pct = 100 * good / truth_area
+    return {"bike": sp["bike_id"], "fmt": fmt, "scale_factor": round(1 / sA, 4), "rot_err_deg": rot_err,
+            "scale_err_pct": scale_err, "kp_err_max_cm": max(kp_err.values()),
+            "kp_worst": max(kp_err, key=kp_err.get), "label_area_pct": label_pct,
+            "problems": rec["problems"]}
+
+
+def _check(rows):
+    print("\ncase                fmt  scale      rot_err_deg  scale_err_%  kp_max_cm (worst)        label_area_%")
+    for r in rows:
+        print(f"{r['bike']:18s}  {r['fmt']:4s} {r['scale_factor']:<10g} {r['rot_err_deg']:.5f}      "
+              f"{r['scale_err_pct']:.5f}      {r['kp_err_max_cm']:.3f} ({r['kp_worst']:12s})  {r['label_area_pct']:.3f}")
+    for name, key in (("rotation error deg", "rot_err_deg"), ("scale error %", "scale_err_pct"),
+                      ("max keypoint error cm", "kp_err_max_cm"), ("label area %", "label_area_pct")):
+        v = np.array([r[key] for r in rows])
+        print(f"{name:22s} min {v.min():.4f} median {np.median(v):.4f} max {v.max():.4f}")
+    for r in rows:
+        assert r["rot_err_deg"] < 2.0, r
+        assert r["scale_err_pct"] < 1.0, r
+        assert r["kp_err_max_cm"] < 1.0, r
+        assert r["label_area_pct"] >= 98.0, r
+        assert not r["problems"], r
+
+
+def _cases(n, seed):
+    sp_all = specs.library_specs(n, seed, extras=False)
+    return [(sp, 1000 * seed + i, "glb" if i % 2 == 0 else "obj") for i, sp in enumerate(sp_all)]
+
+
+def test_accuracy_study(tmp_path, fresh_scene):
+    """14 cases (two of each style, glb and obj alternating): ~10 s here, so in the default run."""
+    rows = [run_case(sp, s, tmp_path, fmt) for sp, s, fmt in _cases(14, 1)]
+    _check(rows)
+    with open(tmp_path / "accuracy.json", "w") as f:
+        json.dump(rows, f, indent=1)
