@@ -23,6 +23,7 @@ STAGES = {
     "views": ("bench.render", lambda m, r, out: m.render_all_views(out)),
     "train_parts": ("bench.train_parts", lambda m, r, out: m.run(r, os.path.join(out, "bikes"))),
     "bike_gt": ("bench.bike_gt", lambda m, r, out: m.run(r, out)),
+    "ik": ("bench.ik", lambda m, r, out: m.run(r, out)),
 }
 
 PAPER = {
@@ -37,6 +38,11 @@ TARGETS = {
     "raster_fwdbwd_s": "≤ 0.3 s at 50k",
     "train_parts": "≥ 30 dB in ≤ 600 s per part",
     "bike_pose_ms_100k": "≤ 5 ms",
+    "bike_gt": "IoU ≥ 0.95, PSNR ≥ 28 dB (means)",
+    "ik_iter_ms": "≤ 2 ms",
+    "ik_batch_200x50_s": "≤ 2 s",
+    "rider_gt": "IoU ≥ 0.9, PSNR ≥ 24 dB (means)",
+    "dataset_images_per_hour": "≥ 3000",
 }
 
 
