@@ -7,7 +7,7 @@ views that are done.
 """
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import bpy
 import numpy as np
@@ -42,7 +42,13 @@ def configure_cycles(scene, s: RenderSettings):
         cy.adaptive_threshold = s.adaptive_threshold
     cy.use_denoising = s.denoise != "NONE"
     if s.denoise != "NONE":
-        cy.denoiser = "OPENIMAGEDENOISE"
+        try:
+            cy.denoiser = "OPENIMAGEDENOISE"
+        except TypeError:  # Debian's Blender 3.4 is built without OpenImageDenoise
+            print("render: OpenImageDenoise is not available in this Blender; rendering without denoising")
+            cy.use_denoising = False
+            s = replace(s, denoise="NONE")
+    if s.denoise != "NONE":
         cy.denoising_input_passes = "RGB_ALBEDO_NORMAL"
         cy.denoising_prefilter = "FAST" if s.denoise == "FAST" else "ACCURATE"
         if hasattr(cy, "denoising_quality"):  # Blender >= 4.1

@@ -1,0 +1,136 @@
+"""Import 3DGS .ply Gaussians into Blender as point clouds, optionally render them with Cycles.
+
+    blender -b -P blender_scripts/import_splats.py -- --ply FILE.ply [--render FILE.png] [--save FILE.blend]
+    python blender_scripts/import_splats.py --ply FILE.ply --render out.png
+
+--ply also takes a folder or a glob of per-frame .ply files: they import as frames 1..N and
+--render writes FILE_00001.png ... (or only --frame N, to FILE).  The camera is ring view 3 of
+DESIGN.md's 36-view rig around the clouds' bounding-box centre, or --camera cameras.json:cameraNNNN.
+"""
+import argparse
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from addon.core.script import UserError, run_main  # noqa: E402
+
+
+def frame_path(out, frame):
+    base, ext = os.path.splitext(out)
+    return f"{base}_{frame:05d}{ext or '.png'}"
+
+
+def main(argv):
+    p = argparse.ArgumentParser(prog="import_splats.py", description=__doc__.splitlines()[0])
+    p.add_argument("--ply", required=True, help="a 3DGS .ply, a folder of them, or a glob (sequence)")
+    p.add_argument("--render", help="output RGBA .png (a sequence writes FILE_%%05d.png per frame)")
+    p.add_argument("--save", help="save the scene to this .blend")
+    p.add_argument("--frame", type=int, help="render only this frame of a sequence, to --render as given")
+    p.add_argument("--camera", help="cameras.json:cameraNNNN (or a JSON file with one K/R/T); default ring view --view")
+    p.add_argument("--view", type=int, default=3, help="ring view index 0..35 (default 3)")
+    p.add_argument("--size", type=int, default=512, help="image size for the ring camera (default 512)")
+    p.add_argument("--samples", type=int, default=None)
+    p.add_argument("--denoise", choices=["NONE", "FAST", "BALANCED", "HIGH"], default=None)
+    p.add_argument("--shading", choices=["emission", "lit"], default="emission",
+                   help="emission: the Gaussians' own (baked) colour; lit: Principled BSDF under the studio lights")
+    p.add_argument("--radius-scale", type=float, default=None,
+                   help="disc radius = this * sqrt(product of the two largest scales) (default sqrt 2)")
+    args = p.parse_args(argv)
+    if args.render and not args.render.lower().endswith(".png"):
+        raise UserError(f"--render must name a .png file, got {args.render}")
+    if args.save and not args.save.lower().endswith(".blend"):
+        raise UserError(f"--save must name a .blend file, got {args.save}")
+    if not 0 <= args.view < 36:
+        raise UserError(f"--view must be 0..35, got {args.view}")
+    if args.size < 8:
+        raise UserError(f"--size must be at least 8, got {args.size}")
+
+    from addon.core import splat_import
+    from addon.core.splat_import import RADIUS_SCALE
+
+    paths = splat_import.expand_inputs(args.ply)
+    if args.frame is not None and not 1 <= args.frame <= len(paths):
+        raise UserError(f"--frame must be 1..{len(paths)}, got {args.frame}")
+    rs = RADIUS_SCALE if args.radius_scale is None else args.radius_scale
+    if not rs > 0 or rs == float("inf"):
+        raise UserError(f"--radius-scale must be a positive number, got {args.radius_scale}")
+
+    import bpy
+
+    from addon.core.scene import reset_scene
+
+    scene = reset_scene()  # the binary's startup file would add a cube, a lamp and a camera
+    objs = splat_import.import_splats(paths, shading=args.shading, radius_scale=rs)
+    print(f"import_splats: {len(paths)} file(s), {sum(len(o.data.vertices) for o in objs)} points")
+    if args.render or args.save:
+        setup_render(scene, objs, args)
+    if args.save:
+        from addon.core.atomic import atomic_path
+
+        with atomic_path(args.save) as tmp:
+            os.remove(tmp)  # an existing file would make Blender keep a .blend1 backup of it
+            bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(tmp), copy=True)
+        print(f"import_splats: saved {args.save}")
+    if args.render:
+        render(scene, paths, args)
+    return 0
+
+
+def setup_render(scene, objs, args):
+    from dataclasses import replace
+
+    from addon.core import render, rig
+    from addon.core.render_pose import load_camera
+    from addon.core.splat_import import points_bbox
+
+    if args.camera:
+        K, R, T = load_camera(args.camera, ".")
+        size, focal = int(round(2 * K[0, 2])), float(K[0, 0])
+    else:
+        lo, hi = points_bbox(objs)
+        size = args.size
+        focal = rig.FOCAL * size / rig.SIZE  # a smaller image keeps the ring's field of view
+        R, T, _ = rig.view(args.view, (lo + hi) / 2)
+    s = replace(render.RenderSettings(), size=size)
+    if args.samples:
+        s = replace(s, samples=args.samples)
+    if args.denoise:
+        s = replace(s, denoise=args.denoise)
+    try:
+        render.configure_cycles(scene, s)
+    except TypeError:  # Debian's Blender 3.4 is built without OpenImageDenoise
+        print("import_splats: no OpenImageDenoise in this Blender, rendering without denoising")
+        render.configure_cycles(scene, replace(s, denoise="NONE"))
+    # Each translucent splat costs one transparent bounce (back faces are skipped in the
+    # material); configure_cycles' 2 would turn a stack of splats opaque black.
+    scene.cycles.transparent_max_bounces = 64
+    render.setup_lighting(scene)
+    cam = render.ensure_camera(scene, size, focal)
+    render.place_camera(cam, R, T)
+
+
+def render(scene, paths, args):
+    from addon.core import render as R
+    from addon.core.atomic import temp_name
+
+    if len(paths) == 1:
+        jobs = [(scene.frame_current, args.render)]
+    elif args.frame is not None:
+        jobs = [(args.frame, args.render)]
+    else:
+        jobs = [(f, frame_path(args.render, f)) for f in range(1, len(paths) + 1)]
+    for i, (frame, out) in enumerate(jobs):
+        scene.frame_set(frame)
+        tmp = temp_name(out)
+        try:
+            R.render_still(scene, tmp)
+            os.replace(tmp, out)
+        finally:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+        print(f"import_splats: rendered frame {frame} ({i + 1}/{len(jobs)}) -> {out}", flush=True)
+
+
+if __name__ == "__main__":
+    run_main(main, "import_splats.py")
