@@ -205,3 +205,21 @@ def test_full_ring_every_part(bike, tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     for part in ("frame", "steering", "crank", "whole"):
         check_keypoints_on_masks(b / "views" / part, range(36))
+
+
+@pytest.mark.blender_binary
+def test_debian_blender_34_renders_views(tmp_path):
+    """The same entry points under `blender -b -P` (Debian's 3.4.1, no OIDN): keypoints on masks."""
+    import shutil
+
+    blender = shutil.which("blender")
+    if blender is None:
+        pytest.skip("Debian blender binary not installed")
+    for script, args in (("make_bikes.py", ["--out", str(tmp_path), "--count", "1", "--no-extras"]),
+                         ("render_views.py", ["--bike", str(tmp_path / "bikes" / "road_00"), "--parts", "steering,crank",
+                                              "--views", "0,13", "--samples", "2"])):
+        r = subprocess.run([blender, "-b", "-P", os.path.join(ROOT, "blender_scripts", script), "--", *args],
+                           capture_output=True, text=True, cwd=str(tmp_path))
+        assert r.returncode == 0, (r.stdout[-1500:], r.stderr[-1500:])
+    for part in ("steering", "crank"):
+        check_keypoints_on_masks(tmp_path / "bikes" / "road_00" / "views" / part, [0, 13])
