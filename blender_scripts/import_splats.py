@@ -112,7 +112,6 @@ def setup_render(scene, objs, args):
 
 def render(scene, paths, args):
     from addon.core import render as R
-    from addon.core.atomic import temp_name
 
     if len(paths) == 1:
         jobs = [(scene.frame_current, args.render)]
@@ -122,13 +121,7 @@ def render(scene, paths, args):
         jobs = [(f, frame_path(args.render, f)) for f in range(1, len(paths) + 1)]
     for i, (frame, out) in enumerate(jobs):
         scene.frame_set(frame)
-        tmp = temp_name(out)
-        try:
-            R.render_still(scene, tmp)
-            os.replace(tmp, out)
-        finally:
-            if os.path.exists(tmp):
-                os.remove(tmp)
+        R.render_atomic(scene, out, derive=False)
         print(f"import_splats: rendered frame {frame} ({i + 1}/{len(jobs)}) -> {out}", flush=True)
 
 

@@ -111,3 +111,34 @@ def test_signs_by_geometry(bike_dir):
     assert kp["front_axle"][2] < kp0["front_axle"][2] - 0.01
     front = "pedal_right" if kp0["pedal_right"][0] > kp0["pedal_left"][0] else "pedal_left"
     assert kp[front][1] < kp0[front][1] - 0.1
+
+
+def test_render_pose_oracle_keypoints_on_mask(bike_dir, tmp_path):
+    """render_pose.py: the posed keypoints it reports project onto the mask it rendered."""
+    from PIL import Image
+
+    from addon.core import rig
+
+    cams = rig.ring([0.0, 0.5, 0.0])
+    (tmp_path / "cams.json").write_text(json.dumps(cams))
+    out, kp_out = tmp_path / "gt.png", tmp_path / "kp.json"
+    script = os.path.join(ROOT, "blender_scripts", "render_pose.py")
+    r = subprocess.run([sys.executable, script, "--bike", str(bike_dir), "--pose", "70,35,5,40,-8,0.2,0.05,-0.3",
+                        "--camera", f"{tmp_path / 'cams.json'}:camera0004", "--out", str(out),
+                        "--keypoints-out", str(kp_out), "--samples", "1"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr[-2000:]
+    mask = np.asarray(Image.open(tmp_path / "gt_mask.png")) > 0
+    kp = json.loads(kp_out.read_text())["keypoints"]
+    c = cams["camera0004"]
+    ys, xs = np.nonzero(mask)
+    for name, xyz in kp.items():
+        u, v = rig.project(np.array([xyz]), c["K"], c["R"], c["T"])[0]
+        d = np.sqrt((xs + 0.5 - u) ** 2 + (ys + 0.5 - v) ** 2).min()
+        assert d <= 2.0, f"{name} is {d:.1f} px off the posed mask"
+    # a NaN pose: one line, exit 2, nothing written
+    bad = tmp_path / "bad.png"
+    r = subprocess.run([sys.executable, script, "--bike", str(bike_dir), "--pose", "0,nan,0,0,0,0,0,0",
+                        "--camera", f"{tmp_path / 'cams.json'}:camera0004", "--out", str(bad)],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "theta_s_deg" in r.stderr
+    assert not bad.exists()

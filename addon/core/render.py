@@ -251,6 +251,27 @@ def render_still(scene, path):
         raise RuntimeError(f"Blender did not write {path}")
 
 
+def render_atomic(scene, out, derive=True):
+    """Render to a temporary name beside `out`, then rename it there.
+
+    derive=True also writes `<base>_mask.png` and `<base>_rgb.jpg` from the same render.
+    Returns the paths written.
+    """
+    base, _ = os.path.splitext(out)
+    paths = {"rgba": out, "img": base + "_rgb.jpg", "mask": base + "_mask.png"} if derive else {"rgba": out}
+    tmp = temp_name(out)
+    try:
+        render_still(scene, tmp)
+        if derive:
+            derive_outputs(tmp, paths)
+        else:
+            os.replace(tmp, out)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    return paths
+
+
 def world_bbox(objs):
     pts = []
     for o in objs:

@@ -59,7 +59,7 @@ def render_pose(bike_dir, pose, camera, out, keypoints_out=None, settings=None, 
     import bpy
 
     from .articulation import apply_pose, global_matrix, posed_keypoints
-    from .atomic import temp_name, write_json
+    from .atomic import write_json
     from .bike_asset import open_bike
 
     K, R, T = load_camera(camera, bike_dir)
@@ -88,15 +88,7 @@ def render_pose(bike_dir, pose, camera, out, keypoints_out=None, settings=None, 
     cam = render.ensure_camera(scene, size, K[0, 0])
     render.place_camera(cam, R, T)
     bpy.context.view_layer.update()
-    base, _ = os.path.splitext(out)
-    paths = {"rgba": out, "img": base + "_rgb.jpg", "mask": base + "_mask.png"}
-    tmp = temp_name(out)
-    try:
-        render.render_still(scene, tmp)
-        render.derive_outputs(tmp, paths)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    paths = render.render_atomic(scene, out)
     if keypoints_out:
         write_json(keypoints_out, {"frame": "canonical", "units": "m", "pose": dict(zip(POSE_FIELDS, pose)),
                                    "keypoints": {k: list(map(float, v)) for k, v in posed_keypoints(bike["armature"]).items()}})
