@@ -24,6 +24,7 @@ STAGES = {
     "train_parts": ("bench.train_parts", lambda m, r, out: m.run(r, os.path.join(out, "bikes"))),
     "bike_gt": ("bench.bike_gt", lambda m, r, out: m.run(r, out)),
     "ik": ("bench.ik", lambda m, r, out: m.run(r, out)),
+    "rider": ("bench.rider", lambda m, r, out: m.run(r, out)),
 }
 
 PAPER = {

@@ -15,6 +15,9 @@ COMMANDS = {
     "pose-bike": ("splatting.pose_bike", "re-pose a bike's part Gaussians with the 8-DoF pose"),
     "contact-sheet": ("splatting.contact_sheet", "one view of every bike in a library on one PNG"),
     "rider": ("splatting.rider.command", "list the rider roster; export a rider mesh (rest or posed)"),
+    "rider-avatar": ("splatting.rider.avatar_build", "build a rider's Gaussian avatar (render, train, skin)"),
+    "cyclist": ("splatting.cyclist.command", "pose, fit and render a rider on a bike over a sequence of frames"),
+    "dataset": ("splatting.dataset.command", "COCO training images + annotations from a YAML config or preset"),
 }
 
 

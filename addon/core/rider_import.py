@@ -13,7 +13,6 @@ import bpy
 import numpy as np
 
 from . import frames, render
-from .atomic import temp_name
 from .script import UserError
 
 RIDER_PASS_INDEX = 4  # DESIGN.md: rider 4 when rendered together with a bike
@@ -96,7 +95,8 @@ def srgb_to_linear(c):
 def _vertex_color_material(name):
     """Diffuse BSDF fed by the colour attribute: view-independent, so degree-0 SH can hold it."""
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
+    if bpy.app.version < (5, 0, 0):  # 5.0 materials always have nodes (use_nodes is deprecated)
+        mat.use_nodes = True
     nt = mat.node_tree
     for n in list(nt.nodes):
         nt.nodes.remove(n)
@@ -197,14 +197,6 @@ def render_rider_still(mesh_path, camera, out, settings=None, light_yaw_deg=0.0)
     cam = render.ensure_camera(scene, size, K[0, 0])
     render.place_camera(cam, R, T)
     bpy.context.view_layer.update()
-    base, _ = os.path.splitext(out)
-    paths = {"rgba": out, "img": base + "_rgb.jpg", "mask": base + "_mask.png"}
     os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
-    tmp = temp_name(out)
-    try:
-        render.render_still(scene, tmp)
-        render.derive_outputs(tmp, paths)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    paths = render.render_atomic(scene, out)
     return paths
