@@ -1,0 +1,75 @@
+"""Per-part training benchmark: `train_parts` = [{"bike", "part", "psnr", "ssim", "gaussians", "wall_s"}].
+
+Trains every part of one procedural bike with the trainer's defaults (held-out views 3, 12, 21, 30;
+PSNR over white, the NeRF-synthetic convention) and writes the Gaussians where the pipeline
+expects them (<bike>/gaussians/<part>.ply + .json). Needs the views from render_views.py; skips
+with a message when they are missing. Run alone: `python -m bench.train_parts --bikes out/bench/bikes`.
+"""
+import argparse
+import glob
+import os
+import sys
+
+PARTS = ("frame", "steering", "crank")
+
+
+def complete_views(d, n=36):
+    """A views folder render_views.py has finished: cameras.json and every view's RGBA."""
+    return (os.path.isfile(os.path.join(d, "cameras.json"))
+            and len(glob.glob(os.path.join(d, "rgba", "camera*", "0000.png"))) >= n)
+
+
+def find_bike(bikes_dir, bike=None):
+    """The named bike, or the first (sorted) with complete views for at least one part."""
+    ids = [bike] if bike else sorted(os.listdir(bikes_dir)) if os.path.isdir(bikes_dir) else []
+    for b in ids:
+        parts = [p for p in PARTS if complete_views(os.path.join(bikes_dir, b, "views", p))]
+        if parts:
+            return b, parts
+    return None, []
+
+
+def run(results, bikes_dir="out/bikes", bike=None, threads=1, max_gaussians=None, time_budget_s=None,
+        parts=None):
+    from splatting.train import TrainConfig, train
+
+    b, found = find_bike(bikes_dir, bike)
+    if not b:
+        print(f"train_parts: skipped, no bike under {bikes_dir} has complete views/<part> folders "
+              f"(run blender_scripts/render_views.py first)", flush=True)
+        return results
+    rows = results.setdefault("train_parts", [])
+    for part in parts or found:
+        if part not in found:
+            print(f"train_parts: {b}/{part} has no complete views, skipped", flush=True)
+            continue
+        cfg = TrainConfig(threads=threads)
+        if max_gaussians:
+            cfg.densify.max_gaussians = max_gaussians
+        if time_budget_s:
+            cfg.time_budget_s = time_budget_s
+        views = os.path.join(bikes_dir, b, "views", part)
+        print(f"train_parts: {b}/{part} ...", flush=True)
+        m = train(views, None, cfg)
+        row = {"bike": b, "part": part, "psnr": m["psnr"], "ssim": m["ssim"], "gaussians": m["gaussians"],
+               "wall_s": m["wall_s"]}
+        rows.append(row)
+        print(f"train_parts: {b}/{part}: held-out PSNR {m['psnr']:.2f} dB, SSIM {m['ssim']:.4f}, "
+              f"{m['gaussians']} Gaussians, {m['wall_s']:.0f} s ({m['iterations']} it, {m['stopped']}, "
+              f"{threads} threads)", flush=True)
+    return results
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--bikes", default="out/bikes")
+    ap.add_argument("--bike")
+    ap.add_argument("--parts", help="comma-separated (default: all found)")
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--max-gaussians", type=int)
+    ap.add_argument("--time-budget-s", type=float)
+    a = ap.parse_args()
+    sys.path.insert(0, os.getcwd())
+    r = run({}, a.bikes, a.bike, a.threads, a.max_gaussians, a.time_budget_s,
+            a.parts.split(",") if a.parts else None)
+    print(r)
