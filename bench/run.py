@@ -25,6 +25,7 @@ STAGES = {
     "bike_gt": ("bench.bike_gt", lambda m, r, out: m.run(r, out)),
     "ik": ("bench.ik", lambda m, r, out: m.run(r, out)),
     "rider": ("bench.rider", lambda m, r, out: m.run(r, out)),
+    "dataset": ("bench.dataset", lambda m, r, out: m.run(r, out)),
 }
 
 PAPER = {

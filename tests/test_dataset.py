@@ -1,0 +1,223 @@
+"""`python -m splatting dataset`: COCO output that pycocotools loads and self-evaluates to 1.0,
+kill-and-resume gives identical bytes, config errors name the field."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+RIDER = "m_adult_average_185"
+
+# a city bike's keypoints (canonical frame, metres), as the procedural generator writes them
+CITY_KEYPOINTS = {
+    "seat": [-0.2253, 0.9537, 0.0], "pedal_left": [-0.1737, 0.2764, -0.134], "pedal_right": [0.1737, 0.2764, 0.134],
+    "steer_top": [0.3888, 0.8964, 0.0], "steer_bottom": [0.4591, 0.7200, 0.0],
+    "handle_right": [0.2314, 1.0829, 0.2990], "handle_left": [0.2314, 1.0829, -0.2990],
+    "crank_axle": [0.0, 0.2764, 0.0], "front_axle": [0.6662, 0.3466, 0.0], "rear_axle": [-0.4584, 0.3466, 0.0],
+    "ground": [-0.4584, 0.0, 0.0]}
+
+
+def write_test_bike(root, bike_id="city_t"):
+    """A bike folder with keypoints and meta but no trained Gaussians (the pipeline builds stand-ins)."""
+    d = os.path.join(root, bike_id)
+    os.makedirs(d, exist_ok=True)
+    with open(os.path.join(d, "keypoints.json"), "w") as f:
+        json.dump({"frame": "canonical", "units": "m", "keypoints": CITY_KEYPOINTS,
+                   "parts": {"steering": ["steer_top", "steer_bottom", "handle_left", "handle_right", "front_axle"],
+                             "crank": ["crank_axle", "pedal_left", "pedal_right"]}}, f)
+    with open(os.path.join(d, "meta.json"), "w") as f:
+        json.dump({"bike_id": bike_id, "has_crank": True, "dimensions": {"wheel_diameter_m": 0.693},
+                   "spec": {"frame_colour": [0.05, 0.1, 0.4]}}, f)
+    return d
+
+
+def small_config(bikes_root, **kw):
+    cfg = {"name": "t", "mode": "cyclist", "seed": 3, "count": 6, "image_size": 64, "riders": [RIDER],
+           "bikes": ["city_t"], "bikes_root": bikes_root, "riders_root": os.path.join(bikes_root, "no_avatars"),
+           "synthetic_gaussians_per_part": 600, "rider_gaussians": 2500, "ik_iterations": 10,
+           "png_compress_level": 1}
+    cfg.update(kw)
+    return cfg
+
+
+def write_yaml(path, cfg):
+    import yaml
+    with open(path, "w") as f:
+        yaml.safe_dump(cfg, f)
+    return path
+
+
+def cli(*argv):
+    return subprocess.run([sys.executable, "-m", "splatting", *argv], cwd=ROOT, capture_output=True, text=True,
+                          env=dict(os.environ, OMP_NUM_THREADS="1"))
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    import torch
+    torch.set_num_threads(1)
+    from splatting.dataset.command import generate
+    from splatting.dataset.config import validate
+    root = tmp_path_factory.mktemp("ds")
+    write_test_bike(str(root))
+    cfg = small_config(str(root))
+    out = str(root / "full")
+    generate(validate(cfg), out, log=lambda m: None, progress=False)
+    return root, cfg, out
+
+
+def test_coco_loads_and_self_eval_is_perfect(built):
+    from pycocotools.coco import COCO
+    from pycocotools.cocoeval import COCOeval
+    _, cfg, out = built
+    gt = COCO(os.path.join(out, "annotations.json"))
+    assert len(gt.getImgIds()) == cfg["count"]
+    cats = {c["name"]: c for c in gt.loadCats(gt.getCatIds())}
+    assert set(cats) == {"bicycle", "person", "cyclist"}
+    assert len(cats["bicycle"]["keypoints"]) == 11 and len(cats["person"]["keypoints"]) == 24
+    for img in gt.loadImgs(gt.getImgIds()):
+        assert os.path.isfile(os.path.join(out, "images", img["file_name"]))
+        names = {gt.loadCats(a["category_id"])[0]["name"] for a in gt.loadAnns(gt.getAnnIds(imgIds=img["id"]))}
+        assert names == {"bicycle", "person", "cyclist"}
+    dets = [dict(a, score=1.0) for a in gt.dataset["annotations"]]
+    dt = gt.loadRes(dets)
+    for iou in ("bbox", "segm"):
+        ev = COCOeval(gt, dt, iou)
+        ev.evaluate(); ev.accumulate(); ev.summarize()
+        assert ev.stats[0] == pytest.approx(1.0), iou
+    for name, n in (("bicycle", 11), ("person", 24)):
+        ev = COCOeval(gt, dt, "keypoints")
+        ev.params.catIds = [cats[name]["id"]]
+        ev.params.kpt_oks_sigmas = np.full(n, 0.05)
+        ev.evaluate(); ev.accumulate(); ev.summarize()
+        assert ev.stats[0] == pytest.approx(1.0), name
+
+
+def test_masks_boxes_and_keypoints_are_consistent(built):
+    from PIL import Image
+    from pycocotools import mask as mu
+    from pycocotools.coco import COCO
+    _, _, out = built
+    gt = COCO(os.path.join(out, "annotations.json"))
+    for img in gt.loadImgs(gt.getImgIds()):
+        anns = {gt.loadCats(a["category_id"])[0]["name"]: a for a in gt.loadAnns(gt.getAnnIds(imgIds=img["id"]))}
+        m = {k: mu.decode(a["segmentation"]).astype(bool) for k, a in anns.items()}
+        assert not (m["bicycle"] & m["person"]).any()  # one id per pixel
+        assert (m["cyclist"] == (m["bicycle"] | m["person"])).all()
+        x, y, w, h = anns["cyclist"]["bbox"]
+        ys, xs = np.nonzero(m["cyclist"])
+        assert (x, y, x + w, y + h) == (xs.min(), ys.min(), xs.max() + 1, ys.max() + 1)
+        # the object differs from the background where the mask is
+        rgb = np.asarray(Image.open(os.path.join(out, "images", img["file_name"])))
+        assert rgb.shape == (img["height"], img["width"], 3)
+        kp = np.array(anns["person"]["keypoints"]).reshape(-1, 3)
+        assert set(kp[:, 2].astype(int)) <= {0, 1, 2} and (kp[:, 2] == 2).sum() >= 5
+        inside = kp[kp[:, 2] == 2]
+        # a visible joint projects onto (or next to) the person's pixels
+        near = [m["person"][max(0, int(v) - 2):int(v) + 3, max(0, int(u) - 2):int(u) + 3].any() for u, v, _ in inside]
+        assert np.mean(near) > 0.8
+
+
+def test_kill_and_resume_gives_identical_dataset(built, tmp_path):
+    root, cfg, full = built
+    cfg_path = write_yaml(str(tmp_path / "c.yaml"), cfg)
+    out = str(tmp_path / "killed")
+    p = subprocess.Popen([sys.executable, "-m", "splatting", "dataset", "--config", cfg_path, "--out", out, "--quiet"],
+                         cwd=ROOT, env=dict(os.environ, OMP_NUM_THREADS="1"),
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    shards = os.path.join(out, "shards")
+    t0 = time.time()
+    while time.time() - t0 < 120 and p.poll() is None:
+        if os.path.isdir(shards) and len([f for f in os.listdir(shards) if f.endswith(".json")]) >= 2:
+            break
+        time.sleep(0.02)
+    p.send_signal(signal.SIGKILL)
+    p.wait()
+    assert not os.path.exists(os.path.join(out, "annotations.json")), "killed too late to test resuming"
+    for f in os.listdir(os.path.join(out, "images")):  # nothing under a final name is truncated
+        if f.endswith(".png") and not f.startswith("."):
+            from PIL import Image
+            Image.open(os.path.join(out, "images", f)).load()
+    r = cli("dataset", "--config", cfg_path, "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert "already done" in r.stdout
+    with open(os.path.join(full, "annotations.json"), "rb") as a, open(os.path.join(out, "annotations.json"), "rb") as b:
+        assert a.read() == b.read()
+    imgs = sorted(f for f in os.listdir(os.path.join(full, "images")) if not f.startswith("."))
+    assert imgs == sorted(f for f in os.listdir(os.path.join(out, "images")) if not f.startswith("."))
+    for f in imgs:
+        with open(os.path.join(full, "images", f), "rb") as a, open(os.path.join(out, "images", f), "rb") as b:
+            assert a.read() == b.read(), f
+
+
+@pytest.mark.parametrize("patch, field", [
+    ({"views": {"azimuth_deg": 5}}, "views.azimuth_deg"),
+    ({"pose": {"theta_q_deg": [0, 1]}}, "pose.theta_q_deg"),
+    ({"pose": {"theta_s_deg": [30, -30]}}, "pose.theta_s_deg"),
+    ({"count": 0}, "count"),
+    ({"backgrounds": {"kinds": ["photo"]}}, "backgrounds.kinds"),
+    ({"riders": ["nobody"]}, "riders"),
+    ({"bikes": ["no_such_bike"]}, "bikes"),
+])
+def test_config_errors_name_the_field(tmp_path, patch, field):
+    from splatting.cli import main
+    write_test_bike(str(tmp_path))
+    cfg = small_config(str(tmp_path))
+    cfg.update(patch)
+    path = write_yaml(str(tmp_path / "bad.yaml"), cfg)
+    import contextlib
+    import io
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        rc = main(["dataset", "--config", path, "--out", str(tmp_path / "o")])
+    assert rc == 2
+    msg = err.getvalue().strip()
+    assert f"config field '{field}'" in msg and len(msg.splitlines()) == 1
+    assert not os.path.exists(tmp_path / "o" / "annotations.json")
+
+
+def test_bad_yaml_and_unknown_preset(tmp_path):
+    from splatting.cli import main
+    p = tmp_path / "x.yaml"
+    p.write_text("count: [1,\n")
+    assert main(["dataset", "--config", str(p)]) == 2
+    assert main(["dataset", "--preset", "nope"]) == 2
+
+
+def test_presets_are_valid():
+    from splatting.dataset.config import load_config
+    a = load_config(preset="bike-only")
+    b = load_config(preset="cyclist")
+    assert a["mode"] == "bike-only" and b["mode"] == "cyclist"
+
+
+def test_other_config_in_same_folder_is_refused(built, tmp_path):
+    from splatting.dataset.command import generate
+    from splatting.dataset.config import validate
+    from splatting.errors import UserError
+    root, cfg, full = built
+    with pytest.raises(UserError, match="seed"):
+        generate(validate(dict(cfg, seed=99)), full, log=lambda m: None, progress=False)
+
+
+def test_bike_only_mode_and_backgrounds(tmp_path):
+    from pycocotools.coco import COCO
+    from splatting.dataset.command import generate
+    from splatting.dataset.config import validate
+    from splatting.dataset.generate import background
+    write_test_bike(str(tmp_path))
+    cfg = validate(small_config(str(tmp_path), mode="bike-only", count=2, seed=1))
+    generate(cfg, str(tmp_path / "b"), log=lambda m: None, progress=False)
+    gt = COCO(str(tmp_path / "b" / "annotations.json"))
+    assert {a["category_id"] for a in gt.dataset["annotations"]} == {1}
+    assert len(gt.dataset["annotations"]) == 2
+    for kind in ("solid", "gradient", "noise"):
+        a, b = background(kind, 7, 32), background(kind, 7, 32)
+        assert a.shape == (32, 32, 3) and (a == b).all() and 0 <= a.min() and a.max() <= 1
+        assert not (background(kind, 8, 32) == a).all()
+    assert background("noise", 7, 32).std() > 0.01
