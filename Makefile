@@ -28,12 +28,10 @@ test: setup
 test-all: setup
 	$(PY) -m pytest -m ""
 
-# The demo: a few procedural bikes, their 36 views per part, a contact sheet.
+# The demo: everything from nothing on a reduced budget (splatting/demo.py); resumes if interrupted.
 demo: setup
-	$(PY) blender_scripts/make_bikes.py --out $(DEMO) --count 3 --seed 0 --no-extras
-	for b in $(DEMO)/bikes/*/; do $(PY) blender_scripts/render_views.py --bike $$b --parts all || exit 1; done
-	$(PY) -m splatting contact-sheet --bikes $(DEMO)/bikes --out $(DEMO)/contact_sheet.png
-	@echo "demo: bikes and views in $(DEMO)/bikes, contact sheet $(DEMO)/contact_sheet.png"
+	$(PY) -m splatting demo --out $(DEMO)
+	@echo "demo: report in $(DEMO)/report.md"
 
 bench: setup
 	$(PY) -m bench.run --out $(OUT)/bench

@@ -11,6 +11,7 @@ from .errors import UserError
 
 # name -> (module, one-line help)
 COMMANDS = {
+    "demo": ("splatting.demo", "the whole pipeline from nothing on a reduced budget, with a report"),
     "train": ("splatting.train", "train one part's Gaussians on its 36 rendered views"),
     "pose-bike": ("splatting.pose_bike", "re-pose a bike's part Gaussians with the 8-DoF pose"),
     "contact-sheet": ("splatting.contact_sheet", "one view of every bike in a library on one PNG"),
