@@ -86,6 +86,9 @@ def run(args):
             yaml.safe_dump(cfg, f, sort_keys=False)
     coco = os.path.join(out, "coco")
     st.run("COCO set", [py, "-m", "splatting", "dataset", "--config", cfg_path, "--out", coco, "--quiet"])
+    from .dataset.preview import coco_preview
+
+    coco_preview(coco, os.path.join(out, "coco_preview.png"))
     st.run("contact sheet", [py, "-m", "splatting", "contact-sheet", "--bikes", os.path.join(out, "bikes"), "--view", "3",
                              "--out", os.path.join(out, "contact_sheet.png")])
     plys = sorted(glob.glob(os.path.join(cyc, "ply", "*.ply")))
@@ -123,13 +126,14 @@ def report(out, bike, args, times, wall):
         res = [max(_json(f)["ik"]["residual_m"].values()) for f in frames]
         flagged = sum(any(_json(f)["ik"]["flagged"].values()) for f in frames)
         lines += ["", "## Cyclist sequence", "", f"{len(frames)} frames; IK worst residual per frame: median "
-                  f"{sorted(res)[len(res) // 2] * 100:.1f} cm, max {max(res) * 100:.1f} cm; frames with a flagged target: {flagged}."]
+                  f"{sorted(res)[len(res) // 2] * 1000:.1f} mm, max {max(res) * 1000:.1f} mm; frames with a flagged target: {flagged}."]
     ann = _json(os.path.join(out, "coco", "annotations.json"))
     if ann:
         lines += ["", "## COCO set", "", f"{len(ann['images'])} images, {len(ann['annotations'])} annotations "
                   f"({', '.join(c['name'] for c in ann['categories'])}) in `coco/`."]
     lines += ["", "## Pictures", ""]
     for title, pattern in (("Contact sheet", "contact_sheet.png"), ("Cyclist preview", "cyclist/preview.png"),
+                           ("COCO samples with their annotations", "coco_preview.png"),
                            ("Point cloud in Blender (Cycles)", "cyclist_blender.png")):
         for p in sorted(glob.glob(os.path.join(out, pattern)))[:1]:
             lines.append(f"### {title}\n\n![{title}]({rel(p)})\n")
