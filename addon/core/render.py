@@ -169,8 +169,9 @@ def mesh_world_triangles(obj):
     return frames.to_canonical(co)[tris.reshape(-1, 3)]
 
 
-def sample_surface(tris, n, seed=0):
-    """Area-weighted uniform samples on triangles -> points (n, 3), normals (n, 3)."""
+def sample_surface(tris, n, seed=0, return_index=False):
+    """Area-weighted uniform samples on triangles -> points (n, 3), normals (n, 3)
+    (and the sampled triangle indices (n,) with return_index, e.g. to look up colours)."""
     rng = np.random.default_rng(seed)
     e1, e2 = tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
     cr = np.cross(e1, e2)
@@ -181,7 +182,7 @@ def sample_surface(tris, n, seed=0):
     u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
     pts = tris[idx, 0] + u[:, None] * e1[idx] + v[:, None] * e2[idx]
     nrm = cr[idx] / np.maximum(area[idx, None], 1e-12)
-    return pts, nrm
+    return (pts, nrm, idx) if return_index else (pts, nrm)
 
 
 def write_points_ply(path, pts, nrm, rgb=None):

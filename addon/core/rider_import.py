@@ -131,17 +131,7 @@ def import_rider(path, name="rider", scene=None):
 def _colored_points_ply(path, v, f, c, n, seed):
     """points.ply for the trainer's initialisation: area-uniform surface samples carrying their
     triangle's mean vertex colour (render_part writes uncoloured ones only when none exist)."""
-    rng = np.random.default_rng(seed)
-    tris = v[f]
-    e1, e2 = tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
-    cr = np.cross(e1, e2)
-    area = np.linalg.norm(cr, axis=1)
-    idx = rng.choice(len(f), size=n, p=area / area.sum())
-    a, b = rng.random(n), rng.random(n)
-    flip = a + b > 1
-    a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
-    pts = tris[idx, 0] + a[:, None] * e1[idx] + b[:, None] * e2[idx]
-    nrm = cr[idx] / np.maximum(area[idx, None], 1e-12)
+    pts, nrm, idx = render.sample_surface(v[f], n, seed=seed, return_index=True)
     rgb = np.clip(c[f[idx]].mean(1) * 255 + 0.5, 0, 255).astype(np.uint8)
     render.write_points_ply(path, pts, nrm, rgb)
 

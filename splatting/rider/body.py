@@ -225,7 +225,11 @@ def build_rider(spec):
 def load_rider(rider_id):
     """The roster's rider `rider_id` (UserError if unknown). Cached per process."""
     from .roster import get_spec
-    return build_rider(get_spec(rider_id))
+    spec = get_spec(rider_id)
+    if spec.get("body", "anny") == "smpl":  # the user's own SMPL model file, via smplx
+        from .smpl_body import rider_from_spec
+        return rider_from_spec(spec)
+    return build_rider(spec)
 
 
 def pose_vertices(rider, local_rotmats, root_trans=None):

@@ -32,6 +32,10 @@ def load_roster(path=ROSTER_PATH):
         if rid in seen:
             raise UserError(f"{path}: duplicate rider id {rid!r}")
         seen.add(rid)
+        if r.get("body") == "smpl":  # a user-supplied SMPL model (smpl_body.py): no anny phenotype
+            if not isinstance(r.get("model_path"), str) or not r["model_path"]:
+                raise UserError(f"{path}: rider {rid}: body: smpl needs a 'model_path' string")
+            continue
         ph = r.get("phenotype") or {}
         for k in PHENOTYPE_KEYS:
             v = ph.get(k)
@@ -56,6 +60,8 @@ def get_spec(rider_id, path=ROSTER_PATH):
 
 def describe(r):
     """One line, id first."""
+    if r.get("body") == "smpl":
+        return f"{r['id']}  SMPL model {r['model_path']} ({r.get('gender', 'neutral')})"
     return (f"{r['id']}  {r['sex']:<6} {r['age_years']:>2} y  {r['height_m']:.2f} m  "
             f"{r['build']:<8} top {r['colors']['top']} bottom {r['colors']['bottom']} "
             f"helmet {r['colors']['helmet']}")
