@@ -22,6 +22,8 @@ STAGES = {
     "render": ("bench.render", lambda m, r, out: m.run(r, out)),
     "views": ("bench.render", lambda m, r, out: m.render_all_views(out)),
     "train_parts": ("bench.train_parts", lambda m, r, out: m.run(r, os.path.join(out, "bikes"))),
+    "train_chart": ("bench.train_chart", lambda m, r, out: m.run(r, os.path.join(out, "bikes"),
+                                                                 png=os.path.join(out, "train_chart.png"), time_budget_s=180)),
     "bike_gt": ("bench.bike_gt", lambda m, r, out: m.run(r, out)),
     "ik": ("bench.ik", lambda m, r, out: m.run(r, out)),
     "rider": ("bench.rider", lambda m, r, out: m.run(r, out)),
