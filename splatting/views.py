@@ -272,3 +272,20 @@ def write_views(folder, cameras, images, points=None, orbit_centre=None, point_c
             arr["red"], arr["green"], arr["blue"] = c.T
         with atomic_path(os.path.join(folder, "points.ply")) as tmp:
             PlyData([PlyElement.describe(arr, "vertex")], text=False).write(tmp)
+
+
+def render_ring_views(g, size, orbit_centre):
+    """The 36 ring views of Gaussians `g` at `size` px as straight-alpha RGBA (V, H, W, 4), with
+    their cameras: synthetic training data in the same form load_views returns."""
+    from .cameras import ring
+    from .rasterize import render_gaussians
+
+    cams = [c.scaled(size / 512) for c in ring(orbit_centre=orbit_centre)]
+    imgs = []
+    with torch.no_grad():
+        for c in cams:
+            o = render_gaussians(g, c)
+            a = o["alpha"].clamp(0, 1)
+            rgb = torch.where(a[..., None] > 0, o["rgb"] / a.clamp_min(1e-8)[..., None], torch.zeros_like(o["rgb"]))
+            imgs.append(torch.cat([rgb.clamp(0, 1), a[..., None]], -1))
+    return cams, torch.stack(imgs)

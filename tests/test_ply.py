@@ -4,11 +4,10 @@ import pytest
 import torch
 from plyfile import PlyData
 
-from splatting.cameras import ring
 from splatting.gaussians import Gaussians, read_ply, write_ply
 from splatting.rasterize import render_gaussians
 from splatting.train import TrainConfig, train_views
-from splatting.views import load_views, write_views
+from splatting.views import load_views, render_ring_views, write_views
 
 # The layout INRIA's train.py writes (save_ply), which the common viewers and Blender add-ons read.
 INRIA_FIELDS = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
@@ -61,15 +60,8 @@ def _blob_views(folder, size=64):
     scene.log_scales = torch.full((60, 3), np.log(0.04))
     scene.opacity_logits = torch.full((60,), 1.5)
     scene.sh = scene.sh * 0.3
-    cams = [c.scaled(size / 512) for c in ring(orbit_centre=(0.0, 0.5, 0.0))]
-    imgs = []
-    with torch.no_grad():
-        for c in cams:
-            o = render_gaussians(scene, c)
-            a = o["alpha"].clamp(0, 1)
-            rgb = torch.where(a[..., None] > 0, o["rgb"] / a.clamp_min(1e-8)[..., None], torch.zeros_like(o["rgb"]))
-            imgs.append(torch.cat([rgb.clamp(0, 1), a[..., None]], -1))
-    write_views(folder, cams, torch.stack(imgs), scene.means, (0.0, 0.5, 0.0))
+    cams, imgs = render_ring_views(scene, size, (0.0, 0.5, 0.0))
+    write_views(folder, cams, imgs, scene.means, (0.0, 0.5, 0.0))
 
 
 def test_train_write_read_render_is_identical(tmp_path):

@@ -8,14 +8,12 @@ import sys
 import pytest
 import torch
 
-from splatting.cameras import ring
 from splatting.densify import DensifyConfig, DensifyStrategy
 from splatting.errors import UserError
 from splatting.gaussians import Gaussians, read_ply
-from splatting.rasterize import render_gaussians
 from splatting.sh import rgb_to_sh0
 from splatting.train import (TrainConfig, default_out, init_gaussians, split_views, train, train_views)
-from splatting.views import load_views, write_views
+from splatting.views import load_views, render_ring_views, write_views
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SIZE = 96  # the 512 px ring scaled down: 1 px = 3 cm at 12 m
@@ -43,15 +41,7 @@ def bike_like_scene(seed=0, n=40):
 
 def render_views(scene, size=SIZE, centre=(0.0, 0.65, 0.0)):
     """36 ring views of `scene` as straight-alpha RGBA (V, H, W, 4)."""
-    cams = [c.scaled(size / 512) for c in ring(orbit_centre=centre)]
-    imgs = []
-    with torch.no_grad():
-        for c in cams:
-            o = render_gaussians(scene, c)
-            a = o["alpha"].clamp(0, 1)
-            rgb = torch.where(a[..., None] > 0, o["rgb"] / a.clamp_min(1e-8)[..., None], torch.zeros_like(o["rgb"]))
-            imgs.append(torch.cat([rgb.clamp(0, 1), a[..., None]], -1))
-    return cams, torch.stack(imgs)
+    return render_ring_views(scene, size, centre)
 
 
 def make_views(folder, seed=0, points=True):
