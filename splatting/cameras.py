@@ -69,8 +69,10 @@ def load_cameras(path, width=None, height=None, dtype=torch.float32):
             data = json.load(f)
     except FileNotFoundError:
         raise UserError(f"no cameras file: {path}")
-    except json.JSONDecodeError as e:
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise UserError(f"{path} is not valid JSON: {e}")
+    except OSError as e:
+        raise UserError(f"cannot read {path}: {e.strerror or e}")
     cams = []
     for name in sorted(k for k in data if k.startswith("camera")):
         d = data[name]
