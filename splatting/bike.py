@@ -85,6 +85,7 @@ class BikeModel:
     def __init__(self, parts, keypoints_doc, meta, sh_degree=None, source="<memory>"):
         """parts: {part name: Gaussians}; keypoints_doc: the keypoints.json object; meta: meta.json."""
         self.source = source
+        self.meta = meta
         self.bike_id = str(meta.get("bike_id", ""))
         self.has_crank = "crank" in parts
         self.part_names = [p for p in MAIN_PARTS + SUB_PARTS if p in parts]

@@ -32,6 +32,38 @@ class CyclistFrame:
     ik: dict                      # {"residual_m": {pair: m}, "flagged": {pair: bool}, "seat_offset_m"} or None
 
 
+SADDLE_RADIUS_M = 0.2  # the saddle (about 0.28 m long) lies within this of the seat-tube line
+SADDLE_DEPTH_M = 0.12  # ... and within this below the seat keypoint along the line (springs too)
+POST_RADIUS_M = 0.03   # the seat post: a thin cylinder on the line ...
+POST_MARGIN_M = 0.04   # ... starting this far beyond the seat tube's nominal top (tube end, collar)
+
+
+def saddle_slide(bike):
+    """(mask (N,) bool, unit axis (3,) float64) of the frame Gaussians that slide with the IK's
+    saddle auto-fit along the line crank_axle -> seat: the saddle (near the seat keypoint) and the
+    exposed seat post (on the line, beyond the seat tube).  Only when the asset says where its
+    seat tube ends (meta.json dimensions.seat_tube_m, written by the procedural generator);
+    otherwise (None, None): nothing is modelled that the asset lacks.  Thresholds were checked
+    against the generator's materials for all seven styles (tests/test_cyclist_saddle.py)."""
+    dims = (getattr(bike, "meta", None) or {}).get("dimensions") or {}
+    top = dims.get("seat_tube_m")
+    kp = bike.keypoints
+    if not isinstance(top, (int, float)) or "seat" not in kp or "crank_axle" not in kp or "frame" not in bike.part_names:
+        return None, None
+    u = kp["seat"] - kp["crank_axle"]
+    seat_t = float(u.norm())
+    u = u / seat_t
+    a, e = bike.ranges[bike.part_names.index("frame")]
+    rel = bike.canonical.means[a:e].double() - kp["crank_axle"]
+    t = rel @ u
+    radial = (rel - t[:, None] * u).norm(dim=1)
+    saddle = (t > seat_t - SADDLE_DEPTH_M) & (radial < SADDLE_RADIUS_M)
+    post = (t > float(top) + POST_MARGIN_M) & (radial < POST_RADIUS_M)
+    mask = torch.zeros(len(bike), dtype=torch.bool)
+    mask[a:e] = saddle | post
+    return (mask, u) if mask.any() else (None, None)
+
+
 class Cyclist:
     def __init__(self, bike, avatar=None, ik_iterations=50):
         self.bike, self.avatar, self.ik_iterations = bike, avatar, int(ik_iterations)
@@ -43,6 +75,7 @@ class Cyclist:
             have = set(bike.keypoints)
             self.pairs = tuple((j, t) for j, t in ik.DEFAULT_PAIRS if t in have)
             self.saddle_fit = "seat" in have and "crank_axle" in have
+            self.saddle_mask, self.saddle_axis = saddle_slide(bike) if self.saddle_fit else (None, None)
         self.ids = ids
 
     def fit_rider(self, poses, saddle_shared=False, init_local_aa=None):
@@ -62,7 +95,7 @@ class Cyclist:
         bt = self.bike.pose_tensors(p)
         names = bt["keypoint_names"]
         frames = []
-        rider_out = None
+        rider_out = slide = None
         if self.avatar is not None:
             res = fit if fit is not None else self.fit_rider(p, saddle_shared, init_local_aa)
             Hg = self.bike.part_transforms(p)["frame"].float()  # H_g: the frame part is H_g alone
@@ -73,9 +106,17 @@ class Cyclist:
             root = ((rest0 + res.root_trans.float())[:, None] @ Rg.transpose(1, 2))[:, 0] + tg - rest0
             joints = res.joints.float() @ Rg.transpose(1, 2) + tg[:, None]
             rider_out = (self.avatar.pose_tensors(rot, root), joints, res)
+            if res.seat_offset is not None and self.saddle_mask is not None:
+                # the fitted seat moves the saddle + post Gaussians and the seat keypoint with it
+                slide = res.seat_offset.double()[:, None] * (Rg.double() @ self.saddle_axis)  # (B, 3) world
         for b in range(B):
-            parts = [Gaussians(bt["means"][b], bt["quats"][b], bt["log_scales"], bt["opacity_logits"], bt["sh"][b])]
+            means = bt["means"][b]
             kp = {k: bt["keypoints"][b, j].numpy() for j, k in enumerate(names)}
+            if slide is not None:
+                means = means.clone()
+                means[self.saddle_mask] += slide[b].to(means.dtype)
+                kp["seat"] = kp["seat"] + slide[b].numpy()
+            parts = [Gaussians(means, bt["quats"][b], bt["log_scales"], bt["opacity_logits"], bt["sh"][b])]
             joints = ikd = None
             if rider_out is not None:
                 out, J, res = rider_out
