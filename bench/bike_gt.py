@@ -68,6 +68,7 @@ def compare(bike_dir, poses, cams, gt_dir):
     import torch
     from PIL import Image
 
+    from bench.compare import mask_iou, psnr
     from splatting.bike import BikeModel
     from splatting.cameras import load_cameras
     from splatting.rasterize import render_gaussians
@@ -84,24 +85,13 @@ def compare(bike_dir, poses, cams, gt_dir):
             gt = np.asarray(Image.open(os.path.join(gt_dir, f"gt_{i:03d}.png")).convert("RGBA")).astype(np.float64) / 255
             gt_rgb = gt[..., :3] * gt[..., 3:4]
             m_gt, m = gt[..., 3] > 0.5, alpha > 0.5
-            iou = float((m & m_gt).sum() / max(1, (m | m_gt).sum()))
-            mse = float(((rgb - gt_rgb) ** 2).mean())
-            psnr = 10 * np.log10(1.0 / max(mse, 1e-12))
             with open(os.path.join(gt_dir, f"gt_{i:03d}_kp.json")) as f:
                 kp_gt = json.load(f)["keypoints"]
             kp_err = max(float(np.linalg.norm(posed.keypoints[k].numpy() - np.asarray(kp_gt[k]))) for k in kp_gt)
-            rows.append({"pose": [round(float(v), 3) for v in pose], "camera": int(cam), "iou": iou,
-                         "psnr": float(psnr), "kp_err_mm": kp_err * 1000})
+            rows.append({"pose": [round(float(v), 3) for v in pose], "camera": int(cam), "iou": mask_iou(m, m_gt),
+                         "psnr": psnr(rgb, gt_rgb), "kp_err_mm": kp_err * 1000})
             renders.append((gt_rgb, rgb))
     return rows, renders
-
-
-def side_by_side(gt, pred, path):
-    from PIL import Image
-
-    diff = np.abs(gt - pred).mean(-1, keepdims=True).repeat(3, -1) * 4
-    strip = np.concatenate([gt, pred, np.clip(diff, 0, 1)], 1)
-    Image.fromarray((strip * 255).round().astype(np.uint8)).save(path)
 
 
 def run(results, out_dir, n_poses=20, seed=0, samples=16):
@@ -119,6 +109,8 @@ def run(results, out_dir, n_poses=20, seed=0, samples=16):
     rows, renders = compare(bike_dir, poses, cams, gt_dir)
     iou, ps = np.array([r["iou"] for r in rows]), np.array([r["psnr"] for r in rows])
     worst = int(np.argmin(ps))
+    from bench.compare import side_by_side
+
     side_by_side(*renders[worst], os.path.join(out_dir, "bike_gt_worst.png"))
     results["bike_gt"] = {"poses": len(rows), "iou_mean": float(iou.mean()), "psnr_mean": float(ps.mean()),
                           "iou_min": float(iou.min()), "psnr_min": float(ps.min()),

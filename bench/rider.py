@@ -58,25 +58,6 @@ def camera_json(cam):
     return {"K": cam.K.tolist(), "R": cam.R.tolist(), "T": cam.T.tolist()}
 
 
-def mask_iou(a, b):
-    return float((a & b).sum() / max(1, (a | b).sum()))
-
-
-def psnr(a, b):
-    return float(10 * np.log10(1.0 / max(float(((a - b) ** 2).mean()), 1e-12)))
-
-
-def side_by_side(gt, pred, path, box):
-    from PIL import Image
-
-    x0, y0, x1, y1 = box
-    gt, pred = gt[y0:y1, x0:x1], pred[y0:y1, x0:x1]
-    diff = np.abs(gt - pred).mean(-1, keepdims=True).repeat(3, -1) * 4
-    strip = np.concatenate([gt, pred, np.clip(diff, 0, 1)], 1)
-    im = Image.fromarray((strip * 255).round().astype(np.uint8))
-    im.resize((im.width * 2, im.height * 2), Image.NEAREST).save(path)
-
-
 def repose_timing(avatar, rot, root, n_bike=100_000, reps=20):
     """Median ms of avatar.pose + Gaussians.cat with a 100k-Gaussian bike, one frame at a time."""
     import torch
@@ -105,6 +86,7 @@ def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, tim
     import torch
     from PIL import Image
 
+    from bench.compare import mask_iou, psnr, side_by_side
     from splatting.cameras import ring_camera
     from splatting.rasterize import render_gaussians
     from splatting.rider.avatar import RiderAvatar
@@ -169,7 +151,7 @@ def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, tim
     results["rider_repose_ms"] = repose_ms
     worst = int(np.argmin(iou))
     gt_w, pred_w, box_w = renders[worst]
-    side_by_side(gt_w, pred_w, os.path.join(out_dir, "rider_gt_worst.png"), box_w)
+    side_by_side(gt_w, pred_w, os.path.join(out_dir, "rider_gt_worst.png"), box_w, zoom=2)
     tr = build.get("train") or {}
     lines = [f"Rider `{rider_id}`: {len(avatar)} Gaussians (SH degree {avatar.gaussians.sh_degree}), training "
              f"{tr.get('iterations')} iterations / {tr.get('wall_s')} s, held-out PSNR {tr.get('psnr')} dB over white; "

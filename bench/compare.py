@@ -1,0 +1,25 @@
+"""Image comparisons shared by the ground-truth benchmarks (bike_gt, rider): float images in [0, 1]."""
+import numpy as np
+
+
+def mask_iou(a, b):
+    return float((a & b).sum() / max(1, (a | b).sum()))
+
+
+def psnr(a, b):
+    return float(10 * np.log10(1.0 / max(float(((a - b) ** 2).mean()), 1e-12)))
+
+
+def side_by_side(gt, pred, path, box=None, zoom=1):
+    """PNG strip: reference | prediction | 4x |difference|, optionally cropped to box and zoomed."""
+    from PIL import Image
+
+    if box is not None:
+        x0, y0, x1, y1 = box
+        gt, pred = gt[y0:y1, x0:x1], pred[y0:y1, x0:x1]
+    diff = np.abs(gt - pred).mean(-1, keepdims=True).repeat(3, -1) * 4
+    strip = np.concatenate([gt, pred, np.clip(diff, 0, 1)], 1)
+    im = Image.fromarray((strip * 255).round().astype(np.uint8))
+    if zoom != 1:
+        im = im.resize((im.width * zoom, im.height * zoom), Image.NEAREST)
+    im.save(path)
