@@ -69,9 +69,9 @@ def compare(bike_dir, poses, cams, gt_dir):
     from PIL import Image
 
     from bench.compare import mask_iou, psnr
-    from splatting.bike import BikeModel
-    from splatting.cameras import load_cameras
-    from splatting.rasterize import render_gaussians
+    from splatting.bike.model import BikeModel
+    from splatting.raster.camera import load_cameras
+    from splatting.raster.sparse import render_gaussians
 
     model = BikeModel.load(bike_dir)
     ring, _ = load_cameras(os.path.join(bike_dir, "views", "whole", "cameras.json"))

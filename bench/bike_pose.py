@@ -27,8 +27,8 @@ KEYPOINTS = {
 
 def synthetic_bike(sh_degree, seed=0):
     """An in-memory BikeModel with PART_SIZES random Gaussians (timing does not depend on content)."""
-    from splatting.bike import BikeModel
-    from splatting.gaussians import Gaussians
+    from splatting.bike.model import BikeModel
+    from splatting.gaussians.container import Gaussians
 
     g = torch.Generator().manual_seed(seed)
     k = (sh_degree + 1) ** 2
@@ -74,7 +74,7 @@ def time_model(model, reps):
 
 
 def run(results, reps=25):
-    from splatting.train import TrainConfig
+    from splatting.training.trainer import TrainConfig
 
     default_degree = TrainConfig().sh_degree
     threads_before = torch.get_num_threads()

@@ -51,8 +51,8 @@ def bike_like_gaussians(n, sh_degree=3, seed=0, dtype=torch.float32):
 
 
 def time_fwdbwd(n, iters=7, warmup=2, camera=None):
-    from splatting.cameras import ring_camera
-    from splatting.rasterize import rasterize
+    from splatting.raster.camera import ring_camera
+    from splatting.raster.sparse import rasterize
 
     cam = camera or ring_camera(30.0)
     params = [p.requires_grad_(True) for p in bike_like_gaussians(n)]

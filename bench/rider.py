@@ -62,7 +62,7 @@ def repose_timing(avatar, rot, root, n_bike=100_000, reps=20):
     """Median ms of avatar.pose + Gaussians.cat with a 100k-Gaussian bike, one frame at a time."""
     import torch
 
-    from splatting.gaussians import Gaussians
+    from splatting.gaussians.container import Gaussians
 
     g = torch.Generator().manual_seed(0)
     k = avatar.gaussians.sh.shape[1]
@@ -87,8 +87,8 @@ def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, tim
     from PIL import Image
 
     from bench.compare import mask_iou, psnr, side_by_side
-    from splatting.cameras import ring_camera
-    from splatting.rasterize import render_gaussians
+    from splatting.raster.camera import ring_camera
+    from splatting.raster.sparse import render_gaussians
     from splatting.rider.avatar import RiderAvatar
     from splatting.rider.avatar_build import build_avatar
     from splatting.rider.body import export_rider, load_rider, pose_vertices

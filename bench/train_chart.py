@@ -38,7 +38,7 @@ def draw(runs, png, title=""):
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     os.makedirs(os.path.dirname(os.path.abspath(png)), exist_ok=True)
-    from splatting.atomic import atomic_path
+    from cyclist_formats.atomic import atomic_path
 
     with atomic_path(png) as tmp:
         fig.savefig(tmp, dpi=110)
@@ -48,9 +48,9 @@ def draw(runs, png, title=""):
 def run(results, bikes_dir="out/bikes", bike=None, part="frame", budgets=BUDGETS, threads=1,
         png="out/bench/train_chart.png", time_budget_s=None):
     from bench.train_parts import find_bike
-    from splatting.atomic import write_json
-    from splatting.train import TrainConfig, train_views
-    from splatting.views import load_views
+    from cyclist_formats.atomic import write_json
+    from splatting.training.trainer import TrainConfig, train_views
+    from splatting.training.views import load_views
 
     b, parts = find_bike(bikes_dir, bike)
     if part not in parts:

@@ -31,7 +31,7 @@ def find_bike(bikes_dir, bike=None):
 
 def run(results, bikes_dir="out/bikes", bike=None, threads=1, max_gaussians=None, time_budget_s=None,
         parts=None):
-    from splatting.train import TrainConfig, train
+    from splatting.training.trainer import TrainConfig, train
 
     b, found = find_bike(bikes_dir, bike)
     if not b:

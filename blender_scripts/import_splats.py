@@ -66,7 +66,7 @@ def main(argv):
     if args.render or args.save:
         setup_render(scene, objs, args)
     if args.save:
-        from addon.core.atomic import atomic_path
+        from cyclist_formats.atomic import atomic_path
 
         with atomic_path(args.save) as tmp:
             os.remove(tmp)  # an existing file would make Blender keep a .blend1 backup of it
@@ -80,7 +80,8 @@ def main(argv):
 def setup_render(scene, objs, args):
     from dataclasses import replace
 
-    from addon.core import render, rig
+    from addon.core import render
+    from cyclist_formats import ring
     from addon.core.render_pose import load_camera
     from addon.core.splat_import import points_bbox
 
@@ -90,8 +91,8 @@ def setup_render(scene, objs, args):
     else:
         lo, hi = points_bbox(objs)
         size = args.size
-        focal = rig.FOCAL * size / rig.SIZE  # a smaller image keeps the ring's field of view
-        R, T, _ = rig.view(args.view, (lo + hi) / 2)
+        focal = ring.FOCAL * size / ring.SIZE  # a smaller image keeps the ring's field of view
+        R, T, _ = ring.view(args.view, (lo + hi) / 2)
     s = replace(render.RenderSettings(), size=size)
     if args.samples:
         s = replace(s, samples=args.samples)

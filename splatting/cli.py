@@ -7,14 +7,14 @@ import argparse
 import importlib
 import sys
 
-from .errors import UserError
+from cyclist_formats.errors import UserError
 
 # name -> (module, one-line help)
 COMMANDS = {
     "demo": ("splatting.demo", "the whole pipeline from nothing on a reduced budget, with a report"),
-    "train": ("splatting.train", "train one part's Gaussians on its 36 rendered views"),
-    "pose-bike": ("splatting.pose_bike", "re-pose a bike's part Gaussians with the 8-DoF pose"),
-    "contact-sheet": ("splatting.contact_sheet", "one view of every bike in a library on one PNG"),
+    "train": ("splatting.training.trainer", "train one part's Gaussians on its 36 rendered views"),
+    "pose-bike": ("splatting.bike.command", "re-pose a bike's part Gaussians with the 8-DoF pose"),
+    "contact-sheet": ("splatting.bike.contact_sheet", "one view of every bike in a library on one PNG"),
     "rider": ("splatting.rider.command", "list the rider roster; export a rider mesh (rest or posed)"),
     "rider-avatar": ("splatting.rider.avatar_build", "build a rider's Gaussian avatar (render, train, skin)"),
     "cyclist": ("splatting.cyclist.command", "pose, fit and render a rider on a bike over a sequence of frames"),

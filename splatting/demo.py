@@ -14,8 +14,8 @@ import time
 
 import yaml
 
-from .atomic import atomic_path
-from .errors import UserError
+from cyclist_formats.atomic import atomic_path
+from cyclist_formats.errors import UserError
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PARTS = ("frame", "steering", "crank")
@@ -86,7 +86,7 @@ def run(args):
             yaml.safe_dump(cfg, f, sort_keys=False)
     coco = os.path.join(out, "coco")
     st.run("COCO set", [py, "-m", "splatting", "dataset", "--config", cfg_path, "--out", coco, "--quiet"])
-    from .dataset.preview import coco_preview
+    from splatting.dataset.preview import coco_preview
 
     coco_preview(coco, os.path.join(out, "coco_preview.png"))
     st.run("contact sheet", [py, "-m", "splatting", "contact-sheet", "--bikes", os.path.join(out, "bikes"), "--view", "3",

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 import torch
 
-from splatting.cameras import ring_camera
-from splatting.errors import UserError
-from splatting.gaussians import Gaussians
-from splatting.rasterize import render_gaussians
+from splatting.raster.camera import ring_camera
+from cyclist_formats.errors import UserError
+from splatting.gaussians.container import Gaussians
+from splatting.raster.sparse import render_gaussians
 from splatting.rider.avatar import RiderAvatar, nearest_surface_point, polar_rotation, quat_mul, rotmat_to_quat_wxyz
 from splatting.rider.kinematics import JOINT_INDEX
 
@@ -273,7 +273,7 @@ def test_render_rider_views_end_to_end(rider, tmp_path):
     """Two ring views at 1 sample through the entry script; the body lands where the cameras say."""
     from PIL import Image
 
-    from splatting.cameras import load_cameras
+    from splatting.raster.camera import load_cameras
     from splatting.rider.body import export_rider
 
     mesh = export_rider(rider, str(tmp_path / "rider.ply"))

@@ -8,11 +8,11 @@ import random
 import pytest
 import torch
 
-from splatting.bike import BikeModel
-from splatting.bike_pose import check_poses, parse_pose_string, poses_from_json, transform_gaussians
-from splatting.errors import UserError
-from splatting.gaussians import Gaussians, read_ply, write_ply
-from splatting.sh import sh_basis
+from splatting.bike.model import BikeModel
+from splatting.bike.pose import check_poses, parse_pose_string, poses_from_json, transform_gaussians
+from cyclist_formats.errors import UserError
+from splatting.gaussians.container import Gaussians, read_ply, write_ply
+from splatting.gaussians.sh import sh_basis
 
 KP = {  # a plausible 1 m-wheelbase bike, canonical frame (X forward, Y up, Z right)
     "seat": [-0.15, 0.95, 0.0], "steer_top": [0.38, 0.95, 0.0], "steer_bottom": [0.45, 0.70, 0.0],
@@ -406,7 +406,7 @@ def test_reuse_overwrites_buffers_with_the_same_result(model):
 
 
 def test_generic_pose_transforms_match_the_model(model):
-    from splatting.bike_pose import pose_transforms
+    from splatting.bike.pose import pose_transforms
 
     pose = [40, -25, 10, -70, 5, 0.3, 0.0, 2.0]
     H = pose_transforms(pose, KP["steer_bottom"], KP["steer_top"], KP["crank_axle"])
@@ -422,8 +422,8 @@ def test_generic_pose_transforms_match_the_model(model):
 def test_global_pose_with_camera_keeps_the_render(model):
     """Posing by H_g alone and moving the camera by H_g too must leave the image unchanged
     (means, quaternions and SH all follow), also when fed the model's strided output views."""
-    rast = pytest.importorskip("splatting.rasterize")
-    from splatting.cameras import Camera
+    rast = pytest.importorskip("splatting.raster.sparse")
+    from splatting.raster.camera import Camera
 
     W = H = 40
     K = torch.tensor([[45.0, 0, W / 2], [0, 45.0, H / 2], [0, 0, 1]])

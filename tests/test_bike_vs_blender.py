@@ -63,7 +63,7 @@ def _blender_posed(bike_dir, pose, rest_points):
 
 
 def _write_part_gaussians(bike_dir, points):
-    from splatting.gaussians import Gaussians, write_ply
+    from splatting.gaussians.container import Gaussians, write_ply
 
     os.makedirs(bike_dir / "gaussians", exist_ok=True)
     for part, p in points.items():
@@ -74,7 +74,7 @@ def _write_part_gaussians(bike_dir, points):
 
 
 def test_keypoints_and_parts_match_blender_armature(bike_dir):
-    from splatting.bike import BikeModel
+    from splatting.bike.model import BikeModel
 
     rest_points = _part_points(bike_dir)
     _write_part_gaussians(bike_dir, rest_points)
@@ -117,9 +117,9 @@ def test_render_pose_oracle_keypoints_on_mask(bike_dir, tmp_path):
     """render_pose.py: the posed keypoints it reports project onto the mask it rendered."""
     from PIL import Image
 
-    from addon.core import rig
+    from cyclist_formats import ring
 
-    cams = rig.ring([0.0, 0.5, 0.0])
+    cams = ring.ring([0.0, 0.5, 0.0])
     (tmp_path / "cams.json").write_text(json.dumps(cams))
     out, kp_out = tmp_path / "gt.png", tmp_path / "kp.json"
     script = os.path.join(ROOT, "blender_scripts", "render_pose.py")
@@ -132,7 +132,7 @@ def test_render_pose_oracle_keypoints_on_mask(bike_dir, tmp_path):
     c = cams["camera0004"]
     ys, xs = np.nonzero(mask)
     for name, xyz in kp.items():
-        u, v = rig.project(np.array([xyz]), c["K"], c["R"], c["T"])[0]
+        u, v = ring.project(np.array([xyz]), c["K"], c["R"], c["T"])[0]
         d = np.sqrt((xs + 0.5 - u) ** 2 + (ys + 0.5 - v) ** 2).min()
         assert d <= 2.0, f"{name} is {d:.1f} px off the posed mask"
     # a NaN pose: one line, exit 2, nothing written

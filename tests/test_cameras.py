@@ -2,8 +2,8 @@ import json
 
 import pytest
 
-from splatting.cameras import load_cameras, ring_camera
-from splatting.errors import UserError
+from splatting.raster.camera import load_cameras, ring_camera
+from cyclist_formats.errors import UserError
 
 
 def test_load_cameras_bad_files_are_user_errors(tmp_path):

@@ -45,7 +45,7 @@ def run_dir(tmp_path_factory):
 
 
 def test_orbit_camera_is_the_ring_at_zero_elevation():
-    from splatting.cameras import ring_camera
+    from splatting.raster.camera import ring_camera
     from splatting.cyclist.render import orbit_camera
     for az in (0.0, 10.0, 90.0, -90.0, 180.0, 237.0):
         a, b = orbit_camera(az, 0.0, 12.0, (0.3, 1.0, -0.2)), ring_camera(az, (0.3, 1.0, -0.2))
@@ -106,7 +106,7 @@ def test_keypoint_behind_the_rider_is_occluded(cyclist):
 
 def test_frame_json_layout_and_outputs(run_dir):
     from PIL import Image
-    from splatting.gaussians import read_ply
+    from splatting.gaussians.container import read_ply
     out, _ = run_dir
     for i in range(3):
         with open(os.path.join(out, f"frame_{i:05d}.json")) as f:

@@ -5,9 +5,9 @@ import torch
 
 from addon.core.procedural import build, layout
 from addon.core.procedural import spec as S
-from splatting.bike import BikeModel
+from splatting.bike.model import BikeModel
 from splatting.cyclist.compose import Cyclist, saddle_slide
-from splatting.gaussians import Gaussians
+from splatting.gaussians.container import Gaussians
 
 
 def _bike_from_mesh(style):

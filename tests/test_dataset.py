@@ -199,7 +199,7 @@ def test_presets_are_valid():
 def test_other_config_in_same_folder_is_refused(built, tmp_path):
     from splatting.dataset.command import generate
     from splatting.dataset.config import validate
-    from splatting.errors import UserError
+    from cyclist_formats.errors import UserError
     root, cfg, full = built
     with pytest.raises(UserError, match="seed"):
         generate(validate(dict(cfg, seed=99)), full, log=lambda m: None, progress=False)

@@ -4,7 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from addon.core import frames, rig
+from addon.core import frames
+from cyclist_formats import ring
 
 
 def test_canonical_to_blender_axes():
@@ -38,7 +39,7 @@ def _rodrigues(axis, angle):
 
 @pytest.mark.parametrize("h", [0.0, 0.55])
 def test_ring_geometry(h):
-    cams = rig.ring([0.0, h, 0.0])
+    cams = ring.ring([0.0, h, 0.0])
     names = [k for k in cams if k.startswith("camera")]
     assert len(names) == 36 and cams["orbit_centre"] == [0.0, h, 0.0]
     for i, n in enumerate(names):
@@ -59,26 +60,26 @@ def test_ring_geometry(h):
 
 
 def test_view0_sees_left_side_front_on_left_and_view9_from_behind():
-    cams = rig.ring([0.0, 0.5, 0.0])
+    cams = ring.ring([0.0, 0.5, 0.0])
     c0 = cams["camera0000"]
     front, rear = np.array([[0.5, 0.35, 0.0]]), np.array([[-0.5, 0.35, 0.0]])
-    uf = rig.project(front, c0["K"], c0["R"], c0["T"])[0]
-    ur = rig.project(rear, c0["K"], c0["R"], c0["T"])[0]
+    uf = ring.project(front, c0["K"], c0["R"], c0["T"])[0]
+    ur = ring.project(rear, c0["K"], c0["R"], c0["T"])[0]
     assert uf[0] < 256 < ur[0]  # front wheel on the image's left
-    high = rig.project(np.array([[0, 1.0, 0]]), c0["K"], c0["R"], c0["T"])[0]
+    high = ring.project(np.array([[0, 1.0, 0]]), c0["K"], c0["R"], c0["T"])[0]
     assert high[1] < 256  # up is image-up
     c9 = cams["camera0009"]
     centre9 = -np.array(c9["R"]).T @ np.array(c9["T"])
     assert np.allclose(centre9, [-12, 0.5, 0])  # behind the bike, looking forward (+X)
     assert np.allclose(np.array(c9["R"])[2], [1, 0, 0])
     # from behind, the rider's right (+Z) is on the image's right
-    right = rig.project(np.array([[0, 0.5, 0.3]]), c9["K"], c9["R"], c9["T"])[0]
+    right = ring.project(np.array([[0, 0.5, 0.3]]), c9["K"], c9["R"], c9["T"])[0]
     assert right[0] > 256
 
 
 def test_transforms_json_is_nerf_convention():
-    cams = rig.ring([0.0, 0.4, 0.0])
-    tj = rig.transforms_json(cams)
+    cams = ring.ring([0.0, 0.4, 0.0])
+    tj = ring.transforms_json(cams)
     assert math.isclose(tj["camera_angle_x"], 2 * math.atan(256 / 2084.97))
     for f, n in zip(tj["frames"], sorted(k for k in cams if k.startswith("camera"))):
         M = np.array(f["transform_matrix"])
@@ -91,9 +92,9 @@ def test_transforms_json_is_nerf_convention():
 
 def test_torch_ring_matches_blender_ring():
     torch = pytest.importorskip("torch")
-    from splatting.cameras import ring_camera
+    from splatting.raster.camera import ring_camera
 
-    cams = rig.ring([0.0, 0.6, 0.0])
+    cams = ring.ring([0.0, 0.6, 0.0])
     for i in (0, 5, 9, 27, 35):
         c = ring_camera(10 * i, (0.0, 0.6, 0.0), dtype=torch.float64)
         n = f"camera{i:04d}"

@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from addon.core.procedural import layout, spec as bike_spec
-from splatting.errors import UserError
+from cyclist_formats.errors import UserError
 from splatting.rider import ik
 from splatting.rider.kinematics import JOINT_INDEX, forward_kinematics
 from splatting.rider.skeleton_template import template_rest_joints

@@ -14,8 +14,8 @@ import pytest
 import torch
 from PIL import Image
 
-from addon.core import rig
-from splatting.gaussians import Gaussians, write_ply
+from cyclist_formats import ring
+from splatting.gaussians.container import Gaussians, write_ply
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCRIPT = os.path.join(ROOT, "blender_scripts", "import_splats.py")
@@ -65,7 +65,7 @@ def near(px, rgb, tol=12):
 
 
 def pixel(img, K, R, T, point):
-    u, v = rig.project(np.array([point], float), K, R, T)[0]
+    u, v = ring.project(np.array([point], float), K, R, T)[0]
     return img[int(v), int(u)]
 
 
@@ -127,15 +127,15 @@ def test_render_sees_the_sides_design_says(tmp_path, fresh_scene):
     # default camera: the ring around the points' bbox centre, here view 18
     assert main(["--ply", ply, "--render", str(tmp_path / "v18.png"), "--view", "18", *FAST]) == 0
     lo, hi = np.array([-0.3, 0.7, -0.8]), np.array([1.05, 1.3, 0.8])  # the three spheres' extent
-    K = rig.intrinsics(64, rig.FOCAL * 64 / 512)
-    R, T, _ = rig.view(18, (lo + hi) / 2)
+    K = ring.intrinsics(64, ring.FOCAL * 64 / 512)
+    R, T, _ = ring.view(18, (lo + hi) / 2)
     img = rgba(tmp_path / "v18.png")
     assert near(pixel(img, K, R, T, (0, 1, 0)), BLUE), pixel(img, K, R, T, (0, 1, 0))
     assert near(pixel(img, K, R, T, (0.9, 1, 0)), GREEN)
-    assert pixel(img, K, R, T, (0.9, 1, 0))[3] > 0 and rig.project(np.array([[0.9, 1, 0]]), K, R, T)[0, 0] > 32
+    assert pixel(img, K, R, T, (0.9, 1, 0))[3] > 0 and ring.project(np.array([[0.9, 1, 0]]), K, R, T)[0, 0] > 32
     assert img[2, 2, 3] == 0  # transparent film around the clouds
     # an explicit cameras.json camera: view 0 of an orbit at (0, 1, 0)
-    cams = rig.ring((0, 1, 0), size=64, focal=rig.FOCAL * 64 / 512)
+    cams = ring.ring((0, 1, 0), size=64, focal=ring.FOCAL * 64 / 512)
     import json
 
     (tmp_path / "cameras.json").write_text(json.dumps(cams))
@@ -144,7 +144,7 @@ def test_render_sees_the_sides_design_says(tmp_path, fresh_scene):
     img = rgba(tmp_path / "v0.png")
     assert near(img[32, 32], RED), img[32, 32]  # the centre: red sphere hides the blue one
     # green, 0.9 m ahead, lands at u = 32 - 0.9 * f / 12 (front on the image's left)
-    u = int(32 - 0.9 * rig.FOCAL * 64 / 512 / 12)
+    u = int(32 - 0.9 * ring.FOCAL * 64 / 512 / 12)
     assert near(img[32, u], GREEN), img[32, u]
     assert not (np.abs(img[..., :3] - np.array([26, 26, 230])).max(-1) < 30).any()  # no blue visible
 
@@ -232,8 +232,8 @@ def test_debian_blender_binary_renders(tmp_path):
     img = rgba(out)
     assert img.shape == (64, 64, 4)
     # view 0 of the bbox-centred ring: red in front at the centre of the spheres, green to its left
-    K = rig.intrinsics(64, rig.FOCAL * 64 / 512)
-    R, T, _ = rig.view(0, (np.array([-0.3, 0.7, -0.8]) + [1.05, 1.3, 0.8]) / 2)
+    K = ring.intrinsics(64, ring.FOCAL * 64 / 512)
+    R, T, _ = ring.view(0, (np.array([-0.3, 0.7, -0.8]) + [1.05, 1.3, 0.8]) / 2)
     assert near(pixel(img, K, R, T, (0, 1, -0.5)), RED, tol=20)
     assert near(pixel(img, K, R, T, (0.9, 1, 0)), GREEN, tol=20)
-    assert rig.project(np.array([[0.9, 1, 0]]), K, R, T)[0, 0] < rig.project(np.array([[0, 1, 0]]), K, R, T)[0, 0]
+    assert ring.project(np.array([[0.9, 1, 0]]), K, R, T)[0, 0] < ring.project(np.array([[0, 1, 0]]), K, R, T)[0, 0]

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from splatting.errors import UserError
+from cyclist_formats.errors import UserError
 from splatting.rider.kinematics import JOINT_INDEX, forward_kinematics
 from splatting.rider.motion import (BikeFit, load_amass, load_cliff, load_motion, pedal_pose,
                                     pedalling_motion, sweep_motion, theta_from_pose)

@@ -4,10 +4,10 @@ import pytest
 import torch
 from plyfile import PlyData
 
-from splatting.gaussians import Gaussians, read_ply, write_ply
-from splatting.rasterize import render_gaussians
-from splatting.train import TrainConfig, train_views
-from splatting.views import load_views, render_ring_views, write_views
+from splatting.gaussians.container import Gaussians, read_ply, write_ply
+from splatting.raster.sparse import render_gaussians
+from splatting.training.trainer import TrainConfig, train_views
+from splatting.training.views import load_views, render_ring_views, write_views
 
 # The layout INRIA's train.py writes (save_ply), which the common viewers and Blender add-ons read.
 INRIA_FIELDS = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]

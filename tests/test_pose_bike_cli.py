@@ -8,7 +8,7 @@ import sys
 import pytest
 import torch
 
-from splatting.gaussians import read_ply
+from splatting.gaussians.container import read_ply
 from test_bike_pose import KP, make_bike, ref_part_point
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -126,15 +126,15 @@ def test_bad_input_from_a_real_process(bike, tmp_path):
 
 
 def test_help_field_names_match_the_pose_fields():
-    from splatting.bike_pose import POSE_FIELDS
-    from splatting.pose_bike import FIELDS_HELP
+    from splatting.bike.pose import POSE_FIELDS
+    from splatting.bike.command import FIELDS_HELP
 
     assert FIELDS_HELP == ", ".join(POSE_FIELDS) and list(POSE_FIELDS) == FIELDS
 
 
 def test_batch_chunks_reuse_buffers_without_mixing_poses(bike, tmp_path, capsys, monkeypatch):
-    import splatting.pose_bike as pb
-    from splatting.bike import BikeModel
+    import splatting.bike.command as pb
+    from splatting.bike.model import BikeModel
 
     monkeypatch.setattr(pb, "BATCH_CHUNK", 2)  # 5 poses: chunks of 2, 2 (reusing), 1
     poses = [[10.0 * i, 5.0 * i, 0, 30.0 * i, 0, 0.1 * i, 0, 0] for i in range(5)]

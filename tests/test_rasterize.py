@@ -4,11 +4,11 @@ import math
 import pytest
 import torch
 
-from splatting.cameras import Camera, ring_camera
-from splatting.gaussians import Gaussians
-from splatting.rasterize import rasterize, render_gaussians
-from splatting.rasterize_reference import render_reference
-from splatting.sh import rgb_to_sh0
+from splatting.raster.camera import Camera, ring_camera
+from splatting.gaussians.container import Gaussians
+from splatting.raster.sparse import rasterize, render_gaussians
+from splatting.raster.reference import render_reference
+from splatting.gaussians.sh import rgb_to_sh0
 
 
 def look_at_camera(eye, target=(0.0, 0.0, 0.0), width=24, height=20, focal=28.0, cx=None, cy=None,
@@ -241,7 +241,7 @@ def test_render_gaussians_applies_activations():
 @pytest.fixture
 def tiny_chunks(monkeypatch):
     """Force intersect() through many front-to-back chunks (the early cut-off path)."""
-    import splatting.rasterize as R
+    import splatting.raster.sparse as R
 
     monkeypatch.setattr(R, "CHUNK_PAIRS", 64)
 
@@ -270,7 +270,7 @@ def test_chunked_gradcheck(tiny_chunks):
 
 
 def test_chunks_drop_pairs_behind_the_cutoff(monkeypatch):
-    import splatting.rasterize as R
+    import splatting.raster.sparse as R
 
     means, quats, scales, opac, sh = _dense_opaque_scene(21)
     cam = look_at_camera((0.2, 0.1, -3.0))

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from addon.core import rig
+from cyclist_formats import ring
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PY = sys.executable
@@ -61,7 +61,7 @@ def check_keypoints_on_masks(views_dir, indices, tol_px=2):
     misses = []
     for i in indices:
         c = cams[f"camera{i:04d}"]
-        uv = rig.project(pts, c["K"], c["R"], c["T"])
+        uv = ring.project(pts, c["K"], c["R"], c["T"])
         m = _mask(views_dir, i) > 0
         ys, xs = np.nonzero(m)
         for n, (u, v) in zip(names, uv):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from splatting.errors import UserError
+from cyclist_formats.errors import UserError
 from splatting.rider.kinematics import JOINT_INDEX, JOINT_NAMES
 from splatting.rider.roster import load_roster
 

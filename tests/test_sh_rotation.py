@@ -4,8 +4,8 @@ import math
 import pytest
 import torch
 
-from splatting.sh import C1, sh_basis
-from splatting.sh_rotation import rotate_sh, sh_band_matrices, sh_rotation_matrix
+from splatting.gaussians.sh import C1, sh_basis
+from splatting.gaussians.sh_rotation import rotate_sh, sh_band_matrices, sh_rotation_matrix
 
 
 def random_rotations(n, dtype, seed=0):
@@ -73,10 +73,10 @@ def test_batched_shapes_broadcast():
 
 
 def test_rotating_scene_and_camera_together_keeps_the_image():
-    rast = pytest.importorskip("splatting.rasterize")
-    from splatting.bike_pose import rigid, transform_gaussians
-    from splatting.cameras import Camera
-    from splatting.gaussians import Gaussians
+    rast = pytest.importorskip("splatting.raster.sparse")
+    from splatting.bike.pose import rigid, transform_gaussians
+    from splatting.raster.camera import Camera
+    from splatting.gaussians.container import Gaussians
 
     g = torch.Generator().manual_seed(5)
     n = 150

@@ -12,7 +12,7 @@ import torch
 
 smplx = pytest.importorskip("smplx")
 
-from splatting.errors import UserError  # noqa: E402
+from cyclist_formats.errors import UserError  # noqa: E402
 from splatting.rider.kinematics import JOINT_INDEX, PARENTS, axis_angle_to_rotmat  # noqa: E402
 
 J = JOINT_INDEX
@@ -144,7 +144,7 @@ def test_pose_vertices_agrees_with_smplx_forward(model):
 
 
 def test_works_with_ik_and_avatar(model):
-    from splatting.gaussians import Gaussians
+    from splatting.gaussians.container import Gaussians
     from splatting.rider import ik
     from splatting.rider.avatar import RiderAvatar
     from splatting.rider.body import pose_vertices
@@ -242,7 +242,7 @@ def test_roster_entry_dispatches_to_smpl(model, tmp_path, monkeypatch):
 def test_roster_accepts_smpl_entries_and_lists_them(tmp_path):
     import yaml as _yaml
 
-    from splatting.errors import UserError
+    from cyclist_formats.errors import UserError
     from splatting.rider.roster import describe, load_roster
 
     p = tmp_path / "riders.yaml"

@@ -8,12 +8,12 @@ import sys
 import pytest
 import torch
 
-from splatting.densify import DensifyConfig, DensifyStrategy
-from splatting.errors import UserError
-from splatting.gaussians import Gaussians, read_ply
-from splatting.sh import rgb_to_sh0
-from splatting.train import (TrainConfig, default_out, init_gaussians, split_views, train, train_views)
-from splatting.views import load_views, render_ring_views, write_views
+from splatting.training.strategy import DensifyConfig, DensifyStrategy
+from cyclist_formats.errors import UserError
+from splatting.gaussians.container import Gaussians, read_ply
+from splatting.gaussians.sh import rgb_to_sh0
+from splatting.training.trainer import (TrainConfig, default_out, init_gaussians, split_views, train, train_views)
+from splatting.training.views import load_views, render_ring_views, write_views
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SIZE = 96  # the 512 px ring scaled down: 1 px = 3 cm at 12 m

@@ -8,9 +8,9 @@ import pytest
 import torch
 from PIL import Image
 
-from splatting.cameras import ring
-from splatting.errors import UserError
-from splatting.views import load_views, write_views
+from splatting.raster.camera import ring
+from cyclist_formats.errors import UserError
+from splatting.training.views import load_views, write_views
 
 SIZE = 32
 

@@ -8,8 +8,8 @@ import os
 
 import bpy
 
-from .atomic import atomic_path, write_json
-from .script import UserError
+from .contract import atomic_path, write_json
+from .contract import UserError
 
 FILES = ("bike.blend", "keypoints.json", "meta.json")
 

@@ -12,23 +12,24 @@ from dataclasses import dataclass, replace
 import bpy
 import numpy as np
 
-from . import frames, rig
-from .atomic import atomic_path, temp_name, write_json
-from .script import UserError
+from . import frames
+from .contract import bike_folder, instances, ply, ring
+from .contract import atomic, temp_name
+from .contract import UserError
 
-PART_IDS = {"frame": 1, "steering": 2, "crank": 3}
-WHOLE = "whole"
+PART_IDS = instances.PART_IDS
+WHOLE = bike_folder.WHOLE
 
 
 @dataclass
 class RenderSettings:
-    """Cycles settings; defaults chosen by `make bench` (see docs/rendering.md)."""
+    """Cycles settings; defaults chosen by `make bench` (see docs/bikes_and_views.md)."""
     samples: int = 16
     adaptive_threshold: float = 0.05
     denoise: str = "FAST"  # "NONE", "FAST", "BALANCED", "HIGH" (OIDN quality; 3.4 ignores quality)
     max_bounces: int = 2
     threads: int = 2
-    size: int = rig.SIZE
+    size: int = ring.SIZE
     seed: int = 0
 
 
@@ -120,7 +121,7 @@ def _quat_z_to(d):
     return (math.cos(h), *(math.sin(h) * axis))
 
 
-def ensure_camera(scene, size=rig.SIZE, focal=rig.FOCAL):
+def ensure_camera(scene, size=ring.SIZE, focal=ring.FOCAL):
     cam = scene.camera
     if cam is None:
         cam = bpy.data.objects.new("ring_camera", bpy.data.cameras.new("ring_camera"))
@@ -142,7 +143,7 @@ def place_camera(cam, R, T):
     hence the diag(1, -1, -1).  The camera's own axes are local, so only the world side is
     converted (left-multiplication), not conjugated.
     """
-    M = rig.camera_to_world_opengl(R, T)
+    M = ring.camera_to_world_opengl(R, T)
     c4 = np.eye(4)
     c4[:3, :3] = frames.C
     Mb = c4 @ M
@@ -185,65 +186,6 @@ def sample_surface(tris, n, seed=0, return_index=False):
     return (pts, nrm, idx) if return_index else (pts, nrm)
 
 
-def write_points_ply(path, pts, nrm, rgb=None):
-    """Plain binary little-endian xyz + normals (+ uchar colour) PLY (readable by plyfile/trimesh)."""
-    n = len(pts)
-    fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
-    if rgb is not None:
-        fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
-    arr = np.zeros(n, dtype=fields)
-    for i, k in enumerate("xyz"):
-        arr[k] = pts[:, i]
-        arr["n" + k] = nrm[:, i]
-    if rgb is not None:
-        for i, k in enumerate(("red", "green", "blue")):
-            arr[k] = rgb[:, i]
-    types = {"<f4": "float", "u1": "uchar"}
-    header = "ply\nformat binary_little_endian 1.0\nelement vertex %d\n" % n
-    header += "".join(f"property {types[t]} {k}\n" for k, t in fields) + "end_header\n"
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as f:
-            f.write(header.encode("ascii"))
-            f.write(arr.tobytes())
-
-
-def view_paths(views_dir, name):
-    return {
-        "rgba": os.path.join(views_dir, "rgba", name, "0000.png"),
-        "img": os.path.join(views_dir, "img", name, "0000.jpg"),
-        "mask": os.path.join(views_dir, "mask", name, "0000.png"),
-    }
-
-
-def view_complete(paths):
-    return all(os.path.isfile(p) and os.path.getsize(p) > 0 for p in paths.values())
-
-
-def remove_stale_temporaries(views_dir):
-    """Temporaries of a killed run (.<name>.*.tmp.<ext>) are never complete: delete them."""
-    for root, _, files in os.walk(views_dir):
-        for f in files:
-            if f.startswith(".") and ".tmp" in f:
-                os.remove(os.path.join(root, f))
-
-
-def derive_outputs(rgba_png, paths):
-    """From the rendered RGBA PNG: mask (alpha > 0.5 -> 255) and RGB composited on black."""
-    from PIL import Image
-
-    rgba = np.asarray(Image.open(rgba_png).convert("RGBA"))
-    alpha = rgba[..., 3:4].astype(np.float32) / 255.0
-    mask = (rgba[..., 3] > 127).astype(np.uint8) * 255  # alpha > 0.5 on the 8-bit value
-    on_black = np.clip(rgba[..., :3].astype(np.float32) * alpha + 0.5, 0, 255).astype(np.uint8)
-    with atomic_path(paths["img"]) as tmp:
-        Image.fromarray(on_black).save(tmp, format="JPEG", quality=95)
-    with atomic_path(paths["mask"]) as tmp:
-        Image.fromarray(mask).save(tmp, format="PNG")
-    # The RGBA goes last: its presence plus the other two marks the view complete.
-    os.makedirs(os.path.dirname(paths["rgba"]), exist_ok=True)
-    os.replace(rgba_png, paths["rgba"])
-
-
 def render_still(scene, path):
     """One Cycles render written to `path` (PNG, RGBA 8-bit)."""
     scene.render.filepath = path
@@ -264,7 +206,7 @@ def render_atomic(scene, out, derive=True):
     try:
         render_still(scene, tmp)
         if derive:
-            derive_outputs(tmp, paths)
+            bike_folder.write_derived(paths, rendered_png=tmp)
         else:
             os.replace(tmp, out)
     finally:
@@ -298,21 +240,18 @@ def render_part(scene, part_objs, views_dir, keypoints, views=None, settings=Ren
     views: indices of the ring to render (default all 36).
     """
     os.makedirs(views_dir, exist_ok=True)
-    remove_stale_temporaries(views_dir)
+    atomic.remove_stale(views_dir)
     show_only(scene, part_objs)
     lo, hi = world_bbox(part_objs)
     orbit = [0.0, float((lo[1] + hi[1]) / 2), 0.0]
-    focal = rig.FOCAL * settings.size / rig.SIZE  # a smaller image keeps the same field of view
-    cams = rig.ring(orbit, size=settings.size, focal=focal)
-    write_json(os.path.join(views_dir, "cameras.json"), cams)
-    write_json(os.path.join(views_dir, "transforms.json"), rig.transforms_json(cams, settings.size, focal))
-    write_json(os.path.join(views_dir, "keypoints.json"),
-               {"frame": "canonical", "units": "m", "keypoints": keypoints})
-    ply = os.path.join(views_dir, "points.ply")
-    if not os.path.isfile(ply):
+    focal = ring.FOCAL * settings.size / ring.SIZE  # a smaller image keeps the same field of view
+    cams = ring.ring(orbit, size=settings.size, focal=focal)
+    bike_folder.write_views_meta(views_dir, cams, ring.transforms_json(cams, settings.size, focal), keypoints)
+    ply_path = os.path.join(views_dir, "points.ply")
+    if not os.path.isfile(ply_path):
         tris = np.concatenate([mesh_world_triangles(o) for o in part_objs])
         pts, nrm = sample_surface(tris, n_points, seed=settings.seed)
-        write_points_ply(ply, pts, nrm)
+        ply.write_points(ply_path, pts, nrm)
 
     cam = ensure_camera(scene, settings.size, focal)
     names = sorted(k for k in cams if k.startswith("camera"))
@@ -320,15 +259,15 @@ def render_part(scene, part_objs, views_dir, keypoints, views=None, settings=Ren
     done = 0
     for n_i, i in enumerate(todo):
         name = names[i]
-        paths = view_paths(views_dir, name)
-        if view_complete(paths):
+        paths = bike_folder.view_paths(views_dir, name)
+        if bike_folder.view_complete(paths):
             done += 1
             continue
         place_camera(cam, cams[name]["R"], cams[name]["T"])
         tmp = temp_name(paths["rgba"])
         try:
             render_still(scene, tmp)
-            derive_outputs(tmp, paths)  # moves tmp onto the final rgba path, last
+            bike_folder.write_derived(paths, rendered_png=tmp)  # moves tmp onto the final rgba path, last
         finally:
             if os.path.exists(tmp):
                 os.remove(tmp)

@@ -2,30 +2,20 @@
 
 This is the ground truth every Gaussian-space result is checked against (DESIGN.md).
 """
-import json
-import math
 import os
 
 import numpy as np
 
 from . import frames, render
-from .script import UserError
+from .contract import UserError, bike_folder, ring
+from .contract import pose as pose_format
 
-POSE_FIELDS = ("theta_p_deg", "theta_s_deg", "theta_x_deg", "theta_y_deg", "theta_z_deg", "t_x_m", "t_y_m", "t_z_m")
+POSE_FIELDS = pose_format.POSE_FIELDS
 
 
 def parse_pose(text):
     """'p,s,X,Y,Z,tx,ty,tz' (degrees, metres) -> list of 8 finite floats."""
-    try:
-        vals = [float(v) for v in str(text).split(",")]
-    except ValueError:
-        raise UserError(f"--pose must be 8 comma-separated numbers p,s,X,Y,Z,tx,ty,tz, got '{text}'")
-    if len(vals) != 8:
-        raise UserError(f"--pose needs 8 values (p,s,X,Y,Z,tx,ty,tz), got {len(vals)}")
-    bad = [POSE_FIELDS[i] for i, v in enumerate(vals) if not math.isfinite(v)]
-    if bad:
-        raise UserError(f"--pose has a non-finite value in {bad[0]}")
-    return vals
+    return [float(v) for v in pose_format.parse_pose_string(text)]
 
 
 def load_camera(spec, bike_dir):
@@ -39,14 +29,9 @@ def load_camera(spec, bike_dir):
         if not os.path.isfile(alt):
             raise UserError(f"no camera file: {path}")
         path = alt
-    try:
-        with open(path) as f:
-            data = json.load(f)
-    except json.JSONDecodeError as e:
-        raise UserError(f"{path} is not valid JSON: {e}")
-    cam = data.get(name) if name else data
-    if cam is None:
-        raise UserError(f"{path} has no camera '{name}'")
+    if name:
+        return ring.camera_entry(path, name)
+    cam = bike_folder.read_json(path, "camera file")
     try:
         K, R, T = (np.asarray(cam[k], float) for k in ("K", "R", "T"))
         K, R, T = K.reshape(3, 3), R.reshape(3, 3), T.reshape(3)
@@ -59,7 +44,7 @@ def render_pose(bike_dir, pose, camera, out, keypoints_out=None, settings=None, 
     import bpy
 
     from .articulation import apply_pose, global_matrix, posed_keypoints
-    from .atomic import write_json
+    from .contract import write_json
     from .bike_asset import open_bike
 
     K, R, T = load_camera(camera, bike_dir)

@@ -4,7 +4,7 @@ import os
 from dataclasses import replace
 
 from . import render
-from .script import UserError
+from .contract import UserError
 
 ALL_PARTS = ("frame", "steering", "crank", render.WHOLE)
 

@@ -13,78 +13,17 @@ import bpy
 import numpy as np
 
 from . import frames, render
-from .script import UserError
+from .contract import UserError, ply
 
 RIDER_PASS_INDEX = 4  # DESIGN.md: rider 4 when rendered together with a bike
 COLOR_ATTRIBUTE = "Col"
 
-_PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
-              "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-              "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}
-
-
 def read_colored_ply(path):
-    """Binary little-endian triangle .ply -> vertices (V,3) canonical, faces (F,3), colours (V,3)
-    sRGB in [0, 1] (white when the file has none)."""
-    try:
-        with open(path, "rb") as f:
-            data = f.read()
-    except FileNotFoundError:
+    """Triangle .ply -> vertices (V,3) canonical, faces (F,3), colours (V,3) sRGB in [0, 1]
+    (white when the file has none)."""
+    if not os.path.isfile(path):
         raise UserError(f"no rider mesh: {path}")
-    end = data.find(b"end_header\n")
-    if not data.startswith(b"ply") or end < 0:
-        raise UserError(f"{path} is not a .ply file")
-    header = data[:end].decode("ascii", "replace").splitlines()
-    body = data[end + len(b"end_header\n"):]
-    if "format binary_little_endian 1.0" not in header:
-        raise UserError(f"{path}: only binary little-endian .ply is supported")
-    elements = []  # [name, count, [(prop, dtype)], list spec or None]
-    for line in header:
-        tok = line.split()
-        if not tok:
-            continue
-        if tok[0] == "element":
-            elements.append([tok[1], int(tok[2]), [], None])
-        elif tok[0] == "property" and elements:
-            if tok[1] == "list":
-                elements[-1][3] = (_PLY_TYPES[tok[2]], _PLY_TYPES[tok[3]])
-            else:
-                elements[-1][2].append((tok[2], "<" + _PLY_TYPES[tok[1]]))
-    verts = faces = None
-    off = 0
-    try:
-        for name, count, props, lst in elements:
-            if lst is None:
-                dt = np.dtype(props)
-                arr = np.frombuffer(body, dtype=dt, count=count, offset=off)
-                off += dt.itemsize * count
-                if name == "vertex":
-                    verts = arr
-            else:  # assume triangles; checked below
-                cnt_t, idx_t = np.dtype("<" + lst[0]), np.dtype("<" + lst[1])
-                dt = np.dtype([("n", cnt_t), ("v", idx_t, (3,))])
-                arr = np.frombuffer(body, dtype=dt, count=count, offset=off)
-                if count and (arr["n"] != 3).any():
-                    raise UserError(f"{path}: faces must be triangles")
-                off += dt.itemsize * count
-                if name == "face":
-                    faces = arr["v"].astype(np.int64)
-    except ValueError as e:  # buffer shorter than the header promises
-        raise UserError(f"{path}: truncated .ply ({e})")
-    if verts is None or faces is None:
-        raise UserError(f"{path}: needs 'vertex' and 'face' elements")
-    v = np.stack([verts[k] for k in ("x", "y", "z")], 1).astype(np.float64)
-    if not np.isfinite(v).all():
-        raise UserError(f"{path}: non-finite vertex coordinates")
-    if len(faces) and (faces.min() < 0 or faces.max() >= len(v)):
-        raise UserError(f"{path}: face indices out of range")
-    names = verts.dtype.names
-    if all(k in names for k in ("red", "green", "blue")):
-        c = np.stack([verts[k] for k in ("red", "green", "blue")], 1).astype(np.float64)
-        c = c / 255.0 if verts["red"].dtype == np.uint8 else c
-    else:
-        c = np.ones_like(v)
-    return v, faces, c
+    return ply.read_colored_mesh(path)
 
 
 def srgb_to_linear(c):
@@ -133,7 +72,7 @@ def _colored_points_ply(path, v, f, c, n, seed):
     triangle's mean vertex colour (render_part writes uncoloured ones only when none exist)."""
     pts, nrm, idx = render.sample_surface(v[f], n, seed=seed, return_index=True)
     rgb = np.clip(c[f[idx]].mean(1) * 255 + 0.5, 0, 255).astype(np.uint8)
-    render.write_points_ply(path, pts, nrm, rgb)
+    ply.write_points(path, pts, nrm, rgb)
 
 
 def render_rider_views(mesh_path, views_dir, views=None, settings=None, n_points=20000, progress=print):

@@ -7,8 +7,7 @@ import sys
 import traceback
 
 
-class UserError(Exception):
-    """Bad input: reported as one line on stderr with a non-zero exit, no traceback."""
+from .contract import UserError  # noqa: F401  (the one UserError of both worlds, re-exported for the scripts)
 
 
 def script_argv(argv=None):

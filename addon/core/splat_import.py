@@ -18,7 +18,7 @@ import os
 import numpy as np
 
 from . import frames
-from .script import UserError
+from .contract import UserError
 
 SH_C0 = 0.28209479177387814  # Y_0^0: 3DGS's colour = 0.5 + C0 * f_dc
 # Area-equivalent 1-sigma radius of the Gaussian's two largest axes, times sqrt(2): an opaque

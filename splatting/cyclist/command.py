@@ -22,8 +22,8 @@ import time
 import numpy as np
 import torch
 
-from ..atomic import atomic_path, write_json
-from ..errors import UserError
+from cyclist_formats.atomic import atomic_path, write_json
+from cyclist_formats.errors import UserError
 
 MAX_PREVIEW_COLUMNS = 8
 
@@ -92,8 +92,8 @@ def programme_poses(n, rpm, fps, steer_range, global_pose):
 def motion_poses(motion_path, rider, bike, n, global_pose):
     """theta_p, theta_s per frame from a motion file (theta_from_pose) + the motion's local rotations."""
     import roma
-    from ..rider.body import posed_joints
-    from ..rider.motion import load_motion, theta_from_pose
+    from splatting.rider.body import posed_joints
+    from splatting.rider.motion import load_motion, theta_from_pose
     m = load_motion(motion_path)
     if len(m) < n:
         raise UserError(f"{motion_path} has {len(m)} frames, --frames asks for {n}")
@@ -108,7 +108,7 @@ def motion_poses(motion_path, rider, bike, n, global_pose):
 def fit_sequence(cyc, poses, motion_aa=None):
     """IK for all frames at once with one seat post.  With a motion: a second solve starts from the
     first one's solution with the motion's rotations on the joints the IK does not move."""
-    from ..rider import ik
+    from splatting.rider import ik
     res = cyc.fit_rider(poses, saddle_shared=True)
     if motion_aa is None:
         return res
@@ -143,11 +143,11 @@ def render_sequence(cyc, poses, views, out, size=512, elevation=0.0, distance=12
                     tolerances=(0.08, 0.15), meta=None, log=print, chunk=8):
     """Render a posed sequence into `out` (layout: module docstring); frames already complete are
     skipped.  Returns {"frames", "rendered", "skipped", "wall_s"}."""
-    from ..bike import KEYPOINTS
-    from ..gaussians import write_ply
-    from ..rider.kinematics import JOINT_NAMES
-    from .compose import frame_record, take_fit
-    from .render import keypoint_visibility, orbit_camera, project_points, render_layers, rgba_image
+    from splatting.bike.model import KEYPOINTS
+    from splatting.gaussians.container import write_ply
+    from splatting.rider.kinematics import JOINT_NAMES
+    from splatting.cyclist.compose import frame_record, take_fit
+    from splatting.cyclist.render import keypoint_visibility, orbit_camera, project_points, render_layers, rgba_image
 
     n = poses.shape[0]
     os.makedirs(out, exist_ok=True)
@@ -221,8 +221,8 @@ def write_previews(out, n, views, thumb=128):
 
 
 def run_one(args, rider_id, bike, out, log):
-    from .assets import bike_dir, load_avatar, load_bike
-    from .compose import Cyclist, check_rider_fits
+    from splatting.cyclist.assets import bike_dir, load_avatar, load_bike
+    from splatting.cyclist.compose import Cyclist, check_rider_fits
     d = bike_dir(bike, args.bikes_root)
     model = load_bike(d, args.synthetic, log=log)
     avatar, rider = load_avatar(rider_id, args.riders_root, args.synthetic, args.rider_gaussians, log=log)
@@ -265,8 +265,8 @@ def run(args):
             raise UserError("--rider and --bike are required (or --all-combinations)")
         run_one(args, args.rider, args.bike, args.out, log)
         return 0
-    from ..dataset.config import _has_crank
-    from ..rider.roster import load_roster
+    from splatting.dataset.config import _has_crank
+    from splatting.rider.roster import load_roster
     riders = [args.rider] if args.rider else [r["id"] for r in load_roster()]
     if args.bike:
         bikes = [args.bike]

@@ -11,15 +11,15 @@ import numpy as np
 import roma
 import torch
 
-from ..bike_pose import check_poses
-from ..errors import UserError
-from ..gaussians import Gaussians
-from ..rider import ik
-from ..rider.kinematics import JOINT_NAMES
-from .render import IDS
+from splatting.bike.pose import check_poses
+from cyclist_formats.errors import UserError
+from splatting.gaussians.container import Gaussians
+from splatting.rider import ik
+from splatting.rider.kinematics import JOINT_NAMES
+from cyclist_formats.instances import IDS
+from cyclist_formats import instances
 
-PART_IDS = {"frame": 1, "rear_wheel": 1, "steering": 2, "front_wheel": 2, "crank": 3,
-            "pedal_left": 3, "pedal_right": 3}
+PART_IDS = {**instances.PART_IDS, **instances.SUB_PART_IDS}
 
 
 @dataclass
@@ -142,7 +142,7 @@ def take_fit(res, idx):
 
 def frame_record(frame, index, extra=None):
     """The DESIGN.md per-frame JSON object."""
-    from ..bike_pose import POSE_FIELDS
+    from splatting.bike.pose import POSE_FIELDS
     rec = {"frame": int(index), "pose": [float(x) for x in frame.pose], "pose_fields": list(POSE_FIELDS),
            "units": {"angles": "deg", "lengths": "m"}, "coordinate_frame": "world (canonical axes)",
            "bike_keypoints": {k: [float(x) for x in v] for k, v in frame.bike_keypoints.items()}}

@@ -7,17 +7,17 @@ the rider's share is alpha minus their sum.  A pixel takes the id with the large
 weight where alpha > 0.5 (0 = background).  Sharing the pair list costs one extra compositing
 pass (cheap next to projection + intersection).
 """
-import math
 
 import numpy as np
 import torch
 
-from ..cameras import RING_FOCAL, RING_SIZE, Camera
-from ..rasterize import composite, intersect, project
-from ..sh import eval_sh
+from cyclist_formats import instances
+from cyclist_formats import ring as formats_ring
+from splatting.raster.camera import RING_FOCAL, RING_SIZE, from_numpy
+from splatting.raster.sparse import composite, intersect, project
+from splatting.gaussians.sh import eval_sh
 
-IDS = {"frame": 1, "steering": 2, "crank": 3, "rider": 4}
-ID_NAMES = {v: k for k, v in IDS.items()}
+IDS, ID_NAMES = instances.IDS, instances.ID_NAMES
 MASK_ALPHA = 0.5
 
 
@@ -28,19 +28,8 @@ def orbit_camera(azimuth_deg, elevation_deg=0.0, distance=12.0, centre=(0.0, 0.0
     +Z, R = diag(-1, -1, 1).  focal defaults to the ring's 2084.97 px scaled to `size`."""
     if focal is None:
         focal = RING_FOCAL * size / RING_SIZE
-    a, e = math.radians(azimuth_deg), math.radians(elevation_deg)
-    c = torch.as_tensor(centre, dtype=torch.float64)
-    # offset of the camera from the centre: view 0's (0, 0, -d) tilted up by e, then turned about +Y by a
-    off = torch.tensor([-distance * math.cos(e) * math.sin(a), distance * math.sin(e),
-                        -distance * math.cos(e) * math.cos(a)], dtype=torch.float64)
-    fwd = -off / off.norm()
-    right = torch.linalg.cross(fwd, torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64))
-    right = right / right.norm()
-    down = torch.linalg.cross(fwd, right)
-    R = torch.stack([right, down, fwd])
-    T = -R @ (c + off)
-    K = torch.tensor([[focal, 0.0, size / 2], [0.0, focal, size / 2], [0.0, 0.0, 1.0]], dtype=torch.float64)
-    return Camera(R.float(), T.float(), K.float(), int(size), int(size), name)
+    R, T, _ = formats_ring.orbit_view(azimuth_deg, elevation_deg, distance, centre)
+    return from_numpy(formats_ring.intrinsics(size, focal), R, T, int(size), int(size), name)
 
 
 @torch.no_grad()

@@ -11,9 +11,9 @@ import os
 
 import numpy as np
 
-from ..atomic import atomic_path
-from ..bike import KEYPOINTS as BIKE_KEYPOINTS
-from ..rider.kinematics import JOINT_NAMES, PARENTS
+from cyclist_formats.atomic import atomic_path
+from splatting.bike.model import KEYPOINTS as BIKE_KEYPOINTS
+from splatting.rider.kinematics import JOINT_NAMES, PARENTS
 
 BIKE_SKELETON_NAMES = [("seat", "steer_top"), ("steer_top", "steer_bottom"), ("steer_top", "handle_left"),
                        ("steer_top", "handle_right"), ("steer_bottom", "front_axle"), ("seat", "crank_axle"),

@@ -11,8 +11,8 @@ import os
 import sys
 import time
 
-from ..atomic import write_json
-from ..errors import UserError
+from cyclist_formats.atomic import write_json
+from cyclist_formats.errors import UserError
 
 
 def add_arguments(p):
@@ -34,20 +34,20 @@ _WORKER = {}
 def _init_worker(cfg, out_dir):
     import torch
     torch.set_num_threads(1)
-    from .generate import Assets
+    from splatting.dataset.generate import Assets
     _WORKER.update(cfg=cfg, out=out_dir, assets=Assets(cfg))
 
 
 def _work(index):
-    from .generate import write_sample
+    from splatting.dataset.generate import write_sample
     return write_sample(_WORKER["cfg"], index, _WORKER["out"], _WORKER["assets"])
 
 
 def generate(cfg, out_dir, workers=1, log=print, progress=True):
     """Make (or finish) the dataset in out_dir; returns {"annotations", "generated", "skipped", "wall_s"}."""
-    from .coco import merge
-    from .config import resolve_assets
-    from .generate import config_record, sample_done
+    from splatting.dataset.coco import merge
+    from splatting.dataset.config import resolve_assets
+    from splatting.dataset.generate import config_record, sample_done
 
     cfg = config_record(resolve_assets(cfg))
     os.makedirs(out_dir, exist_ok=True)
@@ -96,7 +96,7 @@ def generate(cfg, out_dir, workers=1, log=print, progress=True):
 
 
 def run(args):
-    from .config import load_config
+    from splatting.dataset.config import load_config
     if args.workers < 1:
         raise UserError("--workers must be >= 1")
     cfg = load_config(args.config, args.preset, {"count": args.count, "seed": args.seed,

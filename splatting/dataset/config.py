@@ -10,13 +10,13 @@ import os
 
 import yaml
 
-from ..errors import UserError
+from cyclist_formats.errors import UserError
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 PRESET_DIR = os.path.join(ROOT, "blend_assets", "datasets")
 MODES = ("cyclist", "bike-only")
 BACKGROUNDS = ("solid", "gradient", "noise")
-POSE_KEYS = ("theta_p_deg", "theta_s_deg", "theta_x_deg", "theta_y_deg", "theta_z_deg", "t_x_m", "t_y_m", "t_z_m")
+from cyclist_formats.pose import POSE_FIELDS as POSE_KEYS  # config keys are the contract's field names
 
 DEFAULTS = {
     "name": "dataset",
@@ -143,7 +143,7 @@ def validate(raw):
 
 def resolve_assets(cfg):
     """Expand 'all' and check that every rider and bike exists (config field named on failure)."""
-    from ..rider.roster import load_roster
+    from splatting.rider.roster import load_roster
     cfg = copy.deepcopy(cfg)
     if cfg["mode"] == "cyclist":
         known = [r["id"] for r in load_roster()]

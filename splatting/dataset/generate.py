@@ -11,13 +11,13 @@ import os
 import numpy as np
 import torch
 
-from ..atomic import atomic_path, write_json
-from ..bike import KEYPOINTS as BIKE_KEYPOINTS
-from ..cyclist.assets import bike_dir, load_avatar, load_bike
-from ..cyclist.compose import Cyclist
-from ..cyclist.render import keypoint_visibility, orbit_camera, over, project_points, render_layers
-from .coco import instance
-from .config import POSE_KEYS
+from cyclist_formats.atomic import atomic_path, write_json
+from splatting.bike.model import KEYPOINTS as BIKE_KEYPOINTS
+from splatting.cyclist.assets import bike_dir, load_avatar, load_bike
+from splatting.cyclist.compose import Cyclist
+from splatting.cyclist.render import keypoint_visibility, orbit_camera, over, project_points, render_layers
+from splatting.dataset.coco import instance
+from splatting.dataset.config import POSE_KEYS
 
 
 class Assets:

@@ -4,7 +4,7 @@ import os
 
 import numpy as np
 
-from ..atomic import atomic_path
+from cyclist_formats.atomic import atomic_path
 
 COLOURS = {"bicycle": (40, 120, 255), "person": (255, 60, 60), "cyclist": (40, 200, 90)}
 

@@ -19,10 +19,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ..errors import UserError
-from ..gaussians import Gaussians, read_ply, write_ply
-from ..sh_rotation import rotate_sh
-from .kinematics import forward_kinematics
+from cyclist_formats.errors import UserError
+from splatting.gaussians.container import Gaussians, read_ply, write_ply
+from splatting.gaussians.sh_rotation import rotate_sh
+from splatting.rider.kinematics import forward_kinematics
 
 SKINNING_METHOD = "barycentric_nearest_triangle"
 PLY_NAME = "rider.ply"
@@ -211,7 +211,7 @@ class RiderAvatar:
 
     def save_skinning(self, folder):
         """Only <folder>/skinning.npz (the build writes rider.ply with the trainer)."""
-        from ..atomic import atomic_path
+        from cyclist_formats.atomic import atomic_path
         os.makedirs(folder, exist_ok=True)
         with atomic_path(os.path.join(folder, SKINNING_NAME)) as tmp:
             with open(tmp, "wb") as f:  # a file object: np.savez would append .npz to the temp name

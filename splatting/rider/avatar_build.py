@@ -11,7 +11,7 @@ import subprocess
 import sys
 import time
 
-from ..errors import UserError
+from cyclist_formats.errors import UserError
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 RENDER_SCRIPT = os.path.join(ROOT, "blender_scripts", "render_rider.py")
@@ -41,10 +41,10 @@ def build_avatar(rider_id, out_dir, iterations=None, time_budget_s=None, max_gau
 
     import torch
 
-    from ..gaussians import read_ply
-    from ..train import TrainConfig, train
-    from .avatar import PLY_NAME, SKINNING_NAME, RiderAvatar
-    from .body import export_rider, load_rider
+    from splatting.gaussians.container import read_ply
+    from splatting.training.trainer import TrainConfig, train
+    from splatting.rider.avatar import PLY_NAME, SKINNING_NAME, RiderAvatar
+    from splatting.rider.body import export_rider, load_rider
 
     rider = load_rider(rider_id)  # UserError for an unknown id, before any work
     os.makedirs(out_dir, exist_ok=True)

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..errors import UserError
-from .kinematics import JOINT_INDEX, JOINT_NAMES, PARENTS, forward_kinematics
+from cyclist_formats.errors import UserError
+from splatting.rider.kinematics import JOINT_INDEX, JOINT_NAMES, PARENTS, forward_kinematics
 
 ROOT = Path(__file__).resolve().parents[2]
 CACHE_DIR = ROOT / "data" / "anny_cache"
@@ -224,10 +224,10 @@ def build_rider(spec):
 @functools.lru_cache(maxsize=16)
 def load_rider(rider_id):
     """The roster's rider `rider_id` (UserError if unknown). Cached per process."""
-    from .roster import get_spec
+    from splatting.rider.roster import get_spec
     spec = get_spec(rider_id)
     if spec.get("body", "anny") == "smpl":  # the user's own SMPL model file, via smplx
-        from .smpl_body import rider_from_spec
+        from splatting.rider.smpl_body import rider_from_spec
         return rider_from_spec(spec)
     return build_rider(spec)
 
@@ -251,7 +251,7 @@ def posed_joints(rider, local_rotmats, root_trans=None):
 def export_mesh(path, vertices, faces, colors):
     """Write a vertex-coloured mesh (.ply or .obj, canonical frame) atomically."""
     import trimesh
-    from ..atomic import atomic_path
+    from cyclist_formats.atomic import atomic_path
     ext = os.path.splitext(str(path))[1].lower()
     if ext not in (".ply", ".obj"):
         raise UserError(f"mesh output must end in .ply or .obj, got {path}")

@@ -3,7 +3,7 @@ import math
 
 import torch
 
-from ..errors import UserError
+from cyclist_formats.errors import UserError
 
 
 def add_arguments(p):
@@ -17,7 +17,7 @@ def add_arguments(p):
 
 
 def run(args):
-    from .roster import describe, load_roster
+    from splatting.rider.roster import describe, load_roster
     if args.list:
         for r in load_roster():
             print(describe(r))
@@ -30,19 +30,19 @@ def run(args):
         v = getattr(args, name)
         if v is not None and not math.isfinite(v):
             raise UserError(f"--{name.replace('_', '-')} must be a finite number")
-    from .body import export_rider, load_rider, pose_vertices
+    from splatting.rider.body import export_rider, load_rider, pose_vertices
     torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
     rider = load_rider(args.id)
     verts = None
     if args.motion:
-        from .motion import load_motion
+        from splatting.rider.motion import load_motion
         m = load_motion(args.motion)
         if not 0 <= args.frame < len(m):
             raise UserError(f"--frame {args.frame} out of range (motion has {len(m)} frames)")
         f = slice(args.frame, args.frame + 1)
         verts = pose_vertices(rider, m.local_rotmats[f], m.root_trans(rider)[f])[0]
     elif args.theta_p_deg is not None:
-        from .motion import pedal_pose
+        from splatting.rider.motion import pedal_pose
         rot, root, _ = pedal_pose(rider.joints, math.radians(args.theta_p_deg),
                                   math.radians(args.theta_s_deg))
         verts = pose_vertices(rider, rot, root)[0]

@@ -29,7 +29,7 @@ import numpy as np
 import roma
 import torch
 
-from splatting.errors import UserError
+from cyclist_formats.errors import UserError
 from splatting.rider.kinematics import JOINT_INDEX, JOINT_NAMES, PARENTS, forward_kinematics
 
 IK_JOINTS = ("spine1", "left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_hip",
@@ -370,8 +370,8 @@ def posed_bike_keypoints(keypoints, poses_deg):
     """Bike keypoints {name: (3,)} (canonical, rest) at B 8-DoF poses (DESIGN.md, degrees and
     metres) -> {name: (B, 3) float64}: steering keypoints turn with theta_s, pedals with theta_p,
     then the global transform.  What the IK needs without loading a BikeModel's Gaussians."""
-    from splatting.bike import DEFAULT_KEYPOINT_PARTS
-    from splatting.bike_pose import pose_transforms, transform_points
+    from splatting.bike.model import DEFAULT_KEYPOINT_PARTS
+    from splatting.bike.pose import pose_transforms, transform_points
 
     kp = {k: torch.as_tensor(v, dtype=torch.float64) for k, v in keypoints.items()}
     H = pose_transforms(poses_deg, kp["steer_bottom"], kp["steer_top"], kp.get("crank_axle"))

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..errors import UserError
-from .kinematics import JOINT_INDEX, PARENTS, axis_angle_to_rotmat, forward_kinematics
+from cyclist_formats.errors import UserError
+from splatting.rider.kinematics import JOINT_INDEX, PARENTS, axis_angle_to_rotmat, forward_kinematics
 
 C_SMPL = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
 _RX_PI = np.diag([1.0, -1.0, -1.0])  # OpenCV camera (y down, z ahead) -> Y up

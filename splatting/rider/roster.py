@@ -4,7 +4,7 @@ from pathlib import Path
 
 import yaml
 
-from ..errors import UserError
+from cyclist_formats.errors import UserError
 
 ROSTER_PATH = Path(__file__).resolve().parents[2] / "blend_assets" / "riders.yaml"
 PHENOTYPE_KEYS = ("gender", "age", "muscle", "weight", "height", "proportions")

@@ -18,7 +18,7 @@ template proportions (pelvis ~0.05 H above the hips, neck ~0.853 H, head ~0.90 H
 """
 import numpy as np
 
-from splatting.errors import UserError
+from cyclist_formats.errors import UserError
 from splatting.rider.kinematics import JOINT_NAMES
 
 MIN_HEIGHT_M, MAX_HEIGHT_M = 0.9, 2.3  # outside this an adult-proportion skeleton makes no sense

@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..errors import UserError
-from .body import ROOT, Rider, _region_colors
-from .kinematics import JOINT_INDEX, PARENTS
-from .motion import C_SMPL
+from cyclist_formats.errors import UserError
+from splatting.rider.body import ROOT, Rider, _region_colors
+from splatting.rider.kinematics import JOINT_INDEX, PARENTS
+from splatting.rider.motion import C_SMPL
 
 REQUIRED_KEYS = ("v_template", "shapedirs", "posedirs", "J_regressor", "weights", "kintree_table", "f")
 GENDERS = ("neutral", "female", "male")

@@ -8,7 +8,7 @@ import os
 
 import bpy
 
-from ..script import UserError
+from ..contract import UserError
 
 FORMATS = {
     ".glb": [("import_scene", "gltf")], ".gltf": [("import_scene", "gltf")],

@@ -4,7 +4,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..script import UserError
+from ..contract import UserError
 from . import keypoints as kpmod
 from . import mesh, split, wheels
 from .pose import canonical_pose

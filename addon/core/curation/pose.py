@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..script import UserError
+from ..contract import UserError
 from .wheels import Ring, ring_of
 
 

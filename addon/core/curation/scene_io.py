@@ -22,7 +22,7 @@ from .. import bike_asset
 from ..frames import C, to_blender, to_canonical
 from ..procedural.build import PASS_INDEX
 from ..procedural.layout import KEYPOINT_NAMES, part_keypoints
-from ..script import UserError
+from ..contract import UserError
 from . import pipeline, split
 from .validate import validate
 

@@ -10,7 +10,7 @@ import zlib
 import numpy as np
 import yaml
 
-from ..script import UserError
+from ..contract import UserError
 from . import layout
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))

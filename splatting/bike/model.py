@@ -23,10 +23,10 @@ from dataclasses import dataclass
 
 import torch
 
-from .bike_pose import about_point, check_poses, compose, global_rigid, pose_rotations, rigid, steering_axis
-from .errors import UserError
-from .gaussians import Gaussians, read_ply
-from .sh_rotation import BANDS, sh_band_matrices
+from splatting.bike.pose import about_point, check_poses, compose, global_rigid, pose_rotations, rigid, steering_axis
+from cyclist_formats.errors import UserError
+from splatting.gaussians.container import Gaussians, read_ply
+from splatting.gaussians.sh_rotation import BANDS, sh_band_matrices
 
 MAIN_PARTS = ("frame", "steering", "crank")
 SUB_PARTS = ("front_wheel", "rear_wheel", "pedal_left", "pedal_right")

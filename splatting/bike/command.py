@@ -9,11 +9,10 @@ import json
 import os
 import sys
 
-from .atomic import write_json
-from .errors import UserError
+from cyclist_formats.atomic import write_json
+from cyclist_formats.errors import UserError
 
-# spelled out here so that --help does not import torch (bike_pose.POSE_FIELDS is the same list)
-FIELDS_HELP = "theta_p_deg, theta_s_deg, theta_x_deg, theta_y_deg, theta_z_deg, t_x_m, t_y_m, t_z_m"
+from cyclist_formats.pose import FIELDS_HELP  # numpy only: --help does not import torch
 
 BATCH_CHUNK = 8  # poses posed at once in --poses mode (bounds memory: ~22 MB per pose at 100k, SH 3)
 
@@ -30,15 +29,15 @@ def add_arguments(p):
 
 
 def keypoints_doc(model, pose, keypoints):
-    from .bike_pose import pose_dict
+    from splatting.bike.pose import pose_dict
 
     return {"frame": "world", "units": "m", "bike_id": model.bike_id, "pose": pose_dict(pose),
             "keypoints": {k: [float(x) for x in v.tolist()] for k, v in keypoints.items()}}
 
 
 def run(args):
-    from .bike_pose import parse_pose_string, poses_from_json
-    from .gaussians import write_ply
+    from splatting.bike.pose import parse_pose_string, poses_from_json
+    from splatting.gaussians.container import write_ply
 
     # validate every input before loading or writing anything
     if args.pose is not None:
@@ -58,7 +57,7 @@ def run(args):
         if os.path.exists(args.out) and not os.path.isdir(args.out):
             raise UserError(f"--out {args.out} exists and is not a folder")
 
-    from .bike import BikeModel  # torch import only after the arguments are known good
+    from splatting.bike.model import BikeModel  # torch import only after the arguments are known good
 
     model = BikeModel.load(args.bike, bike_id=args.bike_id, sh_degree=args.sh_degree)
     if args.pose is not None:
@@ -69,7 +68,7 @@ def run(args):
         sys.stderr.write(f"pose-bike: {len(posed.gaussians)} Gaussians -> {args.out}\n")
         return 0
 
-    from .bike import posed_from_tensors
+    from splatting.bike.model import posed_from_tensors
 
     os.makedirs(args.out, exist_ok=True)
     n, prev = poses.shape[0], None

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import torch
 
-from .rasterize import quat_to_rotmat
+from splatting.raster.sparse import quat_to_rotmat
 
 
 @dataclass

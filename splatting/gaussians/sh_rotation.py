@@ -16,7 +16,7 @@ import math
 
 import torch
 
-from .sh import sh_basis
+from splatting.gaussians.sh import sh_basis
 
 BANDS = {1: (1, 4), 2: (4, 9), 3: (9, 16)}  # coefficient index range of each band
 N_SAMPLES = 32  # >= 7 (largest band), over-determined for conditioning

@@ -8,8 +8,8 @@ from contextlib import contextmanager
 def temp_name(path):
     """A fresh hidden temporary name beside `path` that keeps its extension.
 
-    Blender and PIL pick formats by extension; the leading dot and '.tmp' mark it as stale
-    if a run is killed (render.remove_stale_temporaries deletes those).
+    Blender and PIL pick formats by extension; the leading dot and '.tmp' mark it as stale if a
+    run is killed (remove_stale deletes those).
     """
     path = os.fspath(path)
     d = os.path.dirname(path) or "."
@@ -21,6 +21,23 @@ def temp_name(path):
     os.umask(umask)
     os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; finished files get the usual mode
     return tmp
+
+
+def is_temp_name(name):
+    """True for the hidden temporaries temp_name makes (left behind only by a killed run)."""
+    base = os.path.basename(name)
+    return base.startswith(".") and ".tmp" in base
+
+
+def remove_stale(folder):
+    """Delete the temporaries a killed run left anywhere below `folder`; returns how many."""
+    n = 0
+    for root, _, files in os.walk(folder):
+        for name in files:
+            if is_temp_name(name):
+                os.remove(os.path.join(root, name))
+                n += 1
+    return n
 
 
 @contextmanager

@@ -17,14 +17,14 @@ from dataclasses import dataclass, field
 import torch
 import torch.nn.functional as F
 
-from .atomic import write_json
-from .cameras import Camera
-from .densify import DensifyConfig, DensifyStrategy
-from .errors import UserError
-from .gaussians import Gaussians, write_ply
-from .rasterize import rasterize
-from .sh import rgb_to_sh0
-from .views import Views, load_views
+from cyclist_formats.atomic import write_json
+from splatting.raster.camera import Camera
+from splatting.training.strategy import DensifyConfig, DensifyStrategy
+from cyclist_formats.errors import UserError
+from splatting.gaussians.container import Gaussians, write_ply
+from splatting.raster.sparse import rasterize
+from splatting.gaussians.sh import rgb_to_sh0
+from splatting.training.views import Views, load_views
 
 DEFAULT_HOLDOUT = (3, 12, 21, 30)
 

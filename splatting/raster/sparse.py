@@ -15,7 +15,7 @@ import math
 
 import torch
 
-from .sh import eval_sh
+from splatting.gaussians.sh import eval_sh
 
 ALPHA_MIN = 1.0 / 255.0
 ALPHA_MAX = 0.99

@@ -4,8 +4,8 @@ import json
 import math
 import os
 
-from .atomic import atomic_path
-from .errors import UserError
+from cyclist_formats.atomic import atomic_path
+from cyclist_formats.errors import UserError
 
 
 def add_arguments(p):

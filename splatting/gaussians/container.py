@@ -1,4 +1,4 @@
-"""The Gaussian set and its INRIA 3DGS .ply layout (DESIGN.md).
+"""The Gaussian set; its INRIA 3DGS .ply layout is cyclist_formats.ply's (docs/contract.md).
 
 Tensor shapes (N Gaussians, K = (sh_degree + 1)**2 SH coefficients per colour channel):
   means        (N, 3)  canonical frame, metres
@@ -7,13 +7,14 @@ Tensor shapes (N Gaussians, K = (sh_degree + 1)**2 SH coefficients per colour ch
   opacity_logits (N,)  logit of opacity
   sh           (N, K, 3)  sh[:, 0] is the DC term (f_dc), sh[:, 1:] the rest (f_rest)
 """
+import os
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
 import torch
 
-from .atomic import atomic_path
-from .errors import UserError
+from cyclist_formats import ply
+from cyclist_formats.errors import UserError
 
 PLY_SH_REST = 45  # always written zero-padded to degree 3
 
@@ -90,8 +91,6 @@ def _ply_dtype():
 
 def write_ply(g: Gaussians, path):
     """Binary little-endian float32 INRIA layout, f_rest channel-major, zero-padded to degree 3."""
-    from plyfile import PlyData, PlyElement
-
     n = len(g)
     sh = g.with_sh_degree(3).sh.detach().cpu().float().numpy()  # (N, 16, 3)
     arr = np.zeros(n, dtype=_ply_dtype())
@@ -108,25 +107,13 @@ def write_ply(g: Gaussians, path):
         arr[f"scale_{i}"] = s[:, i]
     for i in range(4):
         arr[f"rot_{i}"] = q[:, i]
-    with atomic_path(path) as tmp:
-        PlyData([PlyElement.describe(arr, "vertex")], text=False, byte_order="<").write(tmp)
+    ply.write_ply(path, arr)
 
 
 def read_ply(path, sh_degree=None) -> Gaussians:
     """Read an INRIA-layout .ply. sh_degree=None infers the highest band with non-zero values."""
-    from plyfile import PlyData
-
-    try:
-        v = PlyData.read(str(path))["vertex"].data
-    except FileNotFoundError:
-        raise UserError(f"no such Gaussian file: {path}")
-    except Exception as e:  # plyfile raises a zoo of types on corrupt input
-        raise UserError(f"cannot read Gaussian .ply {path}: {e}")
+    v = ply.read_gaussians(os.fspath(path))  # UserError for missing, corrupt, non-3DGS or non-finite
     names = v.dtype.names
-    need = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity"] + [f"scale_{i}" for i in range(3)] + [f"rot_{i}" for i in range(4)]
-    missing = [k for k in need if k not in names]
-    if missing:
-        raise UserError(f"{path} is not a 3DGS .ply: missing fields {', '.join(missing)}")
     n_rest = sum(1 for k in names if k.startswith("f_rest_"))
     if n_rest % 3 or (n_rest // 3 + 1) not in (1, 4, 9, 16):
         raise UserError(f"{path}: {n_rest} f_rest fields is not a whole SH degree")

@@ -19,78 +19,38 @@ from dataclasses import replace
 import roma
 import torch
 
-from .errors import UserError
-from .gaussians import Gaussians
-from .sh_rotation import rotate_sh
+from cyclist_formats import pose as formats_pose
+from cyclist_formats.errors import UserError
+from cyclist_formats.pose import N_ANGLES, POSE_FIELDS  # noqa: F401  (re-exported: the pose maths' field order)
+from splatting.gaussians.container import Gaussians
+from splatting.gaussians.sh_rotation import rotate_sh
 
-POSE_FIELDS = ("theta_p_deg", "theta_s_deg", "theta_x_deg", "theta_y_deg", "theta_z_deg",
-               "t_x_m", "t_y_m", "t_z_m")
-N_ANGLES = 5  # the first five pose values are angles
 MIN_STEER_AXIS_M = 1e-6  # steer_top and steer_bottom closer than this do not define an axis
 
 
 # ---------------------------------------------------------------- parsing and validation
+# cyclist_formats.pose owns the fields and their parsing (numpy); these hand torch float64 on.
 
 def check_poses(poses):
     """Any (8,) or (B, 8) array-like of degrees/metres -> float64 tensor (B, 8); UserError if bad."""
-    try:
-        t = torch.as_tensor(poses, dtype=torch.float64)
-    except (TypeError, ValueError, RuntimeError) as e:
-        raise UserError(f"pose is not a list of numbers: {e}")
-    if t.dim() == 1:
-        t = t[None]
-    if t.dim() != 2 or t.shape[1] != 8:
-        raise UserError(f"a pose has 8 values ({', '.join(POSE_FIELDS)}); got shape {tuple(t.shape)}")
-    if t.shape[0] == 0:
-        raise UserError("no poses given")
-    bad = ~torch.isfinite(t)
-    if bad.any():
-        i, j = (int(x) for x in bad.nonzero()[0])
-        raise UserError(f"pose {i}: {POSE_FIELDS[j]} is {t[i, j].item()} (must be finite)")
-    return t
+    if isinstance(poses, torch.Tensor):
+        poses = poses.detach().cpu().double().numpy()
+    return torch.from_numpy(formats_pose.check_poses(poses))
 
 
 def parse_pose_string(text):
     """'p,s,X,Y,Z,tx,ty,tz' (degrees, metres) -> float64 tensor (8,)."""
-    items = [s.strip() for s in str(text).replace(";", ",").split(",")]
-    if len(items) != 8:
-        raise UserError(f"--pose needs 8 comma-separated values (p,s,X,Y,Z,tx,ty,tz); got {len(items)}: {text!r}")
-    vals = []
-    for name, s in zip(POSE_FIELDS, items):
-        try:
-            vals.append(float(s))
-        except ValueError:
-            raise UserError(f"--pose {name} is not a number: {s!r}")
-    return check_poses(vals)[0]
+    return torch.from_numpy(formats_pose.parse_pose_string(text))
 
 
 def poses_from_json(obj):
     """A list of 8-lists or of dicts with the named POSE_FIELDS (or {"poses": [...]}) -> (B, 8)."""
-    if isinstance(obj, dict) and "poses" in obj:
-        obj = obj["poses"]
-    if isinstance(obj, dict):
-        obj = [obj]
-    if not isinstance(obj, list) or not obj:
-        raise UserError("poses file must hold a non-empty list of poses")
-    rows = []
-    for i, p in enumerate(obj):
-        if isinstance(p, dict):
-            missing = [k for k in POSE_FIELDS if k not in p]
-            extra = [k for k in p if k not in POSE_FIELDS]
-            if missing or extra:
-                raise UserError(f"pose {i}: missing fields {missing}, unknown fields {extra}")
-            p = [p[k] for k in POSE_FIELDS]
-        if not isinstance(p, (list, tuple)) or len(p) != 8:
-            raise UserError(f"pose {i}: expected 8 numbers or a dict of {', '.join(POSE_FIELDS)}")
-        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p):
-            raise UserError(f"pose {i}: values must be numbers, got {p}")
-        rows.append([float(v) for v in p])
-    return check_poses(rows)
+    return torch.from_numpy(formats_pose.poses_from_json(obj))
 
 
 def pose_dict(pose):
     """(8,) degrees/metres -> {field: value} for JSON output."""
-    return {k: float(v) for k, v in zip(POSE_FIELDS, pose.tolist())}
+    return formats_pose.pose_dict(pose.detach().cpu().numpy() if isinstance(pose, torch.Tensor) else pose)
 
 
 # ---------------------------------------------------------------- transforms

@@ -7,7 +7,7 @@ import math
 
 import torch
 
-from .sh import eval_sh
+from splatting.gaussians.sh import eval_sh
 
 
 def _rotmat(q):

@@ -16,10 +16,12 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from .cameras import Camera, load_cameras
-from .errors import UserError
+from splatting.raster.camera import Camera, load_cameras
+from cyclist_formats import bike_folder, ply
+from cyclist_formats import ring as formats_ring
+from cyclist_formats.errors import UserError
 
-FRAME = "0000"  # the single time step of a static part
+FRAME = bike_folder.FRAME  # the single time step of a static part
 
 
 @dataclass
@@ -142,25 +144,9 @@ def _intrinsics(data, fr, w, h, path):
 
 def read_points(path):
     """points.ply -> ((P, 3) float32, (P, 3) colours in [0, 1] or None)."""
-    from plyfile import PlyData
-
-    try:
-        v = PlyData.read(str(path))["vertex"].data
-    except Exception as e:
-        raise UserError(f"cannot read point cloud {path}: {e}")
-    names = v.dtype.names
-    if not all(k in names for k in "xyz"):
-        raise UserError(f"{path}: vertex element has no x, y, z")
-    xyz = np.stack([v["x"], v["y"], v["z"]], 1).astype(np.float32)
-    if not np.isfinite(xyz).all():
-        raise UserError(f"{path}: non-finite point coordinates")
-    colors = None
-    for keys in (("red", "green", "blue"), ("r", "g", "b")):
-        if all(k in names for k in keys):
-            c = np.stack([v[k] for k in keys], 1).astype(np.float32)
-            colors = c / 255.0 if v[keys[0]].dtype.kind in "ui" or c.max() > 1.0 else c
-            break
-    return torch.from_numpy(xyz), None if colors is None else torch.from_numpy(colors)
+    xyz, colors = ply.read_points(path)
+    return (torch.from_numpy(xyz.astype(np.float32)),
+            None if colors is None else torch.from_numpy(colors.astype(np.float32)))
 
 
 def load_views(folder, dtype=torch.float32) -> Views:
@@ -227,58 +213,27 @@ def write_views(folder, cameras, images, points=None, orbit_centre=None, point_c
     straight alpha; points: (P, 3) or None.  Writes cameras.json, rgba/, img/ + mask/,
     transforms.json (NeRF-synthetic, camera-to-world in the OpenGL convention) and points.ply.
     """
-    from PIL import Image
-
-    from .atomic import atomic_path, write_json
-
     os.makedirs(folder, exist_ok=True)
     imgs = (torch.as_tensor(images).clamp(0, 1) * 255).round().to(torch.uint8).numpy()
-    cams_json, frames = {}, []
-    flip = torch.diag(torch.tensor([1.0, -1.0, -1.0], dtype=torch.float64))
+    cams_json = {}
     for i, cam in enumerate(cameras):
-        name = cam.name or f"camera{i:04d}"
-        R, T = cam.R.double(), cam.T.double()
-        cams_json[name] = {"K": cam.K.double().tolist(), "R": R.tolist(), "T": T.tolist()}
-        c2w = torch.eye(4, dtype=torch.float64)
-        c2w[:3, :3] = R.T @ flip
-        c2w[:3, 3] = -R.T @ T
-        rel = os.path.join("rgba", name, FRAME + ".png")
-        frames.append({"file_path": rel, "transform_matrix": c2w.tolist(),
-                       "fl_x": float(cam.K[0, 0]), "fl_y": float(cam.K[1, 1])})
-        rgba = imgs[i]  # img/ is RGB composited on black (SHERF), mask/ binary
-        for sub, arr, ext in (("rgba", rgba, ".png"), ("img", np.round(rgba[..., :3] * (rgba[..., 3:] / 255.0)).astype(np.uint8), ".jpg"),
-                              ("mask", np.where(rgba[..., 3] > 0, 255, 0).astype(np.uint8), ".png")):
-            path = os.path.join(folder, sub, name, FRAME + ext)
-            os.makedirs(os.path.dirname(path), exist_ok=True)
-            with atomic_path(path) as tmp:
-                Image.fromarray(arr).save(tmp, quality=95) if ext == ".jpg" else Image.fromarray(arr).save(tmp)
+        name = cam.name or formats_ring.camera_name(i)
+        cams_json[name] = {"K": cam.K.double().tolist(), "R": cam.R.double().tolist(), "T": cam.T.double().tolist()}
+        bike_folder.write_view(folder, name, rgba=imgs[i])
     if orbit_centre is not None:
         cams_json["orbit_centre"] = [float(x) for x in orbit_centre]
-    write_json(os.path.join(folder, "cameras.json"), cams_json)
-    w = cameras[0].width
-    write_json(os.path.join(folder, "transforms.json"),
-               {"camera_angle_x": 2 * math.atan(w / (2 * float(cameras[0].K[0, 0]))), "frames": frames})
+    w, h, f = cameras[0].width, cameras[0].height, float(cameras[0].K[0, 0])
+    bike_folder.write_views_meta(folder, cams_json, formats_ring.transforms_json(cams_json, w, f, "rgba/{name}/0000.png", h))
     if points is not None:
-        from plyfile import PlyData, PlyElement
-
-        pts = torch.as_tensor(points).float().numpy()
-        dt = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
-        if point_colors is not None:
-            dt += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
-        arr = np.zeros(len(pts), dtype=dt)
-        arr["x"], arr["y"], arr["z"] = pts.T
-        if point_colors is not None:
-            c = (torch.as_tensor(point_colors).clamp(0, 1) * 255).round().to(torch.uint8).numpy()
-            arr["red"], arr["green"], arr["blue"] = c.T
-        with atomic_path(os.path.join(folder, "points.ply")) as tmp:
-            PlyData([PlyElement.describe(arr, "vertex")], text=False).write(tmp)
+        rgb = None if point_colors is None else (torch.as_tensor(point_colors).clamp(0, 1) * 255).round().to(torch.uint8).numpy()
+        ply.write_points(os.path.join(folder, "points.ply"), torch.as_tensor(points).float().numpy(), rgb=rgb)
 
 
 def render_ring_views(g, size, orbit_centre):
     """The 36 ring views of Gaussians `g` at `size` px as straight-alpha RGBA (V, H, W, 4), with
     their cameras: synthetic training data in the same form load_views returns."""
-    from .cameras import ring
-    from .rasterize import render_gaussians
+    from splatting.raster.camera import ring
+    from splatting.raster.sparse import render_gaussians
 
     cams = [c.scaled(size / 512) for c in ring(orbit_centre=orbit_centre)]
     imgs = []
