@@ -14,11 +14,12 @@ BLENDER ?= blender
 
 setup: $(STAMP)
 
-$(STAMP): requirements.txt
+$(STAMP): requirements.txt pyproject.toml
 	@$(PYTHON) -c 'import sys; assert sys.version_info[:2] == (3, 11), "Python 3.11 is required (bpy 5.0.1 is cp311)"'
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -r requirements.txt
+	$(PY) -m pip install -q --no-deps --no-build-isolation -e .  # the project itself (pyproject.toml)
 	@$(PY) -c 'import torch, bpy; assert torch.__version__.startswith("2.13.0"), torch.__version__'
 	touch $(STAMP)
 

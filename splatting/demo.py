@@ -16,8 +16,9 @@ import yaml
 
 from cyclist_formats.atomic import atomic_path
 from cyclist_formats.errors import UserError
+from splatting import paths
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = str(paths.ROOT)
 PARTS = ("frame", "steering", "crank")
 
 

@@ -1,11 +1,8 @@
-import os
+"""Fixtures for every test.  The packages are imported as installed (`make setup` installs the
+project editable); shared factories live in tests/helpers.py."""
 import sys
 
 import pytest
-
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
 
 
 @pytest.fixture

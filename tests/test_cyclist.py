@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from test_dataset import RIDER, write_test_bike
+from helpers import RIDER, write_test_bike
 
 SMPL = ("pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2", "left_ankle",
         "right_ankle", "spine3", "left_foot", "right_foot", "neck", "left_collar", "right_collar", "head",

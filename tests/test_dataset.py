@@ -10,48 +10,9 @@ import time
 import numpy as np
 import pytest
 
+from helpers import RIDER, small_config, write_test_bike, write_yaml  # noqa: F401
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-RIDER = "m_adult_average_185"
-
-# a city bike's keypoints (canonical frame, metres), as the procedural generator writes them
-CITY_KEYPOINTS = {
-    "seat": [-0.2253, 0.9537, 0.0], "pedal_left": [-0.1737, 0.2764, -0.134], "pedal_right": [0.1737, 0.2764, 0.134],
-    "steer_top": [0.3888, 0.8964, 0.0], "steer_bottom": [0.4591, 0.7200, 0.0],
-    "handle_right": [0.2314, 1.0829, 0.2990], "handle_left": [0.2314, 1.0829, -0.2990],
-    "crank_axle": [0.0, 0.2764, 0.0], "front_axle": [0.6662, 0.3466, 0.0], "rear_axle": [-0.4584, 0.3466, 0.0],
-    "ground": [-0.4584, 0.0, 0.0]}
-
-
-def write_test_bike(root, bike_id="city_t"):
-    """A bike folder with keypoints and meta but no trained Gaussians (the pipeline builds stand-ins)."""
-    d = os.path.join(root, bike_id)
-    os.makedirs(d, exist_ok=True)
-    with open(os.path.join(d, "keypoints.json"), "w") as f:
-        json.dump({"frame": "canonical", "units": "m", "keypoints": CITY_KEYPOINTS,
-                   "parts": {"steering": ["steer_top", "steer_bottom", "handle_left", "handle_right", "front_axle"],
-                             "crank": ["crank_axle", "pedal_left", "pedal_right"]}}, f)
-    with open(os.path.join(d, "meta.json"), "w") as f:
-        json.dump({"bike_id": bike_id, "has_crank": True, "dimensions": {"wheel_diameter_m": 0.693},
-                   "spec": {"frame_colour": [0.05, 0.1, 0.4]}}, f)
-    return d
-
-
-def small_config(bikes_root, **kw):
-    cfg = {"name": "t", "mode": "cyclist", "seed": 3, "count": 6, "image_size": 64, "riders": [RIDER],
-           "bikes": ["city_t"], "bikes_root": bikes_root, "riders_root": os.path.join(bikes_root, "no_avatars"),
-           "synthetic_gaussians_per_part": 600, "rider_gaussians": 2500, "ik_iterations": 10,
-           "png_compress_level": 1}
-    cfg.update(kw)
-    return cfg
-
-
-def write_yaml(path, cfg):
-    import yaml
-    with open(path, "w") as f:
-        yaml.safe_dump(cfg, f)
-    return path
-
-
 def cli(*argv):
     return subprocess.run([sys.executable, "-m", "splatting", *argv], cwd=ROOT, capture_output=True, text=True,
                           env=dict(os.environ, OMP_NUM_THREADS="1"))

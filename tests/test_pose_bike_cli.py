@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from splatting.gaussians.container import read_ply
-from test_bike_pose import KP, make_bike, ref_part_point
+from helpers import KP, make_bike, ref_part_point
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FIELDS = ["theta_p_deg", "theta_s_deg", "theta_x_deg", "theta_y_deg", "theta_z_deg", "t_x_m", "t_y_m", "t_z_m"]

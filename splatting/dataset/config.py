@@ -11,9 +11,9 @@ import os
 import yaml
 
 from cyclist_formats.errors import UserError
+from splatting import paths
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-PRESET_DIR = os.path.join(ROOT, "blend_assets", "datasets")
+PRESET_DIR = str(paths.BLEND_ASSETS / "datasets")
 MODES = ("cyclist", "bike-only")
 BACKGROUNDS = ("solid", "gradient", "noise")
 from cyclist_formats.pose import POSE_FIELDS as POSE_KEYS  # config keys are the contract's field names

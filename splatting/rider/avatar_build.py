@@ -12,9 +12,9 @@ import sys
 import time
 
 from cyclist_formats.errors import UserError
+from splatting import paths
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-RENDER_SCRIPT = os.path.join(ROOT, "blender_scripts", "render_rider.py")
+RENDER_SCRIPT = paths.blender_script("render_rider.py")
 N_VIEWS = 36
 
 
@@ -104,7 +104,7 @@ def run(args):
         v = getattr(args, name)
         if v is not None and v < 1:
             raise UserError(f"--{name.replace('_', '-')} must be >= 1")
-    out = args.out or os.path.join(ROOT, "data", "riders", args.id)
+    out = args.out or os.path.join(paths.DATA, "riders", args.id)
     res = build_avatar(args.id, out, args.iterations, args.time_budget_s, args.max_gaussians, args.samples,
                        args.threads)
     print(f"{out}: avatar ready ({', '.join(f'{k} {v}' for k, v in res['steps'].items())})")

@@ -24,10 +24,11 @@ import numpy as np
 import torch
 
 from cyclist_formats.errors import UserError
+from splatting import paths
 from splatting.rider.kinematics import JOINT_INDEX, JOINT_NAMES, PARENTS, forward_kinematics
 
-ROOT = Path(__file__).resolve().parents[2]
-CACHE_DIR = ROOT / "data" / "anny_cache"
+CACHE_DIR = paths.DATA / "anny_cache"
+ROOT = paths.ROOT
 
 # anny -> canonical rotation (see module docstring).
 ANNY_TO_CANONICAL = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]])

@@ -5,8 +5,9 @@ from pathlib import Path
 import yaml
 
 from cyclist_formats.errors import UserError
+from splatting import paths
 
-ROSTER_PATH = Path(__file__).resolve().parents[2] / "blend_assets" / "riders.yaml"
+ROSTER_PATH = paths.BLEND_ASSETS / "riders.yaml"
 PHENOTYPE_KEYS = ("gender", "age", "muscle", "weight", "height", "proportions")
 COLOR_KEYS = ("skin", "top", "bottom", "shoes", "helmet")
 _HEX = re.compile(r"^#[0-9a-fA-F]{6}$")

@@ -1,0 +1,174 @@
+"""Shared test factories: synthetic bikes, Gaussians, a city bike's keypoints, and a pure-Python
+reference of the bike pose maths (independent of splatting.bike.pose, so tests can fail).
+
+Tests import these (`from helpers import ...`) instead of importing each other.
+"""
+import json
+import math
+import os
+
+import torch
+
+from splatting.gaussians.container import Gaussians, write_ply
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCRIPTS = os.path.join(ROOT, "blender_scripts")
+
+KP = {  # a plausible 1 m-wheelbase bike, canonical frame (X forward, Y up, Z right)
+    "seat": [-0.15, 0.95, 0.0], "steer_top": [0.38, 0.95, 0.0], "steer_bottom": [0.45, 0.70, 0.0],
+    "handle_left": [0.33, 1.0, -0.25], "handle_right": [0.33, 1.0, 0.25], "crank_axle": [0.0, 0.30, 0.0],
+    "pedal_left": [-0.17, 0.30, -0.12], "pedal_right": [0.17, 0.30, 0.12], "front_axle": [0.60, 0.35, 0.0],
+    "rear_axle": [-0.50, 0.35, 0.0], "ground": [0.0, 0.0, 0.0],
+}
+KP_PARTS = {"frame": ["seat", "steer_top", "steer_bottom", "rear_axle", "ground", "crank_axle"],
+            "steering": ["handle_left", "handle_right", "front_axle"], "crank": ["pedal_left", "pedal_right"]}
+# the keypoints each part's Gaussians cluster around; the first Gaussian sits exactly on the first
+ANCHORS = {"frame": ["seat", "rear_axle"], "steering": ["front_axle", "handle_left"],
+           "crank": ["pedal_right", "pedal_left"], "front_wheel": ["front_axle"], "rear_wheel": ["rear_axle"],
+           "pedal_left": ["pedal_left"], "pedal_right": ["pedal_right"]}
+
+
+def random_gaussians(n, centre_names, sh_degree=3, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    centres = torch.tensor([KP[c] for c in centre_names])
+    means = centres[torch.randint(len(centres), (n,), generator=g)] + 0.08 * torch.randn(n, 3, generator=g)
+    means[0] = centres[0]
+    k = (sh_degree + 1) ** 2
+    return Gaussians(means=means, quats=torch.randn(n, 4, generator=g), log_scales=torch.randn(n, 3, generator=g) - 4,
+                     opacity_logits=torch.randn(n, generator=g), sh=torch.randn(n, k, 3, generator=g) * 0.3)
+
+
+def make_bike(root, bike_id="synth_01", crank=True, n=200, sh_degree=3, kp=None, sub_parts=(), meta_extra=None):
+    """Write a synthetic bike folder (DESIGN.md layout) and return its path."""
+    d = os.path.join(str(root), bike_id)
+    os.makedirs(os.path.join(d, "gaussians"), exist_ok=True)
+    parts = ["frame", "steering"] + (["crank"] if crank else []) + list(sub_parts)
+    for i, p in enumerate(parts):
+        write_ply(random_gaussians(n + 17 * i, ANCHORS[p], sh_degree, seed=i), os.path.join(d, "gaussians", p + ".ply"))
+    kps = dict(kp or KP)
+    kp_parts = {p: list(v) for p, v in KP_PARTS.items()}
+    if not crank:
+        for k in ("crank_axle", "pedal_left", "pedal_right"):
+            kps.pop(k, None)
+        kp_parts["frame"].remove("crank_axle")
+        kp_parts.pop("crank")
+    with open(os.path.join(d, "keypoints.json"), "w") as f:
+        json.dump({"frame": "canonical", "units": "m", "keypoints": kps, "parts": kp_parts}, f)
+    meta = {"bike_id": bike_id, "has_crank": crank}
+    meta.update(meta_extra or {})
+    with open(os.path.join(d, "meta.json"), "w") as f:
+        json.dump(meta, f)
+    return d
+
+
+# ------------------------------------------------------------- reference math (pure Python)
+
+def mat_vec(M, v):
+    return [sum(M[i][j] * v[j] for j in range(3)) for i in range(3)]
+
+
+def mat_mul(A, B):
+    return [[sum(A[i][k] * B[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
+
+
+def rodrigues(axis, angle):
+    n = math.sqrt(sum(a * a for a in axis))
+    x, y, z = (a / n for a in axis)
+    c, s, C = math.cos(angle), math.sin(angle), 1 - math.cos(angle)
+    return [[c + x * x * C, x * y * C - z * s, x * z * C + y * s],
+            [y * x * C + z * s, c + y * y * C, y * z * C - x * s],
+            [z * x * C - y * s, z * y * C + x * s, c + z * z * C]]
+
+
+def rotate_about(p, centre, axis, angle):
+    r = mat_vec(rodrigues(axis, angle), [a - b for a, b in zip(p, centre)])
+    return [a + b for a, b in zip(r, centre)]
+
+
+def ref_global(p, pose):
+    """x, then y, then z rotation about the world axes, then translate."""
+    ax, ay, az = (math.radians(a) for a in pose[2:5])
+    for axis, ang in (([1, 0, 0], ax), ([0, 1, 0], ay), ([0, 0, 1], az)):
+        p = mat_vec(rodrigues(axis, ang), p)
+    return [a + t for a, t in zip(p, pose[5:8])]
+
+
+def ref_global_R(pose):
+    ax, ay, az = (math.radians(a) for a in pose[2:5])
+    return mat_mul(rodrigues([0, 0, 1], az), mat_mul(rodrigues([0, 1, 0], ay), rodrigues([1, 0, 0], ax)))
+
+
+def steer_axis():
+    return [a - b for a, b in zip(KP["steer_top"], KP["steer_bottom"])]
+
+
+def ref_part_R(part, pose):
+    R = ref_global_R(pose)
+    if part == "steering":
+        return mat_mul(R, rodrigues(steer_axis(), math.radians(pose[1])))
+    if part == "crank":
+        return mat_mul(R, rodrigues([0, 0, 1], -math.radians(pose[0])))
+    return R
+
+
+def ref_part_point(part, p, pose):
+    if part == "steering":
+        p = rotate_about(p, KP["steer_bottom"], steer_axis(), math.radians(pose[1]))
+    elif part == "crank":
+        p = rotate_about(p, KP["crank_axle"], [0, 0, 1], -math.radians(pose[0]))
+    return ref_global(p, pose)
+
+
+def quat_to_R(q):
+    w, x, y, z = (float(a) for a in q)
+    n = w * w + x * x + y * y + z * z
+    w, x, y, z = (a / math.sqrt(n) for a in (w, x, y, z))
+    return [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
+
+
+def random_pose(rng):
+    return [rng.uniform(-180, 180), rng.uniform(-60, 60), rng.uniform(-15, 15), rng.uniform(-180, 180),
+            rng.uniform(-15, 15), rng.uniform(-3, 3), rng.uniform(-1, 1), rng.uniform(-3, 3)]
+
+
+RIDER = "m_adult_average_185"
+
+# a city bike's keypoints (canonical frame, metres), as the procedural generator writes them
+CITY_KEYPOINTS = {
+    "seat": [-0.2253, 0.9537, 0.0], "pedal_left": [-0.1737, 0.2764, -0.134], "pedal_right": [0.1737, 0.2764, 0.134],
+    "steer_top": [0.3888, 0.8964, 0.0], "steer_bottom": [0.4591, 0.7200, 0.0],
+    "handle_right": [0.2314, 1.0829, 0.2990], "handle_left": [0.2314, 1.0829, -0.2990],
+    "crank_axle": [0.0, 0.2764, 0.0], "front_axle": [0.6662, 0.3466, 0.0], "rear_axle": [-0.4584, 0.3466, 0.0],
+    "ground": [-0.4584, 0.0, 0.0]}
+
+
+def write_test_bike(root, bike_id="city_t"):
+    """A bike folder with keypoints and meta but no trained Gaussians (the pipeline builds stand-ins)."""
+    d = os.path.join(root, bike_id)
+    os.makedirs(d, exist_ok=True)
+    with open(os.path.join(d, "keypoints.json"), "w") as f:
+        json.dump({"frame": "canonical", "units": "m", "keypoints": CITY_KEYPOINTS,
+                   "parts": {"steering": ["steer_top", "steer_bottom", "handle_left", "handle_right", "front_axle"],
+                             "crank": ["crank_axle", "pedal_left", "pedal_right"]}}, f)
+    with open(os.path.join(d, "meta.json"), "w") as f:
+        json.dump({"bike_id": bike_id, "has_crank": True, "dimensions": {"wheel_diameter_m": 0.693},
+                   "spec": {"frame_colour": [0.05, 0.1, 0.4]}}, f)
+    return d
+
+
+def small_config(bikes_root, **kw):
+    cfg = {"name": "t", "mode": "cyclist", "seed": 3, "count": 6, "image_size": 64, "riders": [RIDER],
+           "bikes": ["city_t"], "bikes_root": bikes_root, "riders_root": os.path.join(bikes_root, "no_avatars"),
+           "synthetic_gaussians_per_part": 600, "rider_gaussians": 2500, "ik_iterations": 10,
+           "png_compress_level": 1}
+    cfg.update(kw)
+    return cfg
+
+
+def write_yaml(path, cfg):
+    import yaml
+    with open(path, "w") as f:
+        yaml.safe_dump(cfg, f)
+    return path
