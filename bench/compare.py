@@ -1,13 +1,7 @@
 """Image comparisons shared by the ground-truth benchmarks (bike_gt, rider): float images in [0, 1]."""
 import numpy as np
 
-
-def mask_iou(a, b):
-    return float((a & b).sum() / max(1, (a | b).sum()))
-
-
-def psnr(a, b):
-    return float(10 * np.log10(1.0 / max(float(((a - b) ** 2).mean()), 1e-12)))
+from splatting.training.metrics import mask_iou, psnr  # noqa: F401  (one metrics module for bench and trainer)
 
 
 def side_by_side(gt, pred, path, box=None, zoom=1):

@@ -23,13 +23,10 @@ REF_SAMPLES = 1024
 
 
 def psnr(a, b, mask=None):
-    import numpy as np
+    """PSNR of two 8-bit images (peak 255), over `mask` if given."""
+    from splatting.training.metrics import psnr as _psnr
 
-    d = (a.astype(np.float64) - b.astype(np.float64)) ** 2
-    if mask is not None:
-        d = d[mask]
-    mse = d.mean()
-    return float("inf") if mse == 0 else float(10 * np.log10(255.0 ** 2 / mse))
+    return _psnr(a, b, mask, peak=255.0)
 
 
 def worker(bike_dir, work_dir):

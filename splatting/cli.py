@@ -12,7 +12,7 @@ from cyclist_formats.errors import UserError
 # name -> (module, one-line help)
 COMMANDS = {
     "demo": ("splatting.demo", "the whole pipeline from nothing on a reduced budget, with a report"),
-    "train": ("splatting.training.trainer", "train one part's Gaussians on its 36 rendered views"),
+    "train": ("splatting.training.command", "train one part's Gaussians on its 36 rendered views"),
     "pose-bike": ("splatting.bike.command", "re-pose a bike's part Gaussians with the 8-DoF pose"),
     "contact-sheet": ("splatting.bike.contact_sheet", "one view of every bike in a library on one PNG"),
     "rider": ("splatting.rider.command", "list the rider roster; export a rider mesh (rest or posed)"),

@@ -1,4 +1,7 @@
-"""Per-part trainer: fits a known scene, rejects NaN steps, densify rules, bad input, CLI."""
+"""Per-part trainer: fits a known scene, rejects NaN steps, densify rules and strategies, bad input,
+the command line derived from the config."""
+import argparse
+import dataclasses
 import json
 import math
 import os
@@ -8,7 +11,8 @@ import sys
 import pytest
 import torch
 
-from splatting.training.strategy import DensifyConfig, DensifyStrategy
+from splatting.training import command
+from splatting.training.strategy import STRATEGIES, DensifyConfig, DensifyStrategy, FixedStrategy, Strategy, make_strategy
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, read_ply
 from splatting.gaussians.sh import rgb_to_sh0
@@ -118,7 +122,8 @@ def test_nan_view_steps_are_rejected_and_training_continues(views_dir):
 def test_rejected_steps_leave_parameters_untouched(views_dir):
     views = load_views(views_dir)
     views.images[..., 0] = float("nan")  # every step is NaN: nothing may move
-    cfg = fast_config(iterations=30, hull_prune=False)
+    cfg = fast_config(iterations=30)
+    cfg.densify.hull_prune = False
     g, m = train_views(views, cfg)
     assert m["rejected_steps"] == 30
     gen = torch.Generator().manual_seed(cfg.seed)
@@ -246,3 +251,51 @@ def test_cli_trains_to_default_out(tmp_path):
     ply = tmp_path / "bikes" / "b7" / "gaussians" / "crank.ply"
     m = json.loads((tmp_path / "bikes" / "b7" / "gaussians" / "crank.json").read_text())
     assert ply.exists() and m["iterations"] == 60 and m["part"] == "crank" and m["gaussians"] <= 2000
+
+
+# ------------------------------------------------ strategies from the config, CLI from the config
+
+def parse(*argv):
+    p = argparse.ArgumentParser()
+    command.add_arguments(p)
+    return p.parse_args(["--views", "v", *argv])
+
+
+def test_cli_defaults_are_the_config_defaults():
+    cfg = command.config_from_args(parse())
+    d = TrainConfig()
+    for f in dataclasses.fields(TrainConfig):
+        if f.name not in ("progress", "densify"):
+            assert getattr(cfg, f.name) == getattr(d, f.name), f.name
+    assert cfg.densify == d.densify
+
+
+def test_cli_sets_nested_and_tuple_fields():
+    cfg = command.config_from_args(parse("--max-gaussians", "123", "--holdout", "1,2", "--strategy", "fixed"))
+    assert cfg.densify.max_gaussians == 123 and cfg.holdout == (1, 2) and cfg.strategy == "fixed"
+    with pytest.raises(UserError, match="max-gaussians"):
+        command.config_from_args(parse("--max-gaussians", "0"))
+
+
+def test_strategies_implement_the_interface():
+    assert set(STRATEGIES) == {"default", "fixed"}
+    for cls in STRATEGIES.values():
+        assert issubclass(cls, Strategy)
+    with pytest.raises(UserError, match="unknown densification strategy"):
+        make_strategy("nope", TrainConfig().densify, 1.0)
+
+
+def test_fixed_strategy_keeps_the_set_and_default_grows_it(views_dir):
+    views = load_views(views_dir)
+    counts = {}
+    for name in ("fixed", "default"):
+        cfg = fast_config(iterations=160, strategy=name)
+        cfg.densify.start, cfg.densify.stop, cfg.densify.min_opacity = 20, 150, 0.0
+        cfg.densify.hull_prune = False
+        g, m = train_views(views, cfg)
+        counts[name] = len(g)
+        if name == "fixed":
+            assert m["densify"] == {}
+    assert isinstance(make_strategy("fixed", TrainConfig().densify, 1.0), FixedStrategy)
+    assert isinstance(make_strategy("default", TrainConfig().densify, 1.0), DensifyStrategy)
+    assert counts["default"] > counts["fixed"], counts

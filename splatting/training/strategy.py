@@ -1,5 +1,8 @@
-"""Adaptive density control (3DGS clone / split / prune / opacity reset), kept apart from the trainer
-the way gsplat's DefaultStrategy is.
+"""Densification strategies, kept apart from the trainer the way gsplat's are: the trainer talks to
+a `Strategy` only, and takes which one from its config (`TrainConfig.strategy`, a name in
+STRATEGIES).  `DensifyStrategy` ("default") is adaptive density control (3DGS clone / split /
+prune / opacity reset) with visual-hull pruning as an option; `FixedStrategy` ("fixed") never
+changes the set (ablations, fine-tuning an existing model).
 
 The standard INRIA rules, with every length tied to the object's size instead of the camera
 distance: `extent` is the diagonal of the object's bounding box (points.ply or the initial
@@ -10,7 +13,7 @@ the 12 m ring they would make a bike part's "large Gaussian" threshold 13 cm ins
 The parameters live in a dict name -> nn.Parameter with dim 0 = Gaussians, each in its own Adam
 param group (`group["name"]`); every change to the set updates the Adam moments alongside.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 
@@ -29,12 +32,47 @@ class DensifyConfig:
     min_opacity: float = 0.005      # prune below
     max_screen_frac: float = 0.15   # prune Gaussians wider than this fraction of the image (after a reset)
     max_world_frac: float = 0.1     # ... or larger than this fraction of the extent
-    max_gaussians: int = 15000      # hard budget: 40k gained 0.25 dB (box) on a frame for 1.7x the time (docs/training.md)
+    # hard budget: 40k gained 0.25 dB (box) on a frame for 1.7x the time (docs/training.md)
+    max_gaussians: int = field(default=15000, metadata={"help": "hard budget of Gaussians"})
+    hull_prune: bool = True         # drop Gaussians whose centre leaves the dilated silhouettes
 
 
-class DensifyStrategy:
-    def __init__(self, cfg: DensifyConfig, extent: float):
+class Strategy:
+    """What the trainer asks of a densification strategy.
+
+    post_backward(it, params, optimizer, means2d_grad, radii, width, height): after each optimiser
+        step at iteration `it` (1-based); may replace params[k] (and their Adam state) in place.
+    finish(params, optimizer): once, after the last iteration.
+    stats: a dict of counters that goes into the training metrics.
+    """
+    stats: dict
+
+    def post_backward(self, it, params, optimizer, means2d_grad, radii, width, height):
+        raise NotImplementedError
+
+    def finish(self, params, optimizer):
+        raise NotImplementedError
+
+
+class FixedStrategy(Strategy):
+    """The Gaussian set never changes."""
+
+    def __init__(self, cfg: DensifyConfig = None, extent: float = 1.0, hull=None):
+        self.stats = {}
+
+    def post_backward(self, it, params, optimizer, means2d_grad, radii, width, height):
+        return False
+
+    def finish(self, params, optimizer):
+        return None
+
+
+class DensifyStrategy(Strategy):
+    def __init__(self, cfg: DensifyConfig, extent: float, hull=None):
+        """hull: a callable returning (N,) bool, True where a Gaussian's centre lies inside the
+        visual hull of the training masks; used when cfg.hull_prune."""
         self.cfg = cfg
+        self.hull = hull if cfg.hull_prune else None
         self.extent = float(extent)
         self.grad_accum = None
         self.count = None
@@ -59,6 +97,23 @@ class DensifyStrategy:
         self.grad_accum = torch.zeros(n, device=device)
         self.count = torch.zeros(n, device=device)
         self.max_radii = torch.zeros(n, device=device)
+
+    # -- the Strategy interface ------------------------------------------------------------------
+    @torch.no_grad()
+    def post_backward(self, it, params, optimizer, means2d_grad, radii, width, height):
+        self.accumulate(means2d_grad, radii, width, height)
+        keep = self.hull() if self.hull is not None and self.is_densify_step(it) else None
+        return self.step(it, params, optimizer, keep_mask=keep)
+
+    @torch.no_grad()
+    def finish(self, params, optimizer):
+        """Final pruning: outside the visual hull, then invisible Gaussians (they only cost render time)."""
+        if self.hull is not None:
+            self.prune(params, optimizer, self.hull())
+        if self.cfg.min_opacity > 0:
+            keep = torch.sigmoid(params["opacity_logits"]) >= self.cfg.min_opacity
+            if keep.any():
+                self.prune(params, optimizer, keep)
 
     # -- the schedule ---------------------------------------------------------------------------
     def step(self, it, params, optimizer, keep_mask=None):
@@ -169,3 +224,13 @@ class DensifyStrategy:
         empty = {k: v.data[:0] for k, v in params.items()}
         self._replace(params, optimizer, keep, empty)
         self._reset_stats(len(params["means"]), params["means"].device)
+
+
+STRATEGIES = {"default": DensifyStrategy, "fixed": FixedStrategy}
+
+
+def make_strategy(name, cfg: DensifyConfig, extent, hull=None) -> Strategy:
+    if name not in STRATEGIES:
+        from cyclist_formats.errors import UserError
+        raise UserError(f"unknown densification strategy '{name}' (choose from {', '.join(STRATEGIES)})")
+    return STRATEGIES[name](cfg, extent, hull)

@@ -2,7 +2,7 @@
 
 Vanilla 3DGS on CPU: Adam on means / log-scales / quaternions / logit-opacity / SH, loss
 0.8 L1 + 0.2 (1 - SSIM) on RGBA (RGB composited over a random background each step, plus alpha
-against the mask, so the silhouette is learnt), adaptive density control from splatting.densify.
+against the mask, so the silhouette is learnt), densification from the configured strategy (strategy.py).
 For speed: coarse-to-fine resolution, every render cropped to the object's box in that view, and
 a stop once held-out PSNR no longer improves.  See docs/training.md for the numbers behind the
 defaults.
@@ -19,24 +19,29 @@ import torch.nn.functional as F
 
 from cyclist_formats.atomic import write_json
 from splatting.raster.camera import Camera
-from splatting.training.strategy import DensifyConfig, DensifyStrategy
+from splatting.training.strategy import STRATEGIES, DensifyConfig, make_strategy
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, write_ply
 from splatting.raster.sparse import rasterize
 from splatting.gaussians.sh import rgb_to_sh0
 from splatting.training.views import Views, load_views
+from splatting.training.metrics import psnr, ssim
+from splatting.progress import Progress
 
 DEFAULT_HOLDOUT = (3, 12, 21, 30)
 
 
 @dataclass
 class TrainConfig:
-    iterations: int = 3000
-    time_budget_s: float = 600.0
-    sh_degree: int = 0
-    holdout: tuple = DEFAULT_HOLDOUT
-    seed: int = 0
-    threads: int = None              # torch.set_num_threads; None leaves torch's default
+    # fields with a "help" are the command line's options (training/command.py derives them)
+    iterations: int = field(default=3000, metadata={"help": "optimisation steps at most"})
+    time_budget_s: float = field(default=600.0, metadata={"help": "stop after this much wall time"})
+    sh_degree: int = field(default=0, metadata={"help": "spherical-harmonics degree", "choices": (0, 1, 2, 3)})
+    holdout: tuple = field(default=DEFAULT_HOLDOUT, metadata={"help": "held-out view indices (comma list)"})
+    seed: int = field(default=0, metadata={"help": "random seed"})
+    # 1 by default: on the shared 2-core machine 2 threads ran 4-7x slower per iteration
+    # (oversubscription), see docs/training.md; None leaves torch's default
+    threads: int = field(default=1, metadata={"help": "torch.set_num_threads (1: measured fastest on 2 shared cores)"})
     # coarse-to-fine: (first iteration, image scale); renders are always cropped to the object
     resolution_schedule: tuple = ((0, 1.0),)
     crop_margin_px: int = 8          # at full resolution
@@ -51,11 +56,11 @@ class TrainConfig:
     lambda_dssim: float = 0.2
     init_max_points: int = 10000     # subsample points.ply beyond this
     init_opacity: float = 0.1
-    hull_prune: bool = True          # drop Gaussians whose centre leaves the dilated silhouettes
     eval_every: int = 200
     patience: int = 3                # evaluations without a min_delta gain before stopping
     min_delta_db: float = 0.05
     progress: bool = True
+    strategy: str = field(default="default", metadata={"help": "densification strategy", "choices": tuple(STRATEGIES)})
     densify: DensifyConfig = field(default_factory=DensifyConfig)
 
 
@@ -242,17 +247,6 @@ def _render(params, cam, background=None, sh_degree=None):
                      cam, background=background, sh_degree=sh_degree)
 
 
-def _ssim(a, b):
-    from pytorch_msssim import ssim
-
-    return ssim(a.permute(2, 0, 1)[None], b.permute(2, 0, 1)[None], data_range=1.0, size_average=True)
-
-
-def psnr(a, b):
-    mse = float(((a - b) ** 2).mean())
-    return 10 * math.log10(1.0 / max(mse, 1e-12))
-
-
 @torch.no_grad()
 def evaluate(g_or_params, targets: Targets, background=(1.0, 1.0, 1.0), crop=False):
     """Held-out quality on RGB composited over `background` (white: the NeRF-synthetic convention).
@@ -271,7 +265,7 @@ def evaluate(g_or_params, targets: Targets, background=(1.0, 1.0, 1.0), crop=Fal
         out = _render(params, cam, background=bg)
         pred = out["rgb"].clamp(0, 1)
         ps.append(psnr(pred, gt_rgb))
-        ss.append(float(_ssim(pred, gt_rgb)))
+        ss.append(float(ssim(pred, gt_rgb)))
     return sum(ps) / len(ps), sum(ss) / len(ss)
 
 
@@ -286,27 +280,10 @@ def _finite_grads(params):
     return all(p.grad is None or bool(torch.isfinite(p.grad).all()) for p in params.values())
 
 
-class Progress:
-    def __init__(self, enabled, total):
-        self.enabled, self.total = enabled, total
-        self.tty = enabled and sys.stderr.isatty()
-        self.last = 0.0
-
+class TrainProgress(Progress):
     def update(self, it, loss, n, psnr_db, wall, force=False):
-        if not self.enabled:
-            return
-        now = time.time()
-        if not force and now - self.last < (0.5 if self.tty else 15.0):
-            return
-        self.last = now
         p = "  -.-- " if psnr_db is None else f"{psnr_db:6.2f}"
-        line = f"train {it:5d}/{self.total} loss {loss:.4f} gaussians {n:6d} held-out PSNR {p} dB {wall:6.1f}s"
-        sys.stderr.write(("\r" + line) if self.tty else line + "\n")
-        sys.stderr.flush()
-
-    def close(self):
-        if self.tty:
-            sys.stderr.write("\n")
+        self.line(f"train {it:5d}/{self.total} loss {loss:.4f} gaussians {n:6d} held-out PSNR {p} dB {wall:6.1f}s", force)
 
 
 def train_views(views: Views, cfg: TrainConfig):
@@ -324,20 +301,20 @@ def train_views(views: Views, cfg: TrainConfig):
     extent = object_extent(views.points if views.points is not None else g0.means)
     params = _params_from(g0)
     opt = _adam(params, cfg, extent)
-    dens = DensifyStrategy(cfg.densify, extent)
     # silhouettes at half resolution, dilated ~4 full-res pixels: a Gaussian centred outside them
     # sits where every training image is empty
     hull_scale = 0.5
     himg, hcams, _ = tr.at(hull_scale)
     hmasks = [m > 0 for m in F.max_pool2d(himg[:, 3:], 5, 1, 2)[:, 0]]
-    hull = (lambda: hull_mask(params["means"].detach(), hmasks, hcams)) if cfg.hull_prune else (lambda: None)
+    dens = make_strategy(cfg.strategy, cfg.densify, extent, hull=lambda: hull_mask(params["means"].detach(), hmasks, hcams))
 
     gamma = (cfg.lr_means_final / cfg.lr_means) ** (1.0 / max(1, cfg.iterations))
     sched = sorted(cfg.resolution_schedule)
     order = []
     history, rejected = [], []
     best, since_best, stopped = -1.0, 0, "iterations"
-    progress = Progress(cfg.progress, cfg.iterations)
+    progress = TrainProgress(cfg.progress)
+    progress.total = cfg.iterations
     loss_v, last_psnr, it = float("nan"), None, 0
     for it in range(1, cfg.iterations + 1):
         if time.time() - t0 > cfg.time_budget_s:
@@ -355,7 +332,7 @@ def train_views(views: Views, cfg: TrainConfig):
         bg = torch.rand(3, generator=gen)  # random background: colour and alpha are both pinned down
         pred = torch.cat([out["rgb"] + (1 - out["alpha"])[..., None] * bg, out["alpha"][..., None]], -1)
         target = torch.cat([gt[..., :3] + (1 - gt[..., 3:]) * bg, gt[..., 3:]], -1)
-        loss = (1 - cfg.lambda_dssim) * (pred - target).abs().mean() + cfg.lambda_dssim * (1 - _ssim(pred, target))
+        loss = (1 - cfg.lambda_dssim) * (pred - target).abs().mean() + cfg.lambda_dssim * (1 - ssim(pred, target))
 
         ok = bool(torch.isfinite(loss))
         if ok:
@@ -371,9 +348,7 @@ def train_views(views: Views, cfg: TrainConfig):
         for grp in opt.param_groups:
             if grp["name"] == "means":
                 grp["lr"] = cfg.lr_means * extent * gamma ** it
-        with torch.no_grad():
-            dens.accumulate(out["means2d"].grad, out["radii"], cams[v].width, cams[v].height)
-            dens.step(it, params, opt, keep_mask=hull() if dens.is_densify_step(it) else None)
+        dens.post_backward(it, params, opt, out["means2d"].grad, out["radii"], cams[v].width, cams[v].height)
 
         if ho is not None and (it % cfg.eval_every == 0 or it == cfg.iterations):
             last_psnr, _ = evaluate(params, ho, crop=True)
@@ -390,13 +365,7 @@ def train_views(views: Views, cfg: TrainConfig):
         progress.update(it, loss_v, len(params["means"]), last_psnr, time.time() - t0)
     progress.close()
 
-    with torch.no_grad():
-        if cfg.hull_prune:
-            dens.prune(params, opt, hull())
-        if cfg.densify.min_opacity > 0:  # invisible Gaussians only cost render time
-            keep = torch.sigmoid(params["opacity_logits"]) >= cfg.densify.min_opacity
-            if keep.any():
-                dens.prune(params, opt, keep)
+    dens.finish(params, opt)
     g = gaussians_of({k: p.detach() for k, p in params.items()})
     train_wall = time.time() - t0
     metrics = {
@@ -452,51 +421,3 @@ def train(views_dir, out_ply=None, config: TrainConfig = None):
     write_ply(g, out_ply)
     write_json(os.path.splitext(out_ply)[0] + ".json", metrics)
     return metrics
-
-
-# -- command line --------------------------------------------------------------------------------
-
-def _int_list(s):
-    try:
-        return tuple(int(x) for x in s.split(",") if x.strip())
-    except ValueError:
-        raise UserError(f"--holdout wants comma-separated view indices, got {s!r}")
-
-
-def add_arguments(p):
-    d = TrainConfig()
-    p.add_argument("--views", required=True, help="a part's views folder: OUT/bikes/ID/views/PART")
-    p.add_argument("--out", help="output .ply (default OUT/bikes/ID/gaussians/PART.ply; metrics in PART.json beside it)")
-    p.add_argument("--iterations", type=int, default=d.iterations)
-    p.add_argument("--time-budget-s", type=float, default=d.time_budget_s, help="stop after this much wall time")
-    p.add_argument("--max-gaussians", type=int, default=d.densify.max_gaussians, help="hard budget")
-    p.add_argument("--sh-degree", type=int, default=d.sh_degree, choices=(0, 1, 2, 3))
-    p.add_argument("--holdout", default=",".join(map(str, d.holdout)), help="held-out view indices")
-    p.add_argument("--seed", type=int, default=d.seed)
-    p.add_argument("--threads", type=int, default=1,
-                   help="torch.set_num_threads; 1 by default: on the shared 2-core machine 2 threads ran 4-7x "
-                        "slower per iteration (oversubscription), see docs/training.md")
-    p.add_argument("--no-early-stop", action="store_true", help="run all iterations")
-    p.add_argument("--quiet", action="store_true", help="no progress line")
-
-
-def config_from_args(args):
-    cfg = TrainConfig(iterations=args.iterations, time_budget_s=args.time_budget_s, sh_degree=args.sh_degree,
-                      holdout=_int_list(args.holdout), seed=args.seed, threads=args.threads,
-                      progress=not args.quiet)
-    cfg.densify.max_gaussians = args.max_gaussians
-    if args.no_early_stop:
-        cfg.patience = 10 ** 9
-    for name in ("iterations", "max_gaussians"):
-        if getattr(args, name) < 1:
-            raise UserError(f"--{name.replace('_', '-')} must be >= 1")
-    return cfg
-
-
-def run(args):
-    cfg = config_from_args(args)
-    m = train(args.views, args.out, cfg)
-    out = args.out or default_out(args.views)
-    print(f"{out}: {m['gaussians']} Gaussians, held-out PSNR {m['psnr']} dB, SSIM {m['ssim']}, "
-          f"{m['iterations']} iterations in {m['wall_s']} s ({m['stopped']})")
-    return 0
