@@ -1,7 +1,7 @@
 """`make bench`: measure every stage on this machine -> out/bench/results.json + report.md + charts.
 
 Each stage module exposes run(results, ...) and adds only the keys it measured in this run
-(DESIGN.md's benchmark contract); a stage that fails is reported and its keys stay absent.
+(docs/contract.md's benchmark contract); a stage that fails is reported and its keys stay absent.
 """
 import argparse
 import importlib

@@ -74,7 +74,7 @@ def main(argv):
 
 
 KEYPOINT_NOTES = {
-    "bicycle": "DESIGN.md keypoints; drop bars: handle_* at the brake hoods, other bars: grip centres",
+    "bicycle": "docs/contract.md keypoints; drop bars: handle_* at the brake hoods, other bars: grip centres",
     "kick_scooter": "no saddle or crank: seat = rear foot spot on the deck top, crank_axle = deck centre, "
                     "pedal_left/right = foot spots on the deck (frame part)",
     "motorcycle": "no crank: crank_axle = midpoint of the footpeg axis, pedal_left/right = footpeg "

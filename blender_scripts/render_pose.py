@@ -3,7 +3,7 @@
     blender -b -P blender_scripts/render_pose.py -- --bike OUT/bikes/ID --pose "p,s,X,Y,Z,tx,ty,tz" \
         --camera cameras.json:camera0007 --out FILE.png [--keypoints-out FILE.json]
 
-Angles in degrees, translations in metres (DESIGN.md).  Writes FILE.png (RGBA), FILE_mask.png
+Angles in degrees, translations in metres (docs/contract.md).  Writes FILE.png (RGBA), FILE_mask.png
 (alpha > 0.5) and FILE_rgb.jpg (RGB on black).
 """
 import argparse

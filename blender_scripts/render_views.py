@@ -3,7 +3,7 @@
     blender -b -P blender_scripts/render_views.py -- --bike OUT/bikes/ID [--parts all]
     python blender_scripts/render_views.py --bike OUT/bikes/ID [--parts frame,steering]
 
-Writes OUT/bikes/ID/views/<part>/ in the layout of DESIGN.md; reruns skip finished views.
+Writes OUT/bikes/ID/views/<part>/ in the layout of docs/contract.md; reruns skip finished views.
 """
 import argparse
 import os

@@ -1,6 +1,6 @@
 """3DArticCyclists torch side: Gaussian splatting on CPU, parametric bike, rider, datasets.
 
-Never imports bpy.  Meets the Blender side only through files (DESIGN.md formats).
+Never imports bpy.  Meets the Blender side only through files (docs/contract.md formats).
 """
 
 import os as _os

@@ -39,7 +39,7 @@ def random_gaussians(n, centre_names, sh_degree=3, seed=0):
 
 
 def make_bike(root, bike_id="synth_01", crank=True, n=200, sh_degree=3, kp=None, sub_parts=(), meta_extra=None):
-    """Write a synthetic bike folder (DESIGN.md layout) and return its path."""
+    """Write a synthetic bike folder (docs/contract.md layout) and return its path."""
     d = os.path.join(str(root), bike_id)
     os.makedirs(os.path.join(d, "gaussians"), exist_ok=True)
     parts = ["frame", "steering"] + (["crank"] if crank else []) + list(sub_parts)

@@ -1,4 +1,4 @@
-"""The armature's steering and crank bones move keypoints and part meshes exactly as DESIGN.md's
+"""The armature's steering and crank bones move keypoints and part meshes exactly as docs/contract.md's
 H_s, H_p and H_g say (expected values computed here in numpy, independently of the add-on)."""
 import numpy as np
 import pytest

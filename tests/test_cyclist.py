@@ -1,5 +1,5 @@
 """`python -m splatting cyclist`: composition, IK in the world, instance masks, keypoint visibility,
-the DESIGN.md frame layout, resuming."""
+the docs/contract.md frame layout, resuming."""
 import json
 import math
 import os

@@ -1,4 +1,4 @@
-"""Frame conversion and the 36-view ring against DESIGN.md, numbers derived by hand."""
+"""Frame conversion and the 36-view ring against docs/contract.md, numbers derived by hand."""
 import math
 
 import numpy as np

@@ -1,6 +1,6 @@
 """The 36-view renderer on a real procedural bike (bpy module, subprocesses like a user runs them).
 
-Checks DESIGN.md's rig against what Blender actually rendered: keypoints projected with
+Checks docs/contract.md's rig against what Blender actually rendered: keypoints projected with
 cameras.json land on the part's mask, the mask is alpha > 0.5, view 0 shows the front wheel on
 the left; plus resume after a kill and the bad-input contract.
 """

@@ -1,4 +1,4 @@
-"""Views folder reader: DESIGN.md layout, NeRF transforms.json, fallbacks and clear errors."""
+"""Views folder reader: docs/contract.md layout, NeRF transforms.json, fallbacks and clear errors."""
 import json
 import os
 import shutil
@@ -53,7 +53,7 @@ def test_round_trip_layout(tmp_path):
 
 
 def test_nerf_transforms_convention(tmp_path):
-    """A hand-written NeRF frame (OpenGL camera-to-world) for DESIGN.md's view 0: the camera sits at
+    """A hand-written NeRF frame (OpenGL camera-to-world) for docs/contract.md's view 0: the camera sits at
     orbit + (0, 0, -12) looking along +Z with +Y up, so its OpenGL axes are x = -X, y = +Y, z = -Z."""
     d = tmp_path / "v"
     (d / "rgba" / "camera0000").mkdir(parents=True)
@@ -64,7 +64,7 @@ def test_nerf_transforms_convention(tmp_path):
     (d / "transforms.json").write_text(json.dumps({"camera_angle_x": angle, "frames": [
         {"file_path": "./rgba/camera0000/0000", "transform_matrix": c2w}]}))
     cam = load_views(str(d)).cameras[0]
-    assert torch.allclose(cam.R, torch.diag(torch.tensor([-1.0, -1.0, 1.0])))  # DESIGN.md's R0
+    assert torch.allclose(cam.R, torch.diag(torch.tensor([-1.0, -1.0, 1.0])))  # docs/contract.md's R0
     assert torch.allclose(cam.T, torch.tensor([0.0, 0.6, 12.0]), atol=1e-6)  # T = -R C
     assert abs(float(cam.K[0, 0]) - focal) < 1e-3 and float(cam.K[0, 2]) == SIZE / 2
     ref = ring(n=1, orbit_centre=(0.0, 0.6, 0.0))[0]

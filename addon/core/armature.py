@@ -3,7 +3,7 @@
 Bones (Blender frame, armature object at identity):
 - `frame`: root, at the ground origin pointing up.
 - `steering`: head = steer_bottom, tail = steer_top, so its local Y is the steering axis v and a
-  pose rotation by +theta about local Y is DESIGN.md's H_s(theta).
+  pose rotation by +theta about local Y is docs/contract.md's H_s(theta).
 - `crank`: head = crank_axle, tail = crank_axle + 0.1 m along canonical +Z, so a rotation by
   -theta_p about local Y is H_p(theta_p).
 - keypoint bones: head at the keypoint, 3 cm long (canonical +Y), parented (unconnected) to the

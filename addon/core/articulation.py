@@ -1,4 +1,4 @@
-"""Apply DESIGN.md's 8-DoF bicycle pose to a bike armature, and read the posed keypoints.
+"""Apply docs/contract.md's 8-DoF bicycle pose to a bike armature, and read the posed keypoints.
 
 H_s: +theta_s about the steering bone's local Y (= steer_bottom -> steer_top, right-hand rule).
 H_p: -theta_p about the crank bone's local Y (= canonical +Z), so +theta_p pedals forward.

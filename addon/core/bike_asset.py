@@ -1,4 +1,4 @@
-"""A bike asset folder on disk: bike.blend + keypoints.json + meta.json (DESIGN.md layout).
+"""A bike asset folder on disk: bike.blend + keypoints.json + meta.json (docs/contract.md layout).
 
 save_bike writes each file under a temporary name and renames it, meta.json last, so a folder
 holding all three files is complete (make_bikes skips those on a rerun).

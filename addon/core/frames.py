@@ -1,4 +1,4 @@
-"""The one place where the canonical bike frame meets Blender's frame (DESIGN.md).
+"""The one place where the canonical bike frame meets Blender's frame (docs/contract.md).
 
 Canonical: X forward, Y up, Z to the rider's right.  Blender: Z up.
 Blender (x, y, z) = canonical (X, -Z, Y).  Everything written to disk is canonical.

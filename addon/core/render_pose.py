@@ -1,6 +1,6 @@
 """The Blender oracle: pose the articulated mesh with an 8-DoF pose and render it from a camera.
 
-This is the ground truth every Gaussian-space result is checked against (DESIGN.md).
+This is the ground truth every Gaussian-space result is checked against (docs/contract.md).
 """
 import os
 

@@ -15,7 +15,7 @@ import numpy as np
 from . import frames, render
 from .contract import UserError, ply
 
-RIDER_PASS_INDEX = 4  # DESIGN.md: rider 4 when rendered together with a bike
+RIDER_PASS_INDEX = 4  # docs/contract.md: rider 4 when rendered together with a bike
 COLOR_ATTRIBUTE = "Col"
 
 def read_colored_ply(path):

@@ -2,7 +2,7 @@
 
 One pose:  --pose "p,s,X,Y,Z,tx,ty,tz" --out FILE.ply [--keypoints-out FILE.json]
 A batch:   --poses FILE.json --out DIR  ->  DIR/pose_%05d.ply + DIR/pose_%05d.json (keypoints)
-Angles in degrees, translations in metres (DESIGN.md).  A pose starting with '-' must be
+Angles in degrees, translations in metres (docs/contract.md).  A pose starting with '-' must be
 written --pose=-10,0,... so that argparse does not read it as an option.
 """
 import json

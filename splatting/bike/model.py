@@ -1,6 +1,6 @@
 """The parametric bicycle: part Gaussians + keypoints re-posed by the 8-DoF pose (bike_pose.py).
 
-Bike folder (DESIGN.md): gaussians/<part>.ply for frame, steering and crank, keypoints.json,
+Bike folder (docs/contract.md): gaussians/<part>.ply for frame, steering and crank, keypoints.json,
 meta.json (bike_id, has_crank).  Rideables without a crank (kick scooter, motorcycle:
 has_crank false, no crank.ply) accept theta_p and ignore it.
 

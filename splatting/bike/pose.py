@@ -1,4 +1,4 @@
-"""The 8-DoF bicycle pose (DESIGN.md): parsing, validation and the rigid transforms H_s, H_p, H_g.
+"""The 8-DoF bicycle pose (docs/contract.md): parsing, validation and the rigid transforms H_s, H_p, H_g.
 
 pose = (theta_p, theta_s, theta_X, theta_Y, theta_Z, t_X, t_Y, t_Z); degrees and metres in files
 and on the command line, radians inside.  Canonical frame: X forward, Y up, Z to the rider's right.

@@ -3,7 +3,7 @@
 Per frame: the bike's 8-DoF pose (theta_p, theta_s from a motion file or the pedalling programme,
 a fixed global H_g), the rider IK onto the posed bike keypoints (one call for the whole sequence,
 one shared seat post), the rider re-posed by LBS, rider + bike Gaussians concatenated and rendered
-from every view.  Layout (DESIGN.md cyclist runs):
+from every view.  Layout (docs/contract.md cyclist runs):
   DIR/frame_%05d.json                 pose, bike_keypoints, rider_joints, ik (written last: marks the frame done)
   DIR/view_<az>/%05d.png              RGBA (straight alpha)
   DIR/view_<az>/%05d_mask.png         instance ids: 0 background, frame 1, steering 2, crank 3, rider 4
@@ -151,7 +151,7 @@ def render_sequence(cyc, poses, views, out, size=512, elevation=0.0, distance=12
 
     n = poses.shape[0]
     os.makedirs(out, exist_ok=True)
-    # one orbit centre for the whole sequence (DESIGN.md: (x, h, z) of the first frame's box centre)
+    # one orbit centre for the whole sequence (docs/contract.md: (x, h, z) of the first frame's box centre)
     first = cyc.pose(poses[:1], fit=None if fit is None else take_fit(fit, slice(0, 1)))[0]
     lo, hi = first.gaussians.means.min(0).values, first.gaussians.means.max(0).values
     centre = (0.5 * (lo + hi)).double().tolist()

@@ -1,7 +1,7 @@
 """Rendering a composed cyclist: RGB, alpha, depth and per-pixel instance ids in one rasterizer pass,
 plus projected 2D keypoints with a depth-test visibility.
 
-Instance ids (DESIGN.md: frame 1, steering 2, crank 3, rider 4) are composited as colours through
+Instance ids (docs/contract.md: frame 1, steering 2, crank 3, rider 4) are composited as colours through
 the same pixel-Gaussian pair list as the RGB image: frame/steering/crank one-hot in three channels;
 the rider's share is alpha minus their sum.  A pixel takes the id with the largest composited
 weight where alpha > 0.5 (0 = background).  Sharing the pair list costs one extra compositing
@@ -23,7 +23,7 @@ MASK_ALPHA = 0.5
 
 def orbit_camera(azimuth_deg, elevation_deg=0.0, distance=12.0, centre=(0.0, 0.0, 0.0), size=RING_SIZE,
                  focal=None, name=""):
-    """The DESIGN.md ring camera generalised by an elevation (degrees, camera above the centre when
+    """The docs/contract.md ring camera generalised by an elevation (degrees, camera above the centre when
     positive).  Azimuth 0, elevation 0 is ring view 0: at centre + (0, 0, -distance), looking along
     +Z, R = diag(-1, -1, 1).  focal defaults to the ring's 2084.97 px scaled to `size`."""
     if focal is None:

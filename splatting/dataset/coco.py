@@ -1,7 +1,7 @@
 """COCO layout: categories (keypoint names + skeletons), per-instance annotations from an id map,
 and the final merge of per-sample shards into annotations.json.
 
-Categories: 1 bicycle (the 11 DESIGN.md bike keypoints), 2 person (the 24 SMPL joints in SMPL
+Categories: 1 bicycle (the 11 docs/contract.md bike keypoints), 2 person (the 24 SMPL joints in SMPL
 order, not COCO-17), 3 cyclist (bicycle + person pixels, the union; no keypoints).
 Keypoint visibility follows COCO: 0 not labelled (outside the image), 1 labelled but occluded,
 2 visible.  Masks are the visible pixels (modal), RLE-encoded by pycocotools.

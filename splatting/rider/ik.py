@@ -367,7 +367,7 @@ class _Chain:
 
 
 def posed_bike_keypoints(keypoints, poses_deg):
-    """Bike keypoints {name: (3,)} (canonical, rest) at B 8-DoF poses (DESIGN.md, degrees and
+    """Bike keypoints {name: (3,)} (canonical, rest) at B 8-DoF poses (docs/contract.md, degrees and
     metres) -> {name: (B, 3) float64}: steering keypoints turn with theta_s, pedals with theta_p,
     then the global transform.  What the IK needs without loading a BikeModel's Gaussians."""
     from splatting.bike.model import DEFAULT_KEYPOINT_PARTS

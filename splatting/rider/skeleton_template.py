@@ -3,7 +3,7 @@
 A stand-in skeleton for tests and benchmarks of the IK (any SMPL-topology rest skeleton works the
 same way; the anny riders supply theirs through the same (24, 3) interface).
 
-Canonical frame (DESIGN.md): X forward (the person faces +X), Y up, Z to the person's right, so
+Canonical frame (docs/contract.md): X forward (the person faces +X), Y up, Z to the person's right, so
 left joints sit at -Z; feet on Y = 0; metres.  Like SMPL's template, the rest pose is a T-pose
 (arms horizontal, palms down) with the pelvis joint above the hip joints.
 

@@ -403,7 +403,7 @@ def _config_dict(cfg):
 
 
 def default_out(views_dir):
-    """.../<bike>/views/<part> -> .../<bike>/gaussians/<part>.ply (DESIGN.md)."""
+    """.../<bike>/views/<part> -> .../<bike>/gaussians/<part>.ply (docs/contract.md)."""
     d = os.path.abspath(views_dir)
     part, parent = os.path.basename(d), os.path.dirname(d)
     if os.path.basename(parent) != "views":

@@ -1,4 +1,4 @@
-"""Read one part's views folder (DESIGN.md layout) for training.
+"""Read one part's views folder (docs/contract.md layout) for training.
 
     <views>/cameras.json              SHERF: {"camera0000": {"K", "R", "T"}, ..., "orbit_centre": [x, y, z]}
     <views>/rgba/camera%04d/0000.png  straight alpha (preferred)
@@ -99,7 +99,7 @@ def _cameras_from_transforms(path):
 
     NeRF stores camera-to-world in the OpenGL convention (x right, y up, camera looks along -z);
     flipping the y and z camera axes gives OpenCV, whose inverse is our world-to-camera.  The world
-    frame is taken as written (DESIGN.md: everything on disk is in the canonical frame).
+    frame is taken as written (docs/contract.md: everything on disk is in the canonical frame).
     """
     try:
         with open(path) as f:
@@ -207,7 +207,7 @@ def load_views(folder, dtype=torch.float32) -> Views:
 
 
 def write_views(folder, cameras, images, points=None, orbit_centre=None, point_colors=None):
-    """Write a views folder in the DESIGN.md layout (the inverse of load_views; synthetic data, tests).
+    """Write a views folder in the docs/contract.md layout (the inverse of load_views; synthetic data, tests).
 
     cameras: list of Camera (names become the view names); images: (V, H, W, 4) float in [0, 1],
     straight alpha; points: (P, 3) or None.  Writes cameras.json, rgba/, img/ + mask/,

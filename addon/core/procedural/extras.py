@@ -1,6 +1,6 @@
 """Rideables without pedals: a kick scooter and a motorcycle (frame + steering parts only).
 
-Their keypoints keep DESIGN.md's names (layout.keypoints documents the stand-ins: the scooter's
+Their keypoints keep docs/contract.md's names (layout.keypoints documents the stand-ins: the scooter's
 deck centre / feet, the motorcycle's footpeg axis and footpegs for crank_axle / pedal_*).
 """
 import numpy as np

@@ -191,7 +191,7 @@ def layout_for(spec):
 
 
 def keypoints(spec, L=None):
-    """The eleven DESIGN.md keypoints (canonical, metres) for a spec."""
+    """The eleven docs/contract.md keypoints (canonical, metres) for a spec."""
     L = L or layout_for(spec)
     kind = spec["rideable"]
     u = L["u"]
@@ -224,7 +224,7 @@ KEYPOINT_NAMES = ["seat", "steer_top", "steer_bottom", "handle_left", "handle_ri
 
 
 def part_keypoints(spec):
-    """Which keypoints each part carries (DESIGN.md names)."""
+    """Which keypoints each part carries (docs/contract.md names)."""
     frame = ["seat", "rear_axle", "ground", "steer_top", "steer_bottom", "crank_axle"]
     steering = ["steer_top", "steer_bottom", "handle_left", "handle_right", "front_axle"]
     if spec["rideable"] == "bicycle":
