@@ -91,7 +91,8 @@ def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, tim
     from splatting.raster.sparse import render_gaussians
     from splatting.rider.avatar import RiderAvatar
     from splatting.rider.avatar_build import build_avatar
-    from splatting.rider.body import export_rider, load_rider, pose_vertices
+    from splatting.rider.body import export_rider, pose_vertices
+    from splatting.rider.roster import load_rider
 
     torch.set_num_threads(1)
     av_dir = os.path.join(out_dir, "riders", rider_id)

@@ -72,6 +72,15 @@ def read_keypoints(bike_dir_or_file):
     return out
 
 
+def has_crank(bike_dir):
+    """Whether a bike folder's rideable has pedals (meta.json "has_crank", true when absent); False
+    for a folder without a readable meta.json."""
+    try:
+        return bool(read_meta(bike_dir).get("has_crank", True))
+    except UserError:
+        return False
+
+
 def keypoints_doc(keypoints, parts=None):
     doc = {"frame": "canonical", "units": "m", "keypoints": {k: [float(x) for x in v] for k, v in keypoints.items()}}
     if parts is not None:

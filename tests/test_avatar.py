@@ -27,7 +27,7 @@ RIDER_ID = "f_teen_slim_150"
 @pytest.fixture(scope="module")
 def rider():
     torch.set_num_threads(1)
-    from splatting.rider.body import load_rider
+    from splatting.rider.roster import load_rider
     return load_rider(RIDER_ID)
 
 

@@ -53,7 +53,7 @@ def test_no_saddle_slide_without_seat_tube_length():
 
 def test_lowered_seat_moves_saddle_gaussians_and_seat_keypoint():
     from splatting.cyclist.assets import mesh_avatar
-    from splatting.rider.body import load_rider
+    from splatting.rider.roster import load_rider
 
     bike, _ = _bike_from_mesh("road")
     cyc = Cyclist(bike, mesh_avatar(load_rider("f_teen_slim_150"), n=800), ik_iterations=10)

@@ -247,7 +247,7 @@ def test_reduced_chain_matches_full_forward_kinematics():
     joints, _ = forward_kinematics(rest, R, trans)
     names = ["left_wrist", "pelvis", "right_ankle", "head", "left_foot", "right_hand"]
     chain = ik._Chain(rest, R, names)
-    slots = [JOINT_INDEX[n] for n in ik._SLOT_JOINTS]
+    slots = [JOINT_INDEX[n] for n in ik.SLOT_JOINTS]
     eff = chain(R[:, slots].float(), trans.float())
     assert torch.allclose(eff.double(), joints[:, [JOINT_INDEX[n] for n in names]], atol=1e-5)
     assert torch.allclose(ik.rodrigues(aa), torch.as_tensor(__import__("roma").rotvec_to_rotmat(aa)), atol=1e-10)

@@ -16,7 +16,7 @@ J = JOINT_INDEX
 @pytest.fixture(scope="module")
 def riders():
     torch.set_num_threads(1)
-    from splatting.rider.body import load_rider
+    from splatting.rider.roster import load_rider
     return [load_rider(i) for i in ("f_teen_slim_150", "m_adult_average_185", "m_senior_athletic_195")]
 
 

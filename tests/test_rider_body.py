@@ -16,7 +16,7 @@ J = JOINT_INDEX
 @pytest.fixture(scope="session")
 def riders():
     torch.set_num_threads(1)
-    from splatting.rider.body import load_rider
+    from splatting.rider.roster import load_rider
     return {r["id"]: load_rider(r["id"]) for r in load_roster()}
 
 

@@ -221,7 +221,7 @@ def test_bad_model_files_are_user_errors(model, tmp_path):
 
 def test_roster_entry_dispatches_to_smpl(model, tmp_path, monkeypatch):
     from splatting.rider import roster
-    from splatting.rider.body import load_rider
+    from splatting.rider.roster import load_rider
     spec = {"id": "my_smpl", "body": "smpl", "model_path": str(model[0] / "SMPL_NEUTRAL.npz"),
             "betas": BETAS, "height_m": 1.7}
     missing = dict(spec, id="gone", model_path="data/no_such_dir/SMPL_NEUTRAL.pkl")

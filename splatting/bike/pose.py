@@ -16,7 +16,6 @@ log-scales and opacities are rotation invariant and stay.
 import math
 from dataclasses import replace
 
-import roma
 import torch
 
 from cyclist_formats import pose as formats_pose
@@ -24,6 +23,7 @@ from cyclist_formats.errors import UserError
 from cyclist_formats.pose import N_ANGLES, POSE_FIELDS  # noqa: F401  (re-exported: the pose maths' field order)
 from splatting.gaussians.container import Gaussians
 from splatting.gaussians.sh_rotation import rotate_sh
+from splatting.rotations import quat_left_matrix, rotmat_to_quat_wxyz  # noqa: F401
 
 MIN_STEER_AXIS_M = 1e-6  # steer_top and steer_bottom closer than this do not define an axis
 
@@ -148,18 +148,6 @@ def pose_transforms(poses_deg, steer_bottom, steer_top, crank_axle=None):
 
 
 # ---------------------------------------------------------------- applying transforms
-
-def rotmat_to_quat_wxyz(R):
-    """(..., 3, 3) -> unit quaternions (..., 4) wxyz (the .ply order)."""
-    return roma.quat_xyzw_to_wxyz(roma.rotmat_to_unitquat(R))
-
-
-def quat_left_matrix(q):
-    """wxyz (..., 4) -> L (..., 4, 4) with q * p == L @ p (Hamilton product)."""
-    w, x, y, z = q.unbind(-1)
-    rows = [[w, -x, -y, -z], [x, w, -z, y], [y, z, w, -x], [z, -y, x, w]]
-    return torch.stack([torch.stack(r, -1) for r in rows], -2)
-
 
 def transform_points(H, pts):
     """H (..., 4, 4), pts (..., 3) (broadcast) -> (..., 3)."""

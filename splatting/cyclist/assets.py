@@ -146,7 +146,7 @@ def mesh_avatar(rider, n=None, seed=0):
 def load_avatar(rider_id, riders_root="data/riders", synthetic="auto", n=None, log=None):
     """(RiderAvatar, rider body) for a roster id: trained avatar folder if present, else mesh_avatar."""
     from splatting.rider.avatar import PLY_NAME, SKINNING_NAME, RiderAvatar
-    from splatting.rider.body import load_rider
+    from splatting.rider.roster import load_rider
     rider = load_rider(rider_id)
     folder = os.path.join(riders_root, rider_id)
     trained = all(os.path.isfile(os.path.join(folder, f)) for f in (PLY_NAME, SKINNING_NAME))

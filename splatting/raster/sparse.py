@@ -16,21 +16,12 @@ import math
 import torch
 
 from splatting.gaussians.sh import eval_sh
+from splatting.rotations import quat_to_rotmat  # noqa: F401  (re-exported for the projection)
 
 ALPHA_MIN = 1.0 / 255.0
 ALPHA_MAX = 0.99
 T_MIN = 1e-4
 CHUNK_PAIRS = 1 << 16  # candidate pairs per front-to-back chunk in intersect() (2^15..2^16 measured best)
-
-
-def quat_to_rotmat(q):
-    """(N,4) wxyz unit quaternions -> (N,3,3)."""
-    w, x, y, z = q.unbind(-1)
-    return torch.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    ], -1).reshape(q.shape[:-1] + (3, 3))
 
 
 def project(means, quats, scales, camera, near=0.01, eps2d=0.3):

@@ -22,6 +22,7 @@ import torch
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, read_ply, write_ply
 from splatting.gaussians.sh_rotation import rotate_sh
+from splatting.rotations import quat_mul, rotmat_to_quat_wxyz  # noqa: F401
 from splatting.rider.kinematics import forward_kinematics
 
 SKINNING_METHOD = "barycentric_nearest_triangle"
@@ -112,21 +113,6 @@ def polar_rotation(M, max_iterations=NEWTON_ITERATIONS, tol=1e-6):
         if done:
             break
     return X
-
-
-def rotmat_to_quat_wxyz(R):
-    import roma
-    return roma.quat_xyzw_to_wxyz(roma.rotmat_to_unitquat(R))
-
-
-def quat_mul(p, q):
-    """Hamilton product of wxyz quaternions (..., 4)."""
-    pw, px, py, pz = p.unbind(-1)
-    qw, qx, qy, qz = q.unbind(-1)
-    return torch.stack([pw * qw - px * qx - py * qy - pz * qz,
-                        pw * qx + px * qw + py * qz - pz * qy,
-                        pw * qy - px * qz + py * qw + pz * qx,
-                        pw * qz + px * qy - py * qx + pz * qw], -1)
 
 
 # ----------------------------------------------------------------------------- the avatar

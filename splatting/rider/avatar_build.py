@@ -44,7 +44,8 @@ def build_avatar(rider_id, out_dir, iterations=None, time_budget_s=None, max_gau
     from splatting.gaussians.container import read_ply
     from splatting.training.trainer import TrainConfig, train
     from splatting.rider.avatar import PLY_NAME, SKINNING_NAME, RiderAvatar
-    from splatting.rider.body import export_rider, load_rider
+    from splatting.rider.body import export_rider
+    from splatting.rider.roster import load_rider
 
     rider = load_rider(rider_id)  # UserError for an unknown id, before any work
     os.makedirs(out_dir, exist_ok=True)

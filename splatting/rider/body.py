@@ -3,7 +3,7 @@
 anny (Apache-2.0 code, CC0 MakeHuman assets) builds its model data once (~80-100 s) and caches
 it; we point its cache at `data/anny_cache/` (git-ignored) unless ANNY_CACHE_DIR is set.
 
-Pipeline of `load_rider`:
+Pipeline of `build_rider` (splatting.rider.roster.load_rider picks the body model):
 1. anny forward pass with the roster's phenotype (identity pose deltas).
 2. T-pose with anny's own 104-bone skinning: arms straight out sideways, legs straight down,
    so the rest pose matches SMPL's zero pose and SMPL axis-angle poses drive it directly.
@@ -220,17 +220,6 @@ def build_rider(spec):
     return Rider(id=spec["id"], vertices=f32(verts), faces=model.faces.long().clone(),
                  joints=f32(joints), weights=f32(weights), colors=f32(colors),
                  height_m=float(verts[:, 1].max() - verts[:, 1].min()), spec=dict(spec))
-
-
-@functools.lru_cache(maxsize=16)
-def load_rider(rider_id):
-    """The roster's rider `rider_id` (UserError if unknown). Cached per process."""
-    from splatting.rider.roster import get_spec
-    spec = get_spec(rider_id)
-    if spec.get("body", "anny") == "smpl":  # the user's own SMPL model file, via smplx
-        from splatting.rider.smpl_body import rider_from_spec
-        return rider_from_spec(spec)
-    return build_rider(spec)
 
 
 def pose_vertices(rider, local_rotmats, root_trans=None):

@@ -30,7 +30,8 @@ def run(args):
         v = getattr(args, name)
         if v is not None and not math.isfinite(v):
             raise UserError(f"--{name.replace('_', '-')} must be a finite number")
-    from splatting.rider.body import export_rider, load_rider, pose_vertices
+    from splatting.rider.body import export_rider, pose_vertices
+    from splatting.rider.roster import load_rider
     torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
     rider = load_rider(args.id)
     verts = None

@@ -31,6 +31,7 @@ import torch
 
 from cyclist_formats.errors import UserError
 from splatting.rider.kinematics import JOINT_INDEX, JOINT_NAMES, PARENTS, forward_kinematics
+from splatting.rotations import rodrigues, rotmat_to_axis_angle as _rotmat_to_aa  # noqa: F401
 
 IK_JOINTS = ("spine1", "left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_hip",
              "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle")
@@ -46,10 +47,10 @@ FLAG_THRESHOLD_M = 0.03
 OBJECTIVES = ("pairs", "chamfer")
 
 # parameter slots: root orientation, then the 11 joints with the four hinges last (one slice)
-_SLOT_JOINTS = ("pelvis", "spine1", "left_shoulder", "right_shoulder", "left_hip", "right_hip",
+SLOT_JOINTS = ("pelvis", "spine1", "left_shoulder", "right_shoulder", "left_hip", "right_hip",
                 "left_ankle", "right_ankle", "left_elbow", "right_elbow", "left_knee", "right_knee")
 _HINGE_SLOTS = slice(8, 12)
-_N_ROT = len(_SLOT_JOINTS) * 3  # 36 rotation columns, then 3 translation, then 1 seat offset
+_N_ROT = len(SLOT_JOINTS) * 3  # 36 rotation columns, then 3 translation, then 1 seat offset
 
 
 @dataclass
@@ -72,25 +73,12 @@ def pair_name(joint, target):
 
 # ------------------------------------------------------------------ small helpers
 
-def rodrigues(aa):
-    """(..., 3) axis-angle -> (..., 3, 3).  ~3x fewer ops than roma.rotvec_to_rotmat (measured
-    0.05 vs 0.15 ms forward+backward for 12 rotations), which matters at ~1 ms per iteration."""
-    t2 = (aa * aa).sum(-1, keepdim=True) + 1e-12
-    t = t2.sqrt()
-    a = (torch.sin(t) / t)[..., None]
-    b = (2.0 * torch.sin(0.5 * t) ** 2 / t2)[..., None]  # (1 - cos t) / t^2 without cancellation
-    x, y, z = aa.unbind(-1)
-    o = torch.zeros_like(x)
-    K = torch.stack([o, -z, y, z, o, -x, -y, x, o], -1).unflatten(-1, (3, 3))
-    return torch.eye(3, dtype=aa.dtype) + a * K + b * (K @ K)
-
-
 def hinge_axes(rest_joints):
     """Unit flexion axes (4, 3) of the hinge slots (knees, elbows) in the rest frame: positive
     rotation about it swings the child segment toward HINGE_FLEX_DIRECTION."""
     rest = torch.as_tensor(rest_joints, dtype=torch.float64)
     axes = []
-    for name in _SLOT_JOINTS[_HINGE_SLOTS]:
+    for name in SLOT_JOINTS[_HINGE_SLOTS]:
         j = JOINT_INDEX[name]
         u = rest[j] - rest[PARENTS[j]]  # the parent segment (thigh, upper arm) in the rest pose
         a = torch.linalg.cross(u, torch.tensor(HINGE_FLEX_DIRECTION[name], dtype=torch.float64))
@@ -122,18 +110,14 @@ def cycling_init_pose(rest_joints):
     for side, sz in (("left", -1.0), ("right", 1.0)):
         hip, knee = JOINT_INDEX[f"{side}_hip"], JOINT_INDEX[f"{side}_knee"]
         aa[hip] = _align(rest[knee] - rest[hip], np.array([0.55, -0.83, 0.0]))  # thigh ~56 deg up
-        aa[knee] = axes[_SLOT_JOINTS[_HINGE_SLOTS].index(f"{side}_knee")] * 1.4
+        aa[knee] = axes[SLOT_JOINTS[_HINGE_SLOTS].index(f"{side}_knee")] * 1.4
         sh, el = JOINT_INDEX[f"{side}_shoulder"], JOINT_INDEX[f"{side}_elbow"]
         world = _align(rest[el] - rest[sh], np.array([0.55, -0.8, 0.15 * sz]))
         # local = R_parent^T * world rotation; the parent chain (spine1..collar) carries the lean
         Rw = roma.rotvec_to_rotmat(torch.tensor(world)).numpy()
         aa[sh] = roma.rotmat_to_rotvec(torch.tensor(R_lean.T @ Rw)).numpy()
-        aa[el] = axes[_SLOT_JOINTS[_HINGE_SLOTS].index(f"{side}_elbow")] * 0.5
+        aa[el] = axes[SLOT_JOINTS[_HINGE_SLOTS].index(f"{side}_elbow")] * 0.5
     return aa
-
-
-def _rotmat_to_aa(R):
-    return roma.rotmat_to_rotvec(R)
 
 
 def _frame(u, a):
@@ -190,7 +174,7 @@ def analytic_init_pose(rest_joints, targets, pairs=DEFAULT_PAIRS):
     of = {j: t for j, t in pairs}
     pelvis = targets[of["pelvis"]] if "pelvis" in of else rest[0].expand(B, 3)
     trans = pelvis - rest[0]
-    axes = dict(zip(_SLOT_JOINTS[_HINGE_SLOTS], hinge_axes(rest)))
+    axes = dict(zip(SLOT_JOINTS[_HINGE_SLOTS], hinge_axes(rest)))
     J = lambda n: rest[JOINT_INDEX[n]]  # noqa: E731
     seg = lambda a, b: float(torch.linalg.vector_norm(J(b) - J(a)))  # noqa: E731
     # torso lean about the lateral axis, from a grid (vectorised over frames)
@@ -291,7 +275,7 @@ class _Chain:
 
     def __init__(self, rest, init_R, effectors):
         B = init_R.shape[0]
-        slot = {JOINT_INDEX[n]: i for i, n in enumerate(_SLOT_JOINTS)}
+        slot = {JOINT_INDEX[n]: i for i, n in enumerate(SLOT_JOINTS)}
         eff = [JOINT_INDEX[n] for n in effectors]
 
         def ancestors(j):
@@ -331,7 +315,7 @@ class _Chain:
                         slots.append(slot[j])
                     else:  # a constant joint with kept children: its rotation goes into C
                         C = C @ init_R[:, j]
-                        slots.append(len(_SLOT_JOINTS))  # the identity slot
+                        slots.append(len(SLOT_JOINTS))  # the identity slot
                     rows.append(k)
                     Cs.append(C)
                 pidx.append(carried[kparent[j]])
@@ -345,7 +329,7 @@ class _Chain:
                 carry=bool(rows)))
             carried = {nodes[k]: r for r, k in enumerate(rows)}
         self.rest_root = rest[0].float()
-        self.needs_identity = any(L["carry"] and int(L["slots"].max()) == len(_SLOT_JOINTS) for L in self.levels)
+        self.needs_identity = any(L["carry"] and int(L["slots"].max()) == len(SLOT_JOINTS) for L in self.levels)
         self.eff_cols = torch.tensor([col[j] for j in eff])
 
     def __call__(self, rot, trans):
@@ -443,7 +427,7 @@ def solve(rest_joints, targets, init_local_aa=None, init_root=None, objective="p
     up_t = _finite_tensor(up, "up", (3,)).reshape(-1, 3).expand(B, 3)
     up_t = up_t / torch.linalg.vector_norm(up_t, dim=-1, keepdim=True).clamp_min(1e-9)
 
-    slot_idx = [JOINT_INDEX[n] for n in _SLOT_JOINTS]
+    slot_idx = [JOINT_INDEX[n] for n in SLOT_JOINTS]
     seat_i = [k for k, (_, t) in enumerate(pairs) if t == "seat"]
     pelvis_lift = torch.zeros(B, len(pairs), 3, dtype=torch.float64)
     for k, (j, t) in enumerate(pairs):
@@ -495,7 +479,7 @@ def solve(rest_joints, targets, init_local_aa=None, init_root=None, objective="p
     chamfer = objective == "chamfer"
 
     def loss_fn(P):
-        rot = rodrigues(P[:, :_N_ROT].view(B, len(_SLOT_JOINTS), 3))
+        rot = rodrigues(P[:, :_N_ROT].view(B, len(SLOT_JOINTS), 3))
         eff = chain(rot, P[:, _N_ROT:_N_ROT + 3])
         tgt = T0 + P[:, -1:, None] * U if saddle_fit else T0
         if chamfer:
@@ -550,7 +534,7 @@ def solve(rest_joints, targets, init_local_aa=None, init_root=None, objective="p
 def _result(rest, init_aa, P, loss, history, pairs, tg, T0, U, saddle_fit, threshold, slot_idx, seat_i, lift):
     B = P.shape[0]
     local_aa = init_aa.to(torch.float32).clone()
-    local_aa[:, slot_idx] = P[:, :_N_ROT].view(B, len(_SLOT_JOINTS), 3)
+    local_aa[:, slot_idx] = P[:, :_N_ROT].view(B, len(SLOT_JOINTS), 3)
     trans = P[:, _N_ROT:_N_ROT + 3].clone()
     joints, _ = forward_kinematics(rest.to(torch.float32), rodrigues(local_aa), trans)
     s = P[:, -1].clone() if saddle_fit else None

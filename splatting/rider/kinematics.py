@@ -4,7 +4,7 @@ Shapes: rest_joints (24, 3) metres; local_rotmats (B, 24, 3, 3) (joint 0 = root 
 root_trans (B, 3). Returns joints (B, 24, 3) and world transforms (B, 24, 4, 4) that map a
 rest-pose point attached to joint j to its posed position (the LBS bone transforms).
 """
-import roma
+from splatting.rotations import axis_angle_to_rotmat  # noqa: F401  (re-exported: motion and body use it)
 import torch
 
 JOINT_NAMES = ("pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2",
@@ -13,11 +13,6 @@ JOINT_NAMES = ("pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_
                "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hand", "right_hand")
 PARENTS = (-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21)
 JOINT_INDEX = {n: i for i, n in enumerate(JOINT_NAMES)}
-
-
-def axis_angle_to_rotmat(aa):
-    """(..., 3) axis-angle -> (..., 3, 3)."""
-    return roma.rotvec_to_rotmat(aa)
 
 
 def forward_kinematics(rest_joints, local_rotmats, root_trans=None, parents=PARENTS):

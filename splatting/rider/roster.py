@@ -1,4 +1,5 @@
 """The rider roster (`blend_assets/riders.yaml`): selectable people and their anny phenotypes."""
+import functools
 import re
 from pathlib import Path
 
@@ -66,3 +67,16 @@ def describe(r):
     return (f"{r['id']}  {r['sex']:<6} {r['age_years']:>2} y  {r['height_m']:.2f} m  "
             f"{r['build']:<8} top {r['colors']['top']} bottom {r['colors']['bottom']} "
             f"helmet {r['colors']['helmet']}")
+
+
+@functools.lru_cache(maxsize=16)
+def load_rider(rider_id):
+    """The roster's rider `rider_id` (UserError if unknown), built by its body model: anny
+    (splatting.rider.body) or the user's own SMPL file via smplx (splatting.rider.smpl_body).
+    Cached per process."""
+    spec = get_spec(rider_id)
+    if spec.get("body", "anny") == "smpl":
+        from splatting.rider.smpl_body import rider_from_spec
+        return rider_from_spec(spec)
+    from splatting.rider.body import build_rider
+    return build_rider(spec)

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from splatting.raster.sparse import quat_to_rotmat
+from splatting.rotations import quat_to_rotmat
 
 
 @dataclass

@@ -10,7 +10,6 @@ defaults.
 import dataclasses
 import math
 import os
-import sys
 import time
 from dataclasses import dataclass, field
 
