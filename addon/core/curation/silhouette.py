@@ -52,7 +52,7 @@ def surface_samples(P, TW, spacing):
     tri = P[TW]
     e = np.stack([tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 1], tri[:, 0] - tri[:, 2]], 1)
     longest = np.linalg.norm(e, axis=2).max(1)
-    k = np.clip(np.ceil(longest / spacing), 1, 64).astype(int)
+    k = np.clip(np.ceil(longest / spacing), 1, 512).astype(int)
     out = [P]
     for kk in np.unique(k):
         sel = tri[k == kk]
@@ -251,3 +251,61 @@ def find_side_view(P, TW):
             break
     best = max(tried, key=lambda t: t[0])
     return best[2], best[3], spread
+
+
+def _frame(normal):
+    normal = normal / np.linalg.norm(normal)
+    e1 = np.cross(normal, [1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0])
+    e1 /= np.linalg.norm(e1)
+    return normal, e1, np.cross(normal, e1)
+
+
+def wheel_rings(soup):
+    """The two wheels as wheels.Ring (comp = -1) from the side view, refined on the vertices,
+    plus (side view, all circles, band vertex indices per wheel).  UserError naming the failed
+    check for models that are not two-wheelers."""
+    from .wheels import Ring
+    P, TW = soup.P, soup.TW
+    sv, pr, spread = find_side_view(P, TW)
+    if sv.thickness < 0.03:
+        raise UserError(f"not a 3D two-wheeler: the model is flat (thickness {sv.thickness * 100:.1f} % of its "
+                        f"length; a flat icon or a single sheet)")
+    if not pr:
+        n = sum(c.support >= MIN_SUPPORT for c in sv.circles)
+        raise UserError(f"no wheels found: the side view shows {n} round outline(s), need two disjoint "
+                        f"circles (tyres) side by side")
+    _, a, b = pr[0]
+    ratio = min(a.radius, b.radius) / max(a.radius, b.radius)
+    if ratio < 0.6:
+        raise UserError(f"wheel sizes very unequal (smaller/larger = {ratio:.2f} < 0.6): a penny-farthing "
+                        f"or not a two-wheeler")
+    R = 0.5 * (a.radius + b.radius)
+    third = [c for c in sv.circles if c.support >= 0.6 and c is not a and c is not b
+             and min(c.radius, R) > 0.75 * max(c.radius, R)
+             and all(np.linalg.norm(c.centre - w.centre) > 0.95 * (c.radius + w.radius) for w in (a, b))]
+    if third:
+        raise UserError(f"three wheels in the side view ({len(third) + 2} wheel-sized circles): a tricycle "
+                        f"or a vehicle with a trailer, not a two-wheeler")
+    # refine: circles on the vertices, then the plane through both tyres' outer bands
+    cents = [sv.origin + c.centre[0] * sv.e1 + c.centre[1] * sv.e2 for c in (a, b)]
+    radii = [a.radius, b.radius]
+    normal = sv.normal
+    for _ in range(2):
+        n, e1, e2 = _frame(normal)
+        frame = SideView(n, e1, e2, sv.origin)
+        fits = []
+        for c3, r in zip(cents, radii):
+            c2 = np.array([(c3 - sv.origin) @ e1, (c3 - sv.origin) @ e2])
+            fits.append(refine(P, frame, Circle(c2, r, 1.0)))
+        bands = [f[2] for f in fits]
+        allb = np.concatenate(bands)
+        if len(allb) >= 12:
+            _, ax, _ = principal_axes(P[allb])
+            normal = ax[0] if ax[0] @ normal > 0 else -ax[0]
+        cents = [sv.origin + f[0][0] * e1 + f[0][1] * e2 for f in fits]
+        radii = [f[1] for f in fits]
+    rings = []
+    for c3, r, band in zip(cents, radii, bands):
+        lat = float(np.median((P[band] - c3) @ normal)) if len(band) else 0.0
+        rings.append(Ring(-1, c3 + lat * normal, normal.copy(), float(r), 0.0))
+    return rings, sv, bands
