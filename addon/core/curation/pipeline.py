@@ -70,7 +70,7 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
     view = kpmod.View(soup, pose)
     X = shape_samples(view, keep_tri)
     check_two_wheels(X, pose)
-    auto, notes, info, has_crank_shape = choose_keypoints(view, pose, X)
+    auto, notes, info, has_crank_shape = choose_keypoints(view, pose, X, clean=wheel_method == "rings")
     kp = dict(auto)
     source = {k: "auto" for k in auto}
     if keypoints:

@@ -142,9 +142,10 @@ def shape_keypoints(X, pose, auto):
     return kp, notes, has_crank
 
 
-def choose_keypoints(view, pose, X):
+def choose_keypoints(view, pose, X, clean=False):
     """Piece-based keypoints (exact on clean models) unless the shape-based ones validate
-    better.  Returns (kp, notes, info, has_crank or None)."""
+    better, or (on a model whose tyres were not separate pieces, `clean` False) the two
+    disagree.  Returns (kp, notes, info, has_crank or None)."""
     auto, notes, info = kpmod.estimate(view, pose)
     hc = pose.crank is not None or ("pedal_left" in auto and "pedal_right" in auto)
     probs_c = validate(auto, hc)
@@ -153,7 +154,7 @@ def choose_keypoints(view, pose, X):
     if pose.crank is None and "crank_axle" in kp:  # validated where the origin will be
         shifted = {k: v - np.array([kp["crank_axle"][0], 0.0, 0.0]) for k, v in kp.items()}
     probs_s = validate(shifted, has_crank if has_crank is not None else True)
-    if not probs_c and (probs_s or _agree(auto, kp)):
+    if not probs_c and (probs_s or clean or _agree(auto, kp)):
         return auto, notes, info, None
     if len(probs_s) > len(probs_c):
         return auto, notes, info, None
@@ -165,14 +166,16 @@ def choose_keypoints(view, pose, X):
 
 
 def _agree(a, b, tol=0.1):
-    """Piece-based and shape-based keypoints tell the same story: same saddle, bars and
-    steering axis within tol metres (the piece finders can latch onto the wrong piece)."""
-    for k in ("seat", "handle_right", "steer_top"):
-        if k in a and k in b and np.linalg.norm(a[k] - b[k]) > tol:
+    """Piece-based and shape-based keypoints tell the same story: the same saddle and bar ends
+    (within tol metres, 1.5 tol) and the same steering line (the piece finders can latch onto
+    the wrong piece; the shape finder puts steer_top higher, at the stem)."""
+    for k, t in (("seat", tol), ("handle_right", 1.5 * tol)):
+        if k in a and k in b and np.linalg.norm(a[k] - b[k]) > t:
             return False
     if all(k in a and k in b for k in ("steer_top", "steer_bottom")):
         ua = (a["steer_top"] - a["steer_bottom"]) / np.linalg.norm(a["steer_top"] - a["steer_bottom"])
         ub = (b["steer_top"] - b["steer_bottom"]) / np.linalg.norm(b["steer_top"] - b["steer_bottom"])
-        if ua @ ub < np.cos(np.radians(8)):
+        d = a["steer_bottom"] - b["steer_bottom"]
+        if ua @ ub < np.cos(np.radians(8)) or np.linalg.norm(d - (d @ ub) * ub) > 0.5 * tol:
             return False
     return True
