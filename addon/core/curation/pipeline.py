@@ -27,11 +27,12 @@ class Result:
     record: dict = field(default_factory=dict)
 
 
-def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, hints=None):
+def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, hints=None, wheel_centres=None):
     """V (n, 3) model vertices (world), T (m, 3) triangles.
 
     keypoints: optional {name: canonical xyz} that replace the automatic ones (an annotator's
-    JSON); hints: optional per-triangle labels (split.FRAME.. or -1 for none) from vertex
+    JSON); wheel_centres: optional (front, rear) model points an annotator placed, used instead
+    of the wheel search; hints: optional per-triangle labels (split.FRAME.. or -1 for none) from vertex
     groups or object names, used instead of the automatic split where given.
     Raises UserError when no wheels are found.
     """
@@ -45,20 +46,27 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
         raise UserError("the model has non-finite vertex coordinates")
     soup = mesh.Soup(V, T)
     rings = wheels.find_rings(soup)
-    pair = wheels.wheel_pair(rings)
-    seeds, wheel_method = None, "rings"
-    if pair is None:
+    pair = wheels.wheel_pair(rings) if wheel_centres is None else None
+    seeds, wheel_method, front = None, "rings", None
+    if wheel_centres is not None:
+        pair, bands = silhouette.rings_from_centres(soup, *wheel_centres)
+        comp_pos = {c.index: i for i, c in enumerate(soup.comps)}
+        seeds = sorted({comp_pos[c] for b in bands for c in soup.comp_of_vert[b] if c in comp_pos})
+        wheel_method, front = "given", np.asarray(wheel_centres[0], float)
+    elif pair is None:
         # no clean tyre pieces: the wheels are the two circles of the side-view outline
         pair, _, bands = silhouette.wheel_rings(soup)
         comp_pos = {c.index: i for i, c in enumerate(soup.comps)}
         seeds = sorted({comp_pos[c] for b in bands for c in soup.comp_of_vert[b] if c in comp_pos})
         wheel_method = "silhouette"
+    if seeds is not None and not seeds:  # no vertex on the tyre outline: grow from everything
+        seeds = list(range(len(soup.comps)))
     auto_size = wheel_diameter is None
-    pose = canonical_pose(soup, rings, pair, wheel_diameter or DEFAULT_WHEEL_DIAMETER, seeds)
+    pose = canonical_pose(soup, rings, pair, wheel_diameter or DEFAULT_WHEEL_DIAMETER, seeds, front)
     wheel_diameter = DEFAULT_WHEEL_DIAMETER if auto_size else wheel_diameter
     if auto_size and auto_wheel_diameter(soup, pose):
         wheel_diameter = auto_wheel_diameter(soup, pose)
-        pose = canonical_pose(soup, rings, pair, wheel_diameter, seeds)
+        pose = canonical_pose(soup, rings, pair, wheel_diameter, seeds, front)
         pose.notes.append(f"small wheels for the vehicle's height (a kick scooter?): wheel diameter set to "
                           f"{wheel_diameter:.3f} m so its top is 1 m high")
     keep_tri = soup.tri_mask(pose.keep)

@@ -65,7 +65,7 @@ def assembly(soup, seeds, exclude, gap):
     return keep
 
 
-def canonical_pose(soup, rings, pair, wheel_diameter=0.7, seeds=None):
+def canonical_pose(soup, rings, pair, wheel_diameter=0.7, seeds=None, front=None):
     a, b = pair
     R = 0.5 * (a.radius + b.radius)
     n = _unit(a.normal + np.sign(a.normal @ b.normal) * b.normal)
@@ -123,9 +123,12 @@ def canonical_pose(soup, rings, pair, wheel_diameter=0.7, seeds=None):
             continue
         if crank is None or r.radius > crank.radius:
             crank = r
-    # forward: chainring nearer the rear wheel
+    # forward: given (the annotator placed the front wheel), else the chainring sits nearer
+    # the rear wheel, else the handlebar is ahead of the wheelbase middle
     sign, cue = 0, ""
-    if crank is not None:
+    if front is not None:
+        sign, cue = (1 if np.linalg.norm(front - cb) < np.linalg.norm(front - ca) else -1), "front wheel given"
+    if crank is not None and sign == 0:
         xc = local(crank.centre)[0]
         da, db = abs(xc - xa), abs(xb - xc)
         if abs(da - db) > 0.1 * abs(xb - xa):

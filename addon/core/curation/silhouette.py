@@ -309,3 +309,42 @@ def wheel_rings(soup):
         lat = float(np.median((P[band] - c3) @ normal)) if len(band) else 0.0
         rings.append(Ring(-1, c3 + lat * normal, normal.copy(), float(r), 0.0))
     return rings, sv, bands
+
+
+def rings_from_centres(soup, front, rear):
+    """The two wheels around centres an annotator placed (model coordinates): lateral axis =
+    the thinnest principal axis made perpendicular to the wheelbase, radius = the circle around
+    each centre with the most outline (any support: the annotator has the last word)."""
+    from .wheels import Ring
+    P, TW = soup.P, soup.TW
+    front, rear = np.asarray(front, float), np.asarray(rear, float)
+    base = front - rear
+    L = float(np.linalg.norm(base))
+    if L <= 0:
+        raise UserError("the two wheel centres are at the same place: drag kp.front_axle and kp.rear_axle apart")
+    S = surface_samples(P, TW, 0.02 * float(np.linalg.norm(P.max(0) - P.min(0))))
+    _, axes, _ = principal_axes(S)
+    d = base / L
+    cand = [a - (a @ d) * d for a in axes]
+    n = max(cand[:2], key=np.linalg.norm) if np.linalg.norm(cand[0]) < 0.5 else cand[0]
+    n = n / np.linalg.norm(n)
+    sv = side_view(P, TW, n)
+    out, bands = [], []
+    pad = np.pad(sv.image, 1)
+    edge = sv.image & ~(pad[:-2, 1:-1] & pad[2:, 1:-1] & pad[1:-1, :-2] & pad[1:-1, 2:])
+    for c3 in (front, rear):
+        c2 = np.array([(c3 - sv.origin) @ sv.e1, (c3 - sv.origin) @ sv.e2])
+        x, y = (c2 - sv.lo) / sv.px - 0.5
+        rs = np.arange(max(3, int(0.1 * L / sv.px)), int(0.7 * L / sv.px) + 1)
+        if len(rs) == 0:
+            raise UserError("the wheel centres are too close for wheels to fit between them")
+        sup = np.array([circle_support(edge, x, y, r) for r in rs])
+        r = float(rs[int(np.argmax(sup))]) * sv.px
+        c2f, rf, band = refine(P, sv, Circle(c2, r, 1.0))
+        if abs(rf - r) > 0.2 * r or np.linalg.norm(c2f - c2) > 0.2 * r:   # refinement wandered off
+            c2f, rf = c2, r
+        lat = float(np.median((P[band] - c3) @ n)) if len(band) else 0.0
+        cen = sv.origin + c2f[0] * sv.e1 + c2f[1] * sv.e2 + ((c3 - sv.origin) @ n + lat) * n
+        out.append(Ring(-1, cen, n.copy(), float(rf), 0.0))
+        bands.append(band)
+    return out, bands
