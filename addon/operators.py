@@ -11,7 +11,8 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, StringProperty
 from .core.script import UserError
 
 PART_ITEMS = [("frame", "Frame", "frame, rear wheel, saddle"), ("steering", "Steering", "fork, front wheel, bar"),
-              ("crank", "Crank", "crank arms, chainring, pedals")]
+              ("crank", "Crank", "crank arms, chainring, pedals"),
+              ("junk", "Junk", "not the bike (a rider, a stand, a ground): left out of every part")]
 
 
 def _io():
@@ -34,7 +35,7 @@ class _Op:
 
 
 class ARTICCYC_OT_import_model(_Op, bpy.types.Operator):
-    """Import a bicycle model (.glb .gltf .obj .fbx .ply .blend) into an emptied scene"""
+    """Import a bicycle model (.glb .gltf .obj .fbx .ply .stl .blend) into an emptied scene"""
     bl_idname = "articcyc.import_model"
     bl_label = "Import model"
     filepath: StringProperty(name="Model", subtype="FILE_PATH", default="")
@@ -69,18 +70,63 @@ class ARTICCYC_OT_auto_curate(_Op, bpy.types.Operator):
     bl_label = "Auto curate"
     wheel_diameter: FloatProperty(name="Wheel diameter (m)", default=0.0, min=0.0,
                                   description="tyre outer diameter; 0 = the panel's value")
+    auto_wheel: BoolProperty(name="Automatic wheel size", default=False,
+                             description="0.7 m, or for a kick scooter's small wheels the size that puts its bar 1 m high")
     keypoints_file: StringProperty(name="Keypoints JSON", subtype="FILE_PATH", default="",
                                    description="canonical keypoints that replace the automatic ones")
 
     def run(self, context):
         io = _io()
         sc = context.scene
-        d = self.wheel_diameter or sc.articcyc_wheel_diameter
+        d = None if self.auto_wheel else (self.wheel_diameter or sc.articcyc_wheel_diameter or None)
         kp = io.read_keypoints_file(bpy.path.abspath(self.keypoints_file)) if self.keypoints_file else None
+        if context.mode != "OBJECT":
+            bpy.ops.object.mode_set(mode="OBJECT")
         res = io.auto_curate(d, kp, source_path=sc.articcyc_model_path or None)
         _store_problems(sc, res.problems)
         return (f"curated: scale {res.scale:.5g} m/unit, {len(res.keypoints)} keypoints, "
                 f"{len(res.problems)} problem(s)")
+
+
+class ARTICCYC_OT_place_wheels(_Op, bpy.types.Operator):
+    """Put the wheel centre empties kp.front_axle / kp.rear_axle on the model to drag onto the
+    hubs (when the automatic wheel search failed or found the wrong circles)"""
+    bl_idname = "articcyc.place_wheels"
+    bl_label = "Place wheel centres"
+
+    def run(self, context):
+        _io().place_wheel_empties()
+        return "drag kp.front_axle and kp.rear_axle onto the hubs, then Curate from wheel centres"
+
+
+class ARTICCYC_OT_curate_from_wheels(_Op, bpy.types.Operator):
+    """Re-derive pose, scale, keypoints and parts from the wheel centre empties where you put
+    them (kp.front_axle, kp.rear_axle); painted faces are kept"""
+    bl_idname = "articcyc.curate_from_wheels"
+    bl_label = "Curate from wheel centres"
+
+    def run(self, context):
+        sc = context.scene
+        if context.mode != "OBJECT":
+            bpy.ops.object.mode_set(mode="OBJECT")
+        res = _io().auto_curate(sc.articcyc_wheel_diameter or None, None, source_path=sc.articcyc_model_path or None,
+                                from_wheel_empties=True)
+        _store_problems(sc, res.problems)
+        return f"curated from the wheel centres: {len(res.problems)} problem(s)"
+
+
+class ARTICCYC_OT_resume(_Op, bpy.types.Operator):
+    """List the problems saved with a partial curation (a .partial.blend from curate.py)"""
+    bl_idname = "articcyc.resume"
+    bl_label = "Resume partial curation"
+
+    def run(self, context):
+        io = _io()
+        if bpy.data.objects.get(io.SOURCE) is None:
+            raise UserError("no curation in this file: import a model and Auto curate")
+        probs = io.record_problems()
+        _store_problems(context.scene, probs)
+        return f"{len(probs)} problem(s) to fix" if probs else "no problems recorded: Save bike folder"
 
 
 class ARTICCYC_OT_load_keypoints(_Op, bpy.types.Operator):
@@ -249,14 +295,16 @@ class ARTICCYC_Problem(bpy.types.PropertyGroup):
     name: StringProperty()
 
 
-CLASSES = (ARTICCYC_Problem, ARTICCYC_OT_import_model, ARTICCYC_OT_auto_curate, ARTICCYC_OT_load_keypoints,
+CLASSES = (ARTICCYC_Problem, ARTICCYC_OT_import_model, ARTICCYC_OT_auto_curate, ARTICCYC_OT_place_wheels,
+           ARTICCYC_OT_curate_from_wheels, ARTICCYC_OT_resume, ARTICCYC_OT_load_keypoints,
            ARTICCYC_OT_snap_keypoints, ARTICCYC_OT_validate, ARTICCYC_OT_edit_parts, ARTICCYC_OT_paint_part,
            ARTICCYC_OT_split_parts, ARTICCYC_OT_build_rig, ARTICCYC_OT_save_bike, ARTICCYC_OT_render_views)
 
 SCENE_PROPS = {
     "articcyc_model_path": lambda: StringProperty(name="Model", subtype="FILE_PATH", default=""),
     "articcyc_out_dir": lambda: StringProperty(name="Bike folder", subtype="DIR_PATH", default=""),
-    "articcyc_wheel_diameter": lambda: FloatProperty(name="Wheel diameter (m)", default=0.7, min=0.05, max=3.0),
+    "articcyc_wheel_diameter": lambda: FloatProperty(name="Wheel diameter (m)", default=0.0, min=0.0, max=3.0,
+                                                     description="tyre outer diameter; 0 = automatic"),
     "articcyc_theta_s_deg": lambda: FloatProperty(name="θs steering (deg)", default=0.0, min=-90, max=90,
                                                   update=preview_update),
     "articcyc_theta_p_deg": lambda: FloatProperty(name="θp pedals (deg)", default=0.0, min=-360, max=360,

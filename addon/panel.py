@@ -24,6 +24,10 @@ class ARTICCYC_PT_curate(_Panel, bpy.types.Panel):
         col.separator()
         col.prop(sc, "articcyc_wheel_diameter")
         col.operator("articcyc.auto_curate", icon="MODIFIER")
+        col.separator()
+        col.operator("articcyc.place_wheels", icon="EMPTY_AXIS")
+        col.operator("articcyc.curate_from_wheels", icon="FILE_REFRESH")
+        col.operator("articcyc.resume", icon="RECOVER_LAST")
 
 
 class ARTICCYC_PT_keypoints(_Panel, bpy.types.Panel):
@@ -51,7 +55,7 @@ class ARTICCYC_PT_parts(_Panel, bpy.types.Panel):
         col = self.layout.column(align=True)
         col.operator("articcyc.edit_parts", icon="EDITMODE_HLT")
         row = col.row(align=True)
-        for part in ("frame", "steering", "crank"):
+        for part in ("frame", "steering", "crank", "junk"):
             row.operator("articcyc.paint_part", text=part.capitalize()).part = part
         col.operator("articcyc.split_parts", icon="MOD_EXPLODE")
 

@@ -3,7 +3,10 @@
     blender -b -P blender_scripts/curate.py -- --input MODEL --out OUT/bikes/ID [--keypoints auto|FILE.json] [--wheel-diameter M]
     .venv/bin/python blender_scripts/curate.py --input MODEL --out OUT/bikes/ID
 
-MODEL: .glb .gltf .obj .fbx .ply .blend.  Removes what is not the bike, finds the wheels, puts
+A model that is not a two-wheeler is refused with one line naming the failed check; a model
+whose keypoints or split fail is saved as OUT.partial.blend for the annotator panel to finish.
+
+MODEL: .glb .gltf .obj .fbx .ply .stl .blend.  Removes what is not the bike, finds the wheels, puts
 the bike in the canonical pose at real scale (tyre diameter --wheel-diameter, default 0.7 m),
 estimates and validates the keypoints (or reads them, canonical frame, from FILE.json), splits
 frame / steering / crank, rigs and saves.  Runs the annotator panel's operators, headless.
@@ -20,10 +23,12 @@ from addon.core.script import UserError, run_main  # noqa: E402
 
 def parse(argv):
     p = argparse.ArgumentParser(prog="curate.py", description=__doc__.split("\n\n")[0])
-    p.add_argument("--input", required=True, help="model file (.glb .gltf .obj .fbx .ply .blend)")
+    p.add_argument("--input", required=True, help="model file (.glb .gltf .obj .fbx .ply .stl .blend)")
     p.add_argument("--out", required=True, help="bike folder to write, e.g. OUT/bikes/my_bike")
     p.add_argument("--keypoints", default="auto", help="'auto' (default) or a JSON file of canonical keypoints")
-    p.add_argument("--wheel-diameter", type=float, default=0.7, help="tyre outer diameter in metres (default 0.7)")
+    p.add_argument("--wheel-diameter", default="auto",
+                   help="tyre outer diameter in metres, or 'auto' (default: 0.7 m; a kick scooter's small wheels "
+                        "are sized so its bar is 1 m high)")
     p.add_argument("--allow-problems", action="store_true", help="save even if keypoint validation fails")
     return p.parse_args(argv)
 
@@ -44,8 +49,15 @@ def main(argv):
     args = parse(argv)
     if not os.path.isfile(args.input):
         raise UserError(f"model file not found: {args.input}")
-    if not (args.wheel_diameter > 0 and args.wheel_diameter < 10):
-        raise UserError(f"--wheel-diameter must be in (0, 10) metres, got {args.wheel_diameter}")
+    if args.wheel_diameter == "auto":
+        wheel = 0.0
+    else:
+        try:
+            wheel = float(args.wheel_diameter)
+        except ValueError:
+            wheel = float("nan")
+        if not (0 < wheel < 10):
+            raise UserError(f"--wheel-diameter must be 'auto' or in (0, 10) metres, got {args.wheel_diameter}")
     if args.keypoints != "auto" and not os.path.isfile(args.keypoints):
         raise UserError(f"keypoints file not found: {args.keypoints}")
     import bpy
@@ -59,11 +71,22 @@ def main(argv):
     except ValueError:  # already registered in this process
         pass
     _op(bpy.ops.articcyc.import_model, filepath=os.path.abspath(args.input))
-    _op(bpy.ops.articcyc.auto_curate, wheel_diameter=args.wheel_diameter,
+    _op(bpy.ops.articcyc.auto_curate, wheel_diameter=wheel, auto_wheel=wheel == 0.0,
         keypoints_file="" if args.keypoints == "auto" else os.path.abspath(args.keypoints))
     sc = bpy.context.scene
-    for p in sc.articcyc_problems:
-        print(f"curate.py: warning: {p.name}", file=sys.stderr)
+    probs = [p.name for p in sc.articcyc_problems]
+    for p in probs:
+        print(f"curate.py: warning: {p}", file=sys.stderr)
+    from addon.core.curation import scene_io
+    from addon.core.procedural.layout import KEYPOINT_NAMES
+    missing = [k for k in KEYPOINT_NAMES if bpy.data.objects.get(f"kp.{k}") is None]
+    split_failed = any(p.startswith("split:") for p in probs)
+    if probs and (not args.allow_problems or missing or split_failed):
+        # the annotator finishes it: open the partial curation, the panel lists the problems
+        partial = scene_io.save_partial(os.path.abspath(args.out).rstrip("/") + ".partial.blend")
+        raise UserError(f"{probs[0]}" + (f" (+{len(probs) - 1} more)" if len(probs) > 1 else "")
+                        + f"; partial curation saved to {partial}: open it in Blender, ArticCyclists panel "
+                          f"> Resume partial curation")
     _op(bpy.ops.articcyc.save_bike, directory=os.path.abspath(args.out), allow_problems=args.allow_problems)
     print(f"curate.py: wrote {args.out}", flush=True)
     return 0

@@ -87,6 +87,8 @@ def seat(view, crank_axle, rear_axle):
     band = (np.abs(p[:, 0] - xc) < 0.015) & (np.abs(p[:, 2]) < 0.01)
     if band.sum() == 0:
         band = np.abs(p[:, 0] - xc) < 0.03
+    if band.sum() == 0:  # a saddle with no vertex near its middle (low-poly): its top
+        band = np.ones(len(p), bool)
     return np.array([xc, p[band, 1].max() - SEAT_DEPTH, 0.0])
 
 

@@ -65,7 +65,7 @@ def assembly(soup, seeds, exclude, gap):
     return keep
 
 
-def canonical_pose(soup, rings, pair, wheel_diameter=0.7):
+def canonical_pose(soup, rings, pair, wheel_diameter=0.7, seeds=None, front=None):
     a, b = pair
     R = 0.5 * (a.radius + b.radius)
     n = _unit(a.normal + np.sign(a.normal @ b.normal) * b.normal)
@@ -73,7 +73,9 @@ def canonical_pose(soup, rings, pair, wheel_diameter=0.7):
     cb = b.centre + ((a.centre - b.centre) @ n) / 2 * n
     comp_pos = {c.index: i for i, c in enumerate(soup.comps)}
     ground = ground_like(soup, R)
-    keep = assembly(soup, [comp_pos[a.comp], comp_pos[b.comp]], ground, gap=0.02 * R)
+    if seeds is None:
+        seeds = [comp_pos[a.comp], comp_pos[b.comp]]
+    keep = assembly(soup, seeds, ground, gap=0.02 * R)
     notes = []
     if ground.any():
         notes.append(f"removed {int(ground.sum())} ground/backdrop sheet(s)")
@@ -121,9 +123,12 @@ def canonical_pose(soup, rings, pair, wheel_diameter=0.7):
             continue
         if crank is None or r.radius > crank.radius:
             crank = r
-    # forward: chainring nearer the rear wheel
+    # forward: given (the annotator placed the front wheel), else the chainring sits nearer
+    # the rear wheel, else the handlebar is ahead of the wheelbase middle
     sign, cue = 0, ""
-    if crank is not None:
+    if front is not None:
+        sign, cue = (1 if np.linalg.norm(front - cb) < np.linalg.norm(front - ca) else -1), "front wheel given"
+    if crank is not None and sign == 0:
         xc = local(crank.centre)[0]
         da, db = abs(xc - xa), abs(xb - xc)
         if abs(da - db) > 0.1 * abs(xb - xa):

@@ -30,6 +30,27 @@ SOURCE = "curation_source"
 KP_COLLECTION = "keypoints"
 PART_ATTR, PAINT_ATTR, HINT_ATTR = "articcyc_part", "articcyc_paint", "articcyc_hint"
 RECORD = "articcyc_curation"
+SKIPPED = "articcyc_skipped_objects"
+JUNK_PAINT = 9   # painted "not the bike": left out of every part
+# collision / physics proxies by the naming conventions of game engines (Unreal UCX_/UBX_/USP_/
+# UCP_, Godot -col/-colonly, Unity/three.js "collider"), and helpers exporters add
+_PROXY = ("ucx_", "ubx_", "usp_", "ucp_")
+_PROXY_WORDS = ("collider", "collision", "-col", "_col", "colonly", "hitbox", "physics_proxy", "shadow_plane",
+                "shadowcatcher", "shadow_catcher")
+
+
+def _is_visible_geometry(o):
+    """False for objects a viewer of the file would not see as the bike: hidden (glTF bone
+    shapes, helpers), shown as wire/bounds only, or named as a collision proxy."""
+    name = o.name.lower()
+    if name.startswith(_PROXY) or any(w in name for w in _PROXY_WORDS):
+        return False
+    if o.hide_render or o.hide_viewport or o.hide_get() or o.display_type in ("WIRE", "BOUNDS"):
+        return False
+    for c in o.users_collection:
+        if c.hide_render or c.hide_viewport or "not_exported" in c.name.lower():
+            return False
+    return True
 PARTS = ("frame", "steering", "crank")
 
 
@@ -85,6 +106,11 @@ def join_meshes(scene=None):
     meshes = [o for o in scene.objects if o.type == "MESH"]
     if not meshes:
         raise UserError("no mesh objects in the scene (nothing to curate)")
+    skipped = [o.name for o in meshes if not _is_visible_geometry(o)]
+    meshes = [o for o in meshes if _is_visible_geometry(o)]
+    if not meshes:
+        raise UserError(f"all {len(skipped)} mesh object(s) are hidden or colliders (nothing to curate)")
+    scene[SKIPPED] = json.dumps(skipped)
     use_names = len({_part_name(o) for o in meshes} - {None}) >= 2
     parts = []
     for o in meshes:
@@ -193,31 +219,138 @@ def read_keypoints_file(path):
     return out
 
 
-def auto_curate(wheel_diameter=pipeline.DEFAULT_WHEEL_DIAMETER, keypoints=None, source_path=None):
+def auto_curate(wheel_diameter=pipeline.DEFAULT_WHEEL_DIAMETER, keypoints=None, source_path=None,
+                from_wheel_empties=False):
     """Clean up, pose, scale, annotate and split the current scene's model.  Returns the
-    pipeline Result; the scene then holds the parts, the hidden source and keypoint empties."""
+    pipeline Result; the scene then holds the parts, the hidden source and keypoint empties.
+
+    Run again on a scene that already holds `curation_source` (a partial or finished curation)
+    it re-derives everything from that mesh, keeping faces the annotator painted; with
+    from_wheel_empties the wheel centres are the empties kp.front_axle / kp.rear_axle wherever
+    the annotator put them, instead of the automatic wheel search.
+    When the keypoints are incomplete the split waits (the problems say why) instead of failing."""
     scene = bpy.context.scene
-    src = join_meshes(scene)
+    src = bpy.data.objects.get(SOURCE)
+    again = src is not None
+    if again:
+        _clear_derived()
+        src.hide_set(False)
+    else:
+        src = join_meshes(scene)
+    wheel_centres = None
+    if from_wheel_empties:
+        inv = np.array(src.matrix_world.inverted())
+        pts = []
+        for name in ("front_axle", "rear_axle"):
+            e = bpy.data.objects.get(f"kp.{name}")
+            if e is None:
+                raise UserError(f"place the wheel centre empty kp.{name} first (Place wheel centres)")
+            pts.append((inv @ np.r_[np.array(e.matrix_world.translation), 1.0])[:3])
+        wheel_centres = tuple(pts)
     V, T, tp = mesh_arrays(src)
+    V = V @ np.array(src.matrix_world)[:3, :3].T + np.array(src.matrix_world)[:3, 3]
+    src.data.transform(src.matrix_world)
+    src.matrix_world = Matrix.Identity(4)
     hints_poly = _get_face_attr(src.data, HINT_ATTR)
+    paint_before = _get_face_attr(src.data, PAINT_ATTR) if again else None
     res = pipeline.curate_arrays(V, T, wheel_diameter, keypoints,
-                                 hints=hints_poly[tp] if (hints_poly >= 0).any() else None)
+                                 hints=hints_poly[tp] if (hints_poly >= 0).any() else None,
+                                 wheel_centres=wheel_centres)
     area = np.linalg.norm(np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]]), axis=1)
     plab = _poly_labels(res.labels, tp, area, len(src.data.polygons))
     c4 = np.eye(4)
     c4[:3, :3] = C
     src.data.transform(Matrix((c4 @ res.M).tolist()))
     _face_attr(src.data, PART_ATTR, plab)
-    _face_attr(src.data, PAINT_ATTR, np.where(hints_poly >= 0, hints_poly, -1))
-    _delete_faces(src, plab == split.JUNK)
+    paint = np.where(hints_poly >= 0, hints_poly, -1)
+    if paint_before is not None:
+        paint = np.where(paint_before >= 0, paint_before, paint)
+    _face_attr(src.data, PAINT_ATTR, paint)
+    _delete_faces(src, (plab == split.JUNK) & (paint < 0))
     rec = dict(res.record)
+    skipped = json.loads(scene.get(SKIPPED, "[]"))
+    if skipped:
+        rec["notes"] = [f"skipped {len(skipped)} hidden/collider object(s): {', '.join(skipped[:5])}"
+                        + (" ..." if len(skipped) > 5 else "")] + rec.get("notes", [])
     rec["problems"] = list(res.problems)
     if source_path:
         rec["source_file"] = os.path.abspath(source_path)
     scene[RECORD] = json.dumps(rec)
     set_keypoint_empties(res.keypoints)
-    split_parts(relabel=False)
+    try:
+        split_parts(relabel=False)
+    except UserError as e:
+        if not res.problems:
+            raise
+        res.problems.append(f"split: {e} (fix the keypoints above, then Split parts)")
+        rec["problems"] = list(res.problems)
+        scene[RECORD] = json.dumps(rec)
     return res
+
+
+def _clear_derived():
+    """Remove the parts and the rig (a re-derivation makes them again)."""
+    for name in PARTS + ("armature",):
+        o = bpy.data.objects.get(name)
+        if o is not None:
+            bpy.data.objects.remove(o, do_unlink=True)
+
+
+def place_wheel_empties():
+    """kp.front_axle / kp.rear_axle at the two ends of the model's longest extent, half way up,
+    for the annotator to drag onto the hubs (then Curate from wheel centres)."""
+    src = bpy.data.objects.get(SOURCE)
+    if src is None:
+        src = join_meshes(bpy.context.scene)
+    V, _, _ = mesh_arrays(src)
+    V = V @ np.array(src.matrix_world)[:3, :3].T + np.array(src.matrix_world)[:3, 3]
+    lo, hi = V.min(0), V.max(0)
+    k = int(np.argmax(hi - lo))
+    mid = 0.5 * (lo + hi)
+    ends = []
+    for t in (0.8, 0.2):
+        p = mid.copy()
+        p[k] = lo[k] + t * (hi[k] - lo[k])
+        ends.append(p)
+    scene = bpy.context.scene
+    coll = bpy.data.collections.get(KP_COLLECTION) or bpy.data.collections.new(KP_COLLECTION)
+    if coll.name not in scene.collection.children:
+        scene.collection.children.link(coll)
+    size = 0.02 * float(np.linalg.norm(hi - lo))
+    for name, p in zip(("front_axle", "rear_axle"), ends):
+        e = bpy.data.objects.get(f"kp.{name}")
+        if e is None:
+            e = bpy.data.objects.new(f"kp.{name}", None)
+            coll.objects.link(e)
+            e.empty_display_type = "SPHERE"
+            e.show_name = True
+            e.show_in_front = True
+        e.empty_display_size = size
+        e.location = Vector(p.tolist())
+    return ends
+
+
+def save_partial(path):
+    """Write the scene as it is (source mesh, keypoint empties, parts so far, the record with
+    its problems) to a .blend the panel resumes from; atomic (temporary file, then rename)."""
+    path = os.path.abspath(os.fspath(path))
+    d = os.path.dirname(path)
+    os.makedirs(d, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".blend", dir=d)
+    os.close(fd)
+    try:
+        bpy.ops.wm.save_as_mainfile(filepath=tmp, copy=True, check_existing=False)
+        os.replace(tmp, path)
+    finally:
+        for f in (tmp, tmp + "1"):
+            if os.path.exists(f):
+                os.remove(f)
+    return path
+
+
+def record_problems():
+    """The problems stored with the curation (a partial curation opened to resume)."""
+    return list(json.loads(bpy.context.scene.get(RECORD, "{}")).get("problems", []))
 
 
 # ------------------------------------------------------------------ keypoint empties
@@ -338,7 +471,8 @@ def split_parts(relabel=True):
 
 
 def paint_selected(part):
-    """Assign the faces selected in edit mode on curation_source to `part` (annotator repaint)."""
+    """Assign the faces selected in edit mode on curation_source to `part` (annotator repaint;
+    "junk" leaves them out of every part)."""
     src = bpy.data.objects.get(SOURCE)
     if src is None:
         raise UserError("nothing to paint: run Auto curate first")
@@ -348,7 +482,7 @@ def paint_selected(part):
     sel = np.zeros(len(src.data.polygons), bool)
     src.data.polygons.foreach_get("select", sel)
     paint = _get_face_attr(src.data, PAINT_ATTR)
-    paint[sel] = PARTS.index(part)
+    paint[sel] = JUNK_PAINT if part == "junk" else PARTS.index(part)
     _face_attr(src.data, PAINT_ATTR, paint)
     if was_edit:
         bpy.ops.object.mode_set(mode="EDIT")

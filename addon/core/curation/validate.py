@@ -50,7 +50,7 @@ def validate(kp, has_crank=True, tol=0.02):
     if k["front_axle"][0] <= k["rear_axle"][0]:
         probs.append("front_axle: not in front of rear_axle (X forward)")
     for n in ("front_axle", "rear_axle"):
-        if k[n][1] <= 0.05:
+        if k[n][1] <= 0.02:
             probs.append(f"{n}: at or below the ground")
     if not k["rear_axle"][0] < k["crank_axle"][0] < k["front_axle"][0]:
         probs.append("crank_axle: not between the wheel axles")
