@@ -2,15 +2,41 @@
 
 Every button is an operator from operators.py; nothing here changes data by itself.
 """
+import sys
+
 import bpy
 
 CATEGORY = "ArticCyclists"
+
+
+def _requirements_problem():
+    from . import requirements_problem
+    return requirements_problem()
 
 
 class _Panel:
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
     bl_category = CATEGORY
+
+
+class ARTICCYC_PT_requirements(_Panel, bpy.types.Panel):
+    """Shown first, and only when the add-on cannot work: what is missing and how to install it."""
+    bl_label = "Missing Python package: numpy"
+    bl_idname = "ARTICCYC_PT_requirements"
+
+    @classmethod
+    def poll(cls, context):
+        return _requirements_problem() is not None
+
+    def draw(self, context):
+        box = self.layout.box()
+        box.alert = True
+        # A sidebar label does not wrap: one short line per fact.
+        box.label(text="The add-on needs numpy; this Blender's Python lacks it.", icon="ERROR")
+        box.label(text="Debian/Ubuntu: sudo apt install python3-numpy")
+        box.label(text=f"Other Blenders: {sys.executable} -m pip install numpy")
+        box.label(text="Then restart Blender. Every button refuses until then.")
 
 
 class ARTICCYC_PT_curate(_Panel, bpy.types.Panel):
@@ -76,7 +102,7 @@ class ARTICCYC_PT_render(_Panel, bpy.types.Panel):
         col.operator("articcyc.render_views", icon="RENDER_STILL")
 
 
-CLASSES = (ARTICCYC_PT_curate, ARTICCYC_PT_keypoints, ARTICCYC_PT_parts, ARTICCYC_PT_render)
+CLASSES = (ARTICCYC_PT_requirements, ARTICCYC_PT_curate, ARTICCYC_PT_keypoints, ARTICCYC_PT_parts, ARTICCYC_PT_render)
 
 
 def register():

@@ -1,6 +1,6 @@
-"""Build the add-on zip: dist/articcyclists-<version>.zip (plain Python, no bpy).
+"""Build the add-on zip: dist/articcyclists-<version>.zip, checked by Blender's own validator.
 
-    .venv/bin/python blender_scripts/build_addon.py [--out dist]
+    .venv/bin/python blender_scripts/build_addon.py [--out dist] [--no-validate]
 
 The zip holds one folder `articcyclists/` with the package (addon/ minus caches): Blender 4.2+
 installs it as an extension (blender_manifest.toml; the manual allows the files inside one
@@ -9,8 +9,11 @@ package folder).  The version comes from blender_manifest.toml and must match bl
 """
 import argparse
 import ast
+import glob
+import importlib.util
 import os
 import re
+import subprocess
 import sys
 import zipfile
 
@@ -38,7 +41,30 @@ def versions(addon_dir):
     return m.group(1), ".".join(str(v) for v in bl["version"])
 
 
-def build(out_dir, addon_dir=os.path.join(ROOT, "addon")):
+def blender_ext_tool():
+    """(blender_ext.py, tags.py) bundled with the installed bpy module, found without importing bpy."""
+    spec = importlib.util.find_spec("bpy")
+    if spec is None or not spec.submodule_search_locations:
+        raise UserError("cannot validate: the bpy module is not installed (make setup), or pass --no-validate")
+    root = list(spec.submodule_search_locations)[0]
+    tools = sorted(glob.glob(os.path.join(root, "*", "scripts", "addons_core", "bl_pkg", "cli", "blender_ext.py")))
+    tags = sorted(glob.glob(os.path.join(root, "*", "scripts", "modules", "_bpy_internal", "extensions", "tags.py")))
+    if not tools or not tags:
+        raise UserError(f"cannot validate: no bl_pkg/cli/blender_ext.py or extensions/tags.py under {root}")
+    return tools[-1], tags[-1]
+
+
+def validate(path):
+    """Blender's strict extension check on a zip or a package folder -> (ok, [message lines])."""
+    tool, tags = blender_ext_tool()
+    r = subprocess.run([sys.executable, tool, "validate", path, "--valid-tags", tags],
+                       capture_output=True, text=True, timeout=120)
+    lines = [ln.removeprefix("FATAL_ERROR: ").strip() for ln in (r.stdout + r.stderr).splitlines() if ln.strip()]
+    return r.returncode == 0, lines
+
+
+def build(out_dir, addon_dir=os.path.join(ROOT, "addon"), check=False):
+    """Write the zip (atomically); with check=True only if Blender's validator accepts it."""
     manifest_v, bl_v = versions(addon_dir)
     if manifest_v != bl_v:
         raise UserError(f"version mismatch: blender_manifest.toml {manifest_v} vs bl_info {bl_v}")
@@ -53,6 +79,12 @@ def build(out_dir, addon_dir=os.path.join(ROOT, "addon")):
                     continue
                 full = os.path.join(d, f)
                 z.write(full, os.path.join(PKG, os.path.relpath(full, addon_dir)))
+    if check:
+        ok, lines = validate(tmp)
+        if not ok:
+            os.remove(tmp)
+            raise UserError("Blender's extension validator rejects the add-on: "
+                            + "; ".join(ln for ln in lines if not ln.startswith("Error parsing TOML")))
     os.replace(tmp, path)
     return path
 
@@ -60,8 +92,11 @@ def build(out_dir, addon_dir=os.path.join(ROOT, "addon")):
 def main(argv):
     p = argparse.ArgumentParser(prog="build_addon.py", description=__doc__.split("\n\n")[0])
     p.add_argument("--out", default=os.path.join(ROOT, "dist"), help="output folder (default dist/)")
+    p.add_argument("--no-validate", action="store_true",
+                   help="skip Blender's strict manifest check (needs the bpy module's bundled tooling)")
     args = p.parse_args(argv)
-    print(build(args.out))
+    path = build(args.out, check=not args.no_validate)
+    print(path if args.no_validate else f"{path} (passes Blender's extension validate)")
     return 0
 
 

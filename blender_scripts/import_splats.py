@@ -1,7 +1,10 @@
-"""Import 3DGS .ply Gaussians into Blender as point clouds, optionally render them with Cycles.
+"""Import 3DGS .ply Gaussians into Blender as Gaussians, optionally render them with Cycles.
 
     blender -b -P blender_scripts/import_splats.py -- --ply FILE.ply [--render FILE.png] [--save FILE.blend]
-    python blender_scripts/import_splats.py --ply FILE.ply --render out.png
+    python blender_scripts/import_splats.py --ply FILE.ply --render out.png [--mode gaussian|preview]
+
+--mode gaussian (default): oriented ellipsoids with a Gaussian falloff and view-dependent SH
+colour; --mode preview: one sphere per Gaussian (fast, DC colour only).
 
 --ply also takes a folder or a glob of per-frame .ply files: they import as frames 1..N and
 --render writes FILE_00001.png ... (or only --frame N, to FILE).  The camera is ring view 3 of
@@ -32,10 +35,14 @@ def main(argv):
     p.add_argument("--size", type=int, default=512, help="image size for the ring camera (default 512)")
     p.add_argument("--samples", type=int, default=None)
     p.add_argument("--denoise", choices=["NONE", "FAST", "BALANCED", "HIGH"], default=None)
+    p.add_argument("--mode", choices=["gaussian", "preview"], default="gaussian",
+                   help="gaussian: ellipsoids, Gaussian falloff, SH colour (default); preview: spheres")
+    p.add_argument("--sh-degree", type=int, choices=[0, 1, 2, 3], default=3,
+                   help="gaussian mode: highest SH degree evaluated (default 3, or the file's)")
     p.add_argument("--shading", choices=["emission", "lit"], default="emission",
-                   help="emission: the Gaussians' own (baked) colour; lit: Principled BSDF under the studio lights")
+                   help="preview mode: emission = the Gaussians' own (baked) colour; lit = Principled BSDF under the studio lights")
     p.add_argument("--radius-scale", type=float, default=None,
-                   help="disc radius = this * sqrt(product of the two largest scales) (default sqrt 2)")
+                   help="preview mode: sphere radius = this * sqrt(product of the two largest scales) (default sqrt 2)")
     args = p.parse_args(argv)
     if args.render and not args.render.lower().endswith(".png"):
         raise UserError(f"--render must name a .png file, got {args.render}")
@@ -55,13 +62,16 @@ def main(argv):
     rs = RADIUS_SCALE if args.radius_scale is None else args.radius_scale
     if not rs > 0 or rs == float("inf"):
         raise UserError(f"--radius-scale must be a positive number, got {args.radius_scale}")
+    if args.mode == "gaussian" and (args.shading != "emission" or args.radius_scale is not None):
+        raise UserError("--shading and --radius-scale go with --mode preview")
 
     import bpy
 
     from addon.core.scene import reset_scene
 
     scene = reset_scene()  # the binary's startup file would add a cube, a lamp and a camera
-    objs = splat_import.import_splats(paths, shading=args.shading, radius_scale=rs)
+    objs = splat_import.import_splats(paths, shading=args.shading, radius_scale=rs, mode=args.mode,
+                                      sh_degree=args.sh_degree)
     print(f"import_splats: {len(paths)} file(s), {sum(len(o.data.vertices) for o in objs)} points")
     if args.render or args.save:
         setup_render(scene, objs, args)
@@ -105,7 +115,15 @@ def setup_render(scene, objs, args):
         render.configure_cycles(scene, replace(s, denoise="NONE"))
     # Each translucent splat costs one transparent bounce (back faces are skipped in the
     # material); configure_cycles' 2 would turn a stack of splats opaque black.
-    scene.cycles.transparent_max_bounces = 64
+    from addon.core.splat_gaussian import TRANSPARENT_BOUNCES
+
+    scene.cycles.transparent_max_bounces = TRANSPARENT_BOUNCES if args.mode == "gaussian" else 64
+    if args.mode == "gaussian":
+        # A 1-pixel box filter integrates each pixel's own area, like the rasterizer's point
+        # sample (+0.3 px^2 dilation); Cycles' default 1.5 px Blackman-Harris widens sub-pixel
+        # Gaussians by about a pixel.
+        scene.cycles.pixel_filter_type = "BOX"
+        scene.render.filter_size = 1.0
     render.setup_lighting(scene)
     cam = render.ensure_camera(scene, size, focal)
     render.place_camera(cam, R, T)

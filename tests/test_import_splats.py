@@ -82,12 +82,12 @@ def test_reader_matches_plyfile_writer(tmp_path):
     np.testing.assert_array_equal(d["f_rest_15"], g.sh[:, 1, 1].numpy())  # channel-major: G's first
 
 
-def test_import_attributes_and_positions(tmp_path, fresh_scene):
+def test_preview_attributes_and_positions(tmp_path, fresh_scene):
     from addon.core.splat_import import import_splats
 
     g = random_gaussians(257, seed=1)
     write_ply(g, tmp_path / "g.ply")
-    (obj,) = import_splats([str(tmp_path / "g.ply")])
+    (obj,) = import_splats([str(tmp_path / "g.ply")], mode="preview")
     me = obj.data
     n = len(me.vertices)
     assert n == 257
@@ -118,6 +118,122 @@ def test_import_attributes_and_positions(tmp_path, fresh_scene):
         geometry = ev.evaluated_geometry()  # keep it alive while its point cloud is read
         pc = geometry.pointcloud
         assert pc is not None and len(pc.points) == 257 and "splat_color" in pc.attributes
+
+
+def test_gaussian_attributes(tmp_path, fresh_scene):
+    """Gaussian mode: rotation (as the instance Euler), 3-sigma scales and every SH coefficient."""
+    from mathutils import Euler
+
+    from addon.core.splat_import import import_splats
+
+    g = random_gaussians(120, seed=2)
+    write_ply(g, tmp_path / "g.ply")
+    (obj,) = import_splats([str(tmp_path / "g.ply")])
+    me, n = obj.data, 120
+
+    def vec(name):
+        a = np.empty(n * 3, np.float32)
+        me.attributes[name].data.foreach_get("vector", a)
+        return a.reshape(n, 3)
+
+    q = g.quats.double().numpy()
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    C = np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # Blender = C canonical (DESIGN.md)
+    rot = vec("g_rot")
+    for i in range(0, n, 7):
+        w, x, y, z = q[i]
+        R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+        # the instance maps its unit sphere to C R S u: the Gaussian's ellipsoid in Blender's frame
+        np.testing.assert_allclose(np.array(Euler(rot[i].tolist(), "XYZ").to_matrix()), C @ R, atol=1e-5)
+    np.testing.assert_allclose(vec("g_scale"), 3 * np.exp(g.log_scales.numpy()), rtol=1e-5)
+    sh = g.sh.numpy()
+    for k in (0, 1, 5, 15):
+        np.testing.assert_allclose(vec(f"sh_{k}"), sh[:, k], atol=1e-6)
+    types = {nd.bl_idname for nd in obj.modifiers["splat_gaussians"].node_group.nodes}
+    assert "GeometryNodeInstanceOnPoints" in types
+
+
+def _one_gaussian(path, rgb_sh=None, scales=(0.4, 0.05, 0.08), centre=(0.3, 1.6, 0.2), quat=None, logit=3.0):
+    a = np.radians(50)
+    q = quat if quat is not None else [np.cos(a / 2), 0.3 * np.sin(a / 2), 0.2 * np.sin(a / 2), 0.93 * np.sin(a / 2)]
+    sh = torch.zeros(1, 4, 3)
+    sh[0, 0] = torch.tensor([0.5, 0.0, -0.5])
+    if rgb_sh is not None:
+        sh[0, 1:] = torch.tensor(rgb_sh, dtype=torch.float32)
+    g = Gaussians(means=torch.tensor([centre], dtype=torch.float32), quats=torch.tensor([q], dtype=torch.float32),
+                  log_scales=torch.log(torch.tensor([scales])), opacity_logits=torch.tensor([logit]), sh=sh)
+    write_ply(g, path)
+    return g
+
+
+def _both_renders(tmp_path, g, ply, azimuths, size=96, focal=rig.FOCAL * 96 / 512):
+    """(our rasterizer's premultiplied RGBA, Blender's) float images per ring azimuth around g's centre."""
+    import json
+
+    from splatting.cameras import ring_camera
+    from splatting.rasterize import render_gaussians
+
+    centre = tuple(float(x) for x in g.means[0])
+    cams, out = {}, []
+    for i, az in enumerate(azimuths):
+        c = ring_camera(az, centre, size=size, focal=focal)
+        cams[f"camera{i:04d}"] = {"K": c.K.tolist(), "R": c.R.tolist(), "T": c.T.tolist()}
+        r = render_gaussians(g, c)
+        ras = np.concatenate([r["rgb"].detach().numpy(), r["alpha"].detach().numpy().reshape(size, size, 1)], -1)
+        out.append([ras.astype(float), None])
+    (tmp_path / "cameras.json").write_text(json.dumps(cams))
+    main = load_script().main
+    for i in range(len(azimuths)):
+        png = tmp_path / f"bl{i}.png"
+        assert main(["--ply", ply, "--render", str(png), "--camera", f"{tmp_path / 'cameras.json'}:camera{i:04d}",
+                     "--samples", "32", "--denoise", "NONE"]) == 0
+        b = rgba(png) / 255.0
+        b[..., :3] *= b[..., 3:]  # straight -> premultiplied, as the rasterizer returns it
+        out[i][1] = b
+    return out
+
+
+def _axis(alpha):
+    """Alpha-weighted principal axis angle (deg, image x right / y down, mod 180) and s.d.s (px)."""
+    ys, xs = np.nonzero(alpha > 0.05)
+    ev, evec = np.linalg.eigh(np.cov(np.stack([xs, ys]), aweights=alpha[ys, xs]))
+    return np.degrees(np.arctan2(evec[1, 1], evec[0, 1])) % 180, np.sqrt(ev)
+
+
+def test_elongated_gaussian_long_axis_as_the_rasterizer(tmp_path, fresh_scene):
+    """One needle-like Gaussian seen from both sides (and at 70 deg): same long axis, same widths."""
+    ply = str(tmp_path / "g.ply")
+    g = _one_gaussian(ply)
+    angles = []
+    for (ras, bl), az in zip(_both_renders(tmp_path, g, ply, (0, 180, 70)), (0, 180, 70)):
+        (a_r, sd_r), (a_b, sd_b) = _axis(ras[..., 3]), _axis(bl[..., 3])
+        assert abs((a_r - a_b + 90) % 180 - 90) < 2.0, (az, a_r, a_b)
+        np.testing.assert_allclose(sd_b, sd_r, rtol=0.1)  # minor (a few px) and major axis
+        assert sd_r[1] > 4 * sd_r[0]  # it is elongated on screen
+        mse = ((ras - bl) ** 2).mean()
+        assert 10 * np.log10(1 / mse) > 30, (az, 10 * np.log10(1 / mse))
+        angles.append(a_b)
+    assert abs((angles[0] + angles[1]) % 180) < 2 or abs((angles[0] + angles[1]) % 180 - 180) < 2  # mirrored
+    assert abs((angles[0] - angles[2] + 90) % 180 - 90) > 10  # and the third view sees it differently
+
+
+def test_sh_degree1_colour_follows_the_view_as_the_rasterizer(tmp_path, fresh_scene):
+    """A round Gaussian whose degree-1 SH makes it red seen from one side and blue from the other."""
+    ply = str(tmp_path / "g.ply")
+    sh1 = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.9, 0.0, -0.9]]  # Y_3 = -C1 x: varies with the view's x
+    g = _one_gaussian(ply, sh1, scales=(0.15, 0.15, 0.15), quat=[1.0, 0, 0, 0], logit=6.0)
+    cols = []
+    for ras, bl in _both_renders(tmp_path, g, ply, (90, 270, 0)):
+        c = 48
+        col_r, col_b = np.clip(ras[c, c, :3] / ras[c, c, 3], 0, 1), bl[c, c, :3] / bl[c, c, 3]  # a PNG holds 0..1
+        np.testing.assert_allclose(col_b, col_r, atol=6 / 255)
+        cols.append(col_b)
+    # azimuth 90 puts the camera at -X looking along +X (d_x = +1): Y_3 < 0, red down and blue
+    # up; azimuth 270 the reverse
+    assert cols[1][0] - cols[0][0] > 0.3 and cols[0][2] - cols[1][2] > 0.3, cols
+    assert abs(cols[2][0] - (0.5 + C0 * 0.5)) < 6 / 255  # side view: the DC colour only
 
 
 def test_render_sees_the_sides_design_says(tmp_path, fresh_scene):

@@ -272,24 +272,44 @@ def _keyframe_visibility(obj, frame, first, last):
         obj.keyframe_insert("hide_viewport", frame=f)
 
 
-def import_splats(paths, shading="emission", radius_scale=RADIUS_SCALE, first_frame=1):
+MODES = ("gaussian", "preview")
+
+
+def import_splats(paths, shading="emission", radius_scale=RADIUS_SCALE, first_frame=1, mode="gaussian",
+                  sh_degree=3):
     """Import .ply files into the current scene; several files become frames first_frame, +1, ...
 
-    Every file is read and validated before anything is created, so bad input leaves the scene
-    untouched.  Returns the list of objects (one per file, in frame order).
+    mode "gaussian" (default): oriented ellipsoids with a Gaussian falloff and SH colour up to
+    `sh_degree` (splat_gaussian.py; emission only).  mode "preview": one sphere per Gaussian
+    (fast; `shading` and `radius_scale` apply here).  Every file is read and validated before
+    anything is created, so bad input leaves the scene untouched.  Returns the list of objects
+    (one per file, in frame order).
     """
     import bpy
 
+    if mode not in MODES:
+        raise UserError(f"unknown import mode '{mode}' ({' or '.join(MODES)})")
     if isinstance(paths, str):
         paths = [paths]
-    clouds = [splat_points(read_splat_ply(p), radius_scale) for p in paths]
     scene = bpy.context.scene
-    mat = splat_material(shading=shading)
-    ng = splat_node_group(mat)
+    if mode == "gaussian":
+        from . import splat_gaussian as sg
+
+        if shading != "emission":
+            raise UserError("--shading lit goes with --mode preview (Gaussians carry their own lit colour)")
+        clouds = [sg.gaussian_points(read_splat_ply(p), sh_degree) for p in paths]
+        mat = sg.gaussian_material(max(c["degree"] for c in clouds))
+        ng = sg.gaussian_node_group(mat)
+        make = sg.make_gaussian_object
+    else:
+        clouds = [splat_points(read_splat_ply(p), radius_scale) for p in paths]
+        mat = splat_material(shading=shading)
+        ng = splat_node_group(mat)
+        make = make_point_object
     objs = []
     last = first_frame + len(paths) - 1
     for i, (p, pts) in enumerate(zip(paths, clouds)):
-        obj = make_point_object(os.path.splitext(os.path.basename(p))[0], pts, mat, ng)
+        obj = make(os.path.splitext(os.path.basename(p))[0], pts, mat, ng)
         if len(paths) > 1:
             _keyframe_visibility(obj, first_frame + i, first_frame, last)
         objs.append(obj)
