@@ -65,7 +65,7 @@ def main(argv):
           f"({time.time() - t0:.1f} s)", flush=True)
     out = os.path.abspath(args.out)
     if args.format == "gltf":
-        from addon.core.atomic import write_bytes
+        from cyclist_formats.atomic import write_bytes
 
         data = gltf.build(rig, meshes, name, args.clip_seconds, math.radians(args.clip_steer_deg))
         write_bytes(out, data)

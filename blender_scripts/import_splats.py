@@ -8,7 +8,7 @@ colour; --mode preview: one sphere per Gaussian (fast, DC colour only).
 
 --ply also takes a folder or a glob of per-frame .ply files: they import as frames 1..N and
 --render writes FILE_00001.png ... (or only --frame N, to FILE).  The camera is ring view 3 of
-DESIGN.md's 36-view rig around the clouds' bounding-box centre, or --camera cameras.json:cameraNNNN.
+docs/contract.md's 36-view ring around the clouds' bounding-box centre, or --camera cameras.json:cameraNNNN.
 """
 import argparse
 import os

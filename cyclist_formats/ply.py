@@ -64,11 +64,14 @@ def _header(path, what):
     return fmt, elements, nl + 1
 
 
-def read_ply(path, what="ply"):
+def read_ply(path, what="ply", require_format=None):
     """.ply -> {element name: structured array}; a list property becomes field `name` of shape (k,)
-    (every row must have the same count k, e.g. triangles).  UserError for anything malformed."""
+    (every row must have the same count k, e.g. triangles).  UserError for anything malformed, or
+    for a format other than require_format when given."""
     path = os.fspath(path)
     fmt, elements, start = _header(path, what)
+    if require_format is not None and fmt != require_format:
+        raise UserError(f"{path}: format '{fmt}' is not {require_format} (the {what} layout)")
     with open(path, "rb") as f:
         f.seek(start)
         body = f.read()
@@ -122,17 +125,17 @@ def read_ply(path, what="ply"):
     return out
 
 
-def _vertex(path, what):
-    els = read_ply(path, what)
+def _vertex(path, what, require_format=None):
+    els = read_ply(path, what, require_format)
     if "vertex" not in els:
         raise UserError(f"{path}: no 'vertex' element")
     return els
 
 
 def read_gaussians(path):
-    """A 3DGS .ply -> structured array (N,) of its vertex fields; UserError unless it holds exactly
-    one `vertex` element with the INRIA fields, all finite."""
-    els = _vertex(path, "Gaussian")
+    """A 3DGS .ply -> structured array (N,) of its vertex fields; UserError unless it is binary
+    little-endian (the INRIA layout) with exactly one `vertex` element with the INRIA fields, all finite."""
+    els = _vertex(path, "Gaussian", "binary_little_endian")
     if list(els) != ["vertex"]:
         raise UserError(f"{path}: expected one 'vertex' element, found {list(els)}")
     v = els["vertex"]

@@ -1,6 +1,6 @@
 """Articulated export (blender_scripts/export_bike.py): URDF in a real simulator, glTF reloaded.
 
-The reference is `python -m splatting pose-bike`, which poses the bike's keypoints by DESIGN.md's
+The reference is `python -m splatting pose-bike`, which poses the bike's keypoints by docs/contract.md's
 8-DoF pose; the exports must put the handle and pedal keypoints in the same places (1 mm) when
 their joints are set to (theta_s, theta_p).  URDF frame = Blender frame = canonical (X, -Z, Y).
 """
@@ -41,7 +41,7 @@ def bike(tmp_path_factory):
     assert r.returncode == 0, r.stderr[-2000:]
     (bike_dir,) = [root / "bikes" / d for d in os.listdir(root / "bikes")]
     # pose-bike needs part Gaussians; their content does not move keypoints, so a few will do
-    from splatting.gaussians import Gaussians, write_ply
+    from splatting.gaussians.container import Gaussians, write_ply
 
     (bike_dir / "gaussians").mkdir()
     for part in ("frame", "steering", "crank"):

@@ -1,6 +1,6 @@
 """3DGS .ply -> Blender point clouds (addon/core/splat_import.py, blender_scripts/import_splats.py).
 
-Expected values are written out here from DESIGN.md (Blender (x, y, z) = canonical (X, -Z, Y);
+Expected values are written out here from docs/contract.md (Blender (x, y, z) = canonical (X, -Z, Y);
 view 0 looks along +Z at the rider's left side with the front on the image's left) and from the
 3DGS conventions (opacity = sigmoid(logit), colour = 0.5 + C0 * f_dc), not taken from the code.
 """
@@ -138,7 +138,7 @@ def test_gaussian_attributes(tmp_path, fresh_scene):
 
     q = g.quats.double().numpy()
     q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    C = np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # Blender = C canonical (DESIGN.md)
+    C = np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # Blender = C canonical (docs/contract.md)
     rot = vec("g_rot")
     for i in range(0, n, 7):
         w, x, y, z = q[i]
@@ -168,12 +168,12 @@ def _one_gaussian(path, rgb_sh=None, scales=(0.4, 0.05, 0.08), centre=(0.3, 1.6,
     return g
 
 
-def _both_renders(tmp_path, g, ply, azimuths, size=96, focal=rig.FOCAL * 96 / 512):
+def _both_renders(tmp_path, g, ply, azimuths, size=96, focal=ring.FOCAL * 96 / 512):
     """(our rasterizer's premultiplied RGBA, Blender's) float images per ring azimuth around g's centre."""
     import json
 
-    from splatting.cameras import ring_camera
-    from splatting.rasterize import render_gaussians
+    from splatting.raster.camera import ring_camera
+    from splatting.raster.sparse import render_gaussians
 
     centre = tuple(float(x) for x in g.means[0])
     cams, out = {}, []

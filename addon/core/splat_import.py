@@ -1,7 +1,7 @@
-"""Import INRIA 3DGS .ply files (DESIGN.md layout) into Blender as renderable point clouds.
+"""Import INRIA 3DGS .ply files (docs/contract.md layout) into Blender as renderable point clouds.
 
-Blender 3.4's bundled Python has numpy but neither plyfile nor torch, so the header is parsed
-here and the binary body is read with numpy.frombuffer by the declared property list.
+The .ply is read by cyclist_formats.ply (numpy only: Blender 3.4's bundled Python has numpy but
+neither plyfile nor torch).
 
 Each .ply becomes a vertex-only mesh (Blender frame, via frames.py) carrying per-point
 attributes `opacity`, `radius` and `splat_color` (an attribute named plain `color` rendered black
@@ -18,7 +18,7 @@ import os
 import numpy as np
 
 from . import frames
-from .contract import UserError
+from .contract import UserError, ply
 
 SH_C0 = 0.28209479177387814  # Y_0^0: 3DGS's colour = 0.5 + C0 * f_dc
 # Area-equivalent 1-sigma radius of the Gaussian's two largest axes, times sqrt(2): an opaque
@@ -28,74 +28,14 @@ SH_C0 = 0.28209479177387814  # Y_0^0: 3DGS's colour = 0.5 + C0 * f_dc
 # and not the max, which would blow needle-shaped splats up into big balls.
 RADIUS_SCALE = math.sqrt(2.0)
 
-REQUIRED = (["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity"]
-            + [f"scale_{i}" for i in range(3)] + [f"rot_{i}" for i in range(4)])
-_PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
-              "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-              "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}
-_MAX_HEADER = 64 * 1024
+REQUIRED = ply.GAUSSIAN_FIELDS
 
 
 def read_splat_ply(path):
-    """A 3DGS .ply -> structured numpy array (N,) with the declared fields (little-endian).
-
-    Raises UserError for a missing file, a non-binary-little-endian or non-ply file, list
-    properties, elements other than `vertex`, missing 3DGS fields, a short body or non-finite
-    values.
-    """
-    if not os.path.isfile(path):
-        raise UserError(f"no such Gaussian file: {path}")
-    with open(path, "rb") as f:
-        head = f.read(_MAX_HEADER)
-        end = head.find(b"end_header")
-        if not head.startswith(b"ply") or end < 0:
-            raise UserError(f"{path} is not a .ply file")
-        nl = head.find(b"\n", end)
-        if nl < 0:
-            raise UserError(f"{path}: truncated .ply header")
-        lines = head[:end].decode("ascii", "replace").replace("\r", "").split("\n")[1:]
-        count, fields, elements = None, [], []
-        for line in lines:
-            tok = line.split()
-            if not tok or tok[0] in ("comment", "obj_info"):
-                continue
-            if tok[0] == "format":
-                if tok[1:2] != ["binary_little_endian"]:
-                    raise UserError(f"{path}: format '{' '.join(tok[1:])}' is not binary_little_endian "
-                                    "(3DGS .ply files are binary little-endian)")
-            elif tok[0] == "element":
-                elements.append(tok[1] if len(tok) > 1 else "?")
-                if elements[-1] == "vertex":
-                    try:
-                        count = int(tok[2])
-                    except (IndexError, ValueError):
-                        raise UserError(f"{path}: bad vertex count in '{line}'")
-            elif tok[0] == "property":
-                if elements[-1:] != ["vertex"]:
-                    continue  # rejected below with the element's name
-                if len(tok) != 3 or tok[1] not in _PLY_TYPES:
-                    raise UserError(f"{path}: unsupported property '{line.strip()}' (3DGS uses plain floats)")
-                fields.append((tok[2], "<" + _PLY_TYPES[tok[1]]))
-            else:
-                raise UserError(f"{path}: unexpected header line '{line.strip()}'")
-        if elements != ["vertex"] or count is None:
-            raise UserError(f"{path}: expected one 'vertex' element, found {elements or 'none'}")
-        names = [n for n, _ in fields]
-        missing = [k for k in REQUIRED if k not in names]
-        if missing:
-            raise UserError(f"{path} is not a 3DGS .ply: missing fields {', '.join(missing)}")
-        if len(set(names)) != len(names):
-            raise UserError(f"{path}: duplicate property names")
-        dtype = np.dtype(fields)
-        f.seek(nl + 1)
-        body = f.read(count * dtype.itemsize)
-    if len(body) < count * dtype.itemsize:
-        raise UserError(f"{path}: body holds {len(body) // max(dtype.itemsize, 1)} of {count} vertices (truncated)")
-    data = np.frombuffer(body, dtype=dtype, count=count)
-    for n in names:
-        if data[n].dtype.kind == "f" and not np.isfinite(data[n]).all():
-            raise UserError(f"{path}: non-finite values in '{n}'")
-    return data
+    """A 3DGS .ply -> structured numpy array (N,) with the declared fields (cyclist_formats.ply:
+    UserError for a missing file, a non-ply file, missing 3DGS fields, a short body or non-finite
+    values)."""
+    return ply.read_gaussians(path)
 
 
 def srgb_to_linear(c):

@@ -2,7 +2,7 @@
 
 One entry point, `rasterize(...)`; see docs/rasterizer.md. Shapes (N Gaussians, K SH coeffs):
   means (N,3) world, quats (N,4) wxyz (normalised here), scales (N,3) std devs,
-  opacities (N,) in [0,1], sh (N,K,3); camera: splatting.cameras.Camera.
+  opacities (N,) in [0,1], sh (N,K,3); camera: splatting.raster.camera.Camera.
 Returns a dict: rgb (H,W,3), alpha (H,W), depth (H,W), means2d (N,2) pixel coords (retain_grad'ed
 when it requires grad: the densifier reads its .grad), radii (N,) long, visible (N,) bool.
 depth = sum_i w_i z_i with w_i = alpha_i T_i and z_i the camera z: NOT divided by alpha (the

@@ -1,6 +1,6 @@
 """Automatic keypoints on a model already in the canonical pose (numpy, no bpy).
 
-Conventions (how an annotator places them by hand too; DESIGN.md names):
+Conventions (how an annotator places them by hand too; docs/contract.md names):
 - front_axle / rear_axle: wheel centres; ground: on the ground below the rear axle.
 - crank_axle: the chainring centre, moved into the symmetry plane Z = 0.
 - steer_top / steer_bottom: on the head tube's axis, 1 cm inside its ends.

@@ -3,7 +3,7 @@ surface samples of the kept bike, the two-wheeler checks that need the canonical
 rider's removal, and the choice between piece-based and shape-based keypoints."""
 import numpy as np
 
-from ..script import UserError
+from ..contract import UserError
 from . import keypoints as kpmod
 from . import shape_keypoints as sk
 from .silhouette import surface_samples

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..script import UserError
+from ..contract import UserError
 from .wheels import fit_circle_2d
 
 IMAGE_PX = 200          # pixels along the longer side of the side view

@@ -1,7 +1,7 @@
-"""The bike's joints as DESIGN.md defines them, from keypoints.json (numpy only).
+"""The bike's joints as docs/contract.md defines them, from keypoints.json (numpy only).
 
 - `steering`: revolute about v = unit(steer_top - steer_bottom) through steer_bottom; joint
-  value +theta_s turns the front wheel to the rider's left (DESIGN.md H_s).
+  value +theta_s turns the front wheel to the rider's left (docs/contract.md H_s).
 - `crank`: continuous about the axle through crank_axle parallel to canonical Z; joint value
   +theta_p is forward pedalling, a rotation by -theta_p about +Z, i.e. by +theta_p about -Z.
 Everything here is in the canonical frame (X forward, Y up, Z right), metres and radians.
@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..script import UserError
+from ..contract import UserError
 
 PARTS = ("frame", "steering", "crank")
 # keypoints that keypoints.json "parts" does not list belong to these parts, else to frame

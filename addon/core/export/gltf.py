@@ -2,7 +2,7 @@
 axle, keypoint nodes, and a pedalling + steering animation clip (numpy + json only).
 
 Frame: the canonical one (X forward, Y up, Z right, metres).  glTF only asks for +Y up, and
-Blender's importer maps glTF (x, y, z) to Blender (x, -z, y), which is DESIGN.md's Blender frame,
+Blender's importer maps glTF (x, y, z) to Blender (x, -z, y), which is docs/contract.md's Blender frame,
 so the imported bike lands where bike.blend has it.
 
 Nodes: `frame` (root, at the origin) with children `steering` (translation = steer_bottom) and

@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 
 from .. import frames
-from ..script import UserError
+from ..contract import UserError
 from .articulation import rig_from_keypoints
 from .meshes import PartMesh
 
