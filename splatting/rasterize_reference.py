@@ -21,10 +21,12 @@ def _rotmat(q):
 
 @torch.no_grad()
 def render_reference(means, quats, scales, opacities, sh, camera, background=None, sh_degree=None,
-                     near=0.01, eps2d=0.3):
-    """Same contract as rasterize() (rgb, alpha, depth only), computed in float64."""
+                     near=0.01, eps2d=0.3, features=None):
+    """Same contract as rasterize() (rgb, alpha, depth, and features (H, W, F) when features (N, F)
+    are given: composited like the colour, over a zero background), computed in float64."""
     f64 = lambda t: t.detach().to("cpu", torch.float64)
     means, quats, scales, opacities, sh = map(f64, (means, quats, scales, opacities, sh))
+    feats = None if features is None else f64(features)
     R, T, K = f64(camera.R), f64(camera.T), f64(camera.K)
     W, H = camera.width, camera.height
     fx, fy, cx, cy = K[0, 0].item(), K[1, 1].item(), K[0, 2].item(), K[1, 2].item()
@@ -63,12 +65,14 @@ def render_reference(means, quats, scales, opacities, sh, camera, background=Non
         a = torch.where(in_box & (a >= 1.0 / 255.0), a, torch.zeros_like(a))
         d = means[i] - centre
         col = eval_sh(sh[i:i + 1], (d / d.norm())[None], sh_degree)[0]
+        if feats is not None:
+            col = torch.cat([col, feats[i]])
         layers.append((z, a, col))
 
-    layers.sort(key=lambda l: l[0])
+    layers.sort(key=lambda l: l[0])  # stable: equal depths keep index order, as the rasterizers do
     Timg = torch.ones(H, W, dtype=torch.float64)
     done = torch.zeros(H, W, dtype=torch.bool)
-    rgb = torch.zeros(H, W, 3, dtype=torch.float64)
+    rgb = torch.zeros(H, W, 3 + (0 if feats is None else feats.shape[1]), dtype=torch.float64)
     depth = torch.zeros(H, W, dtype=torch.float64)
     for z, a, col in layers:  # front to back
         test_T = Timg * (1 - a)
@@ -79,5 +83,8 @@ def render_reference(means, quats, scales, opacities, sh, camera, background=Non
         Timg = torch.where(done, Timg, test_T)
     alpha = 1 - Timg
     if background is not None:
-        rgb += Timg[..., None] * f64(background)
-    return {"rgb": rgb, "alpha": alpha, "depth": depth}
+        rgb[..., :3] += Timg[..., None] * f64(background)
+    out = {"rgb": rgb[..., :3], "alpha": alpha, "depth": depth}
+    if feats is not None:
+        out["features"] = rgb[..., 3:]
+    return out
