@@ -21,9 +21,10 @@ def _rotmat(q):
 
 @torch.no_grad()
 def render_reference(means, quats, scales, opacities, sh, camera, background=None, sh_degree=None,
-                     near=0.01, eps2d=0.3, features=None):
+                     near=0.01, eps2d=0.3, features=None, antialiased=False):
     """Same contract as rasterize() (rgb, alpha, depth, and features (H, W, F) when features (N, F)
-    are given: composited like the colour, over a zero background), computed in float64."""
+    are given: composited like the colour, over a zero background), computed in float64.
+    antialiased: opacity x sqrt(det S / det(S + eps2d I)), S the projected covariance."""
     f64 = lambda t: t.detach().to("cpu", torch.float64)
     means, quats, scales, opacities, sh = map(f64, (means, quats, scales, opacities, sh))
     feats = None if features is None else f64(features)
@@ -51,7 +52,8 @@ def render_reference(means, quats, scales, opacities, sh, camera, background=Non
         J = torch.tensor([[fx / z, 0.0, -fx * tx / z ** 2], [0.0, fy / z, -fy * ty / z ** 2]], dtype=torch.float64)
         Rq = _rotmat(quats[i])
         cov3 = Rq @ torch.diag(scales[i] ** 2) @ Rq.T
-        cov2 = J @ R @ cov3 @ R.T @ J.T + eps2d * torch.eye(2, dtype=torch.float64)
+        cov2_raw = J @ R @ cov3 @ R.T @ J.T
+        cov2 = cov2_raw + eps2d * torch.eye(2, dtype=torch.float64)
         det = torch.linalg.det(cov2).item()
         if det <= 0:
             continue
@@ -61,7 +63,10 @@ def render_reference(means, quats, scales, opacities, sh, camera, background=Non
         du, dv = pu - mx, pv - my
         in_box = (du.abs() <= r) & (dv.abs() <= r)
         sigma = 0.5 * (inv[0, 0] * du * du + 2 * inv[0, 1] * du * dv + inv[1, 1] * dv * dv)
-        a = torch.clamp(opacities[i] * torch.exp(-sigma), max=0.99)
+        o = opacities[i]
+        if antialiased:
+            o = o * math.sqrt(max(0.0, torch.linalg.det(cov2_raw).item() / det))
+        a = torch.clamp(o * torch.exp(-sigma), max=0.99)
         a = torch.where(in_box & (a >= 1.0 / 255.0), a, torch.zeros_like(a))
         d = means[i] - centre
         col = eval_sh(sh[i:i + 1], (d / d.norm())[None], sh_degree)[0]
