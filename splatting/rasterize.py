@@ -299,15 +299,21 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
     None: "tiles" for CPU tensors, "torch" otherwise. out["backend"] says which one ran."""
     H, W = camera.height, camera.width
     backend = resolve_backend(backend, means)
-    means2d, conics, depths, radii, boxes = project(means, quats, scales, camera, near, eps2d)
+    if backend == "tiles":  # projection + SH fused in C++ (splatting/raster/cpu_project.py)
+        from .raster.cpu_project import preprocess
+
+        means2d, conics, depths, colors, radii, boxes = preprocess(means, quats, scales, sh, camera, sh_degree,
+                                                                   near, eps2d)
+    else:
+        means2d, conics, depths, radii, boxes = project(means, quats, scales, camera, near, eps2d)
+        centre = camera.centre.to(means.device, means.dtype)
+        dirs = means - centre
+        dirs = dirs / dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        colors = eval_sh(sh, dirs, sh_degree)
     if means2d.requires_grad:
         means2d.retain_grad()
     if antialiased:
         opacities = opacities * aa_compensation(conics, eps2d)
-    centre = camera.centre.to(means.device, means.dtype)
-    dirs = means - centre
-    dirs = dirs / dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    colors = eval_sh(sh, dirs, sh_degree)
     nf = 0 if features is None else features.shape[1]
     if nf:
         colors = torch.cat([colors, features.to(colors)], 1)

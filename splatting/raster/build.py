@@ -1,4 +1,4 @@
-"""Build (or find) the tiled CPU rasterizer library csrc/tiles.cpp -> _build/libtiles-<hash>.so.
+"""Build (or find) the tiled CPU rasterizer library csrc/*.cpp -> _build/libtiles-<hash>.so.
 
 `python -m splatting.raster.build` builds it (make setup runs this); `load()` returns the ctypes
 library, building it first when missing (a few seconds of g++; one line on stderr says so).
@@ -16,11 +16,11 @@ import tempfile
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-SRC = HERE / "csrc" / "tiles.cpp"
+SRCS = [HERE / "csrc" / "tiles.cpp", HERE / "csrc" / "project.cpp"]
 BUILD_DIR = HERE / "_build"
 # -march=native: the library is built on the machine that runs it (make setup / first use).
 # -ffp-contract=off: forward and backward must take identical alpha-test decisions (tiles.cpp).
-FLAGS = ["-g", "-O3", "-march=native", "-fopenmp", "-ffp-contract=off", "-shared", "-fPIC", "-std=c++17"]
+FLAGS = ["-O3", "-march=native", "-fopenmp", "-ffp-contract=off", "-shared", "-fPIC", "-std=c++17"]
 
 _lib = None
 
@@ -30,7 +30,7 @@ def compiler():
 
 
 def lib_path():
-    h = hashlib.sha1(SRC.read_bytes() + " ".join(FLAGS).encode()).hexdigest()[:12]
+    h = hashlib.sha1(b"".join(p.read_bytes() for p in SRCS) + " ".join(FLAGS).encode()).hexdigest()[:12]
     return BUILD_DIR / f"libtiles-{h}.so"
 
 
@@ -49,10 +49,13 @@ def build(quiet=False):
     fd, tmp = tempfile.mkstemp(suffix=".so", dir=BUILD_DIR)
     os.close(fd)
     try:
-        r = subprocess.run([cxx, *FLAGS, "-o", tmp, str(SRC)], capture_output=True, text=True)
+        r = subprocess.run([cxx, *FLAGS, "-o", tmp, *map(str, SRCS)], capture_output=True, text=True)
         if r.returncode != 0:
             raise RuntimeError(f"building the tiled rasterizer failed:\n{r.stderr.strip()}")
         os.replace(tmp, path)
+        for old in BUILD_DIR.glob("libtiles-*.so"):  # superseded builds (a process still using one keeps it)
+            if old != path:
+                old.unlink(missing_ok=True)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
@@ -71,6 +74,10 @@ def load():
             f.argtypes, f.restype = [i64, p, p, i32, i32, i32, i32, p, p, p, p, p, p, p, p, p, p], None
             f = getattr(lib, f"gs_backward_{sfx}")
             f.argtypes, f.restype = [i64, p, i32, i32, i32, i32, p, p, p, p, p, p, p, p, p, p, p, p, p, p], None
+            f = getattr(lib, f"gs_preprocess_fwd_{sfx}")
+            f.argtypes, f.restype = [i64, p, p, p, i32, i32, p, p, p, p, i32, i32, i32, p, p, p, p, p, p], None
+            f = getattr(lib, f"gs_preprocess_bwd_{sfx}")
+            f.argtypes, f.restype = [i64, p, p, p, i32, i32, p, p, p, p, i32, i32, i32, p, p, p, p, p, p, p, p, p], None
         _lib = lib
     return _lib
 
