@@ -443,8 +443,8 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
             const I m = pre & (ar >= (S)ALPHA_MIN);
             if (!any(m)) continue;
             const V al = ar < (S)ALPHA_MAX ? ar : (V){} + (S)ALPHA_MAX;
-            const V om = (S)1 - al;
-            const V Tk = T[v] / om;  // the transmittance in front of this Gaussian
+            const V rom = (S)1 / ((S)1 - al);
+            const V Tk = T[v] * rom;  // the transmittance in front of this Gaussian
             T[v] = m ? Tk : T[v];
             const V w = m ? al * Tk : (V){};
             const V* gp = G.data() + (size_t)v * Cf;
@@ -453,7 +453,7 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
               vv += gp[c] * f[c];
               sums[6 + c] += w * gp[c];
             }
-            const V g_alpha = Tk * vv - accum[v] / om;
+            const V g_alpha = Tk * vv - accum[v] * rom;
             accum[v] += w * vv;
             // no gradient through the 0.99 clamp; q = -dL/dsigma
             const V q = (m & (ar < (S)ALPHA_MAX)) ? g_alpha * ar : (V){};
