@@ -67,6 +67,9 @@ class _Preprocess(torch.autograd.Function):
 
 def preprocess(means, quats, scales, sh, camera, sh_degree=None, near=0.01, eps2d=0.3):
     """See the module docstring. CPU tensors, float32 or float64 (means' dtype)."""
+    if any(t.device.type != "cpu" for t in (means, quats, scales, sh)):
+        raise ValueError("the tiled rasterizer runs on CPU tensors; use backend='torch' for "
+                         f"{means.device.type} tensors")
     if means.dtype not in _SUFFIX:
         raise TypeError(f"tiled rasterizer: float32 or float64 tensors, got {means.dtype}")
     k = sh.shape[1]

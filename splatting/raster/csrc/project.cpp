@@ -172,15 +172,18 @@ void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, c
     conics[3 * n + 2] = g.a / det;
     const S mid = (S)0.5 * (g.a + g.c);
     const S lam = mid + std::sqrt(std::max(mid * mid - g.det, (S)0.1));
-    const S r = g.valid ? std::ceil((S)3 * std::sqrt(lam)) : (S)0;
-    const S mu = std::min(std::max(u, (S)-1e7), (S)1e7), mv = std::min(std::max(v, (S)-1e7), (S)1e7);
+    // non-finite input (NaN / inf parameters) is culled rather than turned into garbage boxes
+    const bool ok = g.valid && std::isfinite(u) && std::isfinite(v) && std::isfinite(lam);
+    const S r = ok ? std::ceil((S)3 * std::sqrt(lam)) : (S)0;
+    const S mu = ok ? std::min(std::max(u, (S)-1e7), (S)1e7) : (S)-1e7;  // culled: an empty box
+    const S mv = ok ? std::min(std::max(v, (S)-1e7), (S)1e7) : (S)-1e7;
     const S u0 = std::min(std::max(std::ceil(mu - r - (S)0.5), (S)0), (S)cam.W);
     const S u1 = std::min(std::max(std::floor(mu + r - (S)0.5), (S)-1), (S)(cam.W - 1));
     const S v0 = std::min(std::max(std::ceil(mv - r - (S)0.5), (S)0), (S)cam.H);
     const S v1 = std::min(std::max(std::floor(mv + r - (S)0.5), (S)-1), (S)(cam.H - 1));
     int64_t* bx = boxes + 4 * n;
     bx[0] = (int64_t)u0, bx[1] = (int64_t)u1, bx[2] = (int64_t)v0, bx[3] = (int64_t)v1;
-    radii[n] = (g.valid && bx[1] >= bx[0] && bx[3] >= bx[2]) ? (int64_t)r : 0;
+    radii[n] = (ok && bx[1] >= bx[0] && bx[3] >= bx[2]) ? (int64_t)r : 0;
     S d[3], dn, Y[16];
     direction(cam, means + 3 * n, d, dn);
     sh_basis<S>(d[0], d[1], d[2], nb, Y, nullptr);
