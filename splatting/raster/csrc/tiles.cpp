@@ -100,7 +100,7 @@ inline VT<double>::V vexp(VT<double>::V x) {
 }
 
 template <typename S>
-struct Rec {  // one visible Gaussian
+struct alignas(64) Rec {  // one visible Gaussian; one cache line (float) for the prefetch
   S mx, my, a, b, c, o, tau;  // mean (px), conic, opacity, tau = ln(255 o) + TAU_PAD
   int32_t u0, u1, v0, v1;     // pixels: the 3-sigma box clipped to the sigma <= tau ellipse's box
 };
