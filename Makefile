@@ -10,9 +10,13 @@ OUT ?= out
 DEMO := $(OUT)/demo
 BLENDER ?= blender
 
-.PHONY: setup test test-all demo bench bikes views contact-sheet addon clean
+.PHONY: setup raster-lib test test-all demo bench bikes views contact-sheet addon clean
 
-setup: $(STAMP)
+setup: $(STAMP) raster-lib
+
+# the tiled C++ rasterizer (splatting/raster/csrc, g++ + OpenMP); a no-op when already built
+raster-lib: $(STAMP)
+	$(PY) -m splatting.raster.build
 
 $(STAMP): requirements.txt pyproject.toml
 	@$(PYTHON) -c 'import sys; assert sys.version_info[:2] == (3, 11), "Python 3.11 is required (bpy 5.0.1 is cp311)"'

@@ -1,9 +1,15 @@
-"""Rasterizer forward+backward benchmark: `raster_fwdbwd_s` = {"10k", "50k", "100k"} seconds.
+"""Rasterizer benchmark (default back end: the tiled C++ one, splatting/raster/).
 
+Keys (medians, 512^2, `threads` OpenMP threads, 2 by default as on the target machine):
+  raster_fwdbwd_s       {"10k", "50k", "100k"}: rasterize + L1 loss + backward, seconds
+  raster_fwd_ms         {"50k"}: rasterize under no_grad (an image for the dataset), milliseconds
+  raster_tiles_vs_torch {"fwdbwd_torch_s", "fwdbwd_tiles_s", "speedup"} at 50k: the two back ends
+                        measured interleaved (one of each per round), so machine load hits both
+  raster_thread_scaling {"1_thread_s", "2_threads_s", "speedup", "speedup_of_fastest"}: fwd+bwd at
+                        50k, 1 vs 2 threads, interleaved (medians; and the fastest round of each)
 A synthetic bike-like part (two wheels, tubes, a few mm-to-cm Gaussians) about 1.7 m long around
 the origin, seen by ring view 3 (12 m away, focal 2085, 512^2): it spans ~300 px like the real
-parts. Median of a few iterations of rasterize + L1 loss + backward, 2 threads (as on the target
-machine). Run alone: `python -m bench.raster [--threads N] [--sizes 10k,50k]`.
+parts. Run alone: `python -m bench.raster [--threads N] [--sizes 10k,50k]`.
 
 OMP_WAIT_POLICY=PASSIVE: on the shared 2-core machine, torch's OpenMP threads otherwise spin at
 every barrier while the other core runs someone else's process; measured 2.2 s -> 0.3 s per 50k
@@ -50,25 +56,69 @@ def bike_like_gaussians(n, sh_degree=3, seed=0, dtype=torch.float32):
     return [x.to(dtype) for x in (means, quats, scales, opac, sh)]
 
 
-def time_fwdbwd(n, iters=7, warmup=2, camera=None):
+def _camera_and_params(n):
     from splatting.raster.camera import ring_camera
+
+    return ring_camera(30.0), [p.requires_grad_(True) for p in bike_like_gaussians(n)]
+
+
+def _fwdbwd_once(params, cam, backend=None):
     from splatting.raster.sparse import rasterize
 
-    cam = camera or ring_camera(30.0)
-    params = [p.requires_grad_(True) for p in bike_like_gaussians(n)]
-    target = torch.zeros(cam.height, cam.width, 3)
+    t0 = time.perf_counter()
+    out = rasterize(*params, cam, backend=backend)
+    out["rgb"].abs().mean().backward()  # L1 to a black target
+    dt = time.perf_counter() - t0
+    for p in params:
+        p.grad = None
+    return dt, out
+
+
+def time_fwdbwd(n, iters=7, warmup=2, camera=None, backend=None):
+    cam, params = _camera_and_params(n)
+    cam = camera or cam
     times = []
     for i in range(warmup + iters):
-        t0 = time.perf_counter()
-        out = rasterize(*params, cam)
-        loss = (out["rgb"] - target).abs().mean()
-        loss.backward()
-        dt = time.perf_counter() - t0
-        for p in params:
-            p.grad = None
+        dt, out = _fwdbwd_once(params, cam, backend)
         if i >= warmup:
             times.append(dt)
     return statistics.median(times), min(times), out
+
+
+def time_fwd_ms(n, iters=9, warmup=2, backend=None):
+    from splatting.raster.sparse import rasterize
+
+    cam, params = _camera_and_params(n)
+    params = [p.detach() for p in params]
+    times = []
+    with torch.no_grad():
+        for i in range(warmup + iters):
+            t0 = time.perf_counter()
+            rasterize(*params, cam, backend=backend)
+            if i >= warmup:
+                times.append(time.perf_counter() - t0)
+    return 1e3 * statistics.median(times)
+
+
+def interleaved(n, variants, rounds=7, warmup=1):
+    """variants: name -> (backend, threads). One run of each per round; medians per name."""
+    cam, params = _camera_and_params(n)
+    times = {k: [] for k in variants}
+    old = torch.get_num_threads()
+    try:
+        for r in range(warmup + rounds):
+            for name, (backend, threads) in variants.items():
+                torch.set_num_threads(threads)
+                dt, _ = _fwdbwd_once(params, cam, backend)
+                if r >= warmup:
+                    times[name].append(dt)
+    finally:
+        torch.set_num_threads(old)
+    return {k: statistics.median(v) for k, v in times.items()}, {k: min(v) for k, v in times.items()}
+
+
+def _load():
+    return f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY', 'unset')}, load avg {os.getloadavg()[0]:.1f}"
 
 
 def run(results, threads=2, sizes=None):
@@ -80,13 +130,27 @@ def run(results, threads=2, sizes=None):
             s, fastest, out = time_fwdbwd(SIZES[key])
             res[key] = round(s, 4)
             cover = (out["alpha"] > 0.5).float().mean().item()
-            print(f"raster fwd+bwd {key:>5} Gaussians, 512^2, {threads} thread(s): {s:.3f} s/iter median, "
-                  f"{fastest:.3f} min "
-                  f"(alpha>0.5 on {100 * cover:.1f}% of pixels; OMP_WAIT_POLICY="
-                  f"{os.environ.get('OMP_WAIT_POLICY', 'unset')}, load avg {os.getloadavg()[0]:.1f})", flush=True)
+            print(f"raster fwd+bwd {key:>5} Gaussians, 512^2, {threads} thread(s), {out['backend']}: {s:.3f} s/iter "
+                  f"median, {fastest:.3f} min (alpha>0.5 on {100 * cover:.1f}% of pixels; {_load()})", flush=True)
         results["raster_fwdbwd_s"] = res
+        ms = time_fwd_ms(SIZES["50k"])
+        results["raster_fwd_ms"] = {"50k": round(ms, 2)}
+        print(f"raster fwd 50k, no grad, {threads} thread(s): {ms:.1f} ms median ({_load()})", flush=True)
     finally:
         torch.set_num_threads(old)
+    m, _ = interleaved(SIZES["50k"], {"torch": ("torch", threads), "tiles": ("tiles", threads)})
+    results["raster_tiles_vs_torch"] = {"fwdbwd_torch_s": round(m["torch"], 4), "fwdbwd_tiles_s": round(m["tiles"], 4),
+                                        "speedup": round(m["torch"] / m["tiles"], 2)}
+    print(f"raster fwd+bwd 50k interleaved, {threads} threads: torch {m['torch']:.3f} s, tiles {m['tiles']:.3f} s, "
+          f"{m['torch'] / m['tiles']:.1f}x ({_load()})", flush=True)
+    # min as well as median: on a shared machine the fastest round is the one least disturbed
+    m, lo = interleaved(SIZES["50k"], {"1": ("tiles", 1), "2": ("tiles", 2)}, rounds=9)
+    results["raster_thread_scaling"] = {"1_thread_s": round(m["1"], 4), "2_threads_s": round(m["2"], 4),
+                                        "speedup": round(m["1"] / m["2"], 2),
+                                        "speedup_of_fastest": round(lo["1"] / lo["2"], 2)}
+    print(f"raster fwd+bwd 50k tiles interleaved: 1 thread {m['1']:.3f} s, 2 threads {m['2']:.3f} s, "
+          f"{m['1'] / m['2']:.2f}x (fastest rounds {lo['1']:.3f} / {lo['2']:.3f} s: {lo['1'] / lo['2']:.2f}x; "
+          f"{_load()})", flush=True)
     return results
 
 

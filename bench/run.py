@@ -39,7 +39,9 @@ PAPER = {
 TARGETS = {
     "render_view_s_median": "≤ 1.5 s",
     "render_psnr_vs_ref_db": "≥ 35 dB",
-    "raster_fwdbwd_s": "≤ 0.3 s at 50k",
+    "raster_fwdbwd_s": "≤ 0.06 s at 50k",
+    "raster_fwd_ms": "≤ 15 ms at 50k",
+    "raster_thread_scaling": "speedup ≥ 1.7",
     "train_parts": "≥ 30 dB in ≤ 600 s per part",
     "bike_pose_ms_100k": "≤ 5 ms",
     "bike_gt": "IoU ≥ 0.95, PSNR ≥ 28 dB (means)",

@@ -50,3 +50,33 @@ def test_plain_rgb_colours_equal_their_sh0():
     b, _, _ = rasterization(g.means, g.quats, g.scales, g.opacities, rgb_to_sh0(rgb)[:, None, :], vm, Ks, 24, 24,
                             sh_degree=0)
     assert torch.allclose(a, b, atol=1e-6)
+
+
+def test_feature_channels_use_the_colour_weights():
+    """A constant-1 feature composites to alpha; a one-hot split of the Gaussians sums to alpha and
+    each channel is the render of its own subset's weights."""
+    g, cs = scene(), cams(32)
+    n = len(g)
+    onehot = torch.zeros(n, 2)
+    onehot[: n // 2, 0] = 1.0
+    onehot[n // 2:, 1] = 1.0
+    feats = torch.cat([torch.ones(n, 1), onehot], 1)
+    colors, alphas, _ = render_cameras(g, cs, features=feats)
+    assert colors.shape == (3, 32, 32, 6)
+    assert torch.allclose(colors[..., 3], alphas[..., 0], atol=1e-5)
+    assert torch.allclose(colors[..., 4] + colors[..., 5], alphas[..., 0], atol=1e-5)
+    plain, _, _ = render_cameras(g, cs)
+    assert torch.allclose(colors[..., :3], plain, atol=1e-6)  # features do not disturb the colour
+
+
+def test_gradients_reach_every_input_through_features():
+    g, cs = scene(n=30), cams(24)
+    means = g.means.clone().requires_grad_(True)
+    feats = torch.rand(len(g), 2, requires_grad=True)
+    vm = torch.stack([viewmat(c) for c in cs])
+    Ks = torch.stack([c.K for c in cs])
+    colors, alphas, meta = rasterization(means, g.quats, g.scales, g.opacities, g.sh, vm, Ks, 24, 24,
+                                         sh_degree=1, features=feats)
+    (colors.sum() + alphas.sum()).backward()
+    assert means.grad.abs().sum() > 0 and feats.grad.abs().sum() > 0
+    assert all(m.grad is not None for m in meta["means2d"])

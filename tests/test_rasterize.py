@@ -1,4 +1,6 @@
-"""The fast rasterizer against the reference renderer, finite differences, and frame conventions."""
+"""Both rasterizer back ends ("tiles": the C++ one, "torch") against the reference renderer,
+finite differences, and frame conventions. tests/test_rasterize_tiles.py compares the two back
+ends with each other."""
 import math
 
 import pytest
@@ -43,8 +45,14 @@ def random_camera(gen, **kw):
     return look_at_camera(eye, cx=12 + off[0].item(), cy=10 + off[1].item(), **kw)
 
 
-def assert_matches_reference(scene, cam, background=None, tol=1e-5):
-    out = rasterize(*scene, cam, background=background)
+@pytest.fixture(params=["tiles", "torch"])
+def backend(request):
+    return request.param
+
+
+def assert_matches_reference(scene, cam, background=None, tol=1e-5, backend=None):
+    out = rasterize(*scene, cam, background=background, backend=backend)
+    assert out["backend"] == (backend or "tiles")
     ref = render_reference(*scene, cam, background=background)
     for key in ("rgb", "alpha", "depth"):
         err = (out[key].double() - ref[key]).abs().max().item()
@@ -53,17 +61,17 @@ def assert_matches_reference(scene, cam, background=None, tol=1e-5):
 
 
 @pytest.mark.parametrize("sh_degree", [0, 1, 2, 3])
-def test_matches_reference_random_scenes(sh_degree):
+def test_matches_reference_random_scenes(sh_degree, backend):
     gen = torch.Generator().manual_seed(100 + sh_degree)
     for trial in range(3):
         scene = random_scene(gen, 40, sh_degree)
         cam = random_camera(gen)
         bg = torch.rand(3, generator=gen, dtype=torch.float64) if trial != 1 else None
-        out, ref = assert_matches_reference(scene, cam, bg)
+        out, ref = assert_matches_reference(scene, cam, bg, backend=backend)
         assert ref["alpha"].max() > 0.3  # the scene is really on screen
 
 
-def test_matches_reference_behind_huge_tiny():
+def test_matches_reference_behind_huge_tiny(backend):
     gen = torch.Generator().manual_seed(7)
     means, quats, scales, opac, sh = random_scene(gen, 30, 2)
     cam = look_at_camera((0.0, 0.0, -3.0))
@@ -77,12 +85,13 @@ def test_matches_reference_behind_huge_tiny():
     means[12] = torch.tensor([3.0, 0.1, 0.5])
     scales[12] = torch.tensor([2.0, 0.3, 0.3])
     out, ref = assert_matches_reference((means, quats, scales, opac, sh), cam,
-                                        background=torch.tensor([0.2, 0.5, 0.9], dtype=torch.float64))
+                                        background=torch.tensor([0.2, 0.5, 0.9], dtype=torch.float64),
+                                        backend=backend)
     assert not out["visible"][:2].any() and (out["radii"][:2] == 0).all()
     assert out["visible"][8:12].all()
 
 
-def test_matches_reference_transmittance_cutoff():
+def test_matches_reference_transmittance_cutoff(backend):
     """Many opaque Gaussians stacked on the view axis: compositing must stop at T < 1e-4."""
     gen = torch.Generator().manual_seed(3)
     n = 12
@@ -96,24 +105,25 @@ def test_matches_reference_transmittance_cutoff():
     sh = torch.randn(n, 4, 3, generator=gen, dtype=torch.float64)
     cam = look_at_camera((0.0, 0.0, -3.0))
     out, ref = assert_matches_reference((means, quats, scales, opac, sh), cam,
-                                        background=torch.tensor([1.0, 1.0, 1.0], dtype=torch.float64))
+                                        background=torch.tensor([1.0, 1.0, 1.0], dtype=torch.float64),
+                                        backend=backend)
     # at the centre the front Gaussians bring T below 1e-4: the back half is never reached, so
     # recolouring it changes nothing there; the final T stays in [1e-4, 1e-4 / (1 - 0.99)]
     assert 1 - 1e-2 < out["alpha"][10, 12] <= 1 - 1e-4
-    base = rasterize(means, quats, scales, opac, sh, cam)["rgb"][10, 12]
+    base = rasterize(means, quats, scales, opac, sh, cam, backend=backend)["rgb"][10, 12]
     sh2 = sh.clone()
     sh2[6:] += 1.0
-    assert torch.equal(rasterize(means, quats, scales, opac, sh2, cam)["rgb"][10, 12], base)
+    assert torch.equal(rasterize(means, quats, scales, opac, sh2, cam, backend=backend)["rgb"][10, 12], base)
     sh2[0] += 1.0  # the front one does count
-    assert not torch.allclose(rasterize(means, quats, scales, opac, sh2, cam)["rgb"][10, 12], base)
+    assert not torch.allclose(rasterize(means, quats, scales, opac, sh2, cam, backend=backend)["rgb"][10, 12], base)
 
 
-def test_matches_reference_float32():
+def test_matches_reference_float32(backend):
     gen = torch.Generator().manual_seed(11)
     scene = random_scene(gen, 40, 3)
     cam = random_camera(gen)
     scene32 = [t.float() for t in scene]
-    out = rasterize(*scene32, cam.to(torch.float32))
+    out = rasterize(*scene32, cam.to(torch.float32), backend=backend)
     ref = render_reference(*scene32, cam)
     assert out["rgb"].dtype == torch.float32
     assert (out["rgb"].double() - ref["rgb"]).abs().max() < 2e-4  # float32 rounding only
@@ -131,24 +141,24 @@ def _tiny_scene(seed, n=6, sh_degree=2):
 
 
 @pytest.mark.parametrize("seed", [0, 1])
-def test_gradcheck_all_parameters(seed):
+def test_gradcheck_all_parameters(seed, backend):
     scene, cam = _tiny_scene(seed)
     bg = torch.tensor([0.3, 0.1, 0.6], dtype=torch.float64)
     inputs = [t.clone().requires_grad_(True) for t in (*scene, bg)]
     wimg = torch.rand(cam.height, cam.width, 5, generator=torch.Generator().manual_seed(9), dtype=torch.float64)
 
     def f(means, quats, scales, opac, sh, bg):
-        out = rasterize(means, quats, scales, opac, sh, cam, background=bg)
+        out = rasterize(means, quats, scales, opac, sh, cam, background=bg, backend=backend)
         img = torch.cat([out["rgb"], out["alpha"][..., None], out["depth"][..., None]], -1)
         return (img * wimg).sum()
 
     assert torch.autograd.gradcheck(f, inputs, eps=1e-6, atol=1e-6, rtol=1e-4)
 
 
-def test_gradients_nonzero_and_means2d_retained():
+def test_gradients_nonzero_and_means2d_retained(backend):
     scene, cam = _tiny_scene(4)
     scene = [t.clone().requires_grad_(True) for t in scene]
-    out = rasterize(*scene, cam)
+    out = rasterize(*scene, cam, backend=backend)
     out["rgb"].sum().backward()
     for name, t in zip(("means", "quats", "scales", "opacities", "sh"), scene):
         assert torch.isfinite(t.grad).all() and t.grad.abs().sum() > 0, name
@@ -195,20 +205,20 @@ def test_ring_view0_plus_x_left_plus_y_up():
     assert vy < c - 5 and abs(uy + 0.5 - c) <= 1  # +Y world up (smaller row index)
 
 
-def test_depth_is_camera_z_for_opaque_gaussian():
+def test_depth_is_camera_z_for_opaque_gaussian(backend):
     cam = look_at_camera((0.3, 0.2, -4.0))
     X = torch.tensor([0.05, -0.02, 0.1], dtype=torch.float64)
     z = (cam.R @ X + cam.T)[2].item()
     # many opaque copies at the same place: T reaches ~0, so sum w_i z_i = z
     scene = [t.repeat(10, *([1] * (t.dim() - 1))) for t in _single(X.tolist(), scale=0.3, opacity=1.0)]
-    out = rasterize(*scene, cam)
+    out = rasterize(*scene, cam, backend=backend)
     v, u = divmod(int(out["alpha"].argmax()), cam.width)
     assert out["alpha"][v, u] > 0.999
     assert abs(out["depth"][v, u].item() - z) < 1e-3 * z
     assert abs((out["depth"][v, u] / out["alpha"][v, u]).item() - z) < 1e-9
 
 
-def test_empty_and_all_culled():
+def test_empty_and_all_culled(backend):
     cam = look_at_camera((0.0, 0.0, -3.0))
     bg = torch.tensor([0.1, 0.2, 0.3], dtype=torch.float64)
     empty = (torch.zeros(0, 3, dtype=torch.float64), torch.zeros(0, 4, dtype=torch.float64),
@@ -217,7 +227,7 @@ def test_empty_and_all_culled():
     behind = _single([0.0, 0.0, -5.0], scale=0.5)
     for scene in (empty, behind):
         scene = [t.clone().requires_grad_(True) for t in scene]
-        out = rasterize(*scene, cam, background=bg)
+        out = rasterize(*scene, cam, background=bg, backend=backend)
         assert out["rgb"].shape == (20, 24, 3) and out["alpha"].shape == (20, 24)
         assert torch.equal(out["rgb"], bg.expand(20, 24, 3))
         assert (out["alpha"] == 0).all() and (out["depth"] == 0).all()
@@ -256,7 +266,8 @@ def _dense_opaque_scene(seed, n=60, sh_degree=1):
 def test_chunked_matches_reference(tiny_chunks):
     scene = _dense_opaque_scene(21)
     cam = look_at_camera((0.2, 0.1, -3.0))
-    out, ref = assert_matches_reference(scene, cam, background=torch.tensor([0.4, 0.4, 0.1], dtype=torch.float64))
+    out, ref = assert_matches_reference(scene, cam, background=torch.tensor([0.4, 0.4, 0.1], dtype=torch.float64),
+                                        backend="torch")
     assert (ref["alpha"] > 1 - 1e-2).sum() > 20  # many pixels reach the cut-off
 
 
@@ -265,7 +276,7 @@ def test_chunked_gradcheck(tiny_chunks):
     means, quats, scales, opac, sh = random_scene(gen, 8, 1, spread=0.1)
     scene = [t.clone().requires_grad_(True) for t in (means, quats, scales.clamp_min(0.08), 0.3 + 0.6 * opac, sh)]
     cam = look_at_camera((0.0, 0.0, -3.0), width=10, height=9, focal=12.0)
-    f = lambda *p: rasterize(*p, cam)["rgb"].sum() + 0.3 * rasterize(*p, cam)["depth"].sum()
+    f = lambda *p: rasterize(*p, cam, backend="torch")["rgb"].sum() + 0.3 * rasterize(*p, cam, backend="torch")["depth"].sum()
     assert torch.autograd.gradcheck(f, scene, eps=1e-6, atol=1e-6, rtol=1e-4)
 
 
@@ -278,3 +289,43 @@ def test_chunks_drop_pairs_behind_the_cutoff(monkeypatch):
     n_all = len(R.intersect(m2, cn, opac, z, boxes, radii, cam.width, cam.height, chunk_pairs=1 << 30)[0])
     n_cut = len(R.intersect(m2, cn, opac, z, boxes, radii, cam.width, cam.height, chunk_pairs=64)[0])
     assert n_cut < 0.95 * n_all
+
+
+# ---------------------------------------------------------------- anti-aliasing
+
+def test_antialiased_matches_reference(backend):
+    gen = torch.Generator().manual_seed(61)
+    means, quats, scales, opac, sh = random_scene(gen, 40, 2)
+    scales[:10] = 2e-3  # sub-pixel: the compensation matters
+    cam = random_camera(gen)
+    bg = torch.tensor([0.5, 0.2, 0.1], dtype=torch.float64)
+    out = rasterize(means, quats, scales, opac, sh, cam, background=bg, antialiased=True, backend=backend)
+    ref = render_reference(means, quats, scales, opac, sh, cam, background=bg, antialiased=True)
+    plain = render_reference(means, quats, scales, opac, sh, cam, background=bg)
+    for key in ("rgb", "alpha", "depth"):
+        assert (out[key] - ref[key]).abs().max() <= 1e-5, key
+    assert (ref["alpha"] - plain["alpha"]).abs().max() > 0.05  # the option does something
+
+
+def test_antialiased_gradcheck(backend):
+    scene, cam = _tiny_scene(8)
+    inputs = [t.clone().requires_grad_(True) for t in scene]
+    f = lambda *p: (rasterize(*p, cam, antialiased=True, backend=backend)["rgb"] ** 2).sum()
+    assert torch.autograd.gradcheck(f, inputs, eps=1e-6, atol=1e-6, rtol=1e-4)
+
+
+def test_antialiased_keeps_a_subpixel_footprint(backend):
+    """A sub-pixel Gaussian (0.3 px std): with the compensation the image's total alpha is the
+    integral of its true footprint, o 2 pi sqrt(det S), less the tail under the 1/255 cut
+    (a fraction 1 / (255 o') of it, o' the compensated peak); the 0.3 px^2 dilation alone
+    inflates it ~4x."""
+    cam = look_at_camera((0.0, 0.0, -3.0), width=32, height=32, focal=30.0, cx=16.3, cy=15.8)
+    scene = _single([0.0, 0.0, 0.0], scale=0.03, opacity=0.5)
+    sx, sy = 30.0 * 0.03 / 3.0, 33.0 * 0.03 / 3.0  # fx s / z, fy s / z (look_at_camera: fy = 1.1 fx)
+    det_s = sx * sx * sy * sy
+    o_aa = 0.5 * math.sqrt(det_s / ((sx * sx + 0.3) * (sy * sy + 0.3)))
+    expected = 0.5 * 2 * math.pi * math.sqrt(det_s) * (1 - 1 / (255 * o_aa))
+    aa = rasterize(*scene, cam, antialiased=True, backend=backend)["alpha"].sum().item()
+    plain = rasterize(*scene, cam, backend=backend)["alpha"].sum().item()
+    assert abs(aa - expected) < 0.01 * expected, (aa, expected)
+    assert plain > 3 * expected

@@ -1,6 +1,6 @@
 """Deliberately simple 3DGS renderer for tests: loops over Gaussians, dense over pixels.
 
-Written from the formulas (not from splatting/rasterize.py) so the two can check each other.
+Written from the formulas (not from splatting/raster/sparse.py) so the two can check each other.
 Tiny images only: cost is O(H * W * N) with a Python loop over N.
 """
 import math
@@ -21,10 +21,13 @@ def _rotmat(q):
 
 @torch.no_grad()
 def render_reference(means, quats, scales, opacities, sh, camera, background=None, sh_degree=None,
-                     near=0.01, eps2d=0.3):
-    """Same contract as rasterize() (rgb, alpha, depth only), computed in float64."""
+                     near=0.01, eps2d=0.3, features=None, antialiased=False):
+    """Same contract as rasterize() (rgb, alpha, depth, and features (H, W, F) when features (N, F)
+    are given: composited like the colour, over a zero background), computed in float64.
+    antialiased: opacity x sqrt(det S / det(S + eps2d I)), S the projected covariance."""
     f64 = lambda t: t.detach().to("cpu", torch.float64)
     means, quats, scales, opacities, sh = map(f64, (means, quats, scales, opacities, sh))
+    feats = None if features is None else f64(features)
     R, T, K = f64(camera.R), f64(camera.T), f64(camera.K)
     W, H = camera.width, camera.height
     fx, fy, cx, cy = K[0, 0].item(), K[1, 1].item(), K[0, 2].item(), K[1, 2].item()
@@ -49,7 +52,8 @@ def render_reference(means, quats, scales, opacities, sh, camera, background=Non
         J = torch.tensor([[fx / z, 0.0, -fx * tx / z ** 2], [0.0, fy / z, -fy * ty / z ** 2]], dtype=torch.float64)
         Rq = _rotmat(quats[i])
         cov3 = Rq @ torch.diag(scales[i] ** 2) @ Rq.T
-        cov2 = J @ R @ cov3 @ R.T @ J.T + eps2d * torch.eye(2, dtype=torch.float64)
+        cov2_raw = J @ R @ cov3 @ R.T @ J.T
+        cov2 = cov2_raw + eps2d * torch.eye(2, dtype=torch.float64)
         det = torch.linalg.det(cov2).item()
         if det <= 0:
             continue
@@ -59,16 +63,21 @@ def render_reference(means, quats, scales, opacities, sh, camera, background=Non
         du, dv = pu - mx, pv - my
         in_box = (du.abs() <= r) & (dv.abs() <= r)
         sigma = 0.5 * (inv[0, 0] * du * du + 2 * inv[0, 1] * du * dv + inv[1, 1] * dv * dv)
-        a = torch.clamp(opacities[i] * torch.exp(-sigma), max=0.99)
+        o = opacities[i]
+        if antialiased:
+            o = o * math.sqrt(max(0.0, torch.linalg.det(cov2_raw).item() / det))
+        a = torch.clamp(o * torch.exp(-sigma), max=0.99)
         a = torch.where(in_box & (a >= 1.0 / 255.0), a, torch.zeros_like(a))
         d = means[i] - centre
         col = eval_sh(sh[i:i + 1], (d / d.norm())[None], sh_degree)[0]
+        if feats is not None:
+            col = torch.cat([col, feats[i]])
         layers.append((z, a, col))
 
-    layers.sort(key=lambda l: l[0])
+    layers.sort(key=lambda l: l[0])  # stable: equal depths keep index order, as the rasterizers do
     Timg = torch.ones(H, W, dtype=torch.float64)
     done = torch.zeros(H, W, dtype=torch.bool)
-    rgb = torch.zeros(H, W, 3, dtype=torch.float64)
+    rgb = torch.zeros(H, W, 3 + (0 if feats is None else feats.shape[1]), dtype=torch.float64)
     depth = torch.zeros(H, W, dtype=torch.float64)
     for z, a, col in layers:  # front to back
         test_T = Timg * (1 - a)
@@ -79,5 +88,8 @@ def render_reference(means, quats, scales, opacities, sh, camera, background=Non
         Timg = torch.where(done, Timg, test_T)
     alpha = 1 - Timg
     if background is not None:
-        rgb += Timg[..., None] * f64(background)
-    return {"rgb": rgb, "alpha": alpha, "depth": depth}
+        rgb[..., :3] += Timg[..., None] * f64(background)
+    out = {"rgb": rgb[..., :3], "alpha": alpha, "depth": depth}
+    if feats is not None:
+        out["features"] = rgb[..., 3:]
+    return out

@@ -8,8 +8,11 @@ when it requires grad: the densifier reads its .grad), radii (N,) long, visible 
 depth = sum_i w_i z_i with w_i = alpha_i T_i and z_i the camera z: NOT divided by alpha (the
 background counts as depth 0); depth / alpha.clamp_min(eps) is the normalised expected depth.
 
-Pipeline: project() (EWA, per Gaussian, autograd) -> intersect() (sparse (pixel, Gaussian) list,
-no grad) -> _Composite (segmented front-to-back scan with a hand-written backward).
+Pipeline: project() (EWA, per Gaussian, autograd) -> compositing, by one of two back ends:
+  "tiles" (default for CPU tensors): splatting/raster/cpu_tiles.py, the fused tiled OpenMP C++
+    compositor (per-tile binning, depth order, front-to-back blending, its backward);
+  "torch" (reference, CUDA tensors): intersect() (sparse (pixel, Gaussian) list, no grad) ->
+    _Composite (segmented front-to-back scan with a hand-written backward).
 """
 import math
 
@@ -195,7 +198,8 @@ class _Composite(torch.autograd.Function):
     73 ms vs 176 ms for autograd through the same torch ops, 50k Gaussians, 1 thread).
 
     Per pixel: w_k = a_k T_k, T_k = prod_{j<k} (1 - a_j); out = sum_k w_k f_k + T_final bg_f for the
-    five channels f = (r, g, b, 1, z). T_k comes from an exclusive cumsum of log(1 - a) in float64
+    channels f = (colour (any number Cc >= 3: rgb then extra features), 1, z); the background
+    applies to the first three. T_k comes from an exclusive cumsum of log(1 - a) in float64
     (the running sum over all pixels must not swallow per-pixel differences)."""
 
     @staticmethod
@@ -215,12 +219,13 @@ class _Composite(torch.autograd.Function):
         pix, gid, dx, dy, alpha_raw, alpha = (t.index_select(0, keep) for t in (pix, gid, dx, dy, alpha_raw, alpha))
         T = torch.exp(logT_incl.index_select(0, keep) - logm.index_select(0, keep)).to(dt)
         w = alpha * T
-        table = torch.cat([colors, torch.ones_like(depths)[:, None], depths[:, None]], 1)  # (N, 5)
+        cc = colors.shape[1]
+        table = torch.cat([colors, torch.ones_like(depths)[:, None], depths[:, None]], 1)  # (N, cc + 2)
         F = table.index_select(0, gid)
         cnt = torch.bincount(pix, minlength=n_pix)
         out = torch.segment_reduce(F * w[:, None], "sum", lengths=cnt) if len(pix) else \
-            means2d.new_zeros(n_pix, 5)
-        T_final = 1.0 - out[:, 3]
+            means2d.new_zeros(n_pix, cc + 2)
+        T_final = 1.0 - out[:, cc]
         if background is not None:
             out[:, :3] += T_final[:, None] * background
         ctx.save_for_backward(conics, opacities, background, pix, gid, dx, dy, alpha_raw, T, w, F, cnt, T_final)
@@ -231,7 +236,8 @@ class _Composite(torch.autograd.Function):
         conics, opacities, background, pix, gid, dx, dy, alpha_raw, T, w, F, cnt, T_final = ctx.saved_tensors
         n = len(conics)
         g_out = g_out.contiguous()
-        g_pair = g_out.index_select(0, pix)  # (P, 5): dL/d(r, g, b, alpha, depth) at the pair's pixel
+        cc = g_out.shape[1] - 2
+        g_pair = g_out.index_select(0, pix)  # (P, cc + 2): dL/d(colour, alpha, depth) at the pair's pixel
         v = (g_pair * F).sum(1)  # dL/dw_k
         # S_k = sum_{j>k} v_j w_j + T_final (g_rgb . bg): what lies behind k in its pixel
         cs = torch.cumsum((v * w).double(), 0)
@@ -253,35 +259,105 @@ class _Composite(torch.autograd.Function):
         g_conics = torch.stack([-0.5 * s_xx, -s_xy, -0.5 * s_yy], 1)
         g_opac = s_q / opacities.clamp_min(1e-30)
         # 1-D index_add per channel: the 2-D one takes a slow path with int32 indices
-        g_colors = torch.stack([acc(g_pair[:, c] * w) for c in range(3)], 1)
-        return (g_means2d, g_conics, g_opac, g_colors, acc(g_pair[:, 4] * w), g_bg,
+        g_colors = torch.stack([acc(g_pair[:, c] * w) for c in range(cc)], 1)
+        return (g_means2d, g_conics, g_opac, g_colors, acc(g_pair[:, cc + 1] * w), g_bg,
                 None, None, None, None, None, None)
 
 
 def composite(means2d, conics, opacities, colors, depths, background, pairs, H, W):
-    """Returns rgb (H,W,3), alpha (H,W), depth (H,W) for the pairs from intersect()."""
+    """Returns colour (H,W,Cc) (Cc = colors.shape[1], usually 3), alpha (H,W), depth (H,W) for the
+    pairs from intersect(). background, when given, is added under the first 3 channels."""
     pix, gid, dx, dy, alpha_raw = pairs
     if background is not None:
         background = background.to(means2d)
+    cc = colors.shape[1]
     out = _Composite.apply(means2d, conics, opacities, colors, depths, background, pix, gid, dx, dy, alpha_raw, H * W)
-    return out[:, :3].reshape(H, W, 3), out[:, 3].reshape(H, W), out[:, 4].reshape(H, W)
+    return out[:, :cc].reshape(H, W, cc), out[:, cc].reshape(H, W), out[:, cc + 1].reshape(H, W)
 
 
 def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_degree=None,
-              near=0.01, eps2d=0.3):
-    """Render N Gaussians into camera. See the module docstring for shapes."""
+              near=0.01, eps2d=0.3, features=None, antialiased=False, backend=None):
+    """Render N Gaussians into camera. See the module docstring for shapes.
+
+    features: optional (N, F) extra channels composited like the colour (instance ids, albedo,
+    normals...; background 0), returned as out["features"] (H, W, F).
+    antialiased: mip-splatting's 2D filter with opacity compensation (gsplat's "antialiased"
+    mode): opacity x sqrt(det S / det(S + eps2d I)), S the projected covariance before the eps2d
+    low-pass, so a Gaussian smaller than a pixel keeps its true footprint instead of growing
+    to a 0.3 px^2 blob at full opacity (thin spokes, far-away cyclists).
+    backend: "tiles" (the fused OpenMP C++ compositor, splatting/raster/cpu_tiles.py; CPU tensors),
+    "torch" (the pure-torch pair list below: the reference, and the path for CUDA tensors), or
+    None: "tiles" for CPU tensors, "torch" otherwise. out["backend"] says which one ran."""
     H, W = camera.height, camera.width
-    means2d, conics, depths, radii, boxes = project(means, quats, scales, camera, near, eps2d)
+    backend = resolve_backend(backend, means)
+    if backend == "tiles":  # projection + SH fused in C++ (splatting/raster/cpu_project.py)
+        from splatting.raster.cpu_project import preprocess
+
+        means2d, conics, depths, colors, radii, boxes = preprocess(means, quats, scales, sh, camera, sh_degree,
+                                                                   near, eps2d)
+    else:
+        means2d, conics, depths, radii, boxes = project(means, quats, scales, camera, near, eps2d)
+        centre = camera.centre.to(means.device, means.dtype)
+        dirs = means - centre
+        dirs = dirs / dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        colors = eval_sh(sh, dirs, sh_degree)
     if means2d.requires_grad:
         means2d.retain_grad()
-    centre = camera.centre.to(means.device, means.dtype)
-    dirs = means - centre
-    dirs = dirs / dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    colors = eval_sh(sh, dirs, sh_degree)
-    pairs = intersect(means2d.detach(), conics.detach(), opacities.detach(), depths.detach(), boxes, radii, W, H)
-    rgb, alpha, depth = composite(means2d, conics, opacities, colors, depths, background, pairs, H, W)
-    return {"rgb": rgb, "alpha": alpha, "depth": depth, "means2d": means2d, "radii": radii,
-            "visible": radii > 0}
+    if antialiased:
+        opacities = opacities * aa_compensation(conics, eps2d)
+    nf = 0 if features is None else features.shape[1]
+    if nf:
+        colors = torch.cat([colors, features.to(colors)], 1)
+    if backend == "tiles":
+        rgb, alpha, depth = _composite_tiles(means2d, conics, opacities, colors, depths, radii, boxes,
+                                             background, H, W)
+    else:
+        pairs = intersect(means2d.detach(), conics.detach(), opacities.detach(), depths.detach(), boxes, radii, W, H)
+        rgb, alpha, depth = composite(means2d, conics, opacities, colors, depths, background, pairs, H, W)
+    out = {"rgb": rgb[..., :3], "alpha": alpha, "depth": depth, "means2d": means2d, "radii": radii,
+           "visible": radii > 0, "backend": backend}
+    if nf:
+        out["features"] = rgb[..., 3:]
+    return out
+
+
+def aa_compensation(conics, eps2d):
+    """sqrt(det S / det(S + eps2d I)) from the conic (S + eps2d I)^-1 = [[A, B], [B, C]]:
+    S + eps2d I = [[C, -B], [-B, A]] / d with d = AC - B^2, so det(S + eps2d I) = 1 / d and
+    det S = (C/d - eps2d)(A/d - eps2d) - B^2/d^2. 0 where S is degenerate (culled anyway)."""
+    A, B, C = conics.unbind(-1)
+    d = A * C - B * B
+    d = torch.where(d > 0, d, torch.ones_like(d))
+    det_s = (C / d - eps2d) * (A / d - eps2d) - B * B / (d * d)
+    return torch.sqrt(torch.clamp_min(det_s * d, 0.0))
+
+
+# ---------------------------------------------------------------- back-end choice (tiled C++ / torch)
+
+BACKENDS = ("tiles", "torch")
+
+
+def resolve_backend(backend, means):
+    """None -> "tiles" for CPU tensors, "torch" for others; anything else must be in BACKENDS."""
+    if backend is None:
+        return "tiles" if means.device.type == "cpu" else "torch"
+    if backend not in BACKENDS:
+        raise ValueError(f"rasterize: backend must be one of {BACKENDS} or None, got {backend!r}")
+    return backend
+
+
+def _composite_tiles(means2d, conics, opacities, colors, depths, radii, boxes, background, H, W):
+    """The tiled C++ compositor with the torch path's outputs: colour (H,W,Cc) with the background
+    under the first three channels, alpha, depth (camera z composited as the last channel)."""
+    from splatting.raster.cpu_tiles import composite_tiles
+
+    feats = torch.cat([colors, depths[:, None]], 1)
+    out, T_final = composite_tiles(means2d, conics, opacities, feats, depths.detach(), radii, boxes, H, W)
+    col = out[..., :-1]
+    if background is not None:
+        bg = background.to(col)
+        col = torch.cat([col[..., :3] + T_final[..., None] * bg, col[..., 3:]], -1)
+    return col, 1.0 - T_final, out[..., -1]
 
 
 def render_gaussians(g, camera, **kw):

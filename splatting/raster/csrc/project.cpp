@@ -1,0 +1,335 @@
+// Per-Gaussian preprocessing for the tiled back end, forward and backward, OpenMP over Gaussians:
+// the EWA projection of splatting/rasterize.py's project() and the SH colour of
+// splatting/sh.py's eval_sh(), the same formulas in the same order (docs/rasterizer.md). In
+// torch they are ~60 small autograd ops; fused here they are one pass each way.
+//
+// Culled Gaussians (z <= near or a degenerate 2D covariance) get radius 0 and no gradient: they
+// are never composited, so the compositor hands them none.
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+
+#include <omp.h>
+
+namespace {
+
+struct Cam {
+  double R[9], T[3], centre[3];
+  double fx, fy, cx, cy, near, eps2d;
+  int W, H;
+};
+
+constexpr double SH_C0 = 0.28209479177387814;
+constexpr double SH_C1 = 0.4886025119029199;
+constexpr double SH_C2[5] = {1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792,
+                             0.5462742152960396};
+constexpr double SH_C3[7] = {-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
+                             -0.4570457994644658, 1.445305721320277, -0.5900435899266435};
+
+// SH basis (INRIA order) at unit direction (x, y, z); with grad, its derivatives d/dx, d/dy, d/dz.
+template <typename S>
+inline void sh_basis(S x, S y, S z, int nb, S* Y, S (*dY)[3]) {
+  Y[0] = (S)SH_C0;
+  if (dY) dY[0][0] = dY[0][1] = dY[0][2] = 0;
+  if (nb > 1) {
+    const S c1 = (S)SH_C1;
+    Y[1] = -c1 * y;
+    Y[2] = c1 * z;
+    Y[3] = -c1 * x;
+    if (dY) {
+      S d[3][3] = {{0, -c1, 0}, {0, 0, c1}, {-c1, 0, 0}};
+      for (int k = 0; k < 3; ++k) std::copy(d[k], d[k] + 3, dY[1 + k]);
+    }
+  }
+  if (nb > 4) {
+    const S xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
+    const S* c = nullptr;
+    S c2[5];
+    for (int k = 0; k < 5; ++k) c2[k] = (S)SH_C2[k];
+    c = c2;
+    Y[4] = c[0] * xy;
+    Y[5] = c[1] * yz;
+    Y[6] = c[2] * ((S)2 * zz - xx - yy);
+    Y[7] = c[3] * xz;
+    Y[8] = c[4] * (xx - yy);
+    if (dY) {
+      S d[5][3] = {{c[0] * y, c[0] * x, 0},
+                   {0, c[1] * z, c[1] * y},
+                   {c[2] * (S)-2 * x, c[2] * (S)-2 * y, c[2] * (S)4 * z},
+                   {c[3] * z, 0, c[3] * x},
+                   {c[4] * (S)2 * x, c[4] * (S)-2 * y, 0}};
+      for (int k = 0; k < 5; ++k) std::copy(d[k], d[k] + 3, dY[4 + k]);
+    }
+    if (nb > 9) {
+      S c3[7];
+      for (int k = 0; k < 7; ++k) c3[k] = (S)SH_C3[k];
+      Y[9] = c3[0] * y * ((S)3 * xx - yy);
+      Y[10] = c3[1] * xy * z;
+      Y[11] = c3[2] * y * ((S)4 * zz - xx - yy);
+      Y[12] = c3[3] * z * ((S)2 * zz - (S)3 * xx - (S)3 * yy);
+      Y[13] = c3[4] * x * ((S)4 * zz - xx - yy);
+      Y[14] = c3[5] * z * (xx - yy);
+      Y[15] = c3[6] * x * (xx - (S)3 * yy);
+      if (dY) {
+        S d[7][3] = {{c3[0] * (S)6 * xy, c3[0] * ((S)3 * xx - (S)3 * yy), 0},
+                     {c3[1] * yz, c3[1] * xz, c3[1] * xy},
+                     {c3[2] * (S)-2 * xy, c3[2] * ((S)4 * zz - xx - (S)3 * yy), c3[2] * (S)8 * yz},
+                     {c3[3] * (S)-6 * xz, c3[3] * (S)-6 * yz, c3[3] * ((S)6 * zz - (S)3 * xx - (S)3 * yy)},
+                     {c3[4] * ((S)4 * zz - (S)3 * xx - yy), c3[4] * (S)-2 * xy, c3[4] * (S)8 * xz},
+                     {c3[5] * (S)2 * xz, c3[5] * (S)-2 * yz, c3[5] * (xx - yy)},
+                     {c3[6] * ((S)3 * xx - (S)3 * yy), c3[6] * (S)-6 * xy, 0}};
+        for (int k = 0; k < 7; ++k) std::copy(d[k], d[k] + 3, dY[9 + k]);
+      }
+    }
+  }
+}
+
+template <typename S>
+inline void rotmat(const S* q, S* Rq) {  // unit wxyz -> row-major 3x3
+  const S w = q[0], x = q[1], y = q[2], z = q[3];
+  Rq[0] = 1 - 2 * (y * y + z * z);
+  Rq[1] = 2 * (x * y - w * z);
+  Rq[2] = 2 * (x * z + w * y);
+  Rq[3] = 2 * (x * y + w * z);
+  Rq[4] = 1 - 2 * (x * x + z * z);
+  Rq[5] = 2 * (y * z - w * x);
+  Rq[6] = 2 * (x * z - w * y);
+  Rq[7] = 2 * (y * z + w * x);
+  Rq[8] = 1 - 2 * (x * x + y * y);
+}
+
+// Everything the backward needs again, recomputed from the inputs (cheaper than storing it).
+template <typename S>
+struct Geo {
+  S p[3], zs, iz, tx, ty, qn[4], qnorm, Rq[9], M[9], RM[9], A0[3], A1[3], a, b, c, det;
+  bool valid, clamp_x, clamp_y;
+  S lim_x, lim_y;  // the clamp bound hit (signed), when clamped
+};
+
+template <typename S>
+inline void geometry(const Cam& cam, const S* mean, const S* quat, const S* scale, Geo<S>& g) {
+  S R[9], T[3];
+  for (int i = 0; i < 9; ++i) R[i] = (S)cam.R[i];
+  for (int i = 0; i < 3; ++i) T[i] = (S)cam.T[i];
+  for (int i = 0; i < 3; ++i) g.p[i] = R[3 * i] * mean[0] + R[3 * i + 1] * mean[1] + R[3 * i + 2] * mean[2] + T[i];
+  const S z = g.p[2];
+  g.valid = z > (S)cam.near;
+  g.zs = g.valid ? z : (S)1;
+  g.iz = (S)1 / g.zs;
+  const S fx = (S)cam.fx, fy = (S)cam.fy, W = (S)cam.W, H = (S)cam.H, cx = (S)cam.cx, cy = (S)cam.cy;
+  const S lxp = (W - cx) / fx + (S)0.3 * W / ((S)2 * fx), lxn = cx / fx + (S)0.3 * W / ((S)2 * fx);
+  const S lyp = (H - cy) / fy + (S)0.3 * H / ((S)2 * fy), lyn = cy / fy + (S)0.3 * H / ((S)2 * fy);
+  const S xz = g.p[0] / g.zs, yz = g.p[1] / g.zs;
+  g.clamp_x = xz < -lxn || xz > lxp;
+  g.clamp_y = yz < -lyn || yz > lyp;
+  g.lim_x = xz < -lxn ? -lxn : lxp;
+  g.lim_y = yz < -lyn ? -lyn : lyp;
+  g.tx = std::min(std::max(xz, -lxn), lxp) * g.zs;
+  g.ty = std::min(std::max(yz, -lyn), lyp) * g.zs;
+  g.qnorm = std::sqrt(quat[0] * quat[0] + quat[1] * quat[1] + quat[2] * quat[2] + quat[3] * quat[3]);
+  for (int i = 0; i < 4; ++i) g.qn[i] = quat[i] / g.qnorm;
+  rotmat(g.qn, g.Rq);
+  for (int j = 0; j < 3; ++j)
+    for (int k = 0; k < 3; ++k) g.M[3 * j + k] = g.Rq[3 * j + k] * scale[k];
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k)
+      g.RM[3 * i + k] = R[3 * i] * g.M[k] + R[3 * i + 1] * g.M[3 + k] + R[3 * i + 2] * g.M[6 + k];
+  const S iz = g.iz, iz2 = iz * iz;
+  for (int k = 0; k < 3; ++k) {
+    g.A0[k] = fx * iz * g.RM[k] - fx * g.tx * iz2 * g.RM[6 + k];
+    g.A1[k] = fy * iz * g.RM[3 + k] - fy * g.ty * iz2 * g.RM[6 + k];
+  }
+  const S e = (S)cam.eps2d;
+  g.a = g.A0[0] * g.A0[0] + g.A0[1] * g.A0[1] + g.A0[2] * g.A0[2] + e;
+  g.b = g.A0[0] * g.A1[0] + g.A0[1] * g.A1[1] + g.A0[2] * g.A1[2];
+  g.c = g.A1[0] * g.A1[0] + g.A1[1] * g.A1[1] + g.A1[2] * g.A1[2] + e;
+  g.det = g.a * g.c - g.b * g.b;
+  g.valid = g.valid && g.det > (S)0;
+}
+
+template <typename S>
+inline void direction(const Cam& cam, const S* mean, S* d, S& n) {
+  for (int i = 0; i < 3; ++i) d[i] = mean[i] - (S)cam.centre[i];
+  n = std::max(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), (S)1e-12);
+  for (int i = 0; i < 3; ++i) d[i] /= n;
+}
+
+template <typename S>
+void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, const S* scales, const S* sh,
+                    int K, int nb, int nt, S* means2d, S* conics, S* depths, S* colors, int64_t* radii,
+                    int64_t* boxes) {
+#pragma omp parallel for num_threads(nt) schedule(static)
+  for (int64_t n = 0; n < N; ++n) {
+    Geo<S> g;
+    geometry(cam, means + 3 * n, quats + 4 * n, scales + 3 * n, g);
+    const S u = (S)cam.fx * g.p[0] / g.zs + (S)cam.cx, v = (S)cam.fy * g.p[1] / g.zs + (S)cam.cy;
+    means2d[2 * n] = u;
+    means2d[2 * n + 1] = v;
+    depths[n] = g.p[2];
+    const S det = g.valid ? g.det : (S)1;
+    conics[3 * n] = g.c / det;
+    conics[3 * n + 1] = -g.b / det;
+    conics[3 * n + 2] = g.a / det;
+    const S mid = (S)0.5 * (g.a + g.c);
+    const S lam = mid + std::sqrt(std::max(mid * mid - g.det, (S)0.1));
+    // non-finite input (NaN / inf parameters) is culled rather than turned into garbage boxes
+    const bool ok = g.valid && std::isfinite(u) && std::isfinite(v) && std::isfinite(lam);
+    const S r = ok ? std::ceil((S)3 * std::sqrt(lam)) : (S)0;
+    const S mu = ok ? std::min(std::max(u, (S)-1e7), (S)1e7) : (S)-1e7;  // culled: an empty box
+    const S mv = ok ? std::min(std::max(v, (S)-1e7), (S)1e7) : (S)-1e7;
+    const S u0 = std::min(std::max(std::ceil(mu - r - (S)0.5), (S)0), (S)cam.W);
+    const S u1 = std::min(std::max(std::floor(mu + r - (S)0.5), (S)-1), (S)(cam.W - 1));
+    const S v0 = std::min(std::max(std::ceil(mv - r - (S)0.5), (S)0), (S)cam.H);
+    const S v1 = std::min(std::max(std::floor(mv + r - (S)0.5), (S)-1), (S)(cam.H - 1));
+    int64_t* bx = boxes + 4 * n;
+    bx[0] = (int64_t)u0, bx[1] = (int64_t)u1, bx[2] = (int64_t)v0, bx[3] = (int64_t)v1;
+    radii[n] = (ok && bx[1] >= bx[0] && bx[3] >= bx[2]) ? (int64_t)r : 0;
+    S d[3], dn, Y[16];
+    direction(cam, means + 3 * n, d, dn);
+    sh_basis<S>(d[0], d[1], d[2], nb, Y, nullptr);
+    const S* f = sh + n * K * 3;
+    for (int ch = 0; ch < 3; ++ch) {
+      S acc = 0;
+      for (int k = 0; k < nb; ++k) acc += Y[k] * f[3 * k + ch];
+      colors[3 * n + ch] = std::max(acc + (S)0.5, (S)0);
+    }
+  }
+}
+
+template <typename S>
+void preprocess_bwd(int64_t N, const Cam& cam, const S* means, const S* quats, const S* scales, const S* sh,
+                    int K, int nb, int nt, const int64_t* radii, const S* g_means2d, const S* g_conics,
+                    const S* g_depths, const S* g_colors, S* g_means, S* g_quats, S* g_scales, S* g_sh) {
+#pragma omp parallel for num_threads(nt) schedule(static)
+  for (int64_t n = 0; n < N; ++n) {
+    S* gm = g_means + 3 * n;
+    gm[0] = gm[1] = gm[2] = 0;
+    std::fill_n(g_quats + 4 * n, 4, (S)0);
+    std::fill_n(g_scales + 3 * n, 3, (S)0);
+    std::fill_n(g_sh + n * K * 3, K * 3, (S)0);
+    if (radii[n] <= 0) continue;  // never composited: nothing flows back
+    // ---- colour: rgb = max(0, sum_k Y_k sh_k + 0.5)
+    S d[3], dn, Y[16], dY[16][3];
+    direction(cam, means + 3 * n, d, dn);
+    sh_basis<S>(d[0], d[1], d[2], nb, Y, dY);
+    const S* f = sh + n * K * 3;
+    S* gf = g_sh + n * K * 3;
+    S gd[3] = {0, 0, 0};
+    for (int ch = 0; ch < 3; ++ch) {
+      S acc = 0;
+      for (int k = 0; k < nb; ++k) acc += Y[k] * f[3 * k + ch];
+      const S gc = (acc + (S)0.5 >= (S)0) ? g_colors[3 * n + ch] : (S)0;
+      if (gc == (S)0) continue;
+      for (int k = 0; k < nb; ++k) {
+        gf[3 * k + ch] = Y[k] * gc;
+        for (int i = 0; i < 3; ++i) gd[i] += dY[k][i] * f[3 * k + ch] * gc;
+      }
+    }
+    if (dn > (S)1e-12) {  // through d / |d|
+      const S dot = gd[0] * d[0] + gd[1] * d[1] + gd[2] * d[2];
+      for (int i = 0; i < 3; ++i) gm[i] += (gd[i] - d[i] * dot) / dn;
+    }
+    // ---- geometry
+    Geo<S> g;
+    geometry(cam, means + 3 * n, quats + 4 * n, scales + 3 * n, g);
+    const S fx = (S)cam.fx, fy = (S)cam.fy, iz = g.iz, iz2 = iz * iz;
+    S gp[3] = {0, 0, 0}, g_iz = 0, g_tx = 0, g_ty = 0;
+    // means2d = (fx x / zs + cx, fy y / zs + cy)
+    const S gu = g_means2d[2 * n], gv = g_means2d[2 * n + 1];
+    gp[0] += fx * iz * gu;
+    gp[1] += fy * iz * gv;
+    g_iz += fx * g.p[0] * gu + fy * g.p[1] * gv;
+    gp[2] += g_depths[n];
+    // conic = (c, -b, a) / det
+    const S det = g.det, id = (S)1 / det, id2 = id * id;
+    const S gA = g_conics[3 * n], gB = g_conics[3 * n + 1], gC = g_conics[3 * n + 2];
+    const S a = g.a, b = g.b, c = g.c;
+    const S ga = gA * (-c * c * id2) + gB * (b * c * id2) + gC * (id - a * c * id2);
+    const S gb = gA * ((S)2 * b * c * id2) + gB * (-id - (S)2 * b * b * id2) + gC * ((S)2 * a * b * id2);
+    const S gcc = gA * (id - c * a * id2) + gB * (a * b * id2) + gC * (-a * a * id2);
+    S gA0[3], gA1[3], gR[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};  // gR: d/d RM (rows r0, r1, r2)
+    for (int k = 0; k < 3; ++k) {
+      gA0[k] = (S)2 * ga * g.A0[k] + gb * g.A1[k];
+      gA1[k] = (S)2 * gcc * g.A1[k] + gb * g.A0[k];
+    }
+    S r2A0 = 0, r2A1 = 0, r0A0 = 0, r1A1 = 0;
+    for (int k = 0; k < 3; ++k) {
+      gR[k] += fx * iz * gA0[k];
+      gR[6 + k] += -fx * g.tx * iz2 * gA0[k] - fy * g.ty * iz2 * gA1[k];
+      gR[3 + k] += fy * iz * gA1[k];
+      r0A0 += g.RM[k] * gA0[k];
+      r2A0 += g.RM[6 + k] * gA0[k];
+      r1A1 += g.RM[3 + k] * gA1[k];
+      r2A1 += g.RM[6 + k] * gA1[k];
+    }
+    g_iz += fx * r0A0 - (S)2 * fx * g.tx * iz * r2A0 + fy * r1A1 - (S)2 * fy * g.ty * iz * r2A1;
+    g_tx += -fx * iz2 * r2A0;
+    g_ty += -fy * iz2 * r2A1;
+    // tx = clamp(x / zs) * zs: x itself inside the clamp, bound * zs outside
+    S g_zs = -iz2 * g_iz;
+    if (g.clamp_x) g_zs += g.lim_x * g_tx; else gp[0] += g_tx;
+    if (g.clamp_y) g_zs += g.lim_y * g_ty; else gp[1] += g_ty;
+    if (g.valid) gp[2] += g_zs;  // zs = z (valid is true here: radius > 0)
+    S R[9];
+    for (int i = 0; i < 9; ++i) R[i] = (S)cam.R[i];
+    for (int j = 0; j < 3; ++j) gm[j] += R[j] * gp[0] + R[3 + j] * gp[1] + R[6 + j] * gp[2];
+    // RM = R M -> gM = R^T gRM; M = Rq diag(s)
+    S gM[9], gRq[9];
+    for (int j = 0; j < 3; ++j)
+      for (int k = 0; k < 3; ++k) gM[3 * j + k] = R[j] * gR[k] + R[3 + j] * gR[3 + k] + R[6 + j] * gR[6 + k];
+    const S* s = scales + 3 * n;
+    S* gs = g_scales + 3 * n;
+    for (int k = 0; k < 3; ++k) {
+      gs[k] = gM[k] * g.Rq[k] + gM[3 + k] * g.Rq[3 + k] + gM[6 + k] * g.Rq[6 + k];
+      for (int j = 0; j < 3; ++j) gRq[3 * j + k] = gM[3 * j + k] * s[k];
+    }
+    const S w = g.qn[0], x = g.qn[1], y = g.qn[2], z = g.qn[3];
+    const S* G = gRq;
+    S gq[4];
+    gq[0] = 2 * (-z * G[1] + y * G[2] + z * G[3] - x * G[5] - y * G[6] + x * G[7]);
+    gq[1] = 2 * (y * G[1] + z * G[2] + y * G[3] - 2 * x * G[4] - w * G[5] + z * G[6] + w * G[7] - 2 * x * G[8]);
+    gq[2] = 2 * (-2 * y * G[0] + x * G[1] + w * G[2] + x * G[3] + z * G[5] - w * G[6] + z * G[7] - 2 * y * G[8]);
+    gq[3] = 2 * (-2 * z * G[0] - w * G[1] + x * G[2] + w * G[3] - 2 * z * G[4] + y * G[5] + x * G[6] + y * G[7]);
+    const S dot = gq[0] * g.qn[0] + gq[1] * g.qn[1] + gq[2] * g.qn[2] + gq[3] * g.qn[3];
+    for (int i = 0; i < 4; ++i) g_quats[4 * n + i] = (gq[i] - g.qn[i] * dot) / g.qnorm;
+  }
+}
+
+Cam make_cam(const double* R, const double* T, const double* intr, int W, int H) {
+  Cam c;
+  std::copy(R, R + 9, c.R);
+  std::copy(T, T + 3, c.T);
+  for (int i = 0; i < 3; ++i) c.centre[i] = -(R[i] * T[0] + R[3 + i] * T[1] + R[6 + i] * T[2]);  // -R^T T
+  c.fx = intr[0], c.fy = intr[1], c.cx = intr[2], c.cy = intr[3], c.near = intr[4], c.eps2d = intr[5];
+  c.W = W, c.H = H;
+  return c;
+}
+
+}  // namespace
+
+extern "C" {
+
+// cam_R (9, row-major), cam_T (3), intr = (fx, fy, cx, cy, near, eps2d), all float64.
+// sh: (N, K, 3) contiguous; the first nb = (degree + 1)^2 coefficients are used.
+#define GS_PRE_EXPORT(SUFFIX, S)                                                                   \
+  void gs_preprocess_fwd_##SUFFIX(int64_t N, const double* R, const double* T, const double* intr, \
+                                  int W, int H, const S* means, const S* quats, const S* scales,    \
+                                  const S* sh, int K, int nb, int nt, S* means2d, S* conics,        \
+                                  S* depths, S* colors, int64_t* radii, int64_t* boxes) {           \
+    preprocess_fwd<S>(N, make_cam(R, T, intr, W, H), means, quats, scales, sh, K, nb, nt, means2d,  \
+                      conics, depths, colors, radii, boxes);                                        \
+  }                                                                                                 \
+  void gs_preprocess_bwd_##SUFFIX(int64_t N, const double* R, const double* T, const double* intr, \
+                                  int W, int H, const S* means, const S* quats, const S* scales,    \
+                                  const S* sh, int K, int nb, int nt, const int64_t* radii,         \
+                                  const S* g_means2d, const S* g_conics, const S* g_depths,         \
+                                  const S* g_colors, S* g_means, S* g_quats, S* g_scales,           \
+                                  S* g_sh) {                                                        \
+    preprocess_bwd<S>(N, make_cam(R, T, intr, W, H), means, quats, scales, sh, K, nb, nt, radii,    \
+                      g_means2d, g_conics, g_depths, g_colors, g_means, g_quats, g_scales, g_sh);   \
+  }
+
+GS_PRE_EXPORT(f32, float)
+GS_PRE_EXPORT(f64, double)
+
+}  // extern "C"

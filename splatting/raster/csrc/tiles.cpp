@@ -1,0 +1,537 @@
+// Tiled CPU compositing of projected Gaussians, forward and backward (the structure of the
+// INRIA CUDA rasterizer: per-tile binning, depth order inside each tile, front-to-back blending
+// per pixel with early termination, and a back-to-front backward), OpenMP over tiles.
+//
+// Plain C ABI (called through ctypes from splatting/raster/cpu_tiles.py): no torch headers, so
+// it builds in seconds with g++ and does not depend on torch's C++ ABI. Image formation is the
+// one of splatting/rasterize.py (docs/rasterizer.md), bit for bit in its decisions where
+// possible:
+//   pixel (u, v) is touched by Gaussian g when it lies in g's 3-sigma box [u0,u1]x[v0,v1] and
+//   alpha_raw = o exp(-sigma) >= 1/255, sigma = 0.5 (A dx^2 + C dy^2) + B dx dy,
+//   d = pixel centre - mean; alpha = min(alpha_raw, 0.99); the step that takes T below 1e-4 is
+//   not taken, nor any after it.
+// Every Gaussian carries Cf channels (colour, extra features, depth: the caller decides).
+//
+// Built with -ffp-contract=off: forward and backward must reach the same alpha test decisions
+// from the same expressions, which FMA contraction in one loop and not the other could break.
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include <type_traits>
+#ifdef __AVX__
+#include <immintrin.h>
+#endif
+
+#include <omp.h>
+
+namespace {
+
+constexpr int TILE = 16;
+constexpr int TPIX = TILE * TILE;
+constexpr double ALPHA_MIN = 1.0 / 255.0;
+constexpr double ALPHA_MAX = 0.99;
+constexpr double T_MIN = 1e-4;
+constexpr double MARGIN = 1e-3;  // px: the ellipse spans are widened by this against rounding
+
+// SIMD over the pixels of a tile row with GCC vector extensions (AVX2 with -march=native: 8
+// floats or 4 doubles; SSE or NEON pairs elsewhere). Lanes never mix, so a pixel's result is
+// the same whichever lane computes it: forward and backward take identical decisions.
+template <typename S> struct VT;
+template <> struct VT<float> {
+  typedef float V __attribute__((vector_size(32)));
+  typedef int32_t I __attribute__((vector_size(32)));
+  static constexpr int L = 8;
+};
+template <> struct VT<double> {
+  typedef double V __attribute__((vector_size(32)));
+  typedef int64_t I __attribute__((vector_size(32)));
+  static constexpr int L = 4;
+};
+
+// lane masks -> bits (movemask with AVX; a lane loop elsewhere)
+template <typename I>
+inline unsigned bits(I m) {
+#ifdef __AVX__
+  if (sizeof(m[0]) == 4) return (unsigned)_mm256_movemask_ps((__m256)m);
+  return (unsigned)_mm256_movemask_pd((__m256d)m);
+#else
+  unsigned b = 0;
+  for (int l = 0; l < (int)(sizeof(I) / sizeof(m[0])); ++l) b |= (m[l] != 0) << l;
+  return b;
+#endif
+}
+template <typename I>
+inline bool any(I m) { return bits(m) != 0; }
+template <typename I>
+inline int count(I m) { return __builtin_popcount(bits(m)); }
+
+// exp for float lanes: Cephes expf (range reduction by ln 2, degree-5 polynomial, |rel err| <
+// 2e-7 on the range used here: -sigma in [-88, 0]). Vectorises where the libm call would not.
+inline VT<float>::V vexp(VT<float>::V x) {
+  typedef VT<float>::V V;
+  typedef VT<float>::I I;
+  x = x < (V){} - 87.0f ? (V){} - 87.0f : x;
+  x = x > (V){} + 88.0f ? (V){} + 88.0f : x;
+  V fx = x * 1.44269504088896341f + 0.5f;
+  I n = __builtin_convertvector(fx, I);
+  V fn = __builtin_convertvector(n, V);
+  n = fn > fx ? n - 1 : n;  // floor
+  fn = __builtin_convertvector(n, V);
+  V r = x - fn * 0.693359375f + fn * 2.12194440e-4f;
+  V y = 1.9875691500e-4f * r + 1.3981999507e-3f;
+  y = y * r + 8.3334519073e-3f;
+  y = y * r + 4.1665795894e-2f;
+  y = y * r + 1.6666665459e-1f;
+  y = y * r + 5.0000001201e-1f;
+  y = y * (r * r) + r + 1.0f;
+  I e = (n + 127) << 23;
+  V scale;
+  __builtin_memcpy(&scale, &e, sizeof(V));
+  return y * scale;
+}
+
+// double lanes (the float64 path: tests, gradcheck): libm exp per lane, exact to the ulp.
+inline VT<double>::V vexp(VT<double>::V x) {
+  VT<double>::V r;
+  for (int l = 0; l < 4; ++l) r[l] = std::exp(x[l]);
+  return r;
+}
+
+template <typename S>
+struct alignas(64) Rec {  // one visible Gaussian; one cache line (float) for the prefetch
+  S mx, my, a, b, c, o, tau;  // mean (px), conic, opacity, tau = ln(255 o) + TAU_PAD
+  int32_t u0, u1, v0, v1;     // pixels: the 3-sigma box clipped to the sigma <= tau ellipse's box
+};
+
+// sigma <= tau is only a cheap pre-test (skips the exp and whole tiles); the decision is the
+// alpha test itself, so tau is padded to stay clear of rounding.
+constexpr double TAU_PAD = 1e-3;
+
+inline int64_t clampi(double x, int64_t lo, int64_t hi) {
+  if (!(x >= (double)lo)) return lo;  // also NaN
+  if (x > (double)hi) return hi;
+  return (int64_t)x;
+}
+
+template <typename S>
+void make_rec(Rec<S>& r, int64_t gi, const S* means2d, const S* conics, const S* opac,
+              const int64_t* radii, const int64_t* boxes, int W, int H) {
+  r.mx = means2d[2 * gi];
+  r.my = means2d[2 * gi + 1];
+  r.a = conics[3 * gi];
+  r.b = conics[3 * gi + 1];
+  r.c = conics[3 * gi + 2];
+  r.o = opac[gi];
+  r.tau = r.o > (S)0 ? std::log((S)255 * r.o) + (S)TAU_PAD : (S)-1;
+  r.u0 = r.v0 = 0;
+  r.u1 = r.v1 = -1;
+  const double det = (double)r.a * r.c - (double)r.b * r.b;
+  if (radii[gi] <= 0 || !(r.tau > (S)TAU_PAD) || !(det > 0) || !(r.a > (S)0)) return;
+  // bounding box of the ellipse sigma <= tau, clipped to the 3-sigma box (itself inside the image)
+  const double ex = std::sqrt(2.0 * (double)r.tau * (double)r.c / det);
+  const double ey = std::sqrt(2.0 * (double)r.tau * (double)r.a / det);
+  const int64_t* bx = boxes + 4 * gi;
+  r.u0 = (int32_t)std::max<int64_t>(std::max(bx[0], clampi(std::ceil((double)r.mx - ex - 0.5 - MARGIN), 0, W)), 0);
+  r.u1 = (int32_t)std::min<int64_t>(std::min(bx[1], clampi(std::floor((double)r.mx + ex - 0.5 + MARGIN), -1, W - 1)), W - 1);
+  r.v0 = (int32_t)std::max<int64_t>(std::max(bx[2], clampi(std::ceil((double)r.my - ey - 0.5 - MARGIN), 0, H)), 0);
+  r.v1 = (int32_t)std::min<int64_t>(std::min(bx[3], clampi(std::floor((double)r.my + ey - 0.5 + MARGIN), -1, H - 1)), H - 1);
+}
+
+inline void chunk(int64_t n, int nt, int th, int64_t& b, int64_t& e) {
+  b = n * th / nt;
+  e = n * (th + 1) / nt;
+}
+
+// Order-preserving unsigned keys of floats (negative values flipped).
+inline uint32_t fkey(float x) {
+  uint32_t u;
+  __builtin_memcpy(&u, &x, 4);
+  return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
+}
+inline uint64_t fkey(double x) {
+  uint64_t u;
+  __builtin_memcpy(&u, &x, 8);
+  return (u & 0x8000000000000000ull) ? ~u : (u | 0x8000000000000000ull);
+}
+
+// Stable LSD radix sort of idx by key, 11-bit digits. Stable + indices entering in increasing
+// order = ties in index order, like torch.argsort(stable=True) in the torch path.
+template <typename K>
+void radix_sort(std::vector<K>& key, std::vector<int32_t>& idx) {
+  const size_t n = key.size();
+  std::vector<K> k2(n);
+  std::vector<int32_t> i2(n);
+  std::vector<int64_t> cnt(1 << 11);
+  for (int shift = 0; shift < (int)(8 * sizeof(K)); shift += 11) {
+    std::fill(cnt.begin(), cnt.end(), 0);
+    for (size_t i = 0; i < n; ++i) cnt[(key[i] >> shift) & 2047]++;
+    int64_t pos = 0;
+    for (auto& c : cnt) {
+      int64_t t = c;
+      c = pos;
+      pos += t;
+    }
+    for (size_t i = 0; i < n; ++i) {
+      const int64_t d = cnt[(key[i] >> shift) & 2047]++;
+      k2[d] = key[i];
+      i2[d] = idx[i];
+    }
+    key.swap(k2);
+    idx.swap(i2);
+  }
+}
+
+// Phase 1: the visible Gaussians (radii > 0) sorted by depth into order, their records in that
+// order (recs[s] for Gaussian order[s]);
+// tile counts per thread chunk of that order, tile offsets, per-Gaussian entry offsets (goff,
+// in depth order). cursor (nt x ntiles) becomes each thread's first write position per tile.
+// sizes[0] = visible count nv, sizes[1] = number of (tile, Gaussian) entries.
+template <typename S>
+void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* depths,
+         const int64_t* radii, const int64_t* boxes, int W, int H, int nt, Rec<S>* recs,
+         int32_t* order, int64_t* cursor, int64_t* tile_off, int64_t* goff, int64_t* sizes) {
+  const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
+  typedef decltype(fkey(S())) K;
+  std::vector<K> key;
+  std::vector<int32_t> idx;
+  key.reserve(N);
+  idx.reserve(N);
+  for (int64_t i = 0; i < N; ++i)
+    if (radii[i] > 0) {
+      key.push_back(fkey(depths[i]));
+      idx.push_back((int32_t)i);
+    }
+  radix_sort(key, idx);
+  const int64_t nv = (int64_t)idx.size();
+  std::copy(idx.begin(), idx.end(), order);
+  std::fill(cursor, cursor + (int64_t)nt * NT, 0);
+  // records computed in index order (sequential reads), then gathered into depth order: one
+  // random read per Gaussian here, and sequential or monotonic reads everywhere after
+  std::vector<Rec<S>> by_index(N);
+#pragma omp parallel num_threads(nt)
+  {
+#pragma omp for schedule(static)
+    for (int64_t i = 0; i < N; ++i) make_rec(by_index[i], i, means2d, conics, opac, radii, boxes, W, H);
+    const int th = omp_get_thread_num();
+    int64_t b, e;
+    chunk(nv, nt, th, b, e);
+    int64_t* cnt = cursor + (int64_t)th * NT;
+    for (int64_t s = b; s < e; ++s) {
+      const Rec<S>& r = recs[s] = by_index[order[s]];
+      if (r.u1 < r.u0 || r.v1 < r.v0) {
+        goff[s + 1] = 0;
+        continue;
+      }
+      const int tx0 = r.u0 / TILE, tx1 = r.u1 / TILE, ty0 = r.v0 / TILE, ty1 = r.v1 / TILE;
+      for (int ty = ty0; ty <= ty1; ++ty)
+        for (int tx = tx0; tx <= tx1; ++tx) cnt[ty * TX + tx]++;
+      goff[s + 1] = (int64_t)(tx1 - tx0 + 1) * (ty1 - ty0 + 1);
+    }
+  }
+  goff[0] = 0;
+  for (int64_t s = 0; s < nv; ++s) goff[s + 1] += goff[s];
+  int64_t pos = 0;
+  for (int t = 0; t < NT; ++t) {
+    tile_off[t] = pos;
+    for (int th = 0; th < nt; ++th) {
+      const int64_t c = cursor[(int64_t)th * NT + t];
+      cursor[(int64_t)th * NT + t] = pos;
+      pos += c;
+    }
+  }
+  tile_off[NT] = pos;
+  sizes[0] = nv;
+  sizes[1] = pos;
+}
+
+// Copy L lanes of a vector to dst[0..n) (n < L at the image's right edge).
+template <typename V, typename T>
+inline void store_lanes(T* dst, const V& v, int n) {
+  if (n * sizeof(T) == sizeof(V)) {
+    __builtin_memcpy(dst, &v, sizeof(V));
+    return;
+  }
+  for (int l = 0; l < n; ++l) dst[l] = (T)v[l];
+}
+
+// Phase 2: fill the tile lists with depth-order positions (depth order kept: each thread writes
+// its depth-ordered chunk after the chunks in front of it), gather the Cf channels into depth
+// order (feats), then blend every tile front to back.
+// out (Cf x H x W, channel-major), T_final (H x W), last (H x W): per pixel 1 + the tile-list
+// position of its last contributor (0: none).
+template <typename S>
+void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W, int H, int nt,
+             const Rec<S>* recs, int64_t* cursor, const int64_t* tile_off, const int64_t* goff,
+             int32_t* list, int64_t* gpos, S* feats, S* out, S* T_final, int32_t* last) {
+  const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
+  const int64_t HW = (int64_t)H * W;
+#pragma omp parallel num_threads(nt)
+  {
+    const int th = omp_get_thread_num();
+    int64_t b, e;
+    chunk(nv, nt, th, b, e);
+    int64_t* cur = cursor + (int64_t)th * NT;
+    for (int64_t s = b; s < e; ++s) {
+      std::copy_n(feats_in + (int64_t)order[s] * Cf, Cf, feats + s * Cf);
+      const Rec<S>& r = recs[s];
+      if (r.u1 < r.u0 || r.v1 < r.v0) continue;
+      int64_t k = goff[s];
+      for (int ty = r.v0 / TILE; ty <= r.v1 / TILE; ++ty)
+        for (int tx = r.u0 / TILE; tx <= r.u1 / TILE; ++tx) {
+          const int64_t p = cur[ty * TX + tx]++;
+          list[p] = (int32_t)s;
+          gpos[k++] = p;
+        }
+    }
+#pragma omp barrier
+    typedef typename VT<S>::V V;
+    typedef typename VT<S>::I I;
+    typedef typename std::remove_reference<decltype(I{}[0])>::type IS;
+    constexpr int L = VT<S>::L, NV = TPIX / L, NJ = TILE / L;
+    std::vector<V> T(NV), lane_x(NJ);
+    std::vector<I> done(NV), lst(NV);
+    std::vector<V> acc((size_t)NV * Cf);
+    for (int j = 0; j < NJ; ++j)
+      for (int l = 0; l < L; ++l) lane_x[j][l] = (S)(j * L + l);
+#pragma omp for schedule(dynamic, 1)
+    for (int t = 0; t < NT; ++t) {
+      const int ox = (t % TX) * TILE, oy = (t / TX) * TILE;
+      const int ex = std::min(ox + TILE, W) - 1, ey = std::min(oy + TILE, H) - 1;
+      int active = 0;
+      for (int v = 0; v < NV; ++v) {
+        T[v] = (V){} + (S)1;
+        lst[v] = (I){};
+        for (int l = 0; l < L; ++l) {
+          const int i = v * L + l;
+          const bool inside = ox + i % TILE <= ex && oy + i / TILE <= ey;
+          done[v][l] = inside ? 0 : -1;
+          active += inside;
+        }
+      }
+      std::fill(acc.begin(), acc.end(), (V){});
+      const int64_t t0 = tile_off[t], n = tile_off[t + 1] - t0;
+      for (int64_t k = 0; k < n && active > 0; ++k) {
+        if (k + 8 < n) {
+          __builtin_prefetch(recs + list[t0 + k + 8]);
+          __builtin_prefetch(feats + (int64_t)list[t0 + k + 8] * Cf);
+        }
+        const int32_t sp = list[t0 + k];
+        const Rec<S>& g = recs[sp];
+        const int y0 = std::max(oy, g.v0), y1 = std::min(ey, g.v1);
+        const int xa = std::max(ox, g.u0), xb = std::min(ex, g.u1);
+        const int j0 = (xa - ox) / L, j1 = (xb - ox) / L;
+        const S* f = feats + (int64_t)sp * Cf;
+        const I kk = (I){} + (IS)(k + 1);
+        for (int y = y0; y <= y1; ++y) {
+          const S dy = (S)y + (S)0.5 - g.my;
+          for (int j = j0; j <= j1; ++j) {
+            const int v = (y - oy) * NJ + j;
+            const V xs = lane_x[j] + (S)ox;
+            const V dx = xs + (S)0.5 - g.mx;
+            const V sigma = (S)0.5 * (g.a * dx * dx + g.c * dy * dy) + g.b * dx * dy;
+            const I pre = (xs >= (S)xa) & (xs <= (S)xb) & ~done[v] & (sigma <= g.tau);
+            if (!any(pre)) continue;
+            const V ar = g.o * vexp(-sigma);
+            const I m = pre & (ar >= (S)ALPHA_MIN);
+            if (!any(m)) continue;
+            const V al = ar < (S)ALPHA_MAX ? ar : (V){} + (S)ALPHA_MAX;
+            const V test_T = T[v] * ((S)1 - al);
+            const I term = m & (test_T < (S)T_MIN);
+            if (any(term)) {
+              done[v] |= term;
+              active -= count(term);
+            }
+            const I ok = m & ~term;
+            const V w = ok ? al * T[v] : (V){};
+            V* a = acc.data() + (size_t)v * Cf;
+            for (int c = 0; c < Cf; ++c) a[c] += w * f[c];
+            T[v] = ok ? test_T : T[v];
+            lst[v] = ok ? kk : lst[v];
+          }
+        }
+      }
+      for (int y = oy; y <= ey; ++y)
+        for (int j = 0; j < NJ && ox + j * L <= ex; ++j) {
+          const int v = (y - oy) * NJ + j, nl = std::min(L, ex - (ox + j * L) + 1);
+          const int64_t p = (int64_t)y * W + ox + j * L;
+          store_lanes(T_final + p, T[v], nl);
+          if (sizeof(IS) == 4) {
+            store_lanes(last + p, lst[v], nl);
+          } else {
+            for (int l = 0; l < nl; ++l) last[p + l] = (int32_t)lst[v][l];
+          }
+          const V* a = acc.data() + (size_t)v * Cf;
+          for (int c = 0; c < Cf; ++c) store_lanes(out + c * HW + p, a[c], nl);
+        }
+    }
+  }
+}
+
+// Backward: per tile, back to front from each pixel's last contributor, recovering T_k by
+// dividing by (1 - alpha_k) (alpha <= 0.99). Per (tile, Gaussian) entry the sums over the tile's
+// pixels go to gbuf; then per Gaussian its entries are summed in a fixed order (deterministic,
+// no atomics) and turned into gradients of means2d, conics, opacity and the Cf channels.
+// g_out (Cf x H x W): dL/d out; g_T (H x W): dL/d T_final. Gradient arrays are indexed like the
+// inputs; entries of Gaussians that are not visible are left untouched (the caller zeroes them).
+template <typename S>
+void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, const Rec<S>* recs,
+              const int64_t* tile_off, const int64_t* goff, const int32_t* list, const int64_t* gpos,
+              const S* feats, const S* T_final, const int32_t* last, const S* g_out, const S* g_T,
+              S* g_means2d, S* g_conics, S* g_opac, S* g_feats) {
+  const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
+  const int64_t HW = (int64_t)H * W;
+  const int NB = 6 + Cf;  // q, q dx, q dy, q dx dx, q dx dy, q dy dy, w g_c
+  const int64_t total = tile_off[NT];
+  std::vector<S> gbuf((size_t)total * NB);
+#pragma omp parallel num_threads(nt)
+  {
+    typedef typename VT<S>::V V;
+    typedef typename VT<S>::I I;
+    typedef typename std::remove_reference<decltype(I{}[0])>::type IS;
+    constexpr int L = VT<S>::L, NV = TPIX / L, NJ = TILE / L;
+    std::vector<V> T(NV), accum(NV), G((size_t)NV * Cf), lane_x(NJ), sums(NB);
+    std::vector<I> lst(NV);
+    for (int j = 0; j < NJ; ++j)
+      for (int l = 0; l < L; ++l) lane_x[j][l] = (S)(j * L + l);
+#pragma omp for schedule(dynamic, 1)
+    for (int t = 0; t < NT; ++t) {
+      const int ox = (t % TX) * TILE, oy = (t / TX) * TILE;
+      const int ex = std::min(ox + TILE, W) - 1, ey = std::min(oy + TILE, H) - 1;
+      const int64_t t0 = tile_off[t];
+      int kmax = 0;
+      std::fill(T.begin(), T.end(), (V){} + (S)1);
+      std::fill(accum.begin(), accum.end(), (V){});
+      std::fill(G.begin(), G.end(), (V){});
+      std::fill(lst.begin(), lst.end(), (I){});
+      for (int y = oy; y <= ey; ++y)
+        for (int j = 0; j < NJ && ox + j * L <= ex; ++j) {
+          const int v = (y - oy) * NJ + j, nl = std::min(L, ex - (ox + j * L) + 1);
+          const int64_t p = (int64_t)y * W + ox + j * L;
+          for (int l = 0; l < nl; ++l) {
+            T[v][l] = T_final[p + l];
+            lst[v][l] = last[p + l];
+            kmax = std::max(kmax, (int)last[p + l]);
+            accum[v][l] = T_final[p + l] * g_T[p + l];  // what lies behind: S_k + T_final dL/dT_final
+            for (int c = 0; c < Cf; ++c) G[(size_t)v * Cf + c][l] = g_out[c * HW + p + l];
+          }
+        }
+      for (int k = kmax - 1; k >= 0; --k) {
+        if (k >= 8) {
+          __builtin_prefetch(recs + list[t0 + k - 8]);
+          __builtin_prefetch(feats + (int64_t)list[t0 + k - 8] * Cf);
+        }
+        const int32_t sp = list[t0 + k];
+        const Rec<S>& g = recs[sp];
+        const S* f = feats + (int64_t)sp * Cf;
+        std::fill(sums.begin(), sums.end(), (V){});
+        const int y0 = std::max(oy, g.v0), y1 = std::min(ey, g.v1);
+        const int xa = std::max(ox, g.u0), xb = std::min(ex, g.u1);
+        const int j0 = (xa - ox) / L, j1 = (xb - ox) / L;
+        const I kk = (I){} + (IS)k;
+        for (int y = y0; y <= y1; ++y) {
+          const S dy = (S)y + (S)0.5 - g.my;
+          for (int j = j0; j <= j1; ++j) {
+            const int v = (y - oy) * NJ + j;
+            const V xs = lane_x[j] + (S)ox;
+            const V dx = xs + (S)0.5 - g.mx;
+            const V sigma = (S)0.5 * (g.a * dx * dx + g.c * dy * dy) + g.b * dx * dy;
+            const I pre = (xs >= (S)xa) & (xs <= (S)xb) & (kk < lst[v]) & (sigma <= g.tau);
+            if (!any(pre)) continue;
+            const V ar = g.o * vexp(-sigma);
+            const I m = pre & (ar >= (S)ALPHA_MIN);
+            if (!any(m)) continue;
+            const V al = ar < (S)ALPHA_MAX ? ar : (V){} + (S)ALPHA_MAX;
+            const V rom = (S)1 / ((S)1 - al);
+            const V Tk = T[v] * rom;  // the transmittance in front of this Gaussian
+            T[v] = m ? Tk : T[v];
+            const V w = m ? al * Tk : (V){};
+            const V* gp = G.data() + (size_t)v * Cf;
+            V vv = (V){};
+            for (int c = 0; c < Cf; ++c) {
+              vv += gp[c] * f[c];
+              sums[6 + c] += w * gp[c];
+            }
+            const V g_alpha = Tk * vv - accum[v] * rom;
+            accum[v] += w * vv;
+            // no gradient through the 0.99 clamp; q = -dL/dsigma
+            const V q = (m & (ar < (S)ALPHA_MAX)) ? g_alpha * ar : (V){};
+            const V qx = q * dx, qy = q * dy;
+            sums[0] += q;
+            sums[1] += qx;
+            sums[2] += qy;
+            sums[3] += qx * dx;
+            sums[4] += qx * dy;
+            sums[5] += qy * dy;
+          }
+        }
+        S* e = gbuf.data() + (size_t)(t0 + k) * NB;
+        for (int b = 0; b < NB; ++b) {
+          S h = 0;
+          for (int l = 0; l < L; ++l) h += sums[b][l];
+          e[b] = h;
+        }
+      }
+      // entries past every pixel's last contributor got nothing: zero them
+      const int64_t n = tile_off[t + 1] - t0;
+      for (int64_t k = kmax; k < n; ++k) std::fill_n(gbuf.data() + (size_t)(t0 + k) * NB, NB, (S)0);
+    }
+#pragma omp for schedule(static)
+    for (int64_t s = 0; s < nv; ++s) {
+      S acc[6] = {0, 0, 0, 0, 0, 0};
+      const int64_t gi = order[s];
+      S* gf = g_feats + gi * Cf;
+      for (int c = 0; c < Cf; ++c) gf[c] = 0;
+      for (int64_t k = goff[s]; k < goff[s + 1]; ++k) {
+        const S* e = gbuf.data() + (size_t)gpos[k] * NB;
+        for (int j = 0; j < 6; ++j) acc[j] += e[j];
+        for (int c = 0; c < Cf; ++c) gf[c] += e[6 + c];
+      }
+      const Rec<S>& g = recs[s];
+      g_means2d[2 * gi] = g.a * acc[1] + g.b * acc[2];
+      g_means2d[2 * gi + 1] = g.b * acc[1] + g.c * acc[2];
+      g_conics[3 * gi] = (S)-0.5 * acc[3];
+      g_conics[3 * gi + 1] = -acc[4];
+      g_conics[3 * gi + 2] = (S)-0.5 * acc[5];
+      g_opac[gi] = acc[0] / std::max(g.o, (S)1e-30);
+    }
+  }
+}
+
+}  // namespace
+
+extern "C" {
+
+int gs_tile_size() { return TILE; }
+int gs_rec_bytes_f32() { return (int)sizeof(Rec<float>); }
+int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
+
+#define GS_EXPORT(SUFFIX, S)                                                                       \
+  void gs_bin_##SUFFIX(int64_t N, const S* means2d, const S* conics, const S* opac,                \
+                       const S* depths, const int64_t* radii, const int64_t* boxes, int W, int H,  \
+                       int nt, void* recs, int32_t* order, int64_t* cursor, int64_t* tile_off,     \
+                       int64_t* goff, int64_t* sizes) {                                            \
+    bin<S>(N, means2d, conics, opac, depths, radii, boxes, W, H, nt, (Rec<S>*)recs, order, cursor, \
+           tile_off, goff, sizes);                                                                 \
+  }                                                                                                \
+  void gs_forward_##SUFFIX(int64_t nv, const int32_t* order, const S* feats, int Cf, int W, int H, \
+                           int nt, const void* recs, int64_t* cursor, const int64_t* tile_off,     \
+                           const int64_t* goff, int32_t* list, int64_t* gpos, S* feats_sorted,    \
+                           S* out, S* T_final, int32_t* last) {                                    \
+    forward<S>(nv, order, feats, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off, goff, list,  \
+               gpos, feats_sorted, out, T_final, last);                                            \
+  }                                                                                                \
+  void gs_backward_##SUFFIX(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt,        \
+                            const void* recs, const int64_t* tile_off, const int64_t* goff,        \
+                            const int32_t* list, const int64_t* gpos, const S* feats,              \
+                            const S* T_final, const int32_t* last, const S* g_out, const S* g_T,   \
+                            S* g_means2d, S* g_conics, S* g_opac, S* g_feats) {                    \
+    backward<S>(nv, order, Cf, W, H, nt, (const Rec<S>*)recs, tile_off, goff, list, gpos, feats,   \
+                T_final, last, g_out, g_T, g_means2d, g_conics, g_opac, g_feats);                  \
+  }
+
+GS_EXPORT(f32, float)
+GS_EXPORT(f64, double)
+
+}  // extern "C"
