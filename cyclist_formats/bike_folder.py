@@ -17,24 +17,29 @@ from .errors import UserError
 
 FILES = ("bike.blend", "keypoints.json", "meta.json")
 PARTS = ("frame", "steering", "crank")
+KEYPOINTS = ("seat", "steer_top", "steer_bottom", "handle_left", "handle_right", "crank_axle",
+             "pedal_left", "pedal_right", "front_axle", "rear_axle", "ground")
+CRANK_KEYPOINTS = ("crank_axle", "pedal_left", "pedal_right")
+# keypoints that keypoints.json "parts" does not list belong to these parts (else to frame)
+DEFAULT_KEYPOINT_PARTS = {"steering": ("handle_left", "handle_right", "front_axle"),
+                          "crank": ("pedal_left", "pedal_right")}
 WHOLE = "whole"
 FRAME = "0000"  # the single time step of a static part
 MASK_ALPHA = 127  # 8-bit alpha above this (alpha > 0.5) is inside the mask
 
 
-def read_json(path, what="JSON file"):
-    """Load a JSON file; every failure is one UserError naming the file."""
+def read_json(path, what="JSON file", missing=None):
+    """Load a JSON file; every failure is one UserError naming the file (`missing`: the message
+    for a file that does not exist)."""
     try:
         with open(path) as f:
             return json.load(f)
     except FileNotFoundError:
-        raise UserError(f"{path}: missing ({what})") from None
-    except IsADirectoryError:
-        raise UserError(f"{path}: is a folder, expected a {what}") from None
+        raise UserError(missing or f"{path}: missing ({what})") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise UserError(f"{path}: unreadable JSON ({e})") from None
+        raise UserError(f"{path} is not valid JSON: {e}") from None
     except OSError as e:
-        raise UserError(f"{path}: cannot read ({e.strerror or e})") from None
+        raise UserError(f"cannot read {path}: {e.strerror or e} (expected a {what})") from None
 
 
 def check_bike_dir(bike_dir):
@@ -79,6 +84,43 @@ def has_crank(bike_dir):
         return bool(read_meta(bike_dir).get("has_crank", True))
     except UserError:
         return False
+
+
+def parse_keypoints_doc(doc, has_crank=True, required=(), source="keypoints.json"):
+    """A keypoints.json object -> (coords {name: (3,) float64}, part_of {name: part}); one
+    UserError naming `source` for anything the rig cannot use (wrong frame or units, a missing
+    required keypoint, non-finite coordinates, a part list naming an unknown or absent part)."""
+    if not isinstance(doc, dict) or not isinstance(doc.get("keypoints"), dict):
+        raise UserError(f"{source}: keypoints.json has no 'keypoints' object")
+    if doc.get("frame", "canonical") != "canonical" or doc.get("units", "m") != "m":
+        raise UserError(f"{source}: keypoints.json must be frame 'canonical', units 'm'")
+    kps = doc["keypoints"]
+    missing = [k for k in required if k not in kps]
+    if missing:
+        raise UserError(f"{source}: keypoints.json lacks keypoints {', '.join(missing)}")
+    coords = {}
+    for k, v in kps.items():
+        ok = isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+        a = np.asarray(v, dtype=np.float64) if ok else None
+        if a is None or not np.isfinite(a).all():
+            raise UserError(f"{source}: keypoint {k} must be 3 finite numbers, got {v!r}")
+        coords[k] = a
+    part_of = {k: "frame" for k in coords}
+    listed = doc.get("parts")
+    if listed is None:
+        listed = {p: [k for k in ks if k in coords] for p, ks in DEFAULT_KEYPOINT_PARTS.items()}
+    if not isinstance(listed, dict):
+        raise UserError(f"{source}: keypoints.json 'parts' must map part names to keypoint lists")
+    for p, ks in listed.items():
+        if p not in PARTS:
+            raise UserError(f"{source}: keypoints.json 'parts' names unknown part {p!r}")
+        if p == "crank" and not has_crank and ks:
+            raise UserError(f"{source}: keypoints.json assigns {ks} to a crank this rideable lacks")
+        for k in ks:
+            if k not in coords:
+                raise UserError(f"{source}: keypoints.json 'parts' lists {k!r}, which has no coordinates")
+            part_of[k] = p  # a keypoint listed twice sits on the shared axis: either part works
+    return coords, part_of
 
 
 def keypoints_doc(keypoints, parts=None):

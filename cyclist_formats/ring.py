@@ -6,11 +6,11 @@ view i is view 0 rotated about the vertical axis through the orbit centre by +st
 +Y).  `orbit_view` adds an elevation (the cyclist and dataset cameras); at elevation 0 it is the
 ring.  Both worlds build cameras here: the Blender renderers and splatting.raster.camera.
 """
-import json
 import math
 
 import numpy as np
 
+from .bike_folder import read_json
 from .errors import UserError
 
 SIZE = 512
@@ -87,15 +87,7 @@ def read_cameras_json(path):
     """cameras.json -> ({name: (K 3x3, R 3x3, T 3) float64 arrays} sorted by name, orbit_centre or None).
 
     Every malformed case is one UserError naming the file (and the camera)."""
-    try:
-        with open(path) as f:
-            data = json.load(f)
-    except FileNotFoundError:
-        raise UserError(f"no cameras file: {path}") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise UserError(f"{path} is not valid JSON: {e}") from None
-    except OSError as e:
-        raise UserError(f"cannot read {path}: {e.strerror or e}") from None
+    data = read_json(path, "cameras.json", missing=f"no cameras file: {path}")
     if not isinstance(data, dict):
         raise UserError(f"{path}: expected an object of cameras (camera0000, camera0001, ...)")
     cams = {}

@@ -16,7 +16,6 @@ Posed Gaussians are therefore strided views (N innermost for means and quats; pe
 an (N, 3) block); call .contiguous() where a consumer needs it.
 Log-scales and opacities do not depend on the pose and are shared with the model, not copied.
 """
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -24,18 +23,14 @@ from dataclasses import dataclass
 import torch
 
 from splatting.bike.pose import about_point, check_poses, compose, global_rigid, pose_rotations, rigid, steering_axis
+from cyclist_formats import bike_folder
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, read_ply
 from splatting.gaussians.sh_rotation import BANDS, sh_band_matrices
 
 MAIN_PARTS = ("frame", "steering", "crank")
 SUB_PARTS = ("front_wheel", "rear_wheel", "pedal_left", "pedal_right")
-KEYPOINTS = ("seat", "steer_top", "steer_bottom", "handle_left", "handle_right", "crank_axle",
-             "pedal_left", "pedal_right", "front_axle", "rear_axle", "ground")
-CRANK_KEYPOINTS = ("crank_axle", "pedal_left", "pedal_right")
-# keypoints that are not named in keypoints.json "parts" belong to these parts (else to frame)
-DEFAULT_KEYPOINT_PARTS = {"steering": ("handle_left", "handle_right", "front_axle"),
-                          "crank": ("pedal_left", "pedal_right")}
+KEYPOINTS, CRANK_KEYPOINTS = bike_folder.KEYPOINTS, bike_folder.CRANK_KEYPOINTS  # docs/contract.md names
 Z = (0.0, 0.0, 1.0)  # crank and wheel axles are parallel to canonical Z
 
 
@@ -43,16 +38,6 @@ Z = (0.0, 0.0, 1.0)  # crank and wheel axles are parallel to canonical Z
 class PosedBike:
     gaussians: Gaussians  # concatenation frame | steering | crank | sub-parts, world frame
     keypoints: dict  # name -> (3,) float64 tensor, world frame, metres
-
-
-def _read_json(path, what):
-    try:
-        with open(path) as f:
-            return json.load(f)
-    except FileNotFoundError:
-        raise UserError(f"missing {what}: {path}")
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise UserError(f"{path} is not valid JSON: {e}")
 
 
 class BikeModel:
@@ -63,7 +48,7 @@ class BikeModel:
         bike_dir = os.fspath(bike_dir)
         if not os.path.isdir(bike_dir):
             raise UserError(f"no bike folder: {bike_dir}")
-        meta = _read_json(os.path.join(bike_dir, "meta.json"), "meta.json")
+        meta = bike_folder.read_json(os.path.join(bike_dir, "meta.json"), "meta.json", f"missing meta.json: {os.path.join(bike_dir, 'meta.json')}")
         if not isinstance(meta, dict) or "bike_id" not in meta:
             raise UserError(f"{bike_dir}/meta.json has no bike_id")
         if bike_id is not None and str(bike_id) != str(meta["bike_id"]):
@@ -71,7 +56,7 @@ class BikeModel:
         has_crank = meta.get("has_crank", True)
         if not isinstance(has_crank, bool):
             raise UserError(f"{bike_dir}/meta.json has_crank must be true or false, got {has_crank!r}")
-        kp_doc = _read_json(os.path.join(bike_dir, "keypoints.json"), "keypoints.json")
+        kp_doc = bike_folder.read_json(os.path.join(bike_dir, "keypoints.json"), "keypoints.json", f"missing keypoints.json: {os.path.join(bike_dir, 'keypoints.json')}")
         gdir = os.path.join(bike_dir, "gaussians")
         names = [p for p in MAIN_PARTS if p != "crank" or has_crank]
         for p in names:
@@ -115,38 +100,9 @@ class BikeModel:
         self._sh = canon.sh.permute(1, 0, 2).contiguous().view(canon.sh.shape[1], -1)  # (K, N*3)
 
     def _load_keypoints(self, doc):
-        src = self.source
-        if not isinstance(doc, dict) or not isinstance(doc.get("keypoints"), dict):
-            raise UserError(f"{src}: keypoints.json has no 'keypoints' object")
-        if doc.get("frame", "canonical") != "canonical" or doc.get("units", "m") != "m":
-            raise UserError(f"{src}: keypoints.json must be frame 'canonical', units 'm'")
-        kps = doc["keypoints"]
         required = [k for k in KEYPOINTS if self.has_crank or k not in CRANK_KEYPOINTS + ("seat",)]
-        missing = [k for k in required if k not in kps]
-        if missing:
-            raise UserError(f"{src}: keypoints.json lacks keypoints {', '.join(missing)}")
-        coords = {}
-        for k, v in kps.items():
-            t = torch.as_tensor(v, dtype=torch.float64) if isinstance(v, list) and len(v) == 3 \
-                and all(isinstance(x, (int, float)) for x in v) else None
-            if t is None or not torch.isfinite(t).all():
-                raise UserError(f"{src}: keypoint {k} must be 3 finite numbers, got {v!r}")
-            coords[k] = t
-        part_of = {k: "frame" for k in coords}
-        listed = doc.get("parts")
-        if listed is None:
-            listed = {p: [k for k in ks if k in coords] for p, ks in DEFAULT_KEYPOINT_PARTS.items()}
-        if not isinstance(listed, dict):
-            raise UserError(f"{src}: keypoints.json 'parts' must map part names to keypoint lists")
-        for p, ks in listed.items():
-            if p not in MAIN_PARTS:
-                raise UserError(f"{src}: keypoints.json 'parts' names unknown part {p!r}")
-            if p == "crank" and not self.has_crank and ks:
-                raise UserError(f"{src}: keypoints.json assigns {ks} to a crank this rideable lacks")
-            for k in ks:
-                if k not in coords:
-                    raise UserError(f"{src}: keypoints.json 'parts' lists {k!r}, which has no coordinates")
-                part_of[k] = p
+        arrays, part_of = bike_folder.parse_keypoints_doc(doc, self.has_crank, required, self.source)
+        coords = {k: torch.from_numpy(v) for k, v in arrays.items()}
         self.steer_axis = steering_axis(coords["steer_bottom"], coords["steer_top"])  # UserError if degenerate
         self.keypoint_names = list(coords)
         self.keypoints = coords

@@ -354,7 +354,7 @@ def posed_bike_keypoints(keypoints, poses_deg):
     """Bike keypoints {name: (3,)} (canonical, rest) at B 8-DoF poses (docs/contract.md, degrees and
     metres) -> {name: (B, 3) float64}: steering keypoints turn with theta_s, pedals with theta_p,
     then the global transform.  What the IK needs without loading a BikeModel's Gaussians."""
-    from splatting.bike.model import DEFAULT_KEYPOINT_PARTS
+    from cyclist_formats.bike_folder import DEFAULT_KEYPOINT_PARTS
     from splatting.bike.pose import pose_transforms, transform_points
 
     kp = {k: torch.as_tensor(v, dtype=torch.float64) for k, v in keypoints.items()}

@@ -10,13 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..contract import UserError
+from ..contract import UserError, bike_folder
 
 PARTS = ("frame", "steering", "crank")
-# keypoints that keypoints.json "parts" does not list belong to these parts, else to frame
-# (the same rule as splatting/bike.py, which places them when posing Gaussians)
-DEFAULT_KEYPOINT_PARTS = {"steering": ("handle_left", "handle_right", "front_axle"),
-                          "crank": ("pedal_left", "pedal_right")}
 CRANK_AXIS = np.array([0.0, 0.0, -1.0])  # +theta_p about this = -theta_p about +Z
 
 
@@ -60,16 +56,7 @@ def quaternion_xyzw(axis, angle):
 
 def rig_from_keypoints(doc, has_crank=True, source="keypoints.json"):
     """keypoints.json object -> Rig.  UserError for missing keypoints or a degenerate axis."""
-    if not isinstance(doc, dict) or not isinstance(doc.get("keypoints"), dict):
-        raise UserError(f"{source} has no 'keypoints' object")
-    if doc.get("frame", "canonical") != "canonical" or doc.get("units", "m") != "m":
-        raise UserError(f"{source} must be frame 'canonical', units 'm'")
-    kps = {}
-    for k, v in doc["keypoints"].items():
-        a = np.asarray(v, float) if isinstance(v, list) and len(v) == 3 else None
-        if a is None or not np.isfinite(a).all():
-            raise UserError(f"{source}: keypoint {k} must be 3 finite numbers, got {v!r}")
-        kps[k] = a
+    kps, part_of = bike_folder.parse_keypoints_doc(doc, has_crank, source=source)
     need = ["steer_top", "steer_bottom"] + (["crank_axle"] if has_crank else [])
     missing = [k for k in need if k not in kps]
     if missing:
@@ -82,21 +69,6 @@ def rig_from_keypoints(doc, has_crank=True, source="keypoints.json"):
     if has_crank:
         joints.append(Joint("crank", "continuous", "frame", kps["crank_axle"].copy(), CRANK_AXIS.copy()))
         parts.append("crank")
-    part_of = {k: "frame" for k in kps}
-    listed = doc.get("parts")
-    if listed is None:
-        listed = {p: [k for k in ks if k in kps] for p, ks in DEFAULT_KEYPOINT_PARTS.items()}
-    if not isinstance(listed, dict):
-        raise UserError(f"{source}: 'parts' must map part names to keypoint lists")
-    for p, ks in listed.items():
-        if p not in PARTS:
-            raise UserError(f"{source}: 'parts' names unknown part {p!r}")
-        if p not in parts and ks:
-            raise UserError(f"{source} assigns {ks} to a {p} this bike lacks")
-        for k in ks:
-            if k not in kps:
-                raise UserError(f"{source}: 'parts' lists {k!r}, which has no coordinates")
-            part_of[k] = p  # a keypoint listed twice sits on the shared axis: either part works
     return Rig(parts, joints, kps, part_of)
 
 

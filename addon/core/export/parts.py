@@ -4,26 +4,15 @@ The curated/generated bike.blend holds mesh objects `frame`, `steering` and `cra
 bone-parented to `armature` (addon/core/armature.py).  The armature is switched to its rest
 position before the meshes are evaluated, so a pose left in the file does not leak into the export.
 """
-import json
 import os
 
 import bpy
 import numpy as np
 
 from .. import frames
-from ..contract import UserError
+from ..contract import UserError, bike_folder
 from .articulation import rig_from_keypoints
 from .meshes import PartMesh
-
-
-def _read_json(path):
-    try:
-        with open(path) as f:
-            return json.load(f)
-    except FileNotFoundError:
-        raise UserError(f"missing {path}")
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise UserError(f"{path} is not valid JSON: {e}")
 
 
 def check_bike_folder(bike_dir):
@@ -33,13 +22,13 @@ def check_bike_folder(bike_dir):
     for f in ("bike.blend", "keypoints.json", "meta.json"):
         if not os.path.isfile(os.path.join(bike_dir, f)):
             raise UserError(f"{bike_dir} has no {f} (a bike folder holds bike.blend, keypoints.json, meta.json)")
-    meta = _read_json(os.path.join(bike_dir, "meta.json"))
+    meta = bike_folder.read_json(os.path.join(bike_dir, "meta.json"))
     if not isinstance(meta, dict):
         raise UserError(f"{bike_dir}/meta.json is not a JSON object")
     has_crank = meta.get("has_crank", True)
     if not isinstance(has_crank, bool):
         raise UserError(f"{bike_dir}/meta.json has_crank must be true or false, got {has_crank!r}")
-    rig = rig_from_keypoints(_read_json(os.path.join(bike_dir, "keypoints.json")), has_crank,
+    rig = rig_from_keypoints(bike_folder.read_json(os.path.join(bike_dir, "keypoints.json")), has_crank,
                              os.path.join(bike_dir, "keypoints.json"))
     return rig, meta
 
