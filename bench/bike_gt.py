@@ -120,9 +120,8 @@ def run(results, out_dir, n_poses=20, seed=0, samples=16):
         lines.append(f"| {i} | {', '.join(f'{v:.1f}' for v in r['pose'][:5])}, {', '.join(f'{v:.2f}' for v in r['pose'][5:])} "
                      f"| {r['camera']} | {r['iou']:.4f} | {r['psnr']:.2f} | {r['kp_err_mm']:.4f} |")
     lines.append(f"\nWorst case: pose {worst} (GT | Gaussians | 4x |diff|) in bike_gt_worst.png; bike {os.path.basename(bike_dir)}.")
-    with open(os.path.join(out_dir, "bike_gt_table.md"), "w") as f:
-        f.write("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    from bench.compare import write_table
+    write_table(out_dir, "bike_gt_table.md", lines)
     return rows
 
 

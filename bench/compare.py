@@ -17,3 +17,11 @@ def side_by_side(gt, pred, path, box=None, zoom=1):
     if zoom != 1:
         im = im.resize((im.width * zoom, im.height * zoom), Image.NEAREST)
     im.save(path)
+
+
+def write_table(out_dir, name, lines):
+    """A markdown table (list of lines) to out_dir/name, echoed to stdout for the bench log."""
+    import os
+    with open(os.path.join(out_dir, name), "w") as f:
+        f.write("\n".join(lines) + "\n")
+    print("\n".join(lines))

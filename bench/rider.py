@@ -166,9 +166,8 @@ def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, tim
     lines.append(f"\nrider_repose_ms: {repose_ms:.2f} ms per frame (LBS re-pose of {len(avatar)} Gaussians + "
                  f"concatenation with a 100k-Gaussian bike, {n_total} in total; median of 20, one thread).")
     lines.append(f"\nWorst IoU: pose {worst} (Blender | Gaussians | 4x |diff|, rider box, 2x) in rider_gt_worst.png.")
-    with open(os.path.join(out_dir, "rider_gt_table.md"), "w") as f:
-        f.write("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    from bench.compare import write_table
+    write_table(out_dir, "rider_gt_table.md", lines)
     return rows
 
 

@@ -76,14 +76,11 @@ def run(results, bikes_dir="out/bikes", bike=None, part="frame", budgets=BUDGETS
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--bikes", default="out/bikes")
-    ap.add_argument("--bike")
+    from bench.train_parts import training_args
+    ap = training_args(__doc__)
     ap.add_argument("--part", default="frame")
     ap.add_argument("--budgets", default=",".join(map(str, BUDGETS)))
-    ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--png", default="out/bench/train_chart.png")
-    ap.add_argument("--time-budget-s", type=float)
     a = ap.parse_args()
     sys.path.insert(0, os.getcwd())
     run({}, a.bikes, a.bike, a.part, [int(x) for x in a.budgets.split(",")], a.threads, a.png, a.time_budget_s)

@@ -60,14 +60,20 @@ def run(results, bikes_dir="out/bikes", bike=None, threads=1, max_gaussians=None
     return results
 
 
-if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def training_args(doc):
+    """The standalone command line shared by the training stages: which bikes, threads, time cap."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
     ap.add_argument("--bikes", default="out/bikes")
     ap.add_argument("--bike")
-    ap.add_argument("--parts", help="comma-separated (default: all found)")
     ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--max-gaussians", type=int)
     ap.add_argument("--time-budget-s", type=float)
+    return ap
+
+
+if __name__ == "__main__":
+    ap = training_args(__doc__)
+    ap.add_argument("--parts", help="comma-separated (default: all found)")
+    ap.add_argument("--max-gaussians", type=int)
     a = ap.parse_args()
     sys.path.insert(0, os.getcwd())
     r = run({}, a.bikes, a.bike, a.threads, a.max_gaussians, a.time_budget_s,

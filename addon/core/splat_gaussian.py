@@ -300,9 +300,5 @@ def make_gaussian_object(name, pts, material, node_group, collection=None):
     for key, arr in vectors.items():
         a = mesh.attributes.new(key, "FLOAT_VECTOR", "POINT")
         a.data.foreach_set("vector", np.ascontiguousarray(arr, dtype=np.float32).ravel())
-    mesh.update()
-    obj = bpy.data.objects.new(name, mesh)
-    (collection or bpy.context.scene.collection).objects.link(obj)
-    mod = obj.modifiers.new("splat_gaussians", "NODES")
-    mod.node_group = node_group
-    return obj
+    from .splat_import import link_with_nodes
+    return link_with_nodes(name, mesh, node_group, "splat_gaussians", collection)

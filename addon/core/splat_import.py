@@ -195,10 +195,17 @@ def make_point_object(name, pts, material, node_group, collection=None):
         a.data.foreach_set("value", np.ascontiguousarray(pts[key], dtype=np.float32))
     c = mesh.attributes.new("splat_color", "FLOAT_COLOR", "POINT")
     c.data.foreach_set("color", np.ascontiguousarray(pts["color"], dtype=np.float32).ravel())
+    return link_with_nodes(name, mesh, node_group, "splat_points", collection)
+
+
+def link_with_nodes(name, mesh, node_group, modifier, collection=None):
+    """A new object for `mesh` in `collection` (default: the scene's) with a Geometry Nodes modifier."""
+    import bpy
+
     mesh.update()
     obj = bpy.data.objects.new(name, mesh)
     (collection or bpy.context.scene.collection).objects.link(obj)
-    mod = obj.modifiers.new("splat_points", "NODES")
+    mod = obj.modifiers.new(modifier, "NODES")
     mod.node_group = node_group
     return obj
 

@@ -204,8 +204,7 @@ def pedal_pose(rider_joints, theta_p, theta_s, fit=BikeFit()):
 
     # Legs: ankle goals on the crank circle, the foot's ball over the pedal.
     leg = lambda s: (J[f"{s}_hip"], J[f"{s}_knee"], J[f"{s}_ankle"])
-    L = ((rest[J["left_knee"]] - rest[J["left_hip"]]).norm()
-         + (rest[J["left_ankle"]] - rest[J["left_knee"]]).norm())
+    L = _limb_length(rest, "left_hip", "left_knee", "left_ankle")
     hip_mid = 0.5 * (joints[:, J["left_hip"]] + joints[:, J["right_hip"]])
     st = math.radians(fit.seat_tube_deg)
     foot_off = rest[J["left_ankle"]] - rest[J["left_foot"]]
@@ -232,8 +231,7 @@ def pedal_pose(rider_joints, theta_p, theta_s, fit=BikeFit()):
     # Arms: grips on a bar that turns by theta_s about the (tilted) steering axis.
     joints, T = forward_kinematics(rest, rot, root_trans)
     arm = lambda s: (J[f"{s}_shoulder"], J[f"{s}_elbow"], J[f"{s}_wrist"])
-    A = ((rest[J["left_elbow"]] - rest[J["left_shoulder"]]).norm()
-         + (rest[J["left_wrist"]] - rest[J["left_elbow"]]).norm())
+    A = _limb_length(rest, "left_shoulder", "left_elbow", "left_wrist")
     sh_mid = 0.5 * (joints[:, J["left_shoulder"]] + joints[:, J["right_shoulder"]])
     drop = math.radians(fit.reach_drop_deg)
     bar = sh_mid + fit.reach * A * torch.tensor([math.cos(drop), -math.sin(drop), 0.0],
@@ -251,6 +249,11 @@ def pedal_pose(rider_joints, theta_p, theta_s, fit=BikeFit()):
     targets["bottom_bracket"] = bb
     targets["bar_centre"] = bar
     return rot, root_trans, targets
+
+
+def _limb_length(rest, a, b, c):
+    """Rest length of the two-segment limb a -> b -> c (joint names)."""
+    return (rest[J[b]] - rest[J[a]]).norm() + (rest[J[c]] - rest[J[b]]).norm()
 
 
 def _solve_two_bone(rot, rest, root_trans, chain, target, pole):
