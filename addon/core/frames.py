@@ -23,21 +23,21 @@ def to_canonical(p):
     return np.asarray(p, dtype=float) @ C_INV.T
 
 
-def matrix_to_blender(m):
-    """A canonical 4x4 (or 3x3) transform -> the same motion expressed in Blender's frame."""
+def _conjugate(m, A, A_inv):
+    """A 4x4 (or 3x3) transform m expressed in the frame A maps into: A m A^-1."""
     m = np.asarray(m, dtype=float)
     if m.shape == (3, 3):
-        return C @ m @ C_INV
-    c4 = np.eye(4)
-    c4[:3, :3] = C
-    return c4 @ m @ c4.T
+        return A @ m @ A_inv
+    a4, a4_inv = np.eye(4), np.eye(4)
+    a4[:3, :3], a4_inv[:3, :3] = A, A_inv
+    return a4 @ m @ a4_inv
+
+
+def matrix_to_blender(m):
+    """A canonical 4x4 (or 3x3) transform -> the same motion expressed in Blender's frame."""
+    return _conjugate(m, C, C_INV)
 
 
 def matrix_to_canonical(m):
     """A Blender 4x4 (or 3x3) transform -> the same motion in the canonical frame."""
-    m = np.asarray(m, dtype=float)
-    if m.shape == (3, 3):
-        return C_INV @ m @ C
-    c4 = np.eye(4)
-    c4[:3, :3] = C_INV
-    return c4 @ m @ c4.T
+    return _conjugate(m, C_INV, C)
