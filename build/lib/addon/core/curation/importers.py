@@ -1,0 +1,91 @@
+"""Import a model file into the current scene (bpy), across Blender 3.4 and 5.0.
+
+Operator names changed between versions (OBJ: wm.obj_import since 3.2, import_scene.obj until
+3.x; PLY: wm.ply_import since 3.6, import_mesh.ply before; STL: wm.stl_import since 4.1,
+import_mesh.stl before), so each format lists the operators to try in order.  A .blend is
+appended: the objects of its first scene are linked into the current scene (other scenes hold
+alternatives, studio sets, not the bike).  glTF files with Draco-compressed meshes go through the
+same importer (it carries the Draco decoder).
+"""
+import os
+
+import bpy
+
+from ..contract import UserError
+
+FORMATS = {
+    ".glb": [("import_scene", "gltf")], ".gltf": [("import_scene", "gltf")],
+    ".obj": [("wm", "obj_import"), ("import_scene", "obj")],
+    ".fbx": [("import_scene", "fbx")],
+    ".ply": [("wm", "ply_import"), ("import_mesh", "ply")],
+    ".stl": [("wm", "stl_import"), ("import_mesh", "stl")],
+}
+EXTENSIONS = tuple(sorted(list(FORMATS) + [".blend"]))
+
+
+def _operator(ext):
+    for mod, name in FORMATS[ext]:
+        op = getattr(getattr(bpy.ops, mod), name)
+        try:
+            op.get_rna_type()
+            return op
+        except (AttributeError, KeyError):
+            continue
+    raise UserError(f"this Blender ({bpy.app.version_string}) has no importer for {ext} files")
+
+
+def import_model(path):
+    """Import `path`; returns the list of new objects.  UserError for a missing, unsupported or
+    unreadable file, or one that adds nothing."""
+    path = os.path.abspath(os.fspath(path))
+    if not os.path.isfile(path):
+        raise UserError(f"model file not found: {path}")
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in EXTENSIONS:
+        raise UserError(f"unsupported model format '{ext}' (supported: {', '.join(EXTENSIONS)})")
+    if os.path.getsize(path) == 0:
+        raise UserError(f"{path}: empty file")
+    before = set(bpy.data.objects)
+    if ext == ".blend":
+        _append_blend(path)
+    else:
+        op = _operator(ext)
+        try:
+            res = op(filepath=path)
+        except Exception as e:  # importers raise RuntimeError or their own errors on bad files
+            lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
+            msg = (lines[-1] if lines else type(e).__name__)[:300]  # a traceback's last line says why
+            made = [o for o in bpy.data.objects if o not in before]
+            where = ""
+            if made:  # the importer builds objects in file order: it broke on the one after these
+                where = f"; it broke after {len(made)} object(s), the last one read was '{made[-1].name}' ({made[-1].type})"
+            raise UserError(f"{path}: cannot import ({msg}){where}") from None
+        if "FINISHED" not in res:
+            raise UserError(f"{path}: the importer gave up ({', '.join(res)})")
+    new = [o for o in bpy.data.objects if o not in before]
+    if not new:
+        raise UserError(f"{path}: the file holds no objects (empty scene)")
+    return new
+
+
+def _append_blend(path):
+    try:
+        with bpy.data.libraries.load(path, link=False) as (src, dst):
+            dst.scenes = list(src.scenes[:1])
+            if not src.scenes:
+                dst.objects = list(src.objects)
+    except (OSError, RuntimeError) as e:
+        msg = " ".join(str(e).split())[:300]
+        raise UserError(f"{path}: cannot read .blend ({msg})") from None
+    coll = bpy.context.scene.collection
+    if dst.scenes and dst.scenes[0] is not None:
+        sc = dst.scenes[0]
+        objs = [o for o in sc.objects]
+        for o in objs:
+            if o.name not in coll.objects:
+                coll.objects.link(o)
+        bpy.data.scenes.remove(sc)
+        return
+    for o in dst.objects:
+        if o is not None and o.name not in coll.objects:
+            coll.objects.link(o)

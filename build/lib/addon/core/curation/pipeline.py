@@ -1,0 +1,149 @@
+"""The whole automatic curation on arrays (numpy, no bpy): model triangles in, canonical
+transform, keypoints, problems and per-triangle part labels out."""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..contract import UserError
+from . import keypoints as kpmod
+from . import mesh, silhouette, split, wheels
+from .shape_fit import check_two_wheels, choose_keypoints, drop_rider, shape_samples
+from .pose import canonical_pose
+from .validate import validate
+
+DEFAULT_WHEEL_DIAMETER = 0.7
+
+
+@dataclass
+class Result:
+    M: np.ndarray                    # 4x4 model -> canonical (metres)
+    scale: float
+    keypoints: dict                  # name -> (3,) canonical
+    labels: np.ndarray               # per input triangle: split.FRAME/STEERING/CRANK/JUNK
+    cut: np.ndarray                  # per input triangle: labelled face by face (fused mesh)
+    problems: list
+    notes: list = field(default_factory=list)
+    wheel_diameter: float = DEFAULT_WHEEL_DIAMETER
+    record: dict = field(default_factory=dict)
+
+
+def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, hints=None, wheel_centres=None):
+    """V (n, 3) model vertices (world), T (m, 3) triangles.
+
+    keypoints: optional {name: canonical xyz} that replace the automatic ones (an annotator's
+    JSON); wheel_centres: optional (front, rear) model points an annotator placed, used instead
+    of the wheel search; hints: optional per-triangle labels (split.FRAME.. or -1 for none) from vertex
+    groups or object names, used instead of the automatic split where given.
+    Raises UserError when no wheels are found.
+    """
+    if wheel_diameter is not None and not (wheel_diameter > 0 and np.isfinite(wheel_diameter)):
+        raise UserError(f"--wheel-diameter must be a positive number of metres, got {wheel_diameter}")
+    V = np.asarray(V, float)
+    T = np.asarray(T, np.int64).reshape(-1, 3)
+    if len(T) == 0:
+        raise UserError("the model has no faces")
+    if not np.all(np.isfinite(V)):
+        raise UserError("the model has non-finite vertex coordinates")
+    soup = mesh.Soup(V, T)
+    rings = wheels.find_rings(soup)
+    pair = wheels.wheel_pair(rings) if wheel_centres is None else None
+    seeds, wheel_method, front = None, "rings", None
+    if wheel_centres is not None:
+        pair, bands = silhouette.rings_from_centres(soup, *wheel_centres)
+        comp_pos = {c.index: i for i, c in enumerate(soup.comps)}
+        seeds = sorted({comp_pos[c] for b in bands for c in soup.comp_of_vert[b] if c in comp_pos})
+        wheel_method, front = "given", np.asarray(wheel_centres[0], float)
+    elif pair is None:
+        # no clean tyre pieces: the wheels are the two circles of the side-view outline
+        pair, _, bands = silhouette.wheel_rings(soup)
+        comp_pos = {c.index: i for i, c in enumerate(soup.comps)}
+        seeds = sorted({comp_pos[c] for b in bands for c in soup.comp_of_vert[b] if c in comp_pos})
+        wheel_method = "silhouette"
+    if seeds is not None and not seeds:  # no vertex on the tyre outline: grow from everything
+        seeds = list(range(len(soup.comps)))
+    auto_size = wheel_diameter is None
+    pose = canonical_pose(soup, rings, pair, wheel_diameter or DEFAULT_WHEEL_DIAMETER, seeds, front)
+    wheel_diameter = DEFAULT_WHEEL_DIAMETER if auto_size else wheel_diameter
+    if auto_size and auto_wheel_diameter(soup, pose):
+        wheel_diameter = auto_wheel_diameter(soup, pose)
+        pose = canonical_pose(soup, rings, pair, wheel_diameter, seeds, front)
+        pose.notes.append(f"small wheels for the vehicle's height (a kick scooter?): wheel diameter set to "
+                          f"{wheel_diameter:.3f} m so its top is 1 m high")
+    keep_tri = soup.tri_mask(pose.keep)
+    rider = drop_rider(soup, pose)
+    if rider.any():
+        pose.keep &= ~rider
+        keep_tri = soup.tri_mask(pose.keep)
+        pose.notes.append(f"removed a rider: {int(rider.sum())} component(s) of a person-sized shape above the saddle")
+    view = kpmod.View(soup, pose)
+    X = shape_samples(view, keep_tri)
+    check_two_wheels(X, pose)
+    auto, notes, info, has_crank_shape = choose_keypoints(view, pose, X, clean=wheel_method == "rings")
+    kp = dict(auto)
+    source = {k: "auto" for k in auto}
+    if keypoints:
+        for k, v in keypoints.items():
+            kp[k] = np.asarray(v, float)
+            source[k] = "file"
+    has_crank = has_crank_shape if has_crank_shape is not None else \
+        (pose.crank is not None or ("pedal_left" in kp and "pedal_right" in kp))
+    problems = validate(kp, has_crank)
+    needed = ("crank_axle", "front_axle", "steer_top", "steer_bottom", "pedal_left", "pedal_right")
+    if all(k in kp for k in needed):
+        labels, cut = split.label_triangles(view, keep_tri, kp, info.get("head_tube_radius"),
+                                            pose.front.radius * pose.scale, has_crank)
+    else:  # no split without the keypoints that define it: everything is frame until fixed
+        labels, cut = np.where(keep_tri, split.FRAME, split.JUNK), np.zeros(len(T), bool)
+    if hints is not None:
+        h = np.asarray(hints)
+        use = (h >= 0) & keep_tri
+        labels[use] = h[use]
+    record = {
+        "method": "auto" if not keypoints else "auto+file",
+        "wheel_diameter_m": float(wheel_diameter),
+        "scale_m_per_unit": float(pose.scale),
+        "model_to_canonical": pose.M.tolist(),
+        "forward_cue": pose.forward_cue,
+        "wheel_radii_model_units": [float(pose.rear.radius), float(pose.front.radius)],
+        "chainring_found": pose.crank is not None,
+        "wheels_from": wheel_method,
+        "has_crank": bool(has_crank),
+        "components": len(soup.comps),
+        "components_kept": int(pose.keep.sum()),
+        "keypoint_source": source,
+        "notes": pose.notes + notes,
+        "faces_cut": int(cut.sum()),
+    }
+    return Result(pose.M, pose.scale, kp, labels, cut, problems, pose.notes + notes, wheel_diameter, record)
+
+
+def auto_wheel_diameter(soup, pose):
+    """0.7 m, unless the wheels are tiny for the vehicle (a kick scooter: its top more than four
+    wheel diameters up), then the size that puts its top (the bar) at 1 m."""
+    top = float(soup.transformed_points(pose.M)[soup.vert_mask(pose.keep), 1].max())
+    D = 2 * 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale
+    return round(D / top, 4) if top > 4 * D else None
+
+
+class _Identity:
+    """A Pose stand-in for a mesh that is already canonical (re-split after edits)."""
+
+    def __init__(self, n_comps):
+        self.M = np.eye(4)
+        self.scale = 1.0
+        self.keep = np.ones(n_comps, bool)
+
+
+def relabel(V, T, kp):
+    """Part label per triangle of an already canonical mesh from (edited) keypoints."""
+    needed = ("crank_axle", "front_axle", "steer_top", "steer_bottom", "pedal_left", "pedal_right")
+    missing = [k for k in needed if k not in kp]
+    if missing:
+        raise UserError(f"keypoint '{missing[0]}' is missing: place it before splitting")
+    kp = {k: np.asarray(v, float) for k, v in kp.items()}
+    soup = mesh.Soup(V, T)
+    view = kpmod.View(soup, _Identity(len(soup.comps)))
+    ht = kpmod.head_tube(view, kp["front_axle"], kp["crank_axle"])
+    labels, _ = split.label_triangles(view, np.ones(len(soup.TW), bool), kp, ht[0] if ht else None,
+                                      float(kp["front_axle"][1]))
+    return labels

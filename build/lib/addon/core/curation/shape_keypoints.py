@@ -1,0 +1,125 @@
+"""Keypoints from the bike's shape alone (numpy, no bpy): no assumption about how the model is
+cut into pieces, so they work on a single fused mesh, one-piece handlebars, head tubes merged
+with the fork, chainrings hidden in chain guards.
+
+Input: surface samples X (n, 3) of the kept bike in the canonical frame (metres) and the wheel
+axles.  Lengths are relative to the wheel radius R where a bike's proportions say so (a scooter
+scaled to 0.7 m wheels is as big as a house; its bar still sits above its front axle).
+- steering axis: the line through (a few cm from) the front hub, leaning back 50-88 degrees,
+  that the most surface lies along above the front tyre (fork legs, head tube, steerer, stem);
+  steer_bottom just above the tyre, steer_top at the top of that run (the stem);
+- handles: the lateral extremes of the bar region (high, ahead of the saddle), the grip centre
+  a quarter wheel radius in from the end, mirrored into a symmetric pair;
+- pedals: the lateral extremes low between the wheels; when they sit apart in the side view
+  (a crank), crank_axle is their midpoint; when they coincide (footpegs, a deck) there is no
+  crank and crank_axle is below them on the symmetry plane;
+- seat: 4 mm below the top of the highest region behind the wheelbase middle.
+Every finder returns None when there is nothing where it looks; validate() names it.
+"""
+import numpy as np
+
+SEAT_DEPTH = 0.004
+
+
+def steering_axis(X, fa, R):
+    """(steer_bottom, steer_top) or None."""
+    d = np.hypot(X[:, 0] - fa[0], X[:, 1] - fa[1])
+    m = (d > 1.05 * R) & (X[:, 1] > fa[1]) & (X[:, 1] < fa[1] + 4 * R) & (np.abs(X[:, 2]) < 0.25 * R) \
+        & (X[:, 0] > fa[0] - 2.5 * R) & (X[:, 0] < fa[0] + 1.0 * R)
+    P = X[m][:, :2]
+    if len(P) < 10:
+        return None
+    if len(P) > 20000:
+        P = P[np.random.default_rng(0).choice(len(P), 20000, replace=False)]
+    P = P - fa[:2]
+    th = np.radians(np.arange(50, 89, 1.0))
+    a = np.stack([-np.cos(th), np.sin(th)], 1)          # up and back
+    nrm = np.stack([a[:, 1], -a[:, 0]], 1)              # towards the front
+    offs = np.arange(-0.3, 0.301, 0.02) * R
+    dist = P @ nrm.T                                     # (n, angles) signed offset
+    along = P @ a.T
+    band = 0.06 * R
+    best, arg = -1.0, None
+    for j, o in enumerate(offs):
+        hit = (np.abs(dist - o) < band) & (along > 1.0 * R)
+        s = hit.sum(0)
+        k = int(np.argmax(s))
+        if s[k] > best:
+            best, arg = s[k], (k, o)
+    if best < 5:
+        return None
+    k, o = arg
+    hit = (np.abs(dist[:, k] - o) < band) & (along[:, k] > 1.0 * R)
+    t = np.sort(along[hit, k])
+    # the contiguous run of surface along the line, starting above the tyre
+    gaps = np.nonzero(np.diff(t) > 0.3 * R)[0]
+    top = t[gaps[0]] if len(gaps) else t[-1]
+    base = fa[:2] + o * nrm[k]
+    t0 = 1.15 * R
+    t1 = max(top - 0.03 * R, t0 + 0.15 * R)
+    ax = np.array([a[k, 0], a[k, 1], 0.0])
+    b3 = np.array([base[0], base[1], 0.0])
+    return b3 + t0 * ax, b3 + t1 * ax
+
+
+def handles(X, steer_top, seat_x, R):
+    m = (X[:, 1] > steer_top[1] - 0.5 * R) & (X[:, 0] > seat_x + 0.3 * R) & (X[:, 0] < steer_top[0] + 1.5 * R)
+    B = X[m]
+    if len(B) < 4 or B[:, 2].max() < 0.2 * R or B[:, 2].min() > -0.2 * R:
+        return None
+    out = []
+    for sg in (1, -1):
+        z = sg * B[:, 2]
+        zmax = z.max()
+        grip = B[(z > zmax - 0.35 * R) & (z < zmax - 0.1 * R)]
+        if len(grip) == 0:
+            grip = B[z > zmax - 0.35 * R]
+        out.append(np.array([grip[:, 0].mean(), grip[:, 1].mean(), sg * (zmax - 0.2 * R)]))
+    r, l = out
+    # a mirror-symmetric pair (the rig and validation expect one)
+    xy = 0.5 * (r[:2] + l[:2])
+    w = 0.5 * (r[2] - l[2])
+    return np.array([xy[0], xy[1], -w]), np.array([xy[0], xy[1], w])
+
+
+def pedals(X, fa, ra, R, tyre_half_width):
+    """(crank_axle, pedal_left, pedal_right, has_crank) or None."""
+    m = (X[:, 0] > ra[0] + 0.5 * R) & (X[:, 0] < fa[0] - 0.5 * R) & (X[:, 1] < max(fa[1], ra[1]) + 0.6 * R)
+    B = X[m]
+    if len(B) < 4:
+        return None
+    ends = []
+    for sg in (1, -1):
+        z = sg * B[:, 2]
+        zmax = z.max()
+        if zmax < tyre_half_width + 0.05 * R:
+            return None
+        c = B[z > zmax - 0.12 * R]
+        lo, hi = c.min(0), c.max(0)
+        ends.append(np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), sg * (zmax - 0.5 * min(0.12 * R, hi[2] - lo[2]))]))
+    pr, pl = ends
+    sep = np.linalg.norm(pr[:2] - pl[:2])
+    ca = np.array([0.5 * (pr[0] + pl[0]), 0.5 * (pr[1] + pl[1]), 0.0])
+    has_crank = 0.35 * R < sep < 1.6 * R
+    if has_crank:  # exactly opposite about the axle (the rig rotates them as one)
+        v = 0.5 * (pr[:2] - pl[:2])
+        pr = np.array([ca[0] + v[0], ca[1] + v[1], pr[2]])
+        pl = np.array([ca[0] - v[0], ca[1] - v[1], pl[2]])
+    else:
+        pr = np.array([ca[0], ca[1], pr[2]])
+        pl = np.array([ca[0], ca[1], pl[2]])
+    return ca, pl, pr, has_crank
+
+
+def seat(X, fa, ra, R):
+    mid = 0.5 * (fa[0] + ra[0])
+    m = (X[:, 0] > ra[0] - 0.3 * R) & (X[:, 0] < mid + 0.15 * R) & (np.abs(X[:, 2]) < 0.3 * R)
+    B = X[m]
+    if len(B) == 0:
+        return None
+    top = B[:, 1].max()
+    if top < max(fa[1], ra[1]) + 0.2 * R:
+        return None
+    cap = B[B[:, 1] > top - 0.08 * R]
+    xc = 0.5 * (cap[:, 0].min() + cap[:, 0].max())
+    return np.array([xc, top - SEAT_DEPTH, 0.0])

@@ -1,0 +1,350 @@
+"""Wheels from the side-view silhouette (numpy, no bpy).
+
+Real models do not give us one clean mesh piece per tyre: tyres have 10-33 segments, are fat
+(scooters, motorcycles), fused to the rim and frame, or the whole bike is one mesh.  What every
+two-wheeler does have is a side view in which the two tyres are the two big circles of the
+outline.  So:
+
+1. lateral axis: the thinnest principal axis of the surface (the other two are tried when the
+   thinnest gives no wheels: a scooter with a tall stem, a rider with spread arms);
+2. the surface is sampled densely and rasterised onto the side plane as an occupancy image;
+3. a Hough-style circle search on the outline: every outline pixel votes, along its inward
+   normal (towards the occupied side), for centres at each radius; only the outer boundary of
+   a filled disc or annulus votes for its own centre, so rims, holes and hubs do not compete
+   with the tyre's outer circle;
+4. circle candidates are scored by the share of their circumference that is outline;
+5. the two wheels are the best-supported pair of similar, disjoint circles side by side.
+Positions are then refined on the mesh's own vertices (outline points per angular sector,
+least-squares circle, plane through both tyres' outer bands), so pixel size does not limit
+the accuracy.
+"""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..contract import UserError
+from .wheels import fit_circle_2d
+
+IMAGE_PX = 200          # pixels along the longer side of the side view
+MIN_SUPPORT = 0.45      # share of a wheel's circumference that must be outline
+
+
+@dataclass
+class Circle:
+    centre: np.ndarray   # (2,) side-plane coordinates (model units)
+    radius: float
+    support: float       # share of the circumference found on the outline
+
+
+@dataclass
+class SideView:
+    normal: np.ndarray           # (3,) lateral unit axis
+    e1: np.ndarray               # (3,) in-plane axes
+    e2: np.ndarray
+    origin: np.ndarray           # (3,)
+    circles: list = field(default_factory=list)   # Circle, best first
+    thickness: float = 0.0       # lateral extent / in-plane extent (flat icon check)
+
+
+def surface_samples(P, TW, spacing):
+    """Points on the triangles no further than ~spacing apart (vertices, edges and interiors),
+    so a large face (a disc wheel's side, a low-poly tyre) fills the image, not just its corners."""
+    tri = P[TW]
+    e = np.stack([tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 1], tri[:, 0] - tri[:, 2]], 1)
+    longest = np.linalg.norm(e, axis=2).max(1)
+    k = np.clip(np.ceil(longest / spacing), 1, 512).astype(int)
+    out = [P]
+    for kk in np.unique(k):
+        sel = tri[k == kk]
+        i, j = np.meshgrid(np.arange(kk + 1), np.arange(kk + 1), indexing="ij")
+        m = i + j <= kk
+        b = np.stack([i[m], j[m], kk - i[m] - j[m]], 1) / kk   # barycentric grid
+        out.append(np.einsum("bk,tkd->tbd", b, sel).reshape(-1, 3))
+    return np.concatenate(out)
+
+
+def principal_axes(X):
+    mu = X.mean(0)
+    w, v = np.linalg.eigh(np.cov((X - mu).T))
+    return mu, v.T, np.sqrt(np.maximum(w, 0))   # ascending spread
+
+
+def _blur(img, passes=2):
+    out = img.astype(float)
+    for _ in range(passes):   # [1 2 1]/4 separable, ~ Gaussian sigma 0.7 px per pass
+        out = np.pad(out, 1, mode="edge")
+        out = (out[:-2] + 2 * out[1:-1] + out[2:]) / 4
+        out = (out[:, :-2] + 2 * out[:, 1:-1] + out[:, 2:]) / 4
+    return out
+
+
+def occupancy(uv, lo, px, shape):
+    img = np.zeros(shape, bool)
+    ij = np.floor((uv - lo) / px).astype(int)
+    ok = (ij[:, 0] >= 0) & (ij[:, 1] >= 0) & (ij[:, 0] < shape[1]) & (ij[:, 1] < shape[0])
+    img[ij[ok, 1], ij[ok, 0]] = True
+    # close one-pixel gaps between samples
+    pad = np.pad(img, 1)
+    grown = pad[1:-1, 1:-1] | pad[:-2, 1:-1] | pad[2:, 1:-1] | pad[1:-1, :-2] | pad[1:-1, 2:]
+    return grown
+
+
+def hough_circles(img, rmin, rmax, max_circles=8):
+    """Circle candidates (x, y, r in pixels, support) of an occupancy image's outline."""
+    pad = np.pad(img, 1)
+    edge = img & ~(pad[:-2, 1:-1] & pad[2:, 1:-1] & pad[1:-1, :-2] & pad[1:-1, 2:])
+    b = _blur(img, 3)
+    gy, gx = np.gradient(b)
+    ys, xs = np.nonzero(edge)
+    g = np.stack([gx[ys, xs], gy[ys, xs]], 1)
+    n = np.linalg.norm(g, axis=1)
+    ok = n > 1e-6
+    ys, xs, g = ys[ok], xs[ok], g[ok] / n[ok, None]   # unit inward normal (towards occupied)
+    H, W = img.shape
+    radii = np.arange(rmin, rmax + 1)
+    # votes in a +-12 degree cone around the inward normal: tolerant of polygonal tyres
+    acc = np.zeros((len(radii), H, W), np.float32)
+    for da in np.radians([-12, -6, 0, 6, 12]):
+        c, s = np.cos(da), np.sin(da)
+        d = np.stack([c * g[:, 0] - s * g[:, 1], s * g[:, 0] + c * g[:, 1]], 1)
+        cx = np.rint(xs[None, :] + radii[:, None] * d[None, :, 0]).astype(int)
+        cy = np.rint(ys[None, :] + radii[:, None] * d[None, :, 1]).astype(int)
+        ri = np.broadcast_to(np.arange(len(radii))[:, None], cx.shape)
+        m = (cx >= 0) & (cy >= 0) & (cx < W) & (cy < H)
+        np.add.at(acc, (ri[m], cy[m], cx[m]), 1.0)
+    # smooth over position (3x3) and radius (+-1): polygons and pixels smear the peak
+    acc = acc[:, :-2] + acc[:, 1:-1] + acc[:, 2:]
+    acc = np.pad(acc, ((0, 0), (1, 1), (0, 0)))
+    acc = acc[:, :, :-2] + acc[:, :, 1:-1] + acc[:, :, 2:]
+    acc = np.pad(acc, ((0, 0), (0, 0), (1, 1)))
+    acc = acc[:-2] + acc[1:-1] + acc[2:]
+    acc = np.pad(acc, ((1, 1), (0, 0), (0, 0)))
+    score = acc / (2 * np.pi * radii[:, None, None] * 5)
+    # candidates per radius band (log-spaced): small circles (spoke gaps, bolts) are many and
+    # would crowd out the few big ones if ranked together
+    out = []
+    edges = np.unique(np.geomspace(rmin, rmax + 1, 7).astype(int))
+    for lo_r, hi_r in zip(edges[:-1], edges[1:]):
+        band = score[(radii >= lo_r) & (radii < hi_r)]
+        base = int(np.searchsorted(radii, lo_r))
+        got = []
+        for f in np.argsort(band.ravel())[::-1][:5000]:
+            ri, y, x = np.unravel_index(f, band.shape)
+            r = float(radii[base + ri])
+            if any(np.hypot(x - o[0], y - o[1]) < 0.5 * max(r, o[2]) for o in got):
+                continue
+            got.append((float(x), float(y), r, circle_support(edge, x, y, r)))
+            if len(got) >= max_circles:
+                break
+        out += got
+    return sorted(out, key=lambda o: -o[3] * o[2])
+
+
+def circle_support(edge, x, y, r, n=90):
+    """Share of n directions around (x, y) with an outline pixel at distance r (+-4 %), whose
+    inside is towards the centre."""
+    H, W = edge.shape
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    tol = max(1.5, 0.04 * r)
+    hit = np.zeros(n, bool)
+    for dr in np.arange(-tol, tol + 0.5, 0.5):
+        px = np.rint(x + (r + dr) * np.cos(a)).astype(int)
+        py = np.rint(y + (r + dr) * np.sin(a)).astype(int)
+        ok = (px >= 0) & (py >= 0) & (px < W) & (py < H)
+        h = np.zeros(n, bool)
+        h[ok] = edge[py[ok], px[ok]]
+        hit |= h
+    return float(hit.mean())
+
+
+def side_view(P, TW, normal, px_count=IMAGE_PX):
+    """Circles in the projection of the mesh along `normal`."""
+    normal = normal / np.linalg.norm(normal)
+    e1 = np.cross(normal, [1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    mu = P.mean(0)
+    Q = P - mu
+    uv = np.stack([Q @ e1, Q @ e2], 1)
+    lo, hi = uv.min(0), uv.max(0)
+    ext = float((hi - lo).max())
+    if ext <= 0:
+        return SideView(normal, e1, e2, mu, [], 0.0)
+    px = ext / px_count
+    S = surface_samples(P, TW, 0.5 * px)
+    suv = np.stack([(S - mu) @ e1, (S - mu) @ e2], 1)
+    lo = lo - 3 * px
+    shape = (int(np.ceil((hi[1] - lo[1]) / px)) + 4, int(np.ceil((hi[0] - lo[0]) / px)) + 4)
+    img = occupancy(suv, lo, px, shape)
+    lat = Q @ normal
+    sv = SideView(normal, e1, e2, mu, [], float((lat.max() - lat.min()) / ext))
+    rmin, rmax = max(5, int(0.04 * px_count)), int(0.45 * px_count)
+    for x, y, r, sup in hough_circles(img, rmin, rmax):
+        c = lo + (np.array([x, y]) + 0.5) * px
+        sv.circles.append(Circle(c, r * px, sup))
+    sv.image, sv.lo, sv.px = img, lo, px
+    return sv
+
+
+def pairs(circles, min_support=MIN_SUPPORT):
+    """(score, a, b) of disjoint circle pairs, best first (any size ratio: checks come later)."""
+    good = [c for c in circles if c.support >= min_support]
+    out = []
+    for i, a in enumerate(good):
+        for b in good[i + 1:]:
+            d = np.linalg.norm(a.centre - b.centre)
+            if d < 0.95 * (a.radius + b.radius):
+                continue
+            ratio = min(a.radius, b.radius) / max(a.radius, b.radius)
+            # big, well-supported, and similar: a wheel pair beats a wheel and a headlight
+            out.append(((a.support + b.support) * (a.radius + b.radius) * ratio, a, b))
+    out.sort(key=lambda t: -t[0])
+    return out
+
+
+def refine(P, sv, circ, sectors=72):
+    """Circle fit on the mesh's vertices: the outermost vertex per angular sector within
+    [0.8 r, 1.12 r] of the Hough circle, outliers (fenders, a fork) dropped by residual."""
+    Q = P - sv.origin
+    uv = np.stack([Q @ sv.e1, Q @ sv.e2], 1)
+    c, r = circ.centre, circ.radius
+    for _ in range(3):
+        d = uv - c
+        rho = np.hypot(d[:, 0], d[:, 1])
+        m = (rho > 0.8 * r) & (rho < 1.12 * r)
+        if m.sum() < 6:
+            return c, r, np.zeros(0, int)
+        idx = np.nonzero(m)[0]
+        sec = ((np.arctan2(d[idx, 1], d[idx, 0]) + np.pi) / (2 * np.pi) * sectors).astype(int) % sectors
+        order = np.lexsort((rho[idx], sec))
+        last = np.r_[sec[order][1:] != sec[order][:-1], True]
+        outer = idx[order][last]
+        if len(outer) < 6:
+            return c, r, idx
+        cc, rr = fit_circle_2d(uv[outer])
+        res = np.abs(np.hypot(*(uv[outer] - cc).T) - rr)
+        mad = np.median(res) + 1e-12
+        keep = outer[res < max(4 * mad, 0.01 * rr)]
+        if len(keep) >= 6:
+            cc, rr = fit_circle_2d(uv[keep])
+        c, r = cc, rr
+    d = uv - c
+    rho = np.hypot(d[:, 0], d[:, 1])
+    band = np.nonzero((rho > 0.9 * r) & (rho < 1.01 * r))[0]
+    return c, r, band
+
+
+def find_side_view(P, TW):
+    """The side view with the best wheel pair (thinnest axis first, then the others)."""
+    S = surface_samples(P, TW, 0.02 * float(np.linalg.norm(P.max(0) - P.min(0))))
+    _, axes, spread = principal_axes(S)
+    if spread[2] <= 0:
+        raise UserError("the model has no extent (all vertices at one point)")
+    tried = []
+    for k in range(3):
+        sv = side_view(P, TW, axes[k])
+        pr = pairs(sv.circles)
+        tried.append((pr[0][0] if pr else 0.0, k, sv, pr))
+        # the thinnest axis giving two well-supported similar circles is the lateral one
+        if k == 0 and pr and min(pr[0][1].support, pr[0][2].support) > 0.6 and \
+                min(pr[0][1].radius, pr[0][2].radius) > 0.6 * max(pr[0][1].radius, pr[0][2].radius):
+            break
+    best = max(tried, key=lambda t: t[0])
+    return best[2], best[3], spread
+
+
+def _frame(normal):
+    normal = normal / np.linalg.norm(normal)
+    e1 = np.cross(normal, [1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0])
+    e1 /= np.linalg.norm(e1)
+    return normal, e1, np.cross(normal, e1)
+
+
+def wheel_rings(soup):
+    """The two wheels as wheels.Ring (comp = -1) from the side view, refined on the vertices,
+    plus (side view, all circles, band vertex indices per wheel).  UserError naming the failed
+    check for models that are not two-wheelers."""
+    from .wheels import Ring
+    P, TW = soup.P, soup.TW
+    sv, pr, spread = find_side_view(P, TW)
+    if sv.thickness < 0.03:
+        raise UserError(f"not a 3D two-wheeler: the model is flat (thickness {sv.thickness * 100:.1f} % of its "
+                        f"length; a flat icon or a single sheet)")
+    if not pr:
+        n = sum(c.support >= MIN_SUPPORT for c in sv.circles)
+        raise UserError(f"no wheels found: the side view shows {n} round outline(s), need two disjoint "
+                        f"circles (tyres) side by side")
+    _, a, b = pr[0]
+    ratio = min(a.radius, b.radius) / max(a.radius, b.radius)
+    if ratio < 0.6:
+        raise UserError(f"wheel sizes very unequal (smaller/larger = {ratio:.2f} < 0.6): a penny-farthing "
+                        f"or not a two-wheeler")
+    R = 0.5 * (a.radius + b.radius)
+    third = [c for c in sv.circles if c.support >= 0.6 and c is not a and c is not b
+             and min(c.radius, R) > 0.75 * max(c.radius, R)
+             and all(np.linalg.norm(c.centre - w.centre) > 0.95 * (c.radius + w.radius) for w in (a, b))]
+    if third:
+        raise UserError(f"three wheels in the side view ({len(third) + 2} wheel-sized circles): a tricycle "
+                        f"or a vehicle with a trailer, not a two-wheeler")
+    # refine: circles on the vertices, then the plane through both tyres' outer bands
+    cents = [sv.origin + c.centre[0] * sv.e1 + c.centre[1] * sv.e2 for c in (a, b)]
+    radii = [a.radius, b.radius]
+    normal = sv.normal
+    for _ in range(2):
+        n, e1, e2 = _frame(normal)
+        frame = SideView(n, e1, e2, sv.origin)
+        fits = []
+        for c3, r in zip(cents, radii):
+            c2 = np.array([(c3 - sv.origin) @ e1, (c3 - sv.origin) @ e2])
+            fits.append(refine(P, frame, Circle(c2, r, 1.0)))
+        bands = [f[2] for f in fits]
+        allb = np.concatenate(bands)
+        if len(allb) >= 12:
+            _, ax, _ = principal_axes(P[allb])
+            normal = ax[0] if ax[0] @ normal > 0 else -ax[0]
+        cents = [sv.origin + f[0][0] * e1 + f[0][1] * e2 for f in fits]
+        radii = [f[1] for f in fits]
+    rings = []
+    for c3, r, band in zip(cents, radii, bands):
+        lat = float(np.median((P[band] - c3) @ normal)) if len(band) else 0.0
+        rings.append(Ring(-1, c3 + lat * normal, normal.copy(), float(r), 0.0))
+    return rings, sv, bands
+
+
+def rings_from_centres(soup, front, rear):
+    """The two wheels around centres an annotator placed (model coordinates): lateral axis =
+    the thinnest principal axis made perpendicular to the wheelbase, radius = the circle around
+    each centre with the most outline (any support: the annotator has the last word)."""
+    from .wheels import Ring
+    P, TW = soup.P, soup.TW
+    front, rear = np.asarray(front, float), np.asarray(rear, float)
+    base = front - rear
+    L = float(np.linalg.norm(base))
+    if L <= 0:
+        raise UserError("the two wheel centres are at the same place: drag kp.front_axle and kp.rear_axle apart")
+    S = surface_samples(P, TW, 0.02 * float(np.linalg.norm(P.max(0) - P.min(0))))
+    _, axes, _ = principal_axes(S)
+    d = base / L
+    cand = [a - (a @ d) * d for a in axes]
+    n = max(cand[:2], key=np.linalg.norm) if np.linalg.norm(cand[0]) < 0.5 else cand[0]
+    n = n / np.linalg.norm(n)
+    sv = side_view(P, TW, n)
+    out, bands = [], []
+    pad = np.pad(sv.image, 1)
+    edge = sv.image & ~(pad[:-2, 1:-1] & pad[2:, 1:-1] & pad[1:-1, :-2] & pad[1:-1, 2:])
+    for c3 in (front, rear):
+        c2 = np.array([(c3 - sv.origin) @ sv.e1, (c3 - sv.origin) @ sv.e2])
+        x, y = (c2 - sv.lo) / sv.px - 0.5
+        rs = np.arange(max(3, int(0.1 * L / sv.px)), int(0.7 * L / sv.px) + 1)
+        if len(rs) == 0:
+            raise UserError("the wheel centres are too close for wheels to fit between them")
+        sup = np.array([circle_support(edge, x, y, r) for r in rs])
+        r = float(rs[int(np.argmax(sup))]) * sv.px
+        c2f, rf, band = refine(P, sv, Circle(c2, r, 1.0))
+        if abs(rf - r) > 0.2 * r or np.linalg.norm(c2f - c2) > 0.2 * r:   # refinement wandered off
+            c2f, rf = c2, r
+        lat = float(np.median((P[band] - c3) @ n)) if len(band) else 0.0
+        cen = sv.origin + c2f[0] * sv.e1 + c2f[1] * sv.e2 + ((c3 - sv.origin) @ n + lat) * n
+        out.append(Ring(-1, cen, n.copy(), float(rf), 0.0))
+        bands.append(band)
+    return out, bands

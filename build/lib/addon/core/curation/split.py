@@ -1,0 +1,96 @@
+"""Automatic part labels from the keypoints (numpy, no bpy).
+
+Every point of space gets a region from the keypoints (canonical metres):
+- crank: within the crank radius of the pedal axle and outside the bottom-bracket shell's
+  width (|Z| > BB_HALF), or on the axle itself;
+- steering: the front wheel disc, the fork between the front axle and the head tube, the
+  steerer inside the head tube (closer to the axis than the head tube wall), and the cockpit
+  above and in front of the saddle nose;
+- frame: the rest.
+A connected component takes the crank or steering label only if (almost) all of its surface
+lies in that region: rigid parts are whole pieces in real models, and a frame tube that merely
+reaches into a region (a chain stay next to the chainring) stays on the frame.  A large
+component that lies across regions (a fused single-mesh model) is labelled per face instead.
+"""
+import numpy as np
+
+FRAME, STEERING, CRANK, JUNK = 0, 1, 2, -1
+PART_NAMES = {FRAME: "frame", STEERING: "steering", CRANK: "crank"}
+BB_HALF = 0.036        # half the bottom-bracket shell width (68-73 mm shells)
+WHOLE = 0.97           # share of a component's area that must lie in a region
+FUSED = 0.05           # components above this share of the bike's area may be cut
+
+
+def _seg_dist(p, a, b):
+    ab = b - a
+    t = np.clip(((p - a) @ ab) / (ab @ ab), 0, 1)
+    return np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
+
+
+def regions(X, kp, head_radius=None, wheel_radius=None):
+    """Region label (FRAME/STEERING/CRANK) per canonical point X (n, 3)."""
+    X = np.asarray(X, float)
+    out = np.full(len(X), FRAME)
+    ca, fa = kp["crank_axle"], kp["front_axle"]
+    sb, st = kp["steer_bottom"], kp["steer_top"]
+    R = wheel_radius if wheel_radius is not None else fa[1]
+    r_ht = head_radius if head_radius else 0.02
+    # crank
+    rc = max(np.hypot(*(kp[p][:2] - ca[:2])) for p in ("pedal_left", "pedal_right")) + 0.07
+    dxy = np.hypot(X[:, 0] - ca[0], X[:, 1] - ca[1])
+    crank = ((dxy < rc) & (np.abs(X[:, 2]) > BB_HALF)) | ((dxy < 0.016) & (np.abs(X[:, 2]) < rc))
+    # steering
+    a = (st - sb) / np.linalg.norm(st - sb)
+    span = np.linalg.norm(st - sb)
+    t = (X - sb) @ a
+    rho = np.linalg.norm((X - sb) - np.outer(t, a), axis=1)
+    in_head = (t >= 0) & (t <= span) & (rho < r_ht + 0.012)
+    steer = np.zeros(len(X), bool)
+    steer |= (np.hypot(X[:, 0] - fa[0], X[:, 1] - fa[1]) < R + 0.03) & (np.abs(X[:, 2]) < 0.15)
+    steer |= (_seg_dist(X[:, :2], fa[:2], sb[:2]) < 0.07) & (np.abs(X[:, 2]) < 0.15) & (t < 0)
+    cockpit_x = kp["seat"][0] + 0.15 if "seat" in kp else ca[0] + 0.1
+    steer |= (X[:, 1] > st[1] - 0.16) & (X[:, 0] > cockpit_x)
+    steer = np.where(in_head, rho < 0.8 * r_ht, steer)
+    out[steer] = STEERING
+    out[crank & ~steer] = CRANK
+    return out
+
+
+def label_triangles(view, keep_tri, kp, head_radius=None, wheel_radius=None, has_crank=True):
+    """Part label per triangle of view.soup (JUNK for triangles outside the kept assembly).
+
+    Returns (labels (m,), per-face flag `cut` (m,) True where a fused component was labelled
+    per face)."""
+    soup = view.soup
+    reg = regions(view.tri_c, kp, head_radius, wheel_radius)
+    # votes use 7 points per triangle (corners, edge midpoints, centroid): a long tube face
+    # that reaches into a region then counts only the part that lies inside it
+    tri = view.P[soup.TW]
+    bary = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [.5, .5, 0], [.5, 0, .5], [0, .5, .5], [1 / 3, 1 / 3, 1 / 3]])
+    samples = np.einsum("kj,mjd->mkd", bary, tri).reshape(-1, 3)
+    vote = regions(samples, kp, head_radius, wheel_radius).reshape(len(tri), len(bary))
+    if not has_crank:
+        reg[reg == CRANK] = FRAME
+        vote[vote == CRANK] = FRAME
+    lab = np.full(len(soup.TW), JUNK)
+    cut = np.zeros(len(soup.TW), bool)
+    total = view.area[keep_tri].sum()
+    for c in view.comps:
+        ti = c.tris
+        a = view.area[ti]
+        A = a.sum()
+        if A <= 0:
+            lab[ti] = FRAME
+            continue
+        v = vote[ti]
+        share = np.array([(a[:, None] * (v == k)).sum() for k in (FRAME, STEERING, CRANK)]) / (A * v.shape[1])
+        if share[CRANK] >= WHOLE:
+            lab[ti] = CRANK
+        elif share[STEERING] >= WHOLE:
+            lab[ti] = STEERING
+        elif A > FUSED * total and share.max() < WHOLE and np.sort(share)[-2] > 0.02:
+            lab[ti] = reg[ti]
+            cut[ti] = True
+        else:
+            lab[ti] = FRAME
+    return lab, cut

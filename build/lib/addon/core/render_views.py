@@ -1,0 +1,77 @@
+"""The render_views stage: a bike folder -> views/<part>/ for each part and the whole bike."""
+import json
+import os
+from dataclasses import replace
+
+from . import render
+from .contract import UserError
+
+ALL_PARTS = ("frame", "steering", "crank", render.WHOLE)
+
+
+def parse_parts(spec, available):
+    if spec in (None, "", "all"):
+        return [p for p in ALL_PARTS if p in available or p == render.WHOLE]
+    parts = [p.strip() for p in spec.split(",") if p.strip()]
+    for p in parts:
+        if p not in ALL_PARTS:
+            raise UserError(f"unknown part '{p}' (choose from {', '.join(ALL_PARTS)} or 'all')")
+        if p != render.WHOLE and p not in available:
+            raise UserError(f"this bike has no '{p}' part (it has {', '.join(sorted(available))})")
+    return parts
+
+
+def parse_views(spec, n=36):
+    if spec in (None, "", "all"):
+        return None
+    try:
+        views = [int(v) for v in spec.split(",")]
+    except ValueError:
+        raise UserError(f"--views must be comma-separated integers, got '{spec}'")
+    bad = [v for v in views if not 0 <= v < n]
+    if bad:
+        raise UserError(f"view index {bad[0]} out of range 0..{n - 1}")
+    return views
+
+
+def render_bike(bike_dir, parts="all", views=None, samples=None, denoise=None, size=None, threads=2,
+                progress=print):
+    from .bike_asset import open_bike  # opens bike.blend; UserError if missing/unreadable
+
+    if not os.path.isdir(bike_dir):
+        raise UserError(f"bike folder not found: {bike_dir}")
+    view_list = parse_views(views)
+    bike = open_bike(bike_dir)
+    part_objs = bike["parts"]
+    chosen = parse_parts(parts, set(part_objs))
+    settings = render.RenderSettings(threads=threads)
+    if samples is not None:
+        if samples < 1:
+            raise UserError("--samples must be >= 1")
+        settings = replace(settings, samples=samples)
+    if denoise is not None:
+        settings = replace(settings, denoise=denoise)
+    if size is not None:
+        if size < 16:
+            raise UserError("--size must be >= 16")
+        settings = replace(settings, size=size)
+
+    import bpy
+
+    scene = bpy.context.scene
+    render.configure_cycles(scene, settings)
+    render.setup_lighting(scene)
+    kp = bike["keypoints"]
+    with open(os.path.join(bike_dir, "keypoints.json")) as f:
+        kp_parts = json.load(f).get("parts", {})  # which keypoints each part carries
+    results = {}
+    for part in chosen:
+        if part == render.WHOLE:
+            objs, names = list(part_objs.values()), list(kp)
+        else:
+            objs, names = [part_objs[part]], kp_parts.get(part, [])
+        part_kp = {k: kp[k] for k in names if k in kp}
+        out = os.path.join(bike_dir, "views", part)
+        results[part] = render.render_part(scene, objs, out, part_kp, views=view_list, settings=settings,
+                                           progress=progress, label=f"{os.path.basename(os.path.normpath(bike_dir))}/{part}")
+    return results

@@ -1,0 +1,304 @@
+"""3DGS Gaussians in Blender as Gaussians: oriented ellipsoids with a Gaussian falloff and
+view-dependent colour from their spherical harmonics (Cycles; splat_import.py's default mode).
+
+Geometry: Geometry Nodes instance a proxy icosahedron on every point, rotated by the point's
+`g_rot` (XYZ Euler of C R, Blender frame) and scaled by `g_scale` = K_SIGMA * (sx, sy, sz); the
+icosahedron is sized so that its inscribed sphere is the unit sphere, i.e. the proxy encloses
+the whole K_SIGMA ellipsoid.
+
+Opacity (shader): the Texture Coordinate node's Object output and a World->Object Vector
+Transform both use the instance's own transform, so in them the ellipsoid is the unit sphere
+and the ray direction D is whitened too.  The ray's closest approach to the centre in sigma
+units is d^2 = |P|^2 - (P . D/|D|)^2 for any point P on the ray (P in sigma units), so the hit
+on the proxy's front face carries the 3D Gaussian's peak along the ray, which for a pinhole ray
+is the projected 2D Gaussian the rasterizer evaluates: alpha = opacity * exp(-d^2 / 2), dropped
+below 1/255 and capped at 0.99 as 3DGS does.  Back faces are transparent, so each Gaussian is met
+once, and Cycles composites the hits front to back along each ray (per-pixel sorted blending).
+
+Colour (shader): colour = max(0, 0.5 + sum_k Y_k(d) sh_k) in the INRIA 3DGS basis and order
+(splatting/sh.py), d the unit direction camera -> shading point in the canonical frame; the
+result is the sRGB display value 3DGS trains against, so it is linearised (IEC 61966-2-1) for
+Blender's Standard view transform and emitted.  SH coefficient k of a point is the instance
+attribute `sh_k` (RGB as a vector); degrees 0-3 follow the file's f_rest count.
+"""
+import numpy as np
+
+from . import frames
+
+K_SIGMA = 3.0  # proxy extent in standard deviations (3DGS's screen-space cut-off is 3 sigma too)
+ALPHA_MIN, ALPHA_MAX = 1.0 / 255.0, 0.99  # 3DGS's skip threshold and cap
+# Cycles transparent bounces: a ray meets two proxy surfaces per Gaussian it passes (the back
+# face is transparent); trained parts stack a few hundred along a ray through the bike.
+TRANSPARENT_BOUNCES = 1024
+ICO_INRADIUS = 0.7946544722917661  # inscribed radius of the unit-circumradius icosahedron
+C0 = 0.28209479177387814
+C1 = 0.4886025119029199
+C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
+C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
+      -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
+
+
+# ---- numpy side --------------------------------------------------------------------------
+
+def quat_to_matrix(q):
+    """wxyz (N, 4), any norm -> rotation matrices (N, 3, 3)."""
+    q = np.asarray(q, float)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True).clip(1e-30)
+    w, x, y, z = q.T
+    return np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+                     2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                     2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], 1).reshape(-1, 3, 3)
+
+
+def matrix_to_euler_xyz(R):
+    """(N, 3, 3) -> Blender 'XYZ' Euler (N, 3) with R = Rz(c) Ry(b) Rx(a)."""
+    sy = -R[:, 2, 0]
+    b = np.arcsin(np.clip(sy, -1.0, 1.0))
+    gimbal = np.abs(sy) > 1 - 1e-9
+    a = np.where(gimbal, np.arctan2(-R[:, 1, 2], R[:, 1, 1]), np.arctan2(R[:, 2, 1], R[:, 2, 2]))
+    c = np.where(gimbal, 0.0, np.arctan2(R[:, 1, 0], R[:, 0, 0]))
+    return np.stack([a, b, c], 1)
+
+
+def sh_degree_of(names):
+    n_rest = sum(1 for n in names if n.startswith("f_rest_"))
+    for deg, k in ((3, 45), (2, 24), (1, 9), (0, 0)):
+        if n_rest >= k:
+            return deg
+    return 0
+
+
+def gaussian_points(data, max_degree=3):
+    """Structured 3DGS array -> per-point arrays for the Gaussian mode, Blender frame.
+
+    co (N, 3); opacity (N,) sigmoid; rot (N, 3) XYZ Euler of C R (R from the wxyz quaternion);
+    scale (N, 3) K_SIGMA * exp(log scale); sh (N, K, 3) coefficients with sh[:, 0] = f_dc and
+    f_rest read channel-major (f_rest_{c * (K-1) + k - 1}); degree.
+    """
+    f = lambda k: data[k].astype(np.float64)  # noqa: E731
+    names = data.dtype.names
+    deg = min(sh_degree_of(names), max_degree)
+    n_rest_file = sum(1 for n in names if n.startswith("f_rest_")) // 3
+    K = (deg + 1) ** 2
+    sh = np.zeros((len(data), K, 3))
+    sh[:, 0] = np.stack([f(f"f_dc_{c}") for c in range(3)], 1)
+    for k in range(1, K):
+        for c in range(3):
+            sh[:, k, c] = f(f"f_rest_{c * n_rest_file + k - 1}")
+    R = quat_to_matrix(np.stack([f(f"rot_{i}") for i in range(4)], 1))
+    # the ellipsoid is {C R S u : |u| <= 1}: its rotation in Blender's frame is C R (a proper
+    # rotation), with the file's scales on the same local axes (not C R C^T, which would
+    # swap the local y and z scales)
+    Rb = frames.C @ R
+    return {"co": frames.to_blender(np.stack([f("x"), f("y"), f("z")], 1)),
+            "opacity": 1.0 / (1.0 + np.exp(-f("opacity"))),
+            "rot": matrix_to_euler_xyz(Rb),
+            "scale": K_SIGMA * np.exp(np.stack([f(f"scale_{i}") for i in range(3)], 1)),
+            "sh": sh, "degree": deg}
+
+
+# ---- bpy side ----------------------------------------------------------------------------
+
+def _named_vector(n, name):
+    from .splat_import import _enabled_output
+
+    a = n.new("GeometryNodeInputNamedAttribute")
+    a.data_type = "FLOAT_VECTOR"
+    a.inputs["Name"].default_value = name
+    return _enabled_output(a, "Attribute")
+
+
+def gaussian_node_group(material, name="splat_gaussians"):
+    """Geometry Nodes: vertices -> points -> an icosahedron instance per point (g_rot, g_scale)."""
+    import bpy
+
+    from .splat_import import _new_socket
+
+    ng = bpy.data.node_groups.new(name, "GeometryNodeTree")
+    _new_socket(ng, "Geometry", "INPUT", "NodeSocketGeometry")
+    _new_socket(ng, "Geometry", "OUTPUT", "NodeSocketGeometry")
+    n, link = ng.nodes, ng.links.new
+    gin, gout = n.new("NodeGroupInput"), n.new("NodeGroupOutput")
+    to_points = n.new("GeometryNodeMeshToPoints")
+    to_points.mode = "VERTICES"
+    ico = n.new("GeometryNodeMeshIcoSphere")
+    ico.inputs["Radius"].default_value = 1.0 / ICO_INRADIUS
+    ico.inputs["Subdivisions"].default_value = 1
+    set_mat = n.new("GeometryNodeSetMaterial")
+    set_mat.inputs["Material"].default_value = material
+    inst = n.new("GeometryNodeInstanceOnPoints")
+    link(gin.outputs[0], to_points.inputs["Mesh"])
+    link(ico.outputs["Mesh"], set_mat.inputs["Geometry"])
+    link(to_points.outputs["Points"], inst.inputs["Points"])
+    link(set_mat.outputs["Geometry"], inst.inputs["Instance"])
+    link(_named_vector(n, "g_rot"), inst.inputs["Rotation"])  # a vector into a 4.x Rotation socket is an Euler
+    link(_named_vector(n, "g_scale"), inst.inputs["Scale"])
+    link(inst.outputs["Instances"], gout.inputs[0])
+    for i, node in enumerate((gin, to_points, inst, gout)):
+        node.location = (220 * i, 0)
+    ico.location, set_mat.location = (220, -250), (440, -250)
+    return ng
+
+
+class _Nodes:
+    """Tiny expression builder over shader math nodes (scalar and vector)."""
+
+    def __init__(self, nt):
+        self.nt, self.n, self.link = nt, nt.nodes, nt.links.new
+
+    def math(self, op, a, b=None, c=None):
+        node = self.n.new("ShaderNodeMath")
+        node.operation = op
+        for i, v in enumerate((a, b, c)):
+            if v is None:
+                continue
+            if isinstance(v, (int, float)):
+                node.inputs[i].default_value = float(v)
+            else:
+                self.link(v, node.inputs[i])
+        return node.outputs[0]
+
+    def vmath(self, op, a, b=None, scale=None):
+        node = self.n.new("ShaderNodeVectorMath")
+        node.operation = op
+        for i, v in enumerate((a, b)):
+            if v is None:
+                continue
+            if isinstance(v, (tuple, list)):
+                node.inputs[i].default_value = v
+            else:
+                self.link(v, node.inputs[i])
+        if scale is not None:
+            sock = node.inputs["Scale"] if "Scale" in node.inputs else node.inputs[3]
+            if isinstance(scale, (int, float)):
+                sock.default_value = float(scale)
+            else:
+                self.link(scale, sock)
+        return node.outputs["Value"] if op in ("DOT_PRODUCT", "LENGTH", "DISTANCE") else node.outputs["Vector"]
+
+    def mul(self, *xs):
+        out = xs[0]
+        for x in xs[1:]:
+            out = self.math("MULTIPLY", out, x)
+        return out
+
+    def attr(self, name, output="Vector"):
+        a = self.n.new("ShaderNodeAttribute")
+        a.attribute_type = "INSTANCER"  # Geometry Nodes instance attributes
+        a.attribute_name = name
+        return a.outputs[output]
+
+
+def _sh_basis(b, x, y, z, degree):
+    """Shader sockets of Y_k(d), k = 1..(degree+1)^2 - 1 (Y_0 = C0 is folded into a constant)."""
+    m, s = b.mul, b.math
+    out = []
+    if degree >= 1:
+        out += [m(y, -C1), m(z, C1), m(x, -C1)]
+    if degree >= 2:
+        xx, yy, zz, xy, yz, xz = m(x, x), m(y, y), m(z, z), m(x, y), m(y, z), m(x, z)
+        out += [m(xy, C2[0]), m(yz, C2[1]),
+                m(s("SUBTRACT", s("SUBTRACT", m(zz, 2.0), xx), yy), C2[2]),
+                m(xz, C2[3]), m(s("SUBTRACT", xx, yy), C2[4])]
+    if degree >= 3:
+        out += [m(y, s("SUBTRACT", m(xx, 3.0), yy), C3[0]),
+                m(xy, z, C3[1]),
+                m(y, s("SUBTRACT", s("SUBTRACT", m(zz, 4.0), xx), yy), C3[2]),
+                m(z, s("SUBTRACT", s("SUBTRACT", m(zz, 2.0), m(xx, 3.0)), m(yy, 3.0)), C3[3]),
+                m(x, s("SUBTRACT", s("SUBTRACT", m(zz, 4.0), xx), yy), C3[4]),
+                m(z, s("SUBTRACT", xx, yy), C3[5]),
+                m(x, s("SUBTRACT", xx, m(yy, 3.0)), C3[6])]
+    return out
+
+
+def _srgb_to_linear(b, v):
+    """Vector (r, g, b) sRGB-encoded -> linear, the exact piecewise curve per channel."""
+    sep = b.n.new("ShaderNodeSeparateXYZ")
+    b.link(v, sep.inputs[0])
+    comb = b.n.new("ShaderNodeCombineXYZ")
+    for i in range(3):
+        c = sep.outputs[i]
+        lo = b.math("DIVIDE", c, 12.92)
+        hi = b.math("POWER", b.math("DIVIDE", b.math("ADD", c, 0.055), 1.055), 2.4)
+        is_lo = b.math("LESS_THAN", c, 0.04045)
+        b.link(b.math("ADD", hi, b.mul(is_lo, b.math("SUBTRACT", lo, hi))), comb.inputs[i])
+    return comb.outputs[0]
+
+
+def gaussian_material(degree, name="splat_gaussian"):
+    """Emission material with the Gaussian falloff and SH colour (see the module docstring)."""
+    import bpy
+
+    mat = bpy.data.materials.new(name)
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    b = _Nodes(nt)
+    tex = b.n.new("ShaderNodeTexCoord")
+    geo = b.n.new("ShaderNodeNewGeometry")
+    # Object coordinates and World->Object vectors use the instance's own transform, so both
+    # are whitened (units of K_SIGMA sigma); this also holds when the imported object is moved
+    P = b.vmath("SCALE", tex.outputs["Object"], scale=K_SIGMA)
+    vt = b.n.new("ShaderNodeVectorTransform")
+    vt.vector_type, vt.convert_from, vt.convert_to = "VECTOR", "WORLD", "OBJECT"
+    b.link(geo.outputs["Incoming"], vt.inputs[0])
+    D = b.vmath("NORMALIZE", vt.outputs[0])
+    t = b.vmath("DOT_PRODUCT", P, D)
+    d2 = b.math("SUBTRACT", b.vmath("DOT_PRODUCT", P, P), b.mul(t, t))  # sigma units
+    alpha = b.mul(b.attr("opacity", "Fac"), b.math("EXPONENT", b.mul(b.math("MAXIMUM", d2, 0.0), -0.5)))
+    alpha = b.mul(alpha, b.math("GREATER_THAN", alpha, ALPHA_MIN))
+    alpha = b.math("MINIMUM", alpha, ALPHA_MAX)
+
+    # view direction camera -> point = -Incoming, Blender (x, y, z) -> canonical (x, z, -y)
+    sep = b.n.new("ShaderNodeSeparateXYZ")
+    b.link(b.vmath("NORMALIZE", geo.outputs["Incoming"]), sep.inputs[0])
+    x, y, z = b.mul(sep.outputs[0], -1.0), b.mul(sep.outputs[2], -1.0), sep.outputs[1]
+    col = b.vmath("SCALE", b.attr("sh_0"), scale=C0)
+    for k, Y in enumerate(_sh_basis(b, x, y, z, degree), start=1):
+        col = b.vmath("ADD", col, b.vmath("SCALE", b.attr(f"sh_{k}"), scale=Y))
+    col = b.vmath("ADD", col, (0.5, 0.5, 0.5))
+    col = b.vmath("MINIMUM", b.vmath("MAXIMUM", col, (0.0, 0.0, 0.0)), (1.0, 1.0, 1.0))  # PNG range
+    col = _srgb_to_linear(b, col)
+
+    emit = b.n.new("ShaderNodeEmission")
+    emit.inputs["Strength"].default_value = 1.0
+    b.link(col, emit.inputs["Color"])
+    clear, clear_back = b.n.new("ShaderNodeBsdfTransparent"), b.n.new("ShaderNodeBsdfTransparent")
+    mix = b.n.new("ShaderNodeMixShader")
+    b.link(alpha, mix.inputs["Fac"])
+    b.link(clear.outputs[0], mix.inputs[1])
+    b.link(emit.outputs[0], mix.inputs[2])
+    back = b.n.new("ShaderNodeMixShader")
+    b.link(geo.outputs["Backfacing"], back.inputs["Fac"])
+    b.link(mix.outputs[0], back.inputs[1])
+    b.link(clear_back.outputs[0], back.inputs[2])
+    out = b.n.new("ShaderNodeOutputMaterial")
+    b.link(back.outputs[0], out.inputs["Surface"])
+    if hasattr(mat, "blend_method"):  # EEVEE Legacy (3.x - 4.1): alpha blending, no shadows
+        try:
+            mat.blend_method = "BLEND"
+            mat.shadow_method = "NONE"
+        except (AttributeError, TypeError):
+            pass
+    for i, node in enumerate(nt.nodes):  # a readable grid in the node editor
+        node.location = (200 * (i % 12), -160 * (i // 12))
+    return mat
+
+
+def make_gaussian_object(name, pts, material, node_group, collection=None):
+    """Vertex-only mesh with opacity, g_rot, g_scale, sh_k attributes and the instancing modifier."""
+    import bpy
+
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(pts["co"]))
+    mesh.vertices.foreach_set("co", np.ascontiguousarray(pts["co"], dtype=np.float32).ravel())
+    a = mesh.attributes.new("opacity", "FLOAT", "POINT")
+    a.data.foreach_set("value", np.ascontiguousarray(pts["opacity"], dtype=np.float32))
+    vectors = {"g_rot": pts["rot"], "g_scale": pts["scale"]}
+    vectors.update({f"sh_{k}": pts["sh"][:, k] for k in range(pts["sh"].shape[1])})
+    for key, arr in vectors.items():
+        a = mesh.attributes.new(key, "FLOAT_VECTOR", "POINT")
+        a.data.foreach_set("vector", np.ascontiguousarray(arr, dtype=np.float32).ravel())
+    from .splat_import import link_with_nodes
+    return link_with_nodes(name, mesh, node_group, "splat_gaussians", collection)

@@ -1,0 +1,194 @@
+"""A bike's folder (docs/contract.md "Bike folder"), the same whether make_bikes or curate wrote it:
+
+    <bike>/bike.blend  keypoints.json  meta.json
+    <bike>/views/<part>/cameras.json  transforms.json  keypoints.json  points.ply
+    <bike>/views/<part>/rgba/cameraNNNN/0000.png   straight alpha (what training reads)
+    <bike>/views/<part>/img/cameraNNNN/0000.jpg    RGB composited on black (SHERF)
+    <bike>/views/<part>/mask/cameraNNNN/0000.png   alpha > 0.5 -> 255
+    <bike>/gaussians/<part>.ply + <part>.json      trained part Gaussians and their metrics
+"""
+import json
+import os
+
+import numpy as np
+
+from .atomic import atomic_path, write_json
+from .errors import UserError
+
+FILES = ("bike.blend", "keypoints.json", "meta.json")
+PARTS = ("frame", "steering", "crank")
+KEYPOINTS = ("seat", "steer_top", "steer_bottom", "handle_left", "handle_right", "crank_axle",
+             "pedal_left", "pedal_right", "front_axle", "rear_axle", "ground")
+CRANK_KEYPOINTS = ("crank_axle", "pedal_left", "pedal_right")
+# keypoints that keypoints.json "parts" does not list belong to these parts (else to frame)
+DEFAULT_KEYPOINT_PARTS = {"steering": ("handle_left", "handle_right", "front_axle"),
+                          "crank": ("pedal_left", "pedal_right")}
+WHOLE = "whole"
+FRAME = "0000"  # the single time step of a static part
+MASK_ALPHA = 127  # 8-bit alpha above this (alpha > 0.5) is inside the mask
+
+
+def read_json(path, what="JSON file", missing=None):
+    """Load a JSON file; every failure is one UserError naming the file (`missing`: the message
+    for a file that does not exist)."""
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except FileNotFoundError:
+        raise UserError(missing or f"{path}: missing ({what})") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise UserError(f"{path} is not valid JSON: {e}") from None
+    except OSError as e:
+        raise UserError(f"cannot read {path}: {e.strerror or e} (expected a {what})") from None
+
+
+def check_bike_dir(bike_dir):
+    bike_dir = os.fspath(bike_dir)
+    if not os.path.isdir(bike_dir):
+        raise UserError(f"bike folder not found: {bike_dir}")
+    return bike_dir
+
+
+def read_meta(bike_dir):
+    meta = read_json(os.path.join(check_bike_dir(bike_dir), "meta.json"),
+                     "bike meta.json written by make_bikes/curate")
+    if not isinstance(meta, dict):
+        raise UserError(f"{os.path.join(bike_dir, 'meta.json')}: expected an object")
+    return meta
+
+
+def read_keypoints(bike_dir_or_file):
+    """keypoints.json (a bike folder's or a views folder's) -> {name: (3,) float64}, canonical metres."""
+    p = os.fspath(bike_dir_or_file)
+    path = os.path.join(p, "keypoints.json") if os.path.isdir(p) else p
+    doc = read_json(path, "keypoints.json")
+    kp = doc.get("keypoints") if isinstance(doc, dict) else None
+    if not isinstance(kp, dict):
+        raise UserError(f"{path}: expected {{\"keypoints\": {{name: [x, y, z]}}}}")
+    out = {}
+    for k, v in kp.items():
+        try:
+            a = np.asarray(v, dtype=np.float64).reshape(3)
+        except (TypeError, ValueError):
+            raise UserError(f"{path}: keypoint '{k}' is not 3 numbers") from None
+        if not np.isfinite(a).all():
+            raise UserError(f"{path}: keypoint '{k}' is not finite")
+        out[k] = a
+    return out
+
+
+def has_crank(bike_dir):
+    """Whether a bike folder's rideable has pedals (meta.json "has_crank", true when absent); False
+    for a folder without a readable meta.json."""
+    try:
+        return bool(read_meta(bike_dir).get("has_crank", True))
+    except UserError:
+        return False
+
+
+def parse_keypoints_doc(doc, has_crank=True, required=(), source="keypoints.json"):
+    """A keypoints.json object -> (coords {name: (3,) float64}, part_of {name: part}); one
+    UserError naming `source` for anything the rig cannot use (wrong frame or units, a missing
+    required keypoint, non-finite coordinates, a part list naming an unknown or absent part)."""
+    if not isinstance(doc, dict) or not isinstance(doc.get("keypoints"), dict):
+        raise UserError(f"{source}: keypoints.json has no 'keypoints' object")
+    if doc.get("frame", "canonical") != "canonical" or doc.get("units", "m") != "m":
+        raise UserError(f"{source}: keypoints.json must be frame 'canonical', units 'm'")
+    kps = doc["keypoints"]
+    missing = [k for k in required if k not in kps]
+    if missing:
+        raise UserError(f"{source}: keypoints.json lacks keypoints {', '.join(missing)}")
+    coords = {}
+    for k, v in kps.items():
+        ok = isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+        a = np.asarray(v, dtype=np.float64) if ok else None
+        if a is None or not np.isfinite(a).all():
+            raise UserError(f"{source}: keypoint {k} must be 3 finite numbers, got {v!r}")
+        coords[k] = a
+    part_of = {k: "frame" for k in coords}
+    listed = doc.get("parts")
+    if listed is None:
+        listed = {p: [k for k in ks if k in coords] for p, ks in DEFAULT_KEYPOINT_PARTS.items()}
+    if not isinstance(listed, dict):
+        raise UserError(f"{source}: keypoints.json 'parts' must map part names to keypoint lists")
+    for p, ks in listed.items():
+        if p not in PARTS:
+            raise UserError(f"{source}: keypoints.json 'parts' names unknown part {p!r}")
+        if p == "crank" and not has_crank and ks:
+            raise UserError(f"{source}: keypoints.json assigns {ks} to a crank this rideable lacks")
+        for k in ks:
+            if k not in coords:
+                raise UserError(f"{source}: keypoints.json 'parts' lists {k!r}, which has no coordinates")
+            part_of[k] = p  # a keypoint listed twice sits on the shared axis: either part works
+    return coords, part_of
+
+
+def keypoints_doc(keypoints, parts=None):
+    doc = {"frame": "canonical", "units": "m", "keypoints": {k: [float(x) for x in v] for k, v in keypoints.items()}}
+    if parts is not None:
+        doc["parts"] = parts
+    return doc
+
+
+def views_dir(bike_dir, part):
+    return os.path.join(bike_dir, "views", part)
+
+
+def gaussians_path(bike_dir, part):
+    return os.path.join(bike_dir, "gaussians", part + ".ply")
+
+
+def view_paths(views_dir, name):
+    return {"rgba": os.path.join(views_dir, "rgba", name, FRAME + ".png"),
+            "img": os.path.join(views_dir, "img", name, FRAME + ".jpg"),
+            "mask": os.path.join(views_dir, "mask", name, FRAME + ".png")}
+
+
+def view_complete(paths):
+    return all(os.path.isfile(p) and os.path.getsize(p) > 0 for p in paths.values())
+
+
+def derived_images(rgba):
+    """(H, W, 4) uint8 straight-alpha RGBA -> (RGB on black (H, W, 3), mask (H, W) 0/255)."""
+    rgba = np.asarray(rgba)
+    alpha = rgba[..., 3:4].astype(np.float32) / 255.0
+    on_black = np.clip(rgba[..., :3].astype(np.float32) * alpha + 0.5, 0, 255).astype(np.uint8)
+    mask = (rgba[..., 3] > MASK_ALPHA).astype(np.uint8) * 255
+    return on_black, mask
+
+
+def write_derived(paths, rgba=None, rendered_png=None):
+    """Write paths["img"] and paths["mask"] derived from one RGBA, then paths["rgba"] last (its
+    presence plus the other two marks a view complete, so a killed run redoes it), atomically.
+
+    rgba: (H, W, 4) uint8 array, or rendered_png: a finished RGBA PNG that is moved into place."""
+    from PIL import Image
+
+    if rgba is None:
+        rgba = np.asarray(Image.open(rendered_png).convert("RGBA"))
+    on_black, mask = derived_images(rgba)
+    with atomic_path(paths["img"]) as tmp:
+        Image.fromarray(on_black).save(tmp, format="JPEG", quality=95)
+    with atomic_path(paths["mask"]) as tmp:
+        Image.fromarray(mask).save(tmp, format="PNG")
+    os.makedirs(os.path.dirname(paths["rgba"]) or ".", exist_ok=True)
+    if rendered_png is not None:
+        os.replace(rendered_png, paths["rgba"])
+    else:
+        with atomic_path(paths["rgba"]) as tmp:
+            Image.fromarray(np.asarray(rgba, dtype=np.uint8)).save(tmp, format="PNG")
+    return paths
+
+
+def write_view(views_dir, name, rgba=None, rendered_png=None):
+    """One view of a views folder in the layout above (see write_derived)."""
+    return write_derived(view_paths(views_dir, name), rgba, rendered_png)
+
+
+def write_views_meta(views_dir, cameras, transforms=None, keypoints=None):
+    """cameras.json (+ transforms.json, + the part's keypoints.json) of a views folder."""
+    write_json(os.path.join(views_dir, "cameras.json"), cameras)
+    if transforms is not None:
+        write_json(os.path.join(views_dir, "transforms.json"), transforms)
+    if keypoints is not None:
+        write_json(os.path.join(views_dir, "keypoints.json"), keypoints_doc(keypoints))

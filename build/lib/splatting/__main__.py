@@ -1,0 +1,3 @@
+from splatting.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,52 @@
+"""`python -m splatting COMMAND ...`: one subcommand per pipeline stage.
+
+Each command lives in its own module exposing `add_arguments(parser)` and `run(args)`;
+modules are imported only when their command is used, so `--help` stays fast.
+"""
+import argparse
+import importlib
+import importlib.util
+import sys
+
+from cyclist_formats.errors import UserError
+
+# name -> (module, one-line help)
+COMMANDS = {
+    "demo": ("splatting.demo", "the whole pipeline from nothing on a reduced budget, with a report"),
+    "train": ("splatting.training.command", "train one part's Gaussians on its 36 rendered views"),
+    "pose-bike": ("splatting.bike.command", "re-pose a bike's part Gaussians with the 8-DoF pose"),
+    "contact-sheet": ("splatting.bike.contact_sheet", "one view of every bike in a library on one PNG"),
+    "rider": ("splatting.rider.command", "list the rider roster; export a rider mesh (rest or posed)"),
+    "rider-avatar": ("splatting.rider.avatar_build", "build a rider's Gaussian avatar (render, train, skin)"),
+    "cyclist": ("splatting.cyclist.command", "pose, fit and render a rider on a bike over a sequence of frames"),
+    "dataset": ("splatting.dataset.command", "COCO training images + annotations from a YAML config or preset"),
+}
+
+
+def _available():
+    return {k: v for k, v in COMMANDS.items() if importlib.util.find_spec(v[0]) is not None}
+
+
+def main(argv=None):
+    argv = list(sys.argv[1:] if argv is None else argv)
+    cmds = _available()
+    top = argparse.ArgumentParser(prog="python -m splatting", description=__doc__.splitlines()[0])
+    sub = top.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (_, helptext) in cmds.items():
+        sub.add_parser(name, help=helptext, add_help=False)
+    if not argv or argv[0] not in cmds:
+        top.parse_args(argv or ["--help"])  # prints help / usage error and exits
+        return 2
+    name, rest = argv[0], argv[1:]
+    module = importlib.import_module(cmds[name][0])
+    parser = argparse.ArgumentParser(prog=f"python -m splatting {name}", description=cmds[name][1])
+    module.add_arguments(parser)
+    args = parser.parse_args(rest)
+    try:
+        return module.run(args) or 0
+    except UserError as e:
+        sys.stderr.write(f"splatting {name}: error: {e}\n")
+        return 2
+    except KeyboardInterrupt:
+        sys.stderr.write(f"splatting {name}: interrupted\n")
+        return 130

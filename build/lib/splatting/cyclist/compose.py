@@ -1,0 +1,159 @@
+"""A cyclist = a posed bike + a rider fitted onto it by IK, as one Gaussian set with instance ids.
+
+Per pose (8-DoF, degrees/metres): the IK runs in the bike's own frame (theta_p, theta_s only: the
+analytic start assumes an upright bike facing +X), then the global transform H_g of the pose is
+folded into the rider's root rotation and translation, so the rider's LBS lands it on the posed
+bike in the world.  The bike is posed by BikeModel (H_s, H_p, H_g on its part Gaussians).
+"""
+from dataclasses import dataclass
+
+import numpy as np
+import roma
+import torch
+
+from splatting.bike.pose import check_poses
+from cyclist_formats.errors import UserError
+from splatting.gaussians.container import Gaussians
+from splatting.rider import ik
+from splatting.rider.kinematics import JOINT_NAMES
+from cyclist_formats.instances import IDS
+from cyclist_formats import instances
+
+PART_IDS = {**instances.PART_IDS, **instances.SUB_PART_IDS}
+
+
+@dataclass
+class CyclistFrame:
+    pose: np.ndarray              # (8,) degrees / metres
+    gaussians: Gaussians          # bike parts then rider, world frame
+    ids: torch.Tensor             # (N,) uint8 instance id per Gaussian
+    bike_keypoints: dict          # name -> (3,) float64 world
+    rider_joints: np.ndarray      # (24, 3) world, SMPL order, or None (bike only)
+    ik: dict                      # {"residual_m": {pair: m}, "flagged": {pair: bool}, "seat_offset_m"} or None
+
+
+SADDLE_RADIUS_M = 0.2  # the saddle (about 0.28 m long) lies within this of the seat-tube line
+SADDLE_DEPTH_M = 0.12  # ... and within this below the seat keypoint along the line (springs too)
+POST_RADIUS_M = 0.03   # the seat post: a thin cylinder on the line ...
+POST_MARGIN_M = 0.04   # ... starting this far beyond the seat tube's nominal top (tube end, collar)
+
+
+def saddle_slide(bike):
+    """(mask (N,) bool, unit axis (3,) float64) of the frame Gaussians that slide with the IK's
+    saddle auto-fit along the line crank_axle -> seat: the saddle (near the seat keypoint) and the
+    exposed seat post (on the line, beyond the seat tube).  Only when the asset says where its
+    seat tube ends (meta.json dimensions.seat_tube_m, written by the procedural generator);
+    otherwise (None, None): nothing is modelled that the asset lacks.  Thresholds were checked
+    against the generator's materials for all seven styles (tests/test_cyclist_saddle.py)."""
+    dims = (getattr(bike, "meta", None) or {}).get("dimensions") or {}
+    top = dims.get("seat_tube_m")
+    kp = bike.keypoints
+    if not isinstance(top, (int, float)) or "seat" not in kp or "crank_axle" not in kp or "frame" not in bike.part_names:
+        return None, None
+    u = kp["seat"] - kp["crank_axle"]
+    seat_t = float(u.norm())
+    u = u / seat_t
+    a, e = bike.ranges[bike.part_names.index("frame")]
+    rel = bike.canonical.means[a:e].double() - kp["crank_axle"]
+    t = rel @ u
+    radial = (rel - t[:, None] * u).norm(dim=1)
+    saddle = (t > seat_t - SADDLE_DEPTH_M) & (radial < SADDLE_RADIUS_M)
+    post = (t > float(top) + POST_MARGIN_M) & (radial < POST_RADIUS_M)
+    mask = torch.zeros(len(bike), dtype=torch.bool)
+    mask[a:e] = saddle | post
+    return (mask, u) if mask.any() else (None, None)
+
+
+class Cyclist:
+    def __init__(self, bike, avatar=None, ik_iterations=50):
+        self.bike, self.avatar, self.ik_iterations = bike, avatar, int(ik_iterations)
+        ids = torch.empty(len(bike), dtype=torch.uint8)
+        for name, (a, e) in zip(bike.part_names, bike.ranges):
+            ids[a:e] = PART_IDS[name]
+        if avatar is not None:
+            ids = torch.cat([ids, torch.full((len(avatar),), IDS["rider"], dtype=torch.uint8)])
+            have = set(bike.keypoints)
+            self.pairs = tuple((j, t) for j, t in ik.DEFAULT_PAIRS if t in have)
+            self.saddle_fit = "seat" in have and "crank_axle" in have
+            self.saddle_mask, self.saddle_axis = saddle_slide(bike) if self.saddle_fit else (None, None)
+        self.ids = ids
+
+    def fit_rider(self, poses, saddle_shared=False, init_local_aa=None):
+        """IK of the rider onto the bike at poses (B, 8) (bike frame; H_g is applied later)."""
+        p = check_poses(poses).clone()
+        p[:, 2:] = 0.0
+        targets = ik.posed_bike_keypoints(self.bike.keypoints, p)
+        return ik.solve(self.avatar.rest_joints, targets, init_local_aa=init_local_aa, iterations=self.ik_iterations,
+                        saddle_fit=self.saddle_fit, saddle_shared=saddle_shared and self.saddle_fit,
+                        pairs=self.pairs)
+
+    def pose(self, poses, saddle_shared=False, init_local_aa=None, fit=None):
+        """poses (B, 8) or (8,) -> list of B CyclistFrame.  fit: a fit_rider() result for exactly
+        these poses (a sequence fits all its frames at once, then poses them chunk by chunk)."""
+        p = check_poses(poses)
+        B = p.shape[0]
+        bt = self.bike.pose_tensors(p)
+        names = bt["keypoint_names"]
+        frames = []
+        rider_out = slide = None
+        if self.avatar is not None:
+            res = fit if fit is not None else self.fit_rider(p, saddle_shared, init_local_aa)
+            Hg = self.bike.part_transforms(p)["frame"].float()  # H_g: the frame part is H_g alone
+            Rg, tg = Hg[:, :3, :3], Hg[:, :3, 3]
+            rot = roma.rotvec_to_rotmat(res.local_aa.float())
+            rot[:, 0] = Rg @ rot[:, 0]
+            rest0 = self.avatar.rest_joints[0]
+            root = ((rest0 + res.root_trans.float())[:, None] @ Rg.transpose(1, 2))[:, 0] + tg - rest0
+            joints = res.joints.float() @ Rg.transpose(1, 2) + tg[:, None]
+            rider_out = (self.avatar.pose_tensors(rot, root), joints, res)
+            if res.seat_offset is not None and self.saddle_mask is not None:
+                # the fitted seat moves the saddle + post Gaussians and the seat keypoint with it
+                slide = res.seat_offset.double()[:, None] * (Rg.double() @ self.saddle_axis)  # (B, 3) world
+        for b in range(B):
+            means = bt["means"][b]
+            kp = {k: bt["keypoints"][b, j].numpy() for j, k in enumerate(names)}
+            if slide is not None:
+                means = means.clone()
+                means[self.saddle_mask] += slide[b].to(means.dtype)
+                kp["seat"] = kp["seat"] + slide[b].numpy()
+            parts = [Gaussians(means, bt["quats"][b], bt["log_scales"], bt["opacity_logits"], bt["sh"][b])]
+            joints = ikd = None
+            if rider_out is not None:
+                out, J, res = rider_out
+                ag = self.avatar.gaussians
+                parts.append(Gaussians(out["means"][b], out["quats"][b], ag.log_scales, ag.opacity_logits, out["sh"][b]))
+                joints = J[b].double().numpy()
+                ikd = {"residual_m": {k: float(v[b]) for k, v in res.residuals.items()},
+                       "flagged": {k: bool(v[b]) for k, v in res.flagged.items()},
+                       "seat_offset_m": None if res.seat_offset is None else float(res.seat_offset[b])}
+            frames.append(CyclistFrame(p[b].numpy(), Gaussians.cat(parts), self.ids, kp, joints, ikd))
+        return frames
+
+
+def take_fit(res, idx):
+    """The frames idx (a slice or index list) of an IKResult, as an IKResult."""
+    from dataclasses import replace
+    pick = lambda t: None if t is None else t[idx]  # noqa: E731
+    return replace(res, local_aa=res.local_aa[idx], root_trans=res.root_trans[idx], joints=res.joints[idx],
+                   loss=res.loss[idx], residuals={k: v[idx] for k, v in res.residuals.items()},
+                   flagged={k: v[idx] for k, v in res.flagged.items()}, seat_offset=pick(res.seat_offset),
+                   history=res.history[:, idx], seat=pick(res.seat))
+
+
+def frame_record(frame, index, extra=None):
+    """The docs/contract.md per-frame JSON object."""
+    from splatting.bike.pose import POSE_FIELDS
+    rec = {"frame": int(index), "pose": [float(x) for x in frame.pose], "pose_fields": list(POSE_FIELDS),
+           "units": {"angles": "deg", "lengths": "m"}, "coordinate_frame": "world (canonical axes)",
+           "bike_keypoints": {k: [float(x) for x in v] for k, v in frame.bike_keypoints.items()}}
+    if frame.rider_joints is not None:
+        rec["rider_joints"] = {n: [float(x) for x in frame.rider_joints[i]] for i, n in enumerate(JOINT_NAMES)}
+        rec["ik"] = frame.ik
+    if extra:
+        rec.update(extra)
+    return rec
+
+
+def check_rider_fits(cyclist):
+    if cyclist.avatar is not None and not cyclist.pairs:
+        raise UserError(f"bike {cyclist.bike.bike_id} has none of the keypoints the rider IK needs")

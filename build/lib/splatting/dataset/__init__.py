@@ -1,0 +1,1 @@
+"""Synthetic COCO training data (`python -m splatting dataset`): config, sampling, COCO writer."""

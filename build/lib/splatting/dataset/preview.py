@@ -1,0 +1,45 @@
+"""A strip of COCO samples with their annotations drawn on (masks, boxes, keypoints): a check by eye."""
+import json
+import os
+
+import numpy as np
+
+from cyclist_formats.atomic import atomic_path
+
+COLOURS = {"bicycle": (40, 120, 255), "person": (255, 60, 60), "cyclist": (40, 200, 90)}
+
+
+def coco_preview(coco_dir, out_png, n=4, tile=256):
+    from PIL import Image, ImageDraw
+    from pycocotools import mask as mask_utils
+
+    with open(os.path.join(coco_dir, "annotations.json")) as f:
+        ann = json.load(f)
+    cats = {c["id"]: c["name"] for c in ann["categories"]}
+    images = ann["images"][:n]
+    strip = Image.new("RGB", (tile * len(images), tile), (255, 255, 255))
+    for i, im in enumerate(images):
+        img = Image.open(os.path.join(coco_dir, "images", im["file_name"])).convert("RGB")
+        arr = np.asarray(img).astype(np.float32)
+        anns = [a for a in ann["annotations"] if a["image_id"] == im["id"]]
+        for a in anns:  # tint the instance masks (the cyclist union is drawn as its box only)
+            name = cats[a["category_id"]]
+            if name == "cyclist":
+                continue
+            m = mask_utils.decode(a["segmentation"]).astype(bool)
+            arr[m] = 0.6 * arr[m] + 0.4 * np.array(COLOURS[name])
+        img = Image.fromarray(arr.clip(0, 255).astype(np.uint8))
+        d = ImageDraw.Draw(img)
+        for a in anns:
+            name = cats[a["category_id"]]
+            x, y, w, h = a["bbox"]
+            d.rectangle([x, y, x + w, y + h], outline=COLOURS[name], width=2)
+            kp = np.array(a.get("keypoints", []), dtype=float).reshape(-1, 3)
+            for u, v, vis in kp:
+                if vis > 0:
+                    r = 3 if vis == 2 else 2
+                    d.ellipse([u - r, v - r, u + r, v + r], fill=(255, 255, 0) if vis == 2 else (120, 120, 120))
+        strip.paste(img.resize((tile, tile)), (i * tile, 0))
+    with atomic_path(out_png) as tmp:
+        strip.save(tmp, format="PNG")
+    return len(images)

@@ -1,0 +1,143 @@
+"""`demo`: the whole pipeline from nothing, on a reduced budget, with a report of this run.
+
+procedural bikes -> 36-view renders -> part Gaussians -> rider avatar -> 24-frame pedalling
+cyclist from 4 views -> small COCO set -> contact sheet -> point-cloud import into Blender with
+one Cycles render -> OUT/report.md.  Each step is skipped when its output exists, so an
+interrupted demo resumes.  Blender steps run as subprocesses (this package never imports bpy).
+"""
+import glob
+import json
+import os
+import subprocess
+import sys
+import time
+
+import yaml
+
+from cyclist_formats.atomic import atomic_path
+from cyclist_formats.errors import UserError
+from splatting import paths
+
+ROOT = str(paths.ROOT)
+PARTS = ("frame", "steering", "crank")
+
+
+def add_arguments(p):
+    p.add_argument("--out", default=os.path.join("out", "demo"))
+    p.add_argument("--bikes", type=int, default=3, help="procedural bikes to generate (default 3)")
+    p.add_argument("--rider", default="m_adult_average_185", help="roster rider id")
+    p.add_argument("--train-seconds", type=float, default=110, help="training budget per part (default 110 s)")
+    p.add_argument("--rider-train-seconds", type=float, default=140)
+    p.add_argument("--max-gaussians", type=int, default=15000, help="per part (default 15000)")
+    p.add_argument("--frames", type=int, default=24)
+    p.add_argument("--coco-count", type=int, default=24)
+
+
+class Steps:
+    def __init__(self, out):
+        self.out, self.times = out, {}
+
+    def run(self, name, cmd, done=None):
+        """Run one step as a subprocess unless `done` (a path) exists; time it."""
+        if done and os.path.exists(done):
+            print(f"demo: {name}: done earlier, skipped", flush=True)
+            return
+        print(f"demo: {name}", flush=True)
+        t = time.time()
+        r = subprocess.run(cmd, cwd=ROOT)
+        self.times[name] = time.time() - t
+        if r.returncode != 0:
+            raise UserError(f"step '{name}' failed (exit {r.returncode}): {' '.join(cmd)}")
+
+
+def run(args):
+    out = os.path.abspath(args.out)
+    py = sys.executable
+    bs = lambda s: os.path.join(ROOT, "blender_scripts", s)  # noqa: E731
+    st = Steps(out)
+    t0 = time.time()
+    st.run("procedural bikes", [py, bs("make_bikes.py"), "--out", out, "--count", str(args.bikes), "--seed", "0", "--no-extras"])
+    bikes = sorted(glob.glob(os.path.join(out, "bikes", "*", "bike.blend")))
+    bike_dirs = [os.path.dirname(b) for b in bikes]
+    if not bike_dirs:
+        raise UserError(f"no bikes were generated under {out}/bikes")
+    for b in bike_dirs[1:]:
+        st.run(f"view 3 of {os.path.basename(b)}", [py, bs("render_views.py"), "--bike", b, "--parts", "whole", "--views", "3"])
+    bike = bike_dirs[0]
+    st.run(f"36 views x 4 of {os.path.basename(bike)}", [py, bs("render_views.py"), "--bike", bike, "--parts", "all"])
+    for part in PARTS:
+        ply = os.path.join(bike, "gaussians", f"{part}.ply")
+        st.run(f"train {part}", [py, "-m", "splatting", "train", "--views", os.path.join(bike, "views", part),
+                                 "--time-budget-s", str(args.train_seconds), "--max-gaussians", str(args.max_gaussians)], done=ply)
+    riders = os.path.join(out, "riders")
+    st.run(f"rider avatar {args.rider}", [py, "-m", "splatting", "rider-avatar", "--id", args.rider, "--out",
+                                          os.path.join(riders, args.rider), "--time-budget-s", str(args.rider_train_seconds)],
+           done=os.path.join(riders, args.rider, "skinning.npz"))
+    cyc = os.path.join(out, "cyclist")
+    st.run(f"{args.frames}-frame cyclist from 4 views",
+           [py, "-m", "splatting", "cyclist", "--rider", args.rider, "--bike", bike, "--riders-root", riders,
+            "--frames", str(args.frames), "--views=0,90,180,-90", "--ply", "--synthetic", "never", "--out", cyc])
+    cfg_path = os.path.join(out, "dataset.yaml")
+    with open(os.path.join(ROOT, "blend_assets", "datasets", "cyclist.yaml")) as f:
+        cfg = yaml.safe_load(f)
+    cfg.update({"name": "demo", "count": args.coco_count, "riders": [args.rider], "riders_root": riders,
+                "bikes": [os.path.basename(bike)], "bikes_root": os.path.join(out, "bikes"), "synthetic_assets": "never"})
+    with atomic_path(cfg_path) as tmp:
+        with open(tmp, "w") as f:
+            yaml.safe_dump(cfg, f, sort_keys=False)
+    coco = os.path.join(out, "coco")
+    st.run("COCO set", [py, "-m", "splatting", "dataset", "--config", cfg_path, "--out", coco, "--quiet"])
+    from splatting.dataset.preview import coco_preview
+
+    coco_preview(coco, os.path.join(out, "coco_preview.png"))
+    st.run("contact sheet", [py, "-m", "splatting", "contact-sheet", "--bikes", os.path.join(out, "bikes"), "--view", "3",
+                             "--out", os.path.join(out, "contact_sheet.png")])
+    plys = sorted(glob.glob(os.path.join(cyc, "ply", "*.ply")))
+    if not plys:
+        raise UserError(f"the cyclist step wrote no .ply under {cyc}/ply")
+    st.run("point cloud into Blender + Cycles render", [py, bs("import_splats.py"), "--ply", plys[0],
+                                                      "--render", os.path.join(out, "cyclist_blender.png")])
+    report(out, bike, args, st.times, time.time() - t0)
+    print(f"demo: finished; see {os.path.join(out, 'report.md')}")
+
+
+def _json(path):
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return None
+
+
+def report(out, bike, args, times, wall):
+    rel = lambda p: os.path.relpath(p, out)  # noqa: E731
+    lines = ["# Demo report", "", f"Generated {time.strftime('%Y-%m-%d %H:%M')} on {os.cpu_count()} cores; "
+             f"total wall time of the steps run now: {wall / 60:.1f} min (steps done earlier are not counted).", "",
+             "## Steps (wall seconds)", "", "| step | s |", "| --- | --- |"]
+    lines += [f"| {k} | {v:.0f} |" for k, v in times.items()]
+    lines += ["", f"## Part Gaussians of {os.path.basename(bike)} (held-out views)", "",
+              "| part | PSNR dB | PSNR object box dB | SSIM | Gaussians | wall s |", "| --- | --- | --- | --- | --- | --- |"]
+    for part in PARTS:
+        m = _json(os.path.join(bike, "gaussians", f"{part}.json"))
+        if m:
+            lines.append(f"| {part} | {m['psnr']:.2f} | {m.get('psnr_crop', float('nan')):.2f} | {m['ssim']:.4f} | "
+                         f"{m['gaussians']} | {m['wall_s']:.0f} |")
+    frames = sorted(glob.glob(os.path.join(out, "cyclist", "frame_*.json")))
+    if frames:
+        res = [max(_json(f)["ik"]["residual_m"].values()) for f in frames]
+        flagged = sum(any(_json(f)["ik"]["flagged"].values()) for f in frames)
+        lines += ["", "## Cyclist sequence", "", f"{len(frames)} frames; IK worst residual per frame: median "
+                  f"{sorted(res)[len(res) // 2] * 1000:.1f} mm, max {max(res) * 1000:.1f} mm; frames with a flagged target: {flagged}."]
+    ann = _json(os.path.join(out, "coco", "annotations.json"))
+    if ann:
+        lines += ["", "## COCO set", "", f"{len(ann['images'])} images, {len(ann['annotations'])} annotations "
+                  f"({', '.join(c['name'] for c in ann['categories'])}) in `coco/`."]
+    lines += ["", "## Pictures", ""]
+    for title, pattern in (("Contact sheet", "contact_sheet.png"), ("Cyclist preview", "cyclist/preview.png"),
+                           ("COCO samples with their annotations", "coco_preview.png"),
+                           ("Point cloud in Blender (Cycles)", "cyclist_blender.png")):
+        for p in sorted(glob.glob(os.path.join(out, pattern)))[:1]:
+            lines.append(f"### {title}\n\n![{title}]({rel(p)})\n")
+    with atomic_path(os.path.join(out, "report.md")) as tmp:
+        with open(tmp, "w") as f:
+            f.write("\n".join(lines) + "\n")

@@ -1,0 +1,80 @@
+"""Fused per-Gaussian preprocessing for the tiled back end (csrc/project.cpp): the EWA projection
+of splatting/raster/sparse.py's project() and the SH colour of splatting/gaussians/sh.py's eval_sh() in one
+OpenMP pass forward and one backward, instead of ~60 small torch autograd ops.
+
+preprocess(means, quats, scales, sh, camera, sh_degree, near, eps2d) -> means2d (N,2),
+conics (N,3), depths (N,), colors (N,3), radii (N,) long, boxes (N,4) long; differentiable in
+means, quats, scales and sh. Culled Gaussians (radius 0) get no gradient (they are never drawn).
+"""
+import torch
+
+from . import build
+
+_SUFFIX = {torch.float32: "f32", torch.float64: "f64"}
+
+
+def _ptr(t):
+    return t.data_ptr()
+
+
+def _camera_args(camera, near, eps2d):
+    R = camera.R.detach().to("cpu", torch.float64).contiguous()
+    T = camera.T.detach().to("cpu", torch.float64).contiguous()
+    K = camera.K.detach().to("cpu", torch.float64)
+    intr = torch.tensor([K[0, 0], K[1, 1], K[0, 2], K[1, 2], near, eps2d], dtype=torch.float64)
+    return R, T, intr
+
+
+class _Preprocess(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, means, quats, scales, sh, camera, nb, near, eps2d):
+        lib = build.load()
+        dt = means.dtype
+        sfx = _SUFFIX[dt]
+        nt = max(1, torch.get_num_threads())
+        n = means.shape[0]
+        m, q, s, f = (t.detach().to(dt).contiguous() for t in (means, quats, scales, sh))
+        R, T, intr = _camera_args(camera, near, eps2d)
+        means2d, conics = torch.empty(n, 2, dtype=dt), torch.empty(n, 3, dtype=dt)
+        depths, colors = torch.empty(n, dtype=dt), torch.empty(n, 3, dtype=dt)
+        radii, boxes = torch.empty(n, dtype=torch.int64), torch.empty(n, 4, dtype=torch.int64)
+        getattr(lib, f"gs_preprocess_fwd_{sfx}")(n, _ptr(R), _ptr(T), _ptr(intr), camera.width, camera.height,
+                                                 _ptr(m), _ptr(q), _ptr(s), _ptr(f), f.shape[1], nb, nt,
+                                                 _ptr(means2d), _ptr(conics), _ptr(depths), _ptr(colors),
+                                                 _ptr(radii), _ptr(boxes))
+        ctx.mark_non_differentiable(radii, boxes)
+        ctx.save_for_backward(m, q, s, f, radii)
+        ctx.cam = (R, T, intr, camera.width, camera.height, nb)
+        ctx.dtypes = (means.dtype, quats.dtype, scales.dtype, sh.dtype)
+        return means2d, conics, depths, colors, radii, boxes
+
+    @staticmethod
+    def backward(ctx, g_m2, g_cn, g_z, g_col, _r, _b):
+        m, q, s, f, radii = ctx.saved_tensors
+        R, T, intr, W, H, nb = ctx.cam
+        dt = m.dtype
+        n = m.shape[0]
+        z = lambda *shape: torch.zeros(*shape, dtype=dt)
+        g = [z(n, 2) if g_m2 is None else g_m2.to(dt).contiguous(), z(n, 3) if g_cn is None else g_cn.to(dt).contiguous(),
+             z(n) if g_z is None else g_z.to(dt).contiguous(), z(n, 3) if g_col is None else g_col.to(dt).contiguous()]
+        gm, gq, gs, gf = torch.empty_like(m), torch.empty_like(q), torch.empty_like(s), torch.empty_like(f)
+        getattr(build.load(), f"gs_preprocess_bwd_{_SUFFIX[dt]}")(
+            n, _ptr(R), _ptr(T), _ptr(intr), W, H, _ptr(m), _ptr(q), _ptr(s), _ptr(f), f.shape[1], nb,
+            max(1, torch.get_num_threads()), _ptr(radii), *map(_ptr, g), _ptr(gm), _ptr(gq), _ptr(gs), _ptr(gf))
+        dm, dq, ds, df = ctx.dtypes
+        return gm.to(dm), gq.to(dq), gs.to(ds), gf.to(df), None, None, None, None
+
+
+def preprocess(means, quats, scales, sh, camera, sh_degree=None, near=0.01, eps2d=0.3):
+    """See the module docstring. CPU tensors, float32 or float64 (means' dtype)."""
+    if any(t.device.type != "cpu" for t in (means, quats, scales, sh)):
+        raise ValueError("the tiled rasterizer runs on CPU tensors; use backend='torch' for "
+                         f"{means.device.type} tensors")
+    if means.dtype not in _SUFFIX:
+        raise TypeError(f"tiled rasterizer: float32 or float64 tensors, got {means.dtype}")
+    k = sh.shape[1]
+    degree = int(round(k ** 0.5)) - 1 if sh_degree is None else int(sh_degree)
+    nb = (degree + 1) ** 2
+    if not 0 <= degree <= 3 or nb > k:
+        raise ValueError(f"sh_degree {degree} needs {nb} SH coefficients (have {k}, degrees 0-3)")
+    return _Preprocess.apply(means, quats, scales, sh, camera, nb, float(near), float(eps2d))

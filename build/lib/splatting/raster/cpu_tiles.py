@@ -1,0 +1,101 @@
+"""Tiled multi-threaded CPU compositing (csrc/tiles.cpp) as a torch autograd Function.
+
+composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, W) -> (out (H, W, Cf),
+T_final (H, W)): out = sum_k w_k feats_k over the Gaussians at each pixel front to back,
+w_k = alpha_k T_k, T_final the transmittance left (alpha = 1 - T_final). Differentiable in
+means2d, conics, opacities and feats (any number Cf of channels: colour, extra features, depth
+ride along together). Same image formation as splatting/raster/sparse.py's torch path; see
+docs/rasterizer.md.
+
+Steps (all threads: torch.get_num_threads()):
+  1. gs_bin: one record per Gaussian, its pixel rectangle (3-sigma box clipped to where alpha can
+     reach 1/255); the visible ones sorted by camera z (stable radix sort: ties in index order, as
+     the torch path's stable argsort); per-tile counts and offsets;
+  2. gs_forward: tile lists filled in depth order, then per 16x16 tile front-to-back blending with
+     early termination;
+  3. gs_backward: per tile back to front, per-(tile, Gaussian) sums, then per Gaussian.
+"""
+import torch
+
+from . import build
+
+_SUFFIX = {torch.float32: "f32", torch.float64: "f64"}
+
+
+def _ptr(t):
+    return t.data_ptr()
+
+
+class _TileComposite(torch.autograd.Function):
+    """out (Cf, H, W) channel-major (what the C++ writes with vector stores), T_final (H, W)."""
+
+    @staticmethod
+    def forward(ctx, means2d, conics, opacities, feats, depths, radii, boxes, H, W):
+        lib = build.load()
+        dt = means2d.dtype
+        if dt not in _SUFFIX:
+            raise TypeError(f"tiled rasterizer: float32 or float64 tensors, got {dt}")
+        sfx = _SUFFIX[dt]
+        nt = max(1, torch.get_num_threads())
+        n, cf = feats.shape
+        m2 = means2d.detach().contiguous()
+        cn = conics.detach().to(dt).contiguous()
+        op = opacities.detach().to(dt).contiguous()
+        fe = feats.detach().to(dt).contiguous()
+        z = depths.detach().to(dt).contiguous()
+        rd = radii.to(torch.int64).contiguous()
+        bx = boxes.to(torch.int64).contiguous()
+        tile = lib.gs_tile_size()
+        ntiles = -(-W // tile) * -(-H // tile)
+        recs = torch.empty(max(n, 1) * getattr(lib, f"gs_rec_bytes_{sfx}")(), dtype=torch.uint8)
+        order = torch.empty(max(n, 1), dtype=torch.int32)
+        cursor = torch.empty(nt * ntiles, dtype=torch.int64)
+        tile_off = torch.empty(ntiles + 1, dtype=torch.int64)
+        goff = torch.empty(n + 1, dtype=torch.int64)
+        sizes = torch.zeros(2, dtype=torch.int64)
+        getattr(lib, f"gs_bin_{sfx}")(n, _ptr(m2), _ptr(cn), _ptr(op), _ptr(z), _ptr(rd), _ptr(bx), W, H, nt,
+                                      _ptr(recs), _ptr(order), _ptr(cursor), _ptr(tile_off), _ptr(goff),
+                                      _ptr(sizes))
+        nv, total = sizes.tolist()
+        lst = torch.empty(max(total, 1), dtype=torch.int32)
+        gpos = torch.empty(max(total, 1), dtype=torch.int64)
+        fs = torch.empty(max(nv, 1), cf, dtype=dt)
+        out = torch.empty(cf, H, W, dtype=dt)
+        T_final = torch.empty(H, W, dtype=dt)
+        last = torch.empty(H, W, dtype=torch.int32)
+        getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), _ptr(fe), cf, W, H, nt, _ptr(recs), _ptr(cursor),
+                                          _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(gpos), _ptr(fs),
+                                          _ptr(out), _ptr(T_final), _ptr(last))
+        ctx.geom = (n, cf, H, W, nv, order, recs, tile_off, goff, lst, gpos, fs, last)
+        ctx.save_for_backward(T_final)
+        ctx.dtypes = (conics.dtype, opacities.dtype, feats.dtype)
+        return out, T_final
+
+    @staticmethod
+    def backward(ctx, g_out, g_T):
+        n, cf, H, W, nv, order, recs, tile_off, goff, lst, gpos, fs, last = ctx.geom
+        (T_final,) = ctx.saved_tensors
+        dt = T_final.dtype
+        sfx = _SUFFIX[dt]
+        g_out = torch.zeros(cf, H, W, dtype=dt) if g_out is None else g_out.to(dt).contiguous()
+        g_T = torch.zeros(H, W, dtype=dt) if g_T is None else g_T.to(dt).contiguous()
+        g_m2 = torch.zeros(n, 2, dtype=dt)
+        g_cn = torch.zeros(n, 3, dtype=dt)
+        g_op = torch.zeros(n, dtype=dt)
+        g_fe = torch.zeros(n, cf, dtype=dt)
+        lib = build.load()
+        getattr(lib, f"gs_backward_{sfx}")(nv, _ptr(order), cf, W, H, max(1, torch.get_num_threads()), _ptr(recs),
+                                           _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(gpos), _ptr(fs),
+                                           _ptr(T_final), _ptr(last), _ptr(g_out), _ptr(g_T),
+                                           _ptr(g_m2), _ptr(g_cn), _ptr(g_op), _ptr(g_fe))
+        dc, do, df = ctx.dtypes
+        return g_m2, g_cn.to(dc), g_op.to(do), g_fe.to(df), None, None, None, None, None
+
+
+def composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, W):
+    """See the module docstring. CPU tensors only; float32 or float64 (means2d's dtype)."""
+    if means2d.device.type != "cpu":
+        raise ValueError("the tiled rasterizer runs on CPU tensors; use backend='torch' for "
+                         f"{means2d.device.type} tensors")
+    out, T_final = _TileComposite.apply(means2d, conics, opacities, feats, depths, radii, boxes, H, W)
+    return out.permute(1, 2, 0), T_final

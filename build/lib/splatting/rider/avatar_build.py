@@ -1,0 +1,112 @@
+"""`python -m splatting rider-avatar --id ID --out data/riders/ID`: build a rider's Gaussian avatar.
+
+Steps, each skipped when its output exists (so a killed run resumes):
+  1. rest_mesh.ply   the T-posed rider mesh with vertex colours (body.export_rider)
+  2. views/          36 ring views in Blender (blender_scripts/render_rider.py, a subprocess)
+  3. rider.ply       Gaussians trained on those views (splatting.train; rider.json = metrics)
+  4. skinning.npz    per-Gaussian LBS weights from the body model (avatar.RiderAvatar)
+"""
+import os
+import subprocess
+import sys
+import time
+
+from cyclist_formats.errors import UserError
+from splatting import paths
+
+RENDER_SCRIPT = paths.blender_script("render_rider.py")
+N_VIEWS = 36
+
+
+def views_complete(views_dir, n=N_VIEWS):
+    return all(os.path.isfile(os.path.join(views_dir, "rgba", f"camera{i:04d}", "0000.png")) for i in range(n))
+
+
+def render_views(mesh, views_dir, samples=None, python=None, log=print):
+    """Run the Blender side (bpy module in this venv by default) on the rest mesh."""
+    cmd = [python or sys.executable, RENDER_SCRIPT, "--mesh", mesh, "--out", views_dir]
+    if samples:
+        cmd += ["--samples", str(samples)]
+    log(f"rider-avatar: rendering 36 views ({' '.join(cmd[1:])})")
+    r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    if r.returncode != 0 or not views_complete(views_dir):
+        tail = "\n".join(r.stdout.strip().splitlines()[-5:])
+        raise UserError(f"Blender rendering of {mesh} failed (exit {r.returncode}): {tail}")
+
+
+def build_avatar(rider_id, out_dir, iterations=None, time_budget_s=None, max_gaussians=None, samples=None,
+                 threads=1, log=print):
+    """Run the four steps; returns {"avatar": out_dir, "steps": {step: seconds or "skipped"}, "train": metrics}."""
+    import json
+
+    import torch
+
+    from splatting.gaussians.container import read_ply
+    from splatting.training.trainer import TrainConfig, train
+    from splatting.rider.avatar import PLY_NAME, SKINNING_NAME, RiderAvatar
+    from splatting.rider.body import export_rider
+    from splatting.rider.roster import load_rider
+
+    rider = load_rider(rider_id)  # UserError for an unknown id, before any work
+    os.makedirs(out_dir, exist_ok=True)
+    mesh = os.path.join(out_dir, "rest_mesh.ply")
+    views = os.path.join(out_dir, "views")
+    ply = os.path.join(out_dir, PLY_NAME)
+    skin = os.path.join(out_dir, SKINNING_NAME)
+    steps = {}
+
+    def step(name, done, fn):
+        if done:
+            steps[name] = "skipped"
+            return
+        t = time.time()
+        fn()
+        steps[name] = round(time.time() - t, 2)
+        log(f"rider-avatar: {name} done in {steps[name]} s")
+
+    step("mesh", os.path.isfile(mesh), lambda: export_rider(rider, mesh))
+    step("views", views_complete(views), lambda: render_views(mesh, views, samples, log=log))
+
+    def do_train():
+        cfg = TrainConfig(threads=threads)
+        if iterations:
+            cfg.iterations = iterations
+        if time_budget_s:
+            cfg.time_budget_s = time_budget_s
+        if max_gaussians:
+            cfg.densify.max_gaussians = max_gaussians
+        m = train(views, ply, cfg)
+        log(f"rider-avatar: {m['gaussians']} Gaussians, held-out PSNR {m['psnr']} dB (over white)")
+
+    step("train", os.path.isfile(ply), do_train)
+
+    def do_skin():
+        torch.set_num_threads(threads)
+        RiderAvatar.from_rider(read_ply(ply), rider).save_skinning(out_dir)
+
+    step("skinning", os.path.isfile(skin), do_skin)
+    metrics_path = os.path.join(out_dir, "rider.json")
+    metrics = json.load(open(metrics_path)) if os.path.isfile(metrics_path) else None
+    return {"avatar": out_dir, "steps": steps, "train": metrics}
+
+
+def add_arguments(p):
+    p.add_argument("--id", required=True, help="rider id from the roster (python -m splatting rider --list)")
+    p.add_argument("--out", help="avatar folder (default data/riders/ID)")
+    p.add_argument("--iterations", type=int, default=None, help="training iterations (reduced budget: e.g. 1500)")
+    p.add_argument("--time-budget-s", type=float, default=None, help="training wall-time cap")
+    p.add_argument("--max-gaussians", type=int, default=None)
+    p.add_argument("--samples", type=int, default=None, help="Cycles samples for the 36 views")
+    p.add_argument("--threads", type=int, default=1, help="torch threads for training")
+
+
+def run(args):
+    for name in ("iterations", "max_gaussians", "samples"):
+        v = getattr(args, name)
+        if v is not None and v < 1:
+            raise UserError(f"--{name.replace('_', '-')} must be >= 1")
+    out = args.out or os.path.join(paths.DATA, "riders", args.id)
+    res = build_avatar(args.id, out, args.iterations, args.time_budget_s, args.max_gaussians, args.samples,
+                       args.threads)
+    print(f"{out}: avatar ready ({', '.join(f'{k} {v}' for k, v in res['steps'].items())})")
+    return 0

@@ -1,0 +1,82 @@
+"""The rider roster (`blend_assets/riders.yaml`): selectable people and their anny phenotypes."""
+import functools
+import re
+from pathlib import Path
+
+import yaml
+
+from cyclist_formats.errors import UserError
+from splatting import paths
+
+ROSTER_PATH = paths.BLEND_ASSETS / "riders.yaml"
+PHENOTYPE_KEYS = ("gender", "age", "muscle", "weight", "height", "proportions")
+COLOR_KEYS = ("skin", "top", "bottom", "shoes", "helmet")
+_HEX = re.compile(r"^#[0-9a-fA-F]{6}$")
+
+
+def load_roster(path=ROSTER_PATH):
+    """List of rider dicts, validated (UserError on a bad file)."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise UserError(f"rider roster not found: {path}") from None
+    except yaml.YAMLError as e:
+        raise UserError(f"bad YAML in {path}: {str(e).splitlines()[0]}") from None
+    riders = (data or {}).get("riders") if isinstance(data, dict) else None
+    if not isinstance(riders, list) or not riders:
+        raise UserError(f"{path}: expected a top-level 'riders:' list")
+    seen = set()
+    for r in riders:
+        rid = r.get("id") if isinstance(r, dict) else None
+        if not isinstance(rid, str) or not rid:
+            raise UserError(f"{path}: every rider needs a string 'id'")
+        if rid in seen:
+            raise UserError(f"{path}: duplicate rider id {rid!r}")
+        seen.add(rid)
+        if r.get("body") == "smpl":  # a user-supplied SMPL model (smpl_body.py): no anny phenotype
+            if not isinstance(r.get("model_path"), str) or not r["model_path"]:
+                raise UserError(f"{path}: rider {rid}: body: smpl needs a 'model_path' string")
+            continue
+        ph = r.get("phenotype") or {}
+        for k in PHENOTYPE_KEYS:
+            v = ph.get(k)
+            if not isinstance(v, (int, float)) or not 0.0 <= v <= 1.0:
+                raise UserError(f"{path}: rider {rid}: phenotype.{k} must be a number in [0, 1]")
+        cols = r.get("colors") or {}
+        for k in COLOR_KEYS:
+            if not isinstance(cols.get(k), str) or not _HEX.match(cols[k]):
+                raise UserError(f"{path}: rider {rid}: colors.{k} must be '#rrggbb'")
+        if not isinstance(r.get("height_m"), (int, float)):
+            raise UserError(f"{path}: rider {rid}: height_m must be a number")
+    return riders
+
+
+def get_spec(rider_id, path=ROSTER_PATH):
+    for r in load_roster(path):
+        if r["id"] == rider_id:
+            return r
+    ids = ", ".join(r["id"] for r in load_roster(path))
+    raise UserError(f"unknown rider id {rider_id!r} (known: {ids})")
+
+
+def describe(r):
+    """One line, id first."""
+    if r.get("body") == "smpl":
+        return f"{r['id']}  SMPL model {r['model_path']} ({r.get('gender', 'neutral')})"
+    return (f"{r['id']}  {r['sex']:<6} {r['age_years']:>2} y  {r['height_m']:.2f} m  "
+            f"{r['build']:<8} top {r['colors']['top']} bottom {r['colors']['bottom']} "
+            f"helmet {r['colors']['helmet']}")
+
+
+@functools.lru_cache(maxsize=16)
+def load_rider(rider_id):
+    """The roster's rider `rider_id` (UserError if unknown), built by its body model: anny
+    (splatting.rider.body) or the user's own SMPL file via smplx (splatting.rider.smpl_body).
+    Cached per process."""
+    spec = get_spec(rider_id)
+    if spec.get("body", "anny") == "smpl":
+        from splatting.rider.smpl_body import rider_from_spec
+        return rider_from_spec(spec)
+    from splatting.rider.body import build_rider
+    return build_rider(spec)

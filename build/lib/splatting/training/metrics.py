@@ -1,0 +1,31 @@
+"""Image metrics shared by the trainer, the benchmarks and the ground-truth checks: PSNR (torch or
+numpy images in [0, 1]), SSIM (pytorch-msssim), mask IoU."""
+import math
+
+import numpy as np
+
+
+def psnr(a, b, mask=None, peak=1.0):
+    """10 log10(peak^2 / MSE) of two images (torch tensors or numpy arrays), over `mask` if given.
+    Identical images give 120 dB (MSE floored at 1e-12), not infinity."""
+    if hasattr(a, "detach"):
+        d = (a.detach().double() - b.detach().double()) ** 2
+        d = d[mask] if mask is not None else d
+        mse = float(d.mean())
+    else:
+        d = (np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2
+        d = d[mask] if mask is not None else d
+        mse = float(d.mean())
+    return 10 * math.log10(peak * peak / max(mse, 1e-12 * peak * peak))
+
+
+def ssim(a, b):
+    """SSIM of two (H, W, C) torch images in [0, 1] (differentiable)."""
+    from pytorch_msssim import ssim as _ssim
+
+    return _ssim(a.permute(2, 0, 1)[None], b.permute(2, 0, 1)[None], data_range=1.0, size_average=True)
+
+
+def mask_iou(a, b):
+    """Intersection over union of two boolean masks (numpy); 0 when both are empty."""
+    return float((a & b).sum() / max(1, (a | b).sum()))
