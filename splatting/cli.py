@@ -6,7 +6,6 @@ modules are imported only when their command is used, so `--help` stays fast.
 import argparse
 import importlib
 import importlib.util
-
 import sys
 
 from cyclist_formats.errors import UserError

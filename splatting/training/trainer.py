@@ -8,7 +8,6 @@ a stop once held-out PSNR no longer improves.  See docs/training.md for the numb
 defaults.
 """
 import dataclasses
-import math
 import os
 import time
 from dataclasses import dataclass, field
@@ -17,14 +16,14 @@ import torch
 import torch.nn.functional as F
 
 from cyclist_formats.atomic import write_json
-from splatting.raster.camera import Camera
 from splatting.training.strategy import STRATEGIES, DensifyConfig, make_strategy
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, write_ply
 from splatting.raster.sparse import rasterize
-from splatting.gaussians.sh import rgb_to_sh0
 from splatting.training.views import Views, load_views
 from splatting.training.metrics import psnr, ssim
+from splatting.training.targets import Targets, crop_camera, split_views  # noqa: F401
+from splatting.training.initialisation import hull_mask, init_gaussians, object_extent  # noqa: F401
 from splatting.progress import Progress
 
 DEFAULT_HOLDOUT = (3, 12, 21, 30)
@@ -61,170 +60,6 @@ class TrainConfig:
     progress: bool = True
     strategy: str = field(default="default", metadata={"help": "densification strategy", "choices": tuple(STRATEGIES)})
     densify: DensifyConfig = field(default_factory=DensifyConfig)
-
-
-# -- data preparation ----------------------------------------------------------------------------
-
-def split_views(views: Views, holdout):
-    """Hold out views by index in the ring (camera0003 -> 3); the rest train."""
-    hold = sorted({i for i in holdout if 0 <= i < len(views)})
-    train = [i for i in range(len(views)) if i not in hold]
-    if not train:
-        raise UserError(f"no training views left after holding out {list(holdout)} of {len(views)}")
-    return train, hold
-
-
-def crop_camera(cam: Camera, box):
-    """The sub-image [x0, x1) x [y0, y1) of cam as a camera of its own (pixel centres unchanged)."""
-    x0, y0, x1, y1 = box
-    K = cam.K.clone()
-    K[0, 2] -= x0
-    K[1, 2] -= y0
-    return Camera(cam.R, cam.T, K, x1 - x0, y1 - y0, cam.name)
-
-
-def _box(alpha, margin, min_size=16):
-    """Bounding box (x0, y0, x1, y1) of alpha > 0 plus margin, at least min_size (SSIM's 11 px window)."""
-    H, W = alpha.shape
-    ys, xs = torch.nonzero(alpha > 0, as_tuple=True)
-    if len(xs) == 0:
-        x0, x1, y0, y1 = W // 2, W // 2, H // 2, H // 2
-    else:
-        x0, x1, y0, y1 = int(xs.min()), int(xs.max()) + 1, int(ys.min()), int(ys.max()) + 1
-    x0, y0, x1, y1 = max(0, x0 - margin), max(0, y0 - margin), min(W, x1 + margin), min(H, y1 + margin)
-
-    def grow(a, b, n):  # widen [a, b) to min_size around its centre, inside [0, n)
-        if b - a >= min_size or n <= min_size:
-            return 0 if n <= min_size else a, n if n <= min_size else b
-        a = min(max(0, (a + b) // 2 - min_size // 2), n - min_size)
-        return a, a + min_size
-
-    x0, x1 = grow(x0, x1, W)
-    y0, y1 = grow(y0, y1, H)
-    return max(0, x0), max(0, y0), min(W, x1), min(H, y1)
-
-
-class Targets:
-    """Per-scale premultiplied RGBA targets, cameras and object crop boxes for a set of views."""
-
-    def __init__(self, views: Views, margin_px):
-        self.views = views
-        self.margin_px = margin_px
-        rgba = views.images.permute(0, 3, 1, 2)  # (V, 4, H, W)
-        self.premult = torch.cat([rgba[:, :3] * rgba[:, 3:], rgba[:, 3:]], 1)
-        self._cache = {}
-
-    def at(self, scale):
-        if scale not in self._cache:
-            H, W = self.views.height, self.views.width
-            if scale == 1.0:
-                img = self.premult
-            else:  # area-average premultiplied colour, so edges blend as the renderer's do
-                img = F.interpolate(self.premult, size=(round(H * scale), round(W * scale)), mode="area")
-            cams = [c.scaled(scale) if scale != 1.0 else c for c in self.views.cameras]
-            m = max(2, int(round(self.margin_px * scale)))
-            boxes = [_box(img[i, 3], m) for i in range(len(cams))]
-            self._cache[scale] = (img, cams, boxes)
-        return self._cache[scale]
-
-
-# -- initialisation ------------------------------------------------------------------------------
-
-def _knn_scale(points, k=3, chunk=2048):
-    """sqrt of the mean squared distance to the k nearest neighbours (INRIA's distCUDA2 init)."""
-    out = torch.empty(len(points))
-    for i in range(0, len(points), chunk):
-        d = torch.cdist(points[i:i + chunk], points)
-        d2 = d.topk(min(k + 1, len(points)), largest=False).values[:, 1:] ** 2
-        out[i:i + chunk] = d2.mean(1).clamp_min(1e-14).sqrt() if d2.shape[1] else 1e-3
-    return out
-
-
-def _project(points, cam):
-    p = points @ cam.R.T + cam.T
-    z = p[:, 2]
-    zs = torch.where(z > 1e-6, z, torch.ones_like(z))
-    u = cam.K[0, 0] * p[:, 0] / zs + cam.K[0, 2]
-    v = cam.K[1, 1] * p[:, 1] / zs + cam.K[1, 2]
-    return u, v, z > 1e-6
-
-
-def hull_mask(points, masks, cams):
-    """(N,) bool: centre projects inside masks[i] (bool (H, W)) in every camera."""
-    keep = torch.ones(len(points), dtype=torch.bool)
-    for m, cam in zip(masks, cams):
-        u, v, front = _project(points, cam)
-        H, W = m.shape
-        ui, vi = torch.floor(u).long(), torch.floor(v).long()
-        inside = front & (ui >= 0) & (ui < W) & (vi >= 0) & (vi < H)
-        hit = torch.zeros_like(keep)
-        hit[inside] = m[vi[inside], ui[inside]]
-        keep &= hit
-    return keep
-
-
-def _carve_init(views: Views, n, gen):
-    """No points.ply: sample the cube the silhouettes span around the orbit centre, keep the visual hull."""
-    centre = views.orbit_centre
-    if centre is None:  # where the optical axes meet (least squares)
-        A, b = torch.zeros(3, 3), torch.zeros(3)
-        for c in views.cameras:
-            d = c.R[2] / c.R[2].norm()
-            P = torch.eye(3) - torch.outer(d, d)
-            A += P
-            b += P @ c.centre
-        centre = torch.linalg.solve(A, b)
-    half = 0.0
-    for c, img in zip(views.cameras, views.images):
-        ys, xs = torch.nonzero(img[..., 3] > 0, as_tuple=True)
-        if len(xs):
-            dist = float((c.centre - centre).norm())
-            off = max(float((xs + 0.5 - c.K[0, 2]).abs().max()) / float(c.K[0, 0]),
-                      float((ys + 0.5 - c.K[1, 2]).abs().max()) / float(c.K[1, 1]))
-            half = max(half, 1.2 * off * dist)
-    masks = [img[..., 3] > 0 for img in views.images]
-    pts = torch.empty(0, 3)
-    for _ in range(20):
-        cand = centre + (torch.rand(20 * n, 3, generator=gen) * 2 - 1) * half
-        pts = torch.cat([pts, cand[hull_mask(cand, masks, views.cameras)]])
-        if len(pts) >= n:
-            break
-    if len(pts) == 0:
-        raise UserError(f"{views.folder}: the silhouettes have no common volume (cameras and masks disagree)")
-    return pts[:n]
-
-
-def init_gaussians(views: Views, cfg: TrainConfig, gen):
-    if views.points is not None:
-        pts, cols = views.points, views.point_colors
-        n = min(len(pts), cfg.init_max_points, cfg.densify.max_gaussians)
-        if n < len(pts):
-            idx = torch.randperm(len(pts), generator=gen)[:n]
-            pts = pts[idx]
-            cols = None if cols is None else cols[idx]
-    else:
-        pts = _carve_init(views, min(5000, cfg.densify.max_gaussians), gen)
-        cols = None
-    pts = pts.float()
-    n = len(pts)
-    if cols is None:
-        cols = torch.full((n, 3), 0.5)
-    k = (cfg.sh_degree + 1) ** 2
-    sh = torch.zeros(n, k, 3)
-    sh[:, 0] = rgb_to_sh0(cols.float())
-    scale = _knn_scale(pts)
-    return Gaussians(
-        means=pts.clone(),
-        quats=torch.tensor([1.0, 0.0, 0.0, 0.0]).repeat(n, 1),
-        log_scales=torch.log(scale)[:, None].repeat(1, 3),
-        opacity_logits=torch.full((n,), math.log(cfg.init_opacity / (1 - cfg.init_opacity))),
-        sh=sh,
-    )
-
-
-def object_extent(points):
-    lo, hi = points.min(0).values, points.max(0).values
-    return max(float((hi - lo).norm()), 1e-3)
 
 
 # -- training ------------------------------------------------------------------------------------
