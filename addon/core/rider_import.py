@@ -13,9 +13,9 @@ import bpy
 import numpy as np
 
 from . import frames, render
-from .contract import UserError, ply
+from .contract import UserError, instances, ply
 
-RIDER_PASS_INDEX = 4  # docs/contract.md: rider 4 when rendered together with a bike
+RIDER_PASS_INDEX = instances.RIDER_ID  # docs/contract.md: rider 4 when rendered together with a bike
 COLOR_ATTRIBUTE = "Col"
 
 def read_colored_ply(path):

@@ -8,11 +8,12 @@ import bpy
 import numpy as np
 
 from .. import armature as arm_mod
+from ..contract import instances
 from ..frames import to_blender
 from . import cockpit, drivetrain, extras, layout, tubes
 from .materials import make_materials
 
-PASS_INDEX = {"frame": 1, "steering": 2, "crank": 3}
+PASS_INDEX = instances.PART_IDS  # docs/contract.md instance ids
 
 
 def part_builders(spec):
