@@ -209,8 +209,11 @@ void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* d
   std::fill(cursor, cursor + (int64_t)nt * NT, 0);
   // records computed in index order (sequential reads), then gathered into depth order: one
   // random read per Gaussian here, and sequential or monotonic reads everywhere after
-  static thread_local std::vector<Rec<S>> by_index;  // reused across calls (no page faults per frame)
-  if ((int64_t)by_index.size() < N) by_index.resize(N);
+  // reused across calls (no page faults per frame); thread_local is the calling thread's, so the
+  // OpenMP threads use it through a plain pointer
+  static thread_local std::vector<Rec<S>> by_index_buf;
+  if ((int64_t)by_index_buf.size() < N) by_index_buf.resize(N);
+  Rec<S>* const by_index = by_index_buf.data();
 #pragma omp parallel num_threads(nt)
   {
 #pragma omp for schedule(static)
@@ -385,8 +388,11 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
   const int64_t HW = (int64_t)H * W;
   const int NB = 6 + Cf;  // q, q dx, q dy, q dx dx, q dx dy, q dy dy, w g_c
   const int64_t total = tile_off[NT];
-  static thread_local std::vector<S> gbuf;  // reused across calls (no page faults per frame)
-  if (gbuf.size() < (size_t)total * NB) gbuf.resize((size_t)total * NB);
+  // reused across calls (no page faults per frame); used through a plain pointer (thread_local
+  // is the calling thread's, not the OpenMP threads')
+  static thread_local std::vector<S> gbuf_vec;
+  if (gbuf_vec.size() < (size_t)total * NB) gbuf_vec.resize((size_t)total * NB);
+  S* const gbuf = gbuf_vec.data();
 #pragma omp parallel num_threads(nt)
   {
     typedef typename VT<S>::V V;
@@ -468,7 +474,7 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
             sums[5] += qy * dy;
           }
         }
-        S* e = gbuf.data() + (size_t)slot[t0 + k] * NB;
+        S* e = gbuf + (size_t)slot[t0 + k] * NB;
         for (int b = 0; b < NB; ++b) {
           S h = 0;
           for (int l = 0; l < L; ++l) h += sums[b][l];
@@ -477,7 +483,7 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
       }
       // entries past every pixel's last contributor got nothing: zero them
       const int64_t n = tile_off[t + 1] - t0;
-      for (int64_t k = kmax; k < n; ++k) std::fill_n(gbuf.data() + (size_t)slot[t0 + k] * NB, NB, (S)0);
+      for (int64_t k = kmax; k < n; ++k) std::fill_n(gbuf + (size_t)slot[t0 + k] * NB, NB, (S)0);
     }
 #pragma omp for schedule(static)
     for (int64_t s = 0; s < nv; ++s) {
@@ -486,7 +492,7 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
       S* gf = g_feats + gi * Cf;
       for (int c = 0; c < Cf; ++c) gf[c] = 0;
       for (int64_t k = goff[s]; k < goff[s + 1]; ++k) {  // this Gaussian's entries: contiguous
-        const S* e = gbuf.data() + (size_t)k * NB;
+        const S* e = gbuf + (size_t)k * NB;
         for (int j = 0; j < 6; ++j) acc[j] += e[j];
         for (int c = 0; c < Cf; ++c) gf[c] += e[6 + c];
       }
