@@ -33,7 +33,7 @@ constexpr int TPIX = TILE * TILE;
 constexpr double ALPHA_MIN = 1.0 / 255.0;
 constexpr double ALPHA_MAX = 0.99;
 constexpr double T_MIN = 1e-4;
-constexpr double MARGIN = 1e-3;  // px: the ellipse spans are widened by this against rounding
+constexpr double MARGIN = 1e-3;  // px: the ellipse's bounding box is widened by this against rounding
 
 // SIMD over the pixels of a tile row with GCC vector extensions (AVX2 with -march=native: 8
 // floats or 4 doubles; SSE or NEON pairs elsewhere). Lanes never mix, so a pixel's result is
