@@ -223,6 +223,7 @@ void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* d
     chunk(nv, nt, th, b, e);
     int64_t* cnt = cursor + (int64_t)th * NT;
     for (int64_t s = b; s < e; ++s) {
+      if (s + 16 < e) __builtin_prefetch(by_index + order[s + 16]);  // the gather's misses overlap
       const Rec<S>& r = recs[s] = by_index[order[s]];
       if (r.u1 < r.u0 || r.v1 < r.v0) {
         goff[s + 1] = 0;
@@ -278,6 +279,7 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
     chunk(nv, nt, th, b, e);
     int64_t* cur = cursor + (int64_t)th * NT;
     for (int64_t s = b; s < e; ++s) {
+      if (s + 16 < e) __builtin_prefetch(feats_in + (int64_t)order[s + 16] * Cf);
       std::copy_n(feats_in + (int64_t)order[s] * Cf, Cf, feats + s * Cf);
       const Rec<S>& r = recs[s];
       if (r.u1 < r.u0 || r.v1 < r.v0) continue;
