@@ -164,3 +164,25 @@ def test_backend_choice_is_explicit_and_reported():
     assert rasterize(*scene, cam, backend="torch")["backend"] == "torch"
     with pytest.raises(ValueError, match="backend"):
         rasterize(*scene, cam, backend="cuda_tiles")
+
+
+def test_float32_bike_scene_agrees():
+    """The benchmark's bike-like part in float32 (the training dtype): images to 1e-5, every
+    parameter's gradient to 1e-4 relative (float32 rounding, different exp implementations)."""
+    from bench.raster import bike_like_gaussians
+    from splatting.cameras import ring_camera
+
+    params = bike_like_gaussians(4000)
+    cam = ring_camera(30.0, size=160, focal=650.0)
+    res = {}
+    for backend in ("tiles", "torch"):
+        ps = [p.clone().requires_grad_(True) for p in params]
+        out = rasterize(*ps, cam, backend=backend)
+        (out["rgb"].abs().mean() + 0.01 * out["depth"].mean()).backward()
+        res[backend] = (out, [p.grad for p in ps])
+    (a, ga), (b, gb) = res["tiles"], res["torch"]
+    assert b["alpha"].max() > 0.9
+    for key in ("rgb", "alpha", "depth"):
+        assert (a[key] - b[key]).abs().max() < 1e-5 * max(1.0, b[key].abs().max().item()), key
+    for name, x, y in zip(("means", "quats", "scales", "opacities", "sh"), ga, gb):
+        assert (x - y).norm() <= 1e-4 * y.norm(), name

@@ -58,22 +58,22 @@ class _TileComposite(torch.autograd.Function):
                                       _ptr(sizes))
         nv, total = sizes.tolist()
         lst = torch.empty(max(total, 1), dtype=torch.int32)
-        gpos = torch.empty(max(total, 1), dtype=torch.int64)
+        slot = torch.empty(max(total, 1), dtype=torch.int64)
         fs = torch.empty(max(nv, 1), cf, dtype=dt)
         out = torch.empty(cf, H, W, dtype=dt)
         T_final = torch.empty(H, W, dtype=dt)
         last = torch.empty(H, W, dtype=torch.int32)
         getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), _ptr(fe), cf, W, H, nt, _ptr(recs), _ptr(cursor),
-                                          _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(gpos), _ptr(fs),
+                                          _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(slot), _ptr(fs),
                                           _ptr(out), _ptr(T_final), _ptr(last))
-        ctx.geom = (n, cf, H, W, nv, order, recs, tile_off, goff, lst, gpos, fs, last)
+        ctx.geom = (n, cf, H, W, nv, order, recs, tile_off, goff, lst, slot, fs, last)
         ctx.save_for_backward(T_final)
         ctx.dtypes = (conics.dtype, opacities.dtype, feats.dtype)
         return out, T_final
 
     @staticmethod
     def backward(ctx, g_out, g_T):
-        n, cf, H, W, nv, order, recs, tile_off, goff, lst, gpos, fs, last = ctx.geom
+        n, cf, H, W, nv, order, recs, tile_off, goff, lst, slot, fs, last = ctx.geom
         (T_final,) = ctx.saved_tensors
         dt = T_final.dtype
         sfx = _SUFFIX[dt]
@@ -85,7 +85,7 @@ class _TileComposite(torch.autograd.Function):
         g_fe = torch.zeros(n, cf, dtype=dt)
         lib = build.load()
         getattr(lib, f"gs_backward_{sfx}")(nv, _ptr(order), cf, W, H, max(1, torch.get_num_threads()), _ptr(recs),
-                                           _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(gpos), _ptr(fs),
+                                           _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(slot), _ptr(fs),
                                            _ptr(T_final), _ptr(last), _ptr(g_out), _ptr(g_T),
                                            _ptr(g_m2), _ptr(g_cn), _ptr(g_op), _ptr(g_fe))
         dc, do, df = ctx.dtypes

@@ -33,7 +33,7 @@ constexpr int TPIX = TILE * TILE;
 constexpr double ALPHA_MIN = 1.0 / 255.0;
 constexpr double ALPHA_MAX = 0.99;
 constexpr double T_MIN = 1e-4;
-constexpr double MARGIN = 1e-3;  // px: the ellipse spans are widened by this against rounding
+constexpr double MARGIN = 1e-3;  // px: the ellipse's bounding box is widened by this against rounding
 
 // SIMD over the pixels of a tile row with GCC vector extensions (AVX2 with -march=native: 8
 // floats or 4 doubles; SSE or NEON pairs elsewhere). Lanes never mix, so a pixel's result is
@@ -209,7 +209,11 @@ void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* d
   std::fill(cursor, cursor + (int64_t)nt * NT, 0);
   // records computed in index order (sequential reads), then gathered into depth order: one
   // random read per Gaussian here, and sequential or monotonic reads everywhere after
-  std::vector<Rec<S>> by_index(N);
+  // reused across calls (no page faults per frame); thread_local is the calling thread's, so the
+  // OpenMP threads use it through a plain pointer
+  static thread_local std::vector<Rec<S>> by_index_buf;
+  if ((int64_t)by_index_buf.size() < N) by_index_buf.resize(N);
+  Rec<S>* const by_index = by_index_buf.data();
 #pragma omp parallel num_threads(nt)
   {
 #pragma omp for schedule(static)
@@ -219,6 +223,7 @@ void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* d
     chunk(nv, nt, th, b, e);
     int64_t* cnt = cursor + (int64_t)th * NT;
     for (int64_t s = b; s < e; ++s) {
+      if (s + 16 < e) __builtin_prefetch(by_index + order[s + 16]);  // the gather's misses overlap
       const Rec<S>& r = recs[s] = by_index[order[s]];
       if (r.u1 < r.u0 || r.v1 < r.v0) {
         goff[s + 1] = 0;
@@ -264,7 +269,7 @@ inline void store_lanes(T* dst, const V& v, int n) {
 template <typename S>
 void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W, int H, int nt,
              const Rec<S>* recs, int64_t* cursor, const int64_t* tile_off, const int64_t* goff,
-             int32_t* list, int64_t* gpos, S* feats, S* out, S* T_final, int32_t* last) {
+             int32_t* list, int64_t* slot, S* feats, S* out, S* T_final, int32_t* last) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   const int64_t HW = (int64_t)H * W;
 #pragma omp parallel num_threads(nt)
@@ -274,6 +279,7 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
     chunk(nv, nt, th, b, e);
     int64_t* cur = cursor + (int64_t)th * NT;
     for (int64_t s = b; s < e; ++s) {
+      if (s + 16 < e) __builtin_prefetch(feats_in + (int64_t)order[s + 16] * Cf);
       std::copy_n(feats_in + (int64_t)order[s] * Cf, Cf, feats + s * Cf);
       const Rec<S>& r = recs[s];
       if (r.u1 < r.u0 || r.v1 < r.v0) continue;
@@ -282,7 +288,7 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
         for (int tx = r.u0 / TILE; tx <= r.u1 / TILE; ++tx) {
           const int64_t p = cur[ty * TX + tx]++;
           list[p] = (int32_t)s;
-          gpos[k++] = p;
+          slot[p] = k++;
         }
     }
 #pragma omp barrier
@@ -371,20 +377,24 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
 
 // Backward: per tile, back to front from each pixel's last contributor, recovering T_k by
 // dividing by (1 - alpha_k) (alpha <= 0.99). Per (tile, Gaussian) entry the sums over the tile's
-// pixels go to gbuf; then per Gaussian its entries are summed in a fixed order (deterministic,
-// no atomics) and turned into gradients of means2d, conics, opacity and the Cf channels.
+// pixels go to gbuf, at the entry's slot in Gaussian-major order (slot, from the fill); then per
+// Gaussian its contiguous slots are summed in a fixed order (deterministic, no atomics) and turned into gradients of means2d, conics, opacity and the Cf channels.
 // g_out (Cf x H x W): dL/d out; g_T (H x W): dL/d T_final. Gradient arrays are indexed like the
 // inputs; entries of Gaussians that are not visible are left untouched (the caller zeroes them).
 template <typename S>
 void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, const Rec<S>* recs,
-              const int64_t* tile_off, const int64_t* goff, const int32_t* list, const int64_t* gpos,
+              const int64_t* tile_off, const int64_t* goff, const int32_t* list, const int64_t* slot,
               const S* feats, const S* T_final, const int32_t* last, const S* g_out, const S* g_T,
               S* g_means2d, S* g_conics, S* g_opac, S* g_feats) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   const int64_t HW = (int64_t)H * W;
   const int NB = 6 + Cf;  // q, q dx, q dy, q dx dx, q dx dy, q dy dy, w g_c
   const int64_t total = tile_off[NT];
-  std::vector<S> gbuf((size_t)total * NB);
+  // reused across calls (no page faults per frame); used through a plain pointer (thread_local
+  // is the calling thread's, not the OpenMP threads')
+  static thread_local std::vector<S> gbuf_vec;
+  if (gbuf_vec.size() < (size_t)total * NB) gbuf_vec.resize((size_t)total * NB);
+  S* const gbuf = gbuf_vec.data();
 #pragma omp parallel num_threads(nt)
   {
     typedef typename VT<S>::V V;
@@ -466,7 +476,7 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
             sums[5] += qy * dy;
           }
         }
-        S* e = gbuf.data() + (size_t)(t0 + k) * NB;
+        S* e = gbuf + (size_t)slot[t0 + k] * NB;
         for (int b = 0; b < NB; ++b) {
           S h = 0;
           for (int l = 0; l < L; ++l) h += sums[b][l];
@@ -475,7 +485,7 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
       }
       // entries past every pixel's last contributor got nothing: zero them
       const int64_t n = tile_off[t + 1] - t0;
-      for (int64_t k = kmax; k < n; ++k) std::fill_n(gbuf.data() + (size_t)(t0 + k) * NB, NB, (S)0);
+      for (int64_t k = kmax; k < n; ++k) std::fill_n(gbuf + (size_t)slot[t0 + k] * NB, NB, (S)0);
     }
 #pragma omp for schedule(static)
     for (int64_t s = 0; s < nv; ++s) {
@@ -483,8 +493,8 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
       const int64_t gi = order[s];
       S* gf = g_feats + gi * Cf;
       for (int c = 0; c < Cf; ++c) gf[c] = 0;
-      for (int64_t k = goff[s]; k < goff[s + 1]; ++k) {
-        const S* e = gbuf.data() + (size_t)gpos[k] * NB;
+      for (int64_t k = goff[s]; k < goff[s + 1]; ++k) {  // this Gaussian's entries: contiguous
+        const S* e = gbuf + (size_t)k * NB;
         for (int j = 0; j < 6; ++j) acc[j] += e[j];
         for (int c = 0; c < Cf; ++c) gf[c] += e[6 + c];
       }
@@ -517,17 +527,17 @@ int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
   }                                                                                                \
   void gs_forward_##SUFFIX(int64_t nv, const int32_t* order, const S* feats, int Cf, int W, int H, \
                            int nt, const void* recs, int64_t* cursor, const int64_t* tile_off,     \
-                           const int64_t* goff, int32_t* list, int64_t* gpos, S* feats_sorted,    \
+                           const int64_t* goff, int32_t* list, int64_t* slot, S* feats_sorted,    \
                            S* out, S* T_final, int32_t* last) {                                    \
     forward<S>(nv, order, feats, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off, goff, list,  \
-               gpos, feats_sorted, out, T_final, last);                                            \
+               slot, feats_sorted, out, T_final, last);                                            \
   }                                                                                                \
   void gs_backward_##SUFFIX(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt,        \
                             const void* recs, const int64_t* tile_off, const int64_t* goff,        \
-                            const int32_t* list, const int64_t* gpos, const S* feats,              \
+                            const int32_t* list, const int64_t* slot, const S* feats,              \
                             const S* T_final, const int32_t* last, const S* g_out, const S* g_T,   \
                             S* g_means2d, S* g_conics, S* g_opac, S* g_feats) {                    \
-    backward<S>(nv, order, Cf, W, H, nt, (const Rec<S>*)recs, tile_off, goff, list, gpos, feats,   \
+    backward<S>(nv, order, Cf, W, H, nt, (const Rec<S>*)recs, tile_off, goff, list, slot, feats,   \
                 T_final, last, g_out, g_T, g_means2d, g_conics, g_opac, g_feats);                  \
   }
 
