@@ -27,7 +27,7 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CAMERAS = (0, 9, 18, 27)
-SAMPLES = 16
+SAMPLES = int(os.environ.get("SPLAT_BENCH_SAMPLES", "16"))
 
 
 def box_psnr(a, b, ma, mb):
