@@ -121,7 +121,7 @@ def test_preview_attributes_and_positions(tmp_path, fresh_scene):
 
 
 def test_gaussian_attributes(tmp_path, fresh_scene):
-    """Gaussian mode: rotation (as the instance Euler), 3-sigma scales and every SH coefficient."""
+    """Gaussian mode: rotation (as the instance Euler), extents, low-pass and every SH coefficient."""
     from mathutils import Euler
 
     from addon.core.splat_import import import_splats
@@ -129,14 +129,18 @@ def test_gaussian_attributes(tmp_path, fresh_scene):
     g = random_gaussians(120, seed=2)
     write_ply(g, tmp_path / "g.ply")
     (obj,) = import_splats([str(tmp_path / "g.ply")])
-    me, n = obj.data, 120
+    op = 1 / (1 + np.exp(-g.opacity_logits.double().numpy()))
+    keep = op > 1 / 255  # fainter Gaussians never reach one 8-bit level: not imported
+    assert 0 < keep.sum() < 120
+    me, n = obj.data, int(keep.sum())
+    assert len(me.vertices) == n
 
-    def vec(name):
-        a = np.empty(n * 3, np.float32)
-        me.attributes[name].data.foreach_get("vector", a)
-        return a.reshape(n, 3)
+    def vec(name, width=3):
+        a = np.empty(n * width, np.float32)
+        me.attributes[name].data.foreach_get("vector" if width == 3 else "value", a)
+        return a.reshape(n, width) if width == 3 else a
 
-    q = g.quats.double().numpy()
+    q = g.quats.double().numpy()[keep]
     q = q / np.linalg.norm(q, axis=1, keepdims=True)
     C = np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # Blender = C canonical (docs/contract.md)
     rot = vec("g_rot")
@@ -147,10 +151,15 @@ def test_gaussian_attributes(tmp_path, fresh_scene):
                       [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
         # the instance maps its unit sphere to C R S u: the Gaussian's ellipsoid in Blender's frame
         np.testing.assert_allclose(np.array(Euler(rot[i].tolist(), "XYZ").to_matrix()), C @ R, atol=1e-5)
-    np.testing.assert_allclose(vec("g_scale"), 3 * np.exp(g.log_scales.numpy()), rtol=1e-5)
-    sh = g.sh.numpy()
-    for k in (0, 1, 5, 15):
-        np.testing.assert_allclose(vec(f"sh_{k}"), sh[:, k], atol=1e-6)
+    # extent: where o exp(-k^2 / 2) = 1/255, at most 3 sigma; sigma with the rasterizer's
+    # 0.3 px^2 low-pass drawn at the ring's 12 m / 2084.97 px
+    k = np.minimum(np.sqrt(2 * np.log(255 * op[keep])), 3.0)
+    np.testing.assert_allclose(vec("g_k", 1), k, rtol=1e-5)
+    sig = np.sqrt(np.exp(2 * g.log_scales.double().numpy()[keep]) + 0.3 * (12 / 2084.97) ** 2)
+    np.testing.assert_allclose(vec("g_scale"), k[:, None] * sig, rtol=1e-5)
+    sh = g.sh.numpy()[keep]
+    for kk in (0, 1, 5, 15):
+        np.testing.assert_allclose(vec(f"sh_{kk}"), sh[:, kk], atol=1e-6)
     types = {nd.bl_idname for nd in obj.modifiers["splat_gaussians"].node_group.nodes}
     assert "GeometryNodeInstanceOnPoints" in types
 

@@ -2,13 +2,14 @@
 view-dependent colour from their spherical harmonics (Cycles; splat_import.py's default mode).
 
 Geometry: Geometry Nodes instance a proxy icosahedron on every point, rotated by the point's
-`g_rot` (XYZ Euler of C R, Blender frame) and scaled by `g_scale` = K_SIGMA * (sx, sy, sz); the
+`g_rot` (XYZ Euler of C R, Blender frame) and scaled by `g_scale` = k (sx, sy, sz), with k =
+`g_k` = min(K_SIGMA, the radius in sigmas where the Gaussian's alpha falls to 1/255); the
 icosahedron is sized so that its inscribed sphere is the unit sphere, i.e. the proxy encloses
-the whole K_SIGMA ellipsoid.
+the whole k-sigma ellipsoid.  (sx, sy, sz) include the LOWPASS_M 3D filter below.
 
 Opacity (shader): the Texture Coordinate node's Object output and a World->Object Vector
 Transform both use the instance's own transform, so in them the ellipsoid is the unit sphere
-and the ray direction D is whitened too.  The ray's closest approach to the centre in sigma
+and the ray direction D is whitened too (P times g_k is in sigma units).  The ray's closest approach to the centre in sigma
 units is d^2 = |P|^2 - (P . D/|D|)^2 for any point P on the ray (P in sigma units), so the hit
 on the proxy's front face carries the 3D Gaussian's peak along the ray, which for a pinhole ray
 is the projected 2D Gaussian the rasterizer evaluates: alpha = opacity * exp(-d^2 / 2), dropped
@@ -25,11 +26,18 @@ import numpy as np
 
 from . import frames
 
-K_SIGMA = 3.0  # proxy extent in standard deviations (3DGS's screen-space cut-off is 3 sigma too)
+K_SIGMA = 3.0  # largest proxy extent in standard deviations (3DGS's screen-space cut-off is 3 sigma too)
+# The rasterizer adds 0.3 px^2 to every projected covariance (eps2d, 3DGS's low-pass), so the
+# trained opacities of sub-pixel Gaussians (spokes, cables) assume that blur.  Drawn in 3D it is
+# an isotropic variance of 0.3 (z / f)^2 at the training cameras' distance z and focal f, here
+# DESIGN.md's ring (12 m, f = 2084.97 px): sigma = 3.15 mm, added to each Gaussian's covariance
+# (the "3D filter" of Mip-Splatting).  Without it thin parts render too faint and too thin.
+LOWPASS_M = (0.3 ** 0.5) * 12.0 / 2084.97
 ALPHA_MIN, ALPHA_MAX = 1.0 / 255.0, 0.99  # 3DGS's skip threshold and cap
 # Cycles transparent bounces: a ray meets two proxy surfaces per Gaussian it passes (the back
 # face is transparent); trained parts stack a few hundred along a ray through the bike.
 TRANSPARENT_BOUNCES = 1024
+MIN_TRANSPARENT = 32  # Cycles min_transparent_bounces: hits before Russian roulette may stop a ray
 ICO_INRADIUS = 0.7946544722917661  # inscribed radius of the unit-circumradius icosahedron
 C0 = 0.28209479177387814
 C1 = 0.4886025119029199
@@ -68,11 +76,13 @@ def sh_degree_of(names):
     return 0
 
 
-def gaussian_points(data, max_degree=3):
+def gaussian_points(data, max_degree=3, lowpass_m=LOWPASS_M):
     """Structured 3DGS array -> per-point arrays for the Gaussian mode, Blender frame.
 
     co (N, 3); opacity (N,) sigmoid; rot (N, 3) XYZ Euler of C R (R from the wxyz quaternion);
-    scale (N, 3) K_SIGMA * exp(log scale); sh (N, K, 3) coefficients with sh[:, 0] = f_dc and
+    scale (N, 3) k * sqrt(exp(log scale)^2 + lowpass_m^2); k (N,) the proxy extent in sigmas,
+    min(K_SIGMA, the radius where alpha falls to 1/255); Gaussians that never reach 1/255 are
+    left out (keep (N_file,) says which); sh (N, K, 3) coefficients with sh[:, 0] = f_dc and
     f_rest read channel-major (f_rest_{c * (K-1) + k - 1}); degree.
     """
     f = lambda k: data[k].astype(np.float64)  # noqa: E731
@@ -90,11 +100,15 @@ def gaussian_points(data, max_degree=3):
     # rotation), with the file's scales on the same local axes (not C R C^T, which would
     # swap the local y and z scales)
     Rb = frames.C @ R
-    return {"co": frames.to_blender(np.stack([f("x"), f("y"), f("z")], 1)),
-            "opacity": 1.0 / (1.0 + np.exp(-f("opacity"))),
-            "rot": matrix_to_euler_xyz(Rb),
-            "scale": K_SIGMA * np.exp(np.stack([f(f"scale_{i}") for i in range(3)], 1)),
-            "sh": sh, "degree": deg}
+    op = 1.0 / (1.0 + np.exp(-f("opacity")))
+    keep = op * 255.0 > 1.0
+    k = np.sqrt(2.0 * np.log(np.maximum(op * 255.0, 1.0)))  # exp(-k^2/2) op = 1/255
+    k = np.minimum(k, K_SIGMA)
+    sig = np.sqrt(np.exp(2 * np.stack([f(f"scale_{i}") for i in range(3)], 1)) + lowpass_m ** 2)
+    return {"co": frames.to_blender(np.stack([f("x"), f("y"), f("z")], 1))[keep],
+            "opacity": op[keep], "rot": matrix_to_euler_xyz(Rb)[keep],
+            "scale": (k[:, None] * sig)[keep], "k": k[keep],
+            "sh": sh[keep], "degree": deg, "keep": keep}
 
 
 # ---- bpy side ----------------------------------------------------------------------------
@@ -239,7 +253,7 @@ def gaussian_material(degree, name="splat_gaussian"):
     geo = b.n.new("ShaderNodeNewGeometry")
     # Object coordinates and World->Object vectors use the instance's own transform, so both
     # are whitened (units of K_SIGMA sigma); this also holds when the imported object is moved
-    P = b.vmath("SCALE", tex.outputs["Object"], scale=K_SIGMA)
+    P = b.vmath("SCALE", tex.outputs["Object"], scale=b.attr("g_k", "Fac"))
     vt = b.n.new("ShaderNodeVectorTransform")
     vt.vector_type, vt.convert_from, vt.convert_to = "VECTOR", "WORLD", "OBJECT"
     b.link(geo.outputs["Incoming"], vt.inputs[0])
@@ -293,8 +307,9 @@ def make_gaussian_object(name, pts, material, node_group, collection=None):
     mesh = bpy.data.meshes.new(name)
     mesh.vertices.add(len(pts["co"]))
     mesh.vertices.foreach_set("co", np.ascontiguousarray(pts["co"], dtype=np.float32).ravel())
-    a = mesh.attributes.new("opacity", "FLOAT", "POINT")
-    a.data.foreach_set("value", np.ascontiguousarray(pts["opacity"], dtype=np.float32))
+    for key in ("opacity", "k"):
+        a = mesh.attributes.new("opacity" if key == "opacity" else "g_k", "FLOAT", "POINT")
+        a.data.foreach_set("value", np.ascontiguousarray(pts[key], dtype=np.float32))
     vectors = {"g_rot": pts["rot"], "g_scale": pts["scale"]}
     vectors.update({f"sh_{k}": pts["sh"][:, k] for k in range(pts["sh"].shape[1])})
     for key, arr in vectors.items():
