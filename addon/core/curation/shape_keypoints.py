@@ -96,7 +96,8 @@ def pedals(X, fa, ra, R, tyre_half_width):
             return None
         c = B[z > zmax - 0.12 * R]
         lo, hi = c.min(0), c.max(0)
-        ends.append(np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), sg * (zmax - 0.5 * min(0.12 * R, hi[2] - lo[2]))]))
+        # the pedal body's centre: about 5 cm (0.14 R) in from its outer end
+        ends.append(np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), sg * (zmax - 0.14 * R)]))
     pr, pl = ends
     sep = np.linalg.norm(pr[:2] - pl[:2])
     ca = np.array([0.5 * (pr[0] + pl[0]), 0.5 * (pr[1] + pl[1]), 0.0])
