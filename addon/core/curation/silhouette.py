@@ -248,7 +248,7 @@ def _ransac_circle(xy, r0, tries=300):
     tyre, without the stays, fork legs and mudguard stays that cross the band around it."""
     rng = np.random.default_rng(0)
     tol = 0.006 * r0
-    best, best_n = None, -1
+    best, best_n = None, -10 ** 9
     n = len(xy)
     for _ in range(tries):
         i = rng.choice(n, 3, replace=False)
@@ -258,10 +258,14 @@ def _ransac_circle(xy, r0, tries=300):
             continue
         if not (0.7 * r0 < r < 1.3 * r0):
             continue
-        inl = np.abs(np.hypot(*(xy - c).T) - r) < tol
-        if inl.sum() > best_n:
-            best, best_n = inl, int(inl.sum())
-    if best is None or best_n < 4:
+        res = np.hypot(*(xy - c).T) - r
+        inl = np.abs(res) < tol
+        # the tyre is the outer outline: points far outside a candidate (the tyre around a
+        # rim) count against it, points inside (rim, spokes) do not
+        score = int(inl.sum()) - int((res > 0.02 * r0).sum())
+        if score > best_n:
+            best, best_n = inl, score
+    if best is None or best.sum() < 4:
         return fit_circle_2d(xy)
     c, r = fit_circle_2d(xy[best])
     inl = np.abs(np.hypot(*(xy - c).T) - r) < tol

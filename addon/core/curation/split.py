@@ -9,7 +9,9 @@ Every point of space gets a region from the keypoints (canonical metres):
 - frame: the rest.
 A connected component takes the crank or steering label only if (almost) all of its surface
 lies in that region: rigid parts are whole pieces in real models, and a frame tube that merely
-reaches into a region (a chain stay next to the chainring) stays on the frame.  A large
+reaches into a region (a chain stay next to the chainring) stays on the frame.  A piece mostly
+(60 %) in the steering regions that never reaches back to the saddle is a one-piece fork, stem
+and bar: all steering.  A large
 component that lies across regions (a fused single-mesh model) is labelled per face instead.
 """
 import numpy as np
@@ -19,6 +21,7 @@ PART_NAMES = {FRAME: "frame", STEERING: "steering", CRANK: "crank"}
 BB_HALF = 0.036        # half the bottom-bracket shell width (68-73 mm shells)
 WHOLE = 0.97           # share of a component's area that must lie in a region
 FUSED = 0.05           # components above this share of the bike's area may be cut
+MOSTLY = 0.6           # a piece this much in the steering regions, ahead of the saddle, steers
 
 
 def _seg_dist(p, a, b):
@@ -75,6 +78,8 @@ def label_triangles(view, keep_tri, kp, head_radius=None, wheel_radius=None, has
     lab = np.full(len(soup.TW), JUNK)
     cut = np.zeros(len(soup.TW), bool)
     total = view.area[keep_tri].sum()
+    front_of_saddle = (kp["seat"][0] + 0.1) if "seat" in kp else kp["crank_axle"][0]
+    crank_r = max(np.hypot(*(kp[p][:2] - kp["crank_axle"][:2])) for p in ("pedal_left", "pedal_right")) + 0.07
     for c in view.comps:
         ti = c.tris
         a = view.area[ti]
@@ -84,9 +89,17 @@ def label_triangles(view, keep_tri, kp, head_radius=None, wheel_radius=None, has
             continue
         v = vote[ti]
         share = np.array([(a[:, None] * (v == k)).sum() for k in (FRAME, STEERING, CRANK)]) / (A * v.shape[1])
-        if share[CRANK] >= WHOLE:
+        xmin = view.P[c.verts, 0].min()
+        reach = np.hypot(*(view.P[c.verts, :2] - kp["crank_axle"][:2]).T).max()
+        if share[CRANK] >= WHOLE or (has_crank and crank_r - 0.07 > reach > 0.05 and share[STEERING] == 0):
+            # a piece within the crank's reach around the axle and bigger than the bottom
+            # bracket shell: a chainring, spider or arm (they may sit inside the shell's width)
             lab[ti] = CRANK
-        elif share[STEERING] >= WHOLE:
+        elif share[STEERING] >= WHOLE or (share[STEERING] >= MOSTLY and share[CRANK] < 0.03
+                                          and xmin > front_of_saddle):
+            # a piece mostly in the steering regions that stays ahead of the saddle is the fork /
+            # stem / bar in one piece (its steerer passes through the head-tube zone, which
+            # alone would call it frame)
             lab[ti] = STEERING
         elif A > FUSED * total and share.max() < WHOLE and np.sort(share)[-2] > 0.02:
             lab[ti] = reg[ti]
