@@ -169,8 +169,10 @@ def choose_keypoints(view, pose, X, clean=False):
     if pose.crank is None and "crank_axle" in kp and abs(kp["crank_axle"][0]) > 1e-9:
         _recentre(kp, view, X, pose, float(kp["crank_axle"][0]))
     why = probs_c[0] if probs_c else "they disagree with the shape"
+    # shape-based steer_top marks the stem top: the head tube is its lower 15 cm (scaled)
+    R = 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale
     return kp, [f"keypoints from the shape (piece-based ones: {why})"] + snotes, \
-        {"head_tube_radius": None}, has_crank
+        {"head_tube_radius": None, "head_span": 0.15 * R / 0.35}, has_crank
 
 
 def _agree(a, b, tol=0.1):

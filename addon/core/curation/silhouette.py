@@ -215,12 +215,13 @@ def pairs(circles, min_support=MIN_SUPPORT):
     return out
 
 
-def refine(P, sv, circ, sectors=72):
+def refine(P, sv, circ, sectors=72, spread=0.15):
     """Circle fit on the mesh's vertices: the outermost vertex per angular sector within
     [0.8 r, 1.12 r] of the Hough circle, outliers (fenders, a fork) dropped by residual."""
     Q = P - sv.origin
     uv = np.stack([Q @ sv.e1, Q @ sv.e2], 1)
     c, r = circ.centre, circ.radius
+    r_found = r
     for _ in range(3):
         d = uv - c
         rho = np.hypot(d[:, 0], d[:, 1])
@@ -234,7 +235,7 @@ def refine(P, sv, circ, sectors=72):
         outer = idx[order][last]
         if len(outer) < 6:
             return c, r, idx
-        cc, rr = _ransac_circle(uv[outer], r)
+        cc, rr = _ransac_circle(uv[outer], r_found, spread=spread)
         c, r = cc, rr
     # the tyre's band around its outer radius: symmetric about the wheel's mid-plane for thin
     # and fat tyres alike (the outline vertices alone sit on one shoulder of a fat tyre)
@@ -243,7 +244,7 @@ def refine(P, sv, circ, sectors=72):
     return c, r, np.nonzero((rho > 0.9 * r) & (rho < 1.01 * r))[0]
 
 
-def _ransac_circle(xy, r0, tries=300):
+def _ransac_circle(xy, r0, tries=300, spread=0.15):
     """Least-squares circle on the inliers of the best 3-point circle: the outline points of a
     tyre, without the stays, fork legs and mudguard stays that cross the band around it."""
     rng = np.random.default_rng(0)
@@ -256,13 +257,15 @@ def _ransac_circle(xy, r0, tries=300):
             c, r = fit_circle_2d(xy[i])
         except np.linalg.LinAlgError:
             continue
-        if not (0.7 * r0 < r < 1.3 * r0):
+        if not ((1 - spread) * r0 < r < (1 + spread) * r0):
             continue
         res = np.hypot(*(xy - c).T) - r
         inl = np.abs(res) < tol
-        # the tyre is the outer outline: points far outside a candidate (the tyre around a
-        # rim) count against it, points inside (rim, spokes) do not
-        score = int(inl.sum()) - int((res > 0.02 * r0).sum())
+        # the tyre is the outer outline: a candidate with most points outside it is a rim
+        # inside its tyre (a mudguard outside the tyre covers only part of the circle)
+        if (res > 0.02 * r0).mean() > 0.4:
+            continue
+        score = int(inl.sum())
         if score > best_n:
             best, best_n = inl, score
     if best is None or best.sum() < 4:
@@ -335,6 +338,14 @@ def wheel_rings(soup):
         for c3, r in zip(cents, radii):
             c2 = np.array([(c3 - sv.origin) @ e1, (c3 - sv.origin) @ e2])
             fits.append(refine(P, frame, Circle(c2, r, 1.0)))
+        # wheels the outline shows equal stay equal: the better-seen tyre sets the size of one
+        # half hidden (a rider's foot against it pulls its fit outwards)
+        if abs(a.radius - b.radius) < 0.05 * max(a.radius, b.radius) and \
+                abs(fits[0][1] - fits[1][1]) > 0.05 * max(fits[0][1], fits[1][1]):
+            good, bad = (0, 1) if a.support >= b.support else (1, 0)
+            c3 = cents[bad]
+            c2 = np.array([(c3 - sv.origin) @ e1, (c3 - sv.origin) @ e2])
+            fits[bad] = refine(P, frame, Circle(c2, fits[good][1], 1.0), spread=0.03)
         bands = [f[2] for f in fits]
         # the plane through both tyres' outlines, or one tyre's own (a tricycle's twin wheels
         # seen slightly askew make one outline thick): the one square to the wheelbase and flat
