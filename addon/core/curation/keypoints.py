@@ -171,6 +171,7 @@ def estimate(view, pose):
     kp, notes = {}, []
     fa = pose.apply(pose.front.centre)
     ra = pose.apply(pose.rear.centre)
+    fa[2] = ra[2] = 0.0   # on the symmetry plane (a model's wheels may sit a little askew)
     kp["front_axle"], kp["rear_axle"] = fa, ra
     kp["ground"] = np.array([ra[0], 0.0, 0.0])
     if pose.crank is not None:

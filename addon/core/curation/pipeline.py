@@ -91,7 +91,7 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
     needed = ("crank_axle", "front_axle", "steer_top", "steer_bottom", "pedal_left", "pedal_right")
     if all(k in kp for k in needed):
         labels, cut = split.label_triangles(view, keep_tri, kp, info.get("head_tube_radius"),
-                                            pose.front.radius * pose.scale, has_crank)
+                                            pose.front.radius * pose.scale, has_crank, info.get("head_span"))
     else:  # no split without the keypoints that define it: everything is frame until fixed
         labels, cut = np.where(keep_tri, split.FRAME, split.JUNK), np.zeros(len(T), bool)
     if hints is not None:

@@ -40,27 +40,33 @@ def check_two_wheels(X, pose):
         c = pose.apply(w.centre)
         r = w.radius * pose.scale
         A = _annulus(X, c, r, 0.8, 1.02)
-        z = np.sort(np.abs(A[:, 2] - c[2]))
-        if len(z) < 10:
+        if len(A) < 10:
             continue
-        # the tyre is a continuous slab around its plane; a twin lies beyond an empty gap
-        gaps = np.nonzero(np.diff(z) > 0.15 * r)[0]
+        # a tyre is one continuous slab across its plane; twins are two slabs with a gap
+        # between them (signed: the mid-plane may fall between the twins)
+        z = A[:, 2] - c[2]
+        zs = np.sort(z)
+        gaps = np.nonzero(np.diff(zs) > 0.15 * r)[0]
         if not len(gaps):
             continue
-        far = A[np.abs(A[:, 2] - c[2]) > z[gaps[0]] + 1e-9]
-        ang = np.arctan2(far[:, 1] - c[1], far[:, 0] - c[0])
-        sectors = len(np.unique(((ang + np.pi) / (2 * np.pi) * 36).astype(int) % 36))
-        if sectors >= 27:
-            raise UserError(f"two wheels side by side on the {name} axle (a second tyre "
-                            f"{np.median(np.abs(far[:, 2] - c[2])) * 100:.0f} cm to the side): a tricycle or quad, "
-                            f"not a two-wheeler")
+        edges = np.r_[zs[0] - 1, zs[gaps] + 1e-9, zs[-1] + 1]
+        full = []
+        for lo, hi in zip(edges[:-1], edges[1:]):
+            grp = A[(z > lo) & (z <= hi)]
+            ang = np.arctan2(grp[:, 1] - c[1], grp[:, 0] - c[0])
+            if len(np.unique(((ang + np.pi) / (2 * np.pi) * 36).astype(int) % 36)) >= 27:
+                full.append(float(np.median(grp[:, 2] - c[2])))
+        if len(full) >= 2:
+            raise UserError(f"two wheels side by side on the {name} axle ({abs(full[-1] - full[0]) * 100:.0f} cm "
+                            f"apart): a tricycle or quad, not a two-wheeler")
 
 
 def drop_rider(soup, pose):
     """Bool per soup component: a rider.  A person on a bike reaches 2.1-3.5 wheel diameters
     high (a bike alone stays below ~2, a kick scooter's stem is far taller and thin); the rider
     is the pieces lying wholly above 1.75 wheel diameters (head, torso), grown through touching
-    pieces whose middle is above the wheel tops (arms, thighs)."""
+    thick pieces (arms, thighs: thicker than a tenth of a wheel, which no tube, saddle or bar
+    is) whose middle is above the wheel tops."""
     P = soup.transformed_points(pose.M)
     D = 2 * 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale
     out = np.zeros(len(soup.comps), bool)
@@ -76,13 +82,15 @@ def drop_rider(soup, pose):
     if not high.any() or (hi[high, 2] - lo[high, 2]).max() < 0.2 * D:
         return out
     mid = 0.5 * (lo[:, 1] + hi[:, 1])
+    # limbs are thick: a bike's tubes, saddle and bar are thinner than a tenth of a wheel
+    thick = (hi - lo).min(1) > 0.1 * D
     grow = high.copy()
-    gap = 0.02 * D
+    gap = 0.08 * D
     frontier = list(np.nonzero(high)[0])
     while frontier:
         f = np.array(frontier)
         ov = np.all((lo[None] <= hi[f][:, None] + gap) & (hi[None] >= lo[f][:, None] - gap), axis=2).any(0)
-        new = np.nonzero(ov & ~grow & (mid > 1.1 * D))[0]
+        new = np.nonzero(ov & ~grow & (mid > 1.1 * D) & thick)[0]
         grow[new] = True
         frontier = list(new)
     out[np.array(idx)[grow]] = True
@@ -161,8 +169,10 @@ def choose_keypoints(view, pose, X, clean=False):
     if pose.crank is None and "crank_axle" in kp and abs(kp["crank_axle"][0]) > 1e-9:
         _recentre(kp, view, X, pose, float(kp["crank_axle"][0]))
     why = probs_c[0] if probs_c else "they disagree with the shape"
+    # shape-based steer_top marks the stem top: the head tube is its lower 15 cm (scaled)
+    R = 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale
     return kp, [f"keypoints from the shape (piece-based ones: {why})"] + snotes, \
-        {"head_tube_radius": None}, has_crank
+        {"head_tube_radius": None, "head_span": 0.15 * R / 0.35}, has_crank
 
 
 def _agree(a, b, tol=0.1):

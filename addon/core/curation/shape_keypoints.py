@@ -24,7 +24,8 @@ SEAT_DEPTH = 0.004
 def steering_axis(X, fa, R):
     """(steer_bottom, steer_top) or None."""
     d = np.hypot(X[:, 0] - fa[0], X[:, 1] - fa[1])
-    m = (d > 1.05 * R) & (X[:, 1] > fa[1]) & (X[:, 1] < fa[1] + 4 * R) & (np.abs(X[:, 2]) < 0.25 * R) \
+    # metric floors: a scooter's 10 cm wheels carry a stem as thick as a bicycle's
+    m = (d > 1.05 * R) & (X[:, 1] > fa[1]) & (X[:, 1] < fa[1] + max(4 * R, 1.2)) & (np.abs(X[:, 2]) < max(0.25 * R, 0.04)) \
         & (X[:, 0] > fa[0] - 2.5 * R) & (X[:, 0] < fa[0] + 1.0 * R)
     P = X[m][:, :2]
     if len(P) < 10:
@@ -38,7 +39,7 @@ def steering_axis(X, fa, R):
     offs = np.arange(-0.3, 0.301, 0.02) * R
     dist = P @ nrm.T                                     # (n, angles) signed offset
     along = P @ a.T
-    band = 0.06 * R
+    band = max(0.06 * R, 0.015)
     best, arg = -1.0, None
     for j, o in enumerate(offs):
         hit = (np.abs(dist - o) < band) & (along > 1.0 * R)
@@ -52,7 +53,7 @@ def steering_axis(X, fa, R):
     hit = (np.abs(dist[:, k] - o) < band) & (along[:, k] > 1.0 * R)
     t = np.sort(along[hit, k])
     # the contiguous run of surface along the line, starting above the tyre
-    gaps = np.nonzero(np.diff(t) > 0.3 * R)[0]
+    gaps = np.nonzero(np.diff(t) > max(0.3 * R, 0.05))[0]
     top = t[gaps[0]] if len(gaps) else t[-1]
     base = fa[:2] + o * nrm[k]
     t0 = 1.15 * R
@@ -82,8 +83,20 @@ def handles(X, steer_top, seat_x, R):
     return np.array([xy[0], xy[1], -w]), np.array([xy[0], xy[1], w])
 
 
+def bulky(X, fa, ra, R, cell=0.02):
+    """Share of the side view between the wheels (axle height to wheel top) that is solid: a
+    motorcycle's engine and tank fill it, a bicycle's tubes do not."""
+    x0, x1, y0, y1 = ra[0] + R, fa[0] - R, 0.5 * R + 0.5 * (fa[1] + ra[1]) - R, 2 * R
+    if x1 - x0 < 2 * cell or y1 - y0 < 2 * cell:
+        return 0.0
+    m = (X[:, 0] > x0) & (X[:, 0] < x1) & (X[:, 1] > y0) & (X[:, 1] < y1)
+    ij = np.unique(np.floor((X[m][:, :2] - [x0, y0]) / cell).astype(int), axis=0)
+    return len(ij) / (np.ceil((x1 - x0) / cell) * np.ceil((y1 - y0) / cell))
+
+
 def pedals(X, fa, ra, R, tyre_half_width):
-    """(crank_axle, pedal_left, pedal_right, has_crank) or None."""
+    """(crank_axle, pedal_left, pedal_right, has_crank) or None.  A bulky body between the
+    wheels (a motorcycle) has footrests, not a crank."""
     m = (X[:, 0] > ra[0] + 0.5 * R) & (X[:, 0] < fa[0] - 0.5 * R) & (X[:, 1] < max(fa[1], ra[1]) + 0.6 * R)
     B = X[m]
     if len(B) < 4:
@@ -96,11 +109,12 @@ def pedals(X, fa, ra, R, tyre_half_width):
             return None
         c = B[z > zmax - 0.12 * R]
         lo, hi = c.min(0), c.max(0)
-        ends.append(np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), sg * (zmax - 0.5 * min(0.12 * R, hi[2] - lo[2]))]))
+        # the pedal body's centre: about 5 cm (0.14 R) in from its outer end
+        ends.append(np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), sg * (zmax - 0.14 * R)]))
     pr, pl = ends
     sep = np.linalg.norm(pr[:2] - pl[:2])
     ca = np.array([0.5 * (pr[0] + pl[0]), 0.5 * (pr[1] + pl[1]), 0.0])
-    has_crank = 0.35 * R < sep < 1.6 * R
+    has_crank = 0.35 * R < sep < 1.6 * R and bulky(X, fa, ra, R) < 0.6
     if has_crank:  # exactly opposite about the axle (the rig rotates them as one)
         v = 0.5 * (pr[:2] - pl[:2])
         pr = np.array([ca[0] + v[0], ca[1] + v[1], pr[2]])

@@ -26,7 +26,8 @@ from ..contract import UserError
 from .wheels import fit_circle_2d
 
 IMAGE_PX = 200          # pixels along the longer side of the side view
-MIN_SUPPORT = 0.45      # share of a wheel's circumference that must be outline
+MIN_SUPPORT = 0.5       # share of a wheel's circumference that must be (outward-facing) outline
+MIN_PAIR_SUPPORT = 1.2  # and both wheels together (one tyre may be half hidden by a rider's leg)
 
 
 @dataclass
@@ -50,6 +51,8 @@ def surface_samples(P, TW, spacing):
     """Points on the triangles no further than ~spacing apart (vertices, edges and interiors),
     so a large face (a disc wheel's side, a low-poly tyre) fills the image, not just its corners."""
     tri = P[TW]
+    # zero-area triangles (slivers that only link pieces) are no surface
+    tri = tri[np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1) > 0]
     e = np.stack([tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 1], tri[:, 0] - tri[:, 2]], 1)
     longest = np.linalg.norm(e, axis=2).max(1)
     k = np.clip(np.ceil(longest / spacing), 1, 512).astype(int)
@@ -133,16 +136,18 @@ def hough_circles(img, rmin, rmax, max_circles=8):
             r = float(radii[base + ri])
             if any(np.hypot(x - o[0], y - o[1]) < 0.5 * max(r, o[2]) for o in got):
                 continue
-            got.append((float(x), float(y), r, circle_support(edge, x, y, r)))
+            got.append((float(x), float(y), r, circle_support(edge, x, y, r, img=img)))
             if len(got) >= max_circles:
                 break
         out += got
     return sorted(out, key=lambda o: -o[3] * o[2])
 
 
-def circle_support(edge, x, y, r, n=90):
-    """Share of n directions around (x, y) with an outline pixel at distance r (+-4 %), whose
-    inside is towards the centre."""
+def circle_support(edge, x, y, r, n=90, img=None):
+    """Share of n directions around (x, y) with an outline pixel at distance r (+-4 %).  With
+    the occupancy image, an outline pixel counts only where the outside beyond it is empty: a
+    tyre's outline faces outwards, a circle inscribed between frame tubes touches their inner
+    edges with tube beyond."""
     H, W = edge.shape
     a = np.linspace(0, 2 * np.pi, n, endpoint=False)
     tol = max(1.5, 0.04 * r)
@@ -154,6 +159,14 @@ def circle_support(edge, x, y, r, n=90):
         h = np.zeros(n, bool)
         h[ok] = edge[py[ok], px[ok]]
         hit |= h
+    if img is not None:
+        ro = r + tol + 1.5
+        px = np.rint(x + ro * np.cos(a)).astype(int)
+        py = np.rint(y + ro * np.sin(a)).astype(int)
+        ok = (px >= 0) & (py >= 0) & (px < W) & (py < H)
+        empty = np.ones(n, bool)
+        empty[ok] = ~img[py[ok], px[ok]]
+        hit &= empty
     return float(hit.mean())
 
 
@@ -193,7 +206,7 @@ def pairs(circles, min_support=MIN_SUPPORT):
     for i, a in enumerate(good):
         for b in good[i + 1:]:
             d = np.linalg.norm(a.centre - b.centre)
-            if d < 0.95 * (a.radius + b.radius):
+            if d < 0.95 * (a.radius + b.radius) or a.support + b.support < MIN_PAIR_SUPPORT:
                 continue
             ratio = min(a.radius, b.radius) / max(a.radius, b.radius)
             # big, well-supported, and similar: a wheel pair beats a wheel and a headlight
@@ -202,12 +215,13 @@ def pairs(circles, min_support=MIN_SUPPORT):
     return out
 
 
-def refine(P, sv, circ, sectors=72):
+def refine(P, sv, circ, sectors=72, spread=0.15):
     """Circle fit on the mesh's vertices: the outermost vertex per angular sector within
     [0.8 r, 1.12 r] of the Hough circle, outliers (fenders, a fork) dropped by residual."""
     Q = P - sv.origin
     uv = np.stack([Q @ sv.e1, Q @ sv.e2], 1)
     c, r = circ.centre, circ.radius
+    r_found = r
     for _ in range(3):
         d = uv - c
         rho = np.hypot(d[:, 0], d[:, 1])
@@ -221,17 +235,44 @@ def refine(P, sv, circ, sectors=72):
         outer = idx[order][last]
         if len(outer) < 6:
             return c, r, idx
-        cc, rr = fit_circle_2d(uv[outer])
-        res = np.abs(np.hypot(*(uv[outer] - cc).T) - rr)
-        mad = np.median(res) + 1e-12
-        keep = outer[res < max(4 * mad, 0.01 * rr)]
-        if len(keep) >= 6:
-            cc, rr = fit_circle_2d(uv[keep])
+        cc, rr = _ransac_circle(uv[outer], r_found, spread=spread)
         c, r = cc, rr
+    # the tyre's band around its outer radius: symmetric about the wheel's mid-plane for thin
+    # and fat tyres alike (the outline vertices alone sit on one shoulder of a fat tyre)
     d = uv - c
     rho = np.hypot(d[:, 0], d[:, 1])
-    band = np.nonzero((rho > 0.9 * r) & (rho < 1.01 * r))[0]
-    return c, r, band
+    return c, r, np.nonzero((rho > 0.9 * r) & (rho < 1.01 * r))[0]
+
+
+def _ransac_circle(xy, r0, tries=300, spread=0.15):
+    """Least-squares circle on the inliers of the best 3-point circle: the outline points of a
+    tyre, without the stays, fork legs and mudguard stays that cross the band around it."""
+    rng = np.random.default_rng(0)
+    tol = 0.006 * r0
+    best, best_n = None, -10 ** 9
+    n = len(xy)
+    for _ in range(tries):
+        i = rng.choice(n, 3, replace=False)
+        try:
+            c, r = fit_circle_2d(xy[i])
+        except np.linalg.LinAlgError:
+            continue
+        if not ((1 - spread) * r0 < r < (1 + spread) * r0):
+            continue
+        res = np.hypot(*(xy - c).T) - r
+        inl = np.abs(res) < tol
+        # the tyre is the outer outline: a candidate with most points outside it is a rim
+        # inside its tyre (a mudguard outside the tyre covers only part of the circle)
+        if (res > 0.02 * r0).mean() > 0.4:
+            continue
+        score = int(inl.sum())
+        if score > best_n:
+            best, best_n = inl, score
+    if best is None or best.sum() < 4:
+        return fit_circle_2d(xy)
+    c, r = fit_circle_2d(xy[best])
+    inl = np.abs(np.hypot(*(xy - c).T) - r) < tol
+    return fit_circle_2d(xy[inl]) if inl.sum() >= 4 else (c, r)
 
 
 def find_side_view(P, TW):
@@ -297,11 +338,27 @@ def wheel_rings(soup):
         for c3, r in zip(cents, radii):
             c2 = np.array([(c3 - sv.origin) @ e1, (c3 - sv.origin) @ e2])
             fits.append(refine(P, frame, Circle(c2, r, 1.0)))
+        # wheels the outline shows equal stay equal: the better-seen tyre sets the size of one
+        # half hidden (a rider's foot against it pulls its fit outwards)
+        if abs(a.radius - b.radius) < 0.05 * max(a.radius, b.radius) and \
+                abs(fits[0][1] - fits[1][1]) > 0.05 * max(fits[0][1], fits[1][1]):
+            good, bad = (0, 1) if a.support >= b.support else (1, 0)
+            c3 = cents[bad]
+            c2 = np.array([(c3 - sv.origin) @ e1, (c3 - sv.origin) @ e2])
+            fits[bad] = refine(P, frame, Circle(c2, fits[good][1], 1.0), spread=0.03)
         bands = [f[2] for f in fits]
-        allb = np.concatenate(bands)
-        if len(allb) >= 12:
-            _, ax, _ = principal_axes(P[allb])
-            normal = ax[0] if ax[0] @ normal > 0 else -ax[0]
+        # the plane through both tyres' outlines, or one tyre's own (a tricycle's twin wheels
+        # seen slightly askew make one outline thick): the one square to the wheelbase and flat
+        base = cents[1] - cents[0]
+        base = base / np.linalg.norm(base)
+        planes = []
+        for band in (np.concatenate(bands), bands[0], bands[1]):
+            if len(band) >= 6:
+                _, ax, sd = principal_axes(P[band])
+                nn = ax[0] if ax[0] @ normal > 0 else -ax[0]
+                planes.append((abs(nn @ base) + sd[0] / max(sd[2], 1e-12), nn))
+        if planes:
+            normal = min(planes, key=lambda t: t[0])[1]
         cents = [sv.origin + f[0][0] * e1 + f[0][1] * e2 for f in fits]
         radii = [f[1] for f in fits]
     rings = []

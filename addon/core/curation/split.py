@@ -9,7 +9,10 @@ Every point of space gets a region from the keypoints (canonical metres):
 - frame: the rest.
 A connected component takes the crank or steering label only if (almost) all of its surface
 lies in that region: rigid parts are whole pieces in real models, and a frame tube that merely
-reaches into a region (a chain stay next to the chainring) stays on the frame.  A large
+reaches into a region (a chain stay next to the chainring) stays on the frame.  With keypoints from the shape
+(a real model), a piece mostly (60 %) in the steering regions, less than half in the head-tube
+zone (not the head tube), that never reaches back to the saddle is a one-piece fork, stem and
+bar: all steering.  A large
 component that lies across regions (a fused single-mesh model) is labelled per face instead.
 """
 import numpy as np
@@ -19,6 +22,7 @@ PART_NAMES = {FRAME: "frame", STEERING: "steering", CRANK: "crank"}
 BB_HALF = 0.036        # half the bottom-bracket shell width (68-73 mm shells)
 WHOLE = 0.97           # share of a component's area that must lie in a region
 FUSED = 0.05           # components above this share of the bike's area may be cut
+MOSTLY = 0.6           # a piece this much in the steering regions, ahead of the saddle, steers
 
 
 def _seg_dist(p, a, b):
@@ -27,8 +31,10 @@ def _seg_dist(p, a, b):
     return np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
 
 
-def regions(X, kp, head_radius=None, wheel_radius=None):
-    """Region label (FRAME/STEERING/CRANK) per canonical point X (n, 3)."""
+def regions(X, kp, head_radius=None, wheel_radius=None, head_span=None, with_head=False):
+    """Region label (FRAME/STEERING/CRANK) per canonical point X (n, 3); with_head: also the
+    bool mask of points in the head-tube zone.  head_span: the head tube's length from
+    steer_bottom when steer_top marks the stem top instead (shape-based keypoints)."""
     X = np.asarray(X, float)
     out = np.full(len(X), FRAME)
     ca, fa = kp["crank_axle"], kp["front_axle"]
@@ -44,7 +50,7 @@ def regions(X, kp, head_radius=None, wheel_radius=None):
     span = np.linalg.norm(st - sb)
     t = (X - sb) @ a
     rho = np.linalg.norm((X - sb) - np.outer(t, a), axis=1)
-    in_head = (t >= 0) & (t <= span) & (rho < r_ht + 0.012)
+    in_head = (t >= 0) & (t <= (span if head_span is None else min(span, head_span))) & (rho < r_ht + 0.012)
     steer = np.zeros(len(X), bool)
     steer |= (np.hypot(X[:, 0] - fa[0], X[:, 1] - fa[1]) < R + 0.03) & (np.abs(X[:, 2]) < 0.15)
     steer |= (_seg_dist(X[:, :2], fa[:2], sb[:2]) < 0.07) & (np.abs(X[:, 2]) < 0.15) & (t < 0)
@@ -53,28 +59,33 @@ def regions(X, kp, head_radius=None, wheel_radius=None):
     steer = np.where(in_head, rho < 0.8 * r_ht, steer)
     out[steer] = STEERING
     out[crank & ~steer] = CRANK
-    return out
+    return (out, in_head) if with_head else out
 
 
-def label_triangles(view, keep_tri, kp, head_radius=None, wheel_radius=None, has_crank=True):
+def label_triangles(view, keep_tri, kp, head_radius=None, wheel_radius=None, has_crank=True, head_span=None):
     """Part label per triangle of view.soup (JUNK for triangles outside the kept assembly).
 
     Returns (labels (m,), per-face flag `cut` (m,) True where a fused component was labelled
     per face)."""
     soup = view.soup
-    reg = regions(view.tri_c, kp, head_radius, wheel_radius)
+    reg = regions(view.tri_c, kp, head_radius, wheel_radius, head_span)
     # votes use 7 points per triangle (corners, edge midpoints, centroid): a long tube face
     # that reaches into a region then counts only the part that lies inside it
     tri = view.P[soup.TW]
     bary = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [.5, .5, 0], [.5, 0, .5], [0, .5, .5], [1 / 3, 1 / 3, 1 / 3]])
     samples = np.einsum("kj,mjd->mkd", bary, tri).reshape(-1, 3)
-    vote = regions(samples, kp, head_radius, wheel_radius).reshape(len(tri), len(bary))
+    vote, head = regions(samples, kp, head_radius, wheel_radius, head_span, with_head=True)
+    vote = vote.reshape(len(tri), len(bary))
+    head = head.reshape(len(tri), len(bary)).mean(1)
     if not has_crank:
         reg[reg == CRANK] = FRAME
         vote[vote == CRANK] = FRAME
     lab = np.full(len(soup.TW), JUNK)
     cut = np.zeros(len(soup.TW), bool)
     total = view.area[keep_tri].sum()
+    front_of_saddle = (kp["seat"][0] + 0.1) if "seat" in kp else kp["crank_axle"][0]
+    shape_kp = head_span is not None   # keypoints from the shape: pieces need not follow our conventions
+    crank_r = max(np.hypot(*(kp[p][:2] - kp["crank_axle"][:2])) for p in ("pedal_left", "pedal_right")) + 0.07
     for c in view.comps:
         ti = c.tris
         a = view.area[ti]
@@ -84,9 +95,18 @@ def label_triangles(view, keep_tri, kp, head_radius=None, wheel_radius=None, has
             continue
         v = vote[ti]
         share = np.array([(a[:, None] * (v == k)).sum() for k in (FRAME, STEERING, CRANK)]) / (A * v.shape[1])
-        if share[CRANK] >= WHOLE:
+        xmin = view.P[c.verts, 0].min()
+        reach = np.hypot(*(view.P[c.verts, :2] - kp["crank_axle"][:2]).T).max()
+        if share[CRANK] >= WHOLE or (has_crank and crank_r - 0.07 > reach > 0.05 and share[STEERING] == 0):
+            # a piece within the crank's reach around the axle and bigger than the bottom
+            # bracket shell: a chainring, spider or arm (they may sit inside the shell's width)
             lab[ti] = CRANK
-        elif share[STEERING] >= WHOLE:
+        elif share[STEERING] >= WHOLE or (shape_kp and share[STEERING] >= MOSTLY and share[CRANK] < 0.03
+                                          and xmin > front_of_saddle
+                                          and (a * head[ti]).sum() < 0.5 * A):
+            # a piece mostly in the steering regions that stays ahead of the saddle is the fork /
+            # stem / bar in one piece (its steerer passes through the head-tube zone, which
+            # alone would call it frame)
             lab[ti] = STEERING
         elif A > FUSED * total and share.max() < WHOLE and np.sort(share)[-2] > 0.02:
             lab[ti] = reg[ti]

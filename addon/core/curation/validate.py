@@ -54,7 +54,8 @@ def validate(kp, has_crank=True, tol=0.02):
             probs.append(f"{n}: at or below the ground")
     if not k["rear_axle"][0] < k["crank_axle"][0] < k["front_axle"][0]:
         probs.append("crank_axle: not between the wheel axles")
-    if k["seat"][1] < k["crank_axle"][1] + 0.15:
+    # a saddle is well above the crank; a kick scooter's standing place is on its deck
+    if k["seat"][1] < k["crank_axle"][1] + (0.15 if has_crank else 0.0):
         probs.append("seat: not above crank_axle")
     # left/right pairs
     for left, right in (("handle_left", "handle_right"), ("pedal_left", "pedal_right")):
