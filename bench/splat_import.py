@@ -58,8 +58,8 @@ def gaussians_ply(bike_dir, work):
         return whole
     import torch
 
-    from splatting.bike import BikeModel
-    from splatting.gaussians import write_ply
+    from splatting.bike.model import BikeModel
+    from splatting.gaussians.container import write_ply
 
     posed = BikeModel.load(bike_dir).pose(torch.zeros(8, dtype=torch.float64))
     path = os.path.join(work, "rest.ply")
@@ -115,9 +115,9 @@ def run(results, out_dir, bike_dir=None, cams=CAMERAS, picture=None):
     import torch
 
     from bench.compare import mask_iou, side_by_side
-    from splatting.cameras import load_cameras
-    from splatting.gaussians import read_ply
-    from splatting.rasterize import render_gaussians
+    from splatting.raster.camera import load_cameras
+    from splatting.gaussians.container import read_ply
+    from splatting.raster.sparse import render_gaussians
 
     work = os.path.join(out_dir, "splat_import")
     os.makedirs(work, exist_ok=True)

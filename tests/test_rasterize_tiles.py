@@ -170,7 +170,7 @@ def test_float32_bike_scene_agrees():
     """The benchmark's bike-like part in float32 (the training dtype): images to 1e-5, every
     parameter's gradient to 1e-4 relative (float32 rounding, different exp implementations)."""
     from bench.raster import bike_like_gaussians
-    from splatting.cameras import ring_camera
+    from splatting.raster.camera import ring_camera
 
     params = bike_like_gaussians(4000)
     cam = ring_camera(30.0, size=160, focal=650.0)

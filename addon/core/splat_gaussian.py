@@ -30,7 +30,7 @@ K_SIGMA = 3.0  # largest proxy extent in standard deviations (3DGS's screen-spac
 # The rasterizer adds 0.3 px^2 to every projected covariance (eps2d, 3DGS's low-pass), so the
 # trained opacities of sub-pixel Gaussians (spokes, cables) assume that blur.  Drawn in 3D it is
 # an isotropic variance of 0.3 (z / f)^2 at the training cameras' distance z and focal f, here
-# DESIGN.md's ring (12 m, f = 2084.97 px): sigma = 3.15 mm, added to each Gaussian's covariance
+# docs/contract.md's ring (12 m, f = 2084.97 px): sigma = 3.15 mm, added to each Gaussian's covariance
 # (the "3D filter" of Mip-Splatting).  Without it thin parts render too faint and too thin.
 LOWPASS_M = (0.3 ** 0.5) * 12.0 / 2084.97
 ALPHA_MIN, ALPHA_MAX = 1.0 / 255.0, 0.99  # 3DGS's skip threshold and cap

@@ -3,7 +3,7 @@
 Steps, each skipped when its output exists (so a killed run resumes):
   1. rest_mesh.ply   the T-posed rider mesh with vertex colours (body.export_rider)
   2. views/          36 ring views in Blender (blender_scripts/render_rider.py, a subprocess)
-  3. rider.ply       Gaussians trained on those views (splatting.train; rider.json = metrics)
+  3. rider.ply       Gaussians trained on those views (splatting.training.trainer; rider.json = metrics)
   4. skinning.npz    per-Gaussian LBS weights from the body model (avatar.RiderAvatar)
 """
 import os

@@ -1,7 +1,7 @@
 """Keypoint checks with messages that name the failing keypoint (numpy, no bpy).
 
 validate(kp) -> list of problem strings, empty when the keypoints make a plausible bicycle in
-DESIGN.md's canonical frame (X forward, Y up, Z right, ground Y = 0, crank axle on the Y axis).
+docs/contract.md's canonical frame (X forward, Y up, Z right, ground Y = 0, crank axle on the Y axis).
 """
 import numpy as np
 
