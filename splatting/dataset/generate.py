@@ -193,6 +193,9 @@ def make_sample(cfg, index, assets):
     rgb = over(L, bg)
 
     K, R, T = cam.K.double().numpy(), cam.R.double().numpy(), cam.T.double().numpy()
+    # the depth test compares with the surface seen through the keypoint's whole pixel, whose
+    # footprint (z / f metres) adds to every tolerance: a far cyclist's pixel spans centimetres
+    px = 1.0 / float(K[0, 0])
     anns, kitti_objs = [], []
     for k, (inst, frame, person) in enumerate(frames):
         sb, sr = 2 * k + 1, 2 * k + 2
@@ -216,7 +219,7 @@ def make_sample(cfg, index, assets):
         bk = np.array([frame.bike_keypoints.get(n, [np.nan] * 3) for n in BIKE_KEYPOINTS], dtype=np.float64)
         have = np.isfinite(bk).all(1)
         uv, z = project_points(np.nan_to_num(bk), cam)
-        vis = keypoint_visibility(uv, z, L["alpha"], L["depth"], kp_cfg["tolerance_bike_m"]) * have
+        vis = keypoint_visibility(uv, z, L["alpha"], L["depth"], kp_cfg["tolerance_bike_m"] + z * px) * have
         a_b = annotation(vclass, vis_b, am_b, ext_b, W, H, np.column_stack([uv, vis]), extra)
         inst_anns = [a_b]
         if inst["rider"] is not None:
@@ -224,7 +227,7 @@ def make_sample(cfg, index, assets):
             uvr, zr = project_points(person, cam)
             # COCO-17: per-point depths under the skin; SMPL joints: one tolerance for joint centres
             tol = COCO17_TOLERANCE_M if kp_cfg["person"] == "coco17" else kp_cfg["tolerance_rider_m"]
-            visr = keypoint_visibility(uvr, zr, L["alpha"], L["depth"], tol)
+            visr = keypoint_visibility(uvr, zr, L["alpha"], L["depth"], np.asarray(tol) + zr * px)
             inst_anns.append(annotation("rider", vis_r, am_r, ext_r, W, H, np.column_stack([uvr, visr]), extra))
             ext_c = [min(ext_b[0], ext_r[0]), min(ext_b[1], ext_r[1]), max(ext_b[2], ext_r[2]), max(ext_b[3], ext_r[3])]
             combined = lab["combined"][vclass]
