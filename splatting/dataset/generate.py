@@ -99,20 +99,23 @@ def _ry(deg):
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
-def extent_box(g, pose, min_opacity=0.1, sigmas=2.0):
-    """The posed instance's 3D box in its heading frame: Gaussians with opacity >= min_opacity,
-    each widened by `sigmas` of its largest scale.  -> {bottom_centre (world), heading_deg, h, w, l}."""
-    keep = g.opacities >= min_opacity
+def extent_box(g, pose, min_opacity=0.1):
+    """The posed instance's 3D box in its heading frame -> {bottom_centre (world), heading_deg, h, w, l}.
+    Gaussians with opacity >= min_opacity count, each widened by the radius where it alone renders
+    alpha 0.5 (sigma sqrt(2 ln 2o) of its largest scale; none below opacity 0.5): the extent of
+    the masks, whose threshold is alpha 0.5."""
+    o = g.opacities
+    keep = o >= min_opacity
     m = g.means[keep].double().numpy()
-    r = sigmas * g.scales[keep].max(1).values.double().numpy()[:, None]
+    oo = o[keep].double().clamp_max(0.99).numpy()
+    r = (g.scales[keep].max(1).values.double().numpy() * np.sqrt(np.maximum(2 * np.log(2 * oo), 0.0)))[:, None]
     t = np.asarray(pose[5:8], float)
     R = _ry(pose[3])
     local = (m - t) @ R  # R^T (p - t) for row vectors
     lo, hi = (local - r).min(0), (local + r).max(0)
     bottom = np.array([(lo[0] + hi[0]) / 2, lo[1], (lo[2] + hi[2]) / 2])
     return {"bottom_centre": (R @ bottom + t).tolist(), "heading_deg": float(pose[3]),
-            "h": float(hi[1] - lo[1]), "w": float(hi[2] - lo[2]), "l": float(hi[0] - lo[0]),
-            "length_centre_offset_m": float((lo[0] + hi[0]) / 2)}
+            "h": float(hi[1] - lo[1]), "w": float(hi[2] - lo[2]), "l": float(hi[0] - lo[0])}
 
 
 def projected_extent(points, cam):
