@@ -37,22 +37,43 @@ def pair_weights(pairs, n_pix):
     return torch.where(keep, alpha.double() * T, torch.zeros_like(T)).float()
 
 
-def _subset_alpha(m2, conics, opac, z, radii, boxes, idx, W, H):
-    """Alpha of the Gaussians idx alone, as (alpha crop (h, w) numpy, (u0, v0)) or None if off screen."""
-    r = radii.index_select(0, idx)
-    on = idx[r > 0]
+def _crop(radii, boxes, idx):
+    """Screen box (u0, v0, w, h) of the on-screen Gaussians among idx, and those Gaussians."""
+    on = idx[radii.index_select(0, idx) > 0]
     if len(on) == 0:
-        return None
+        return None, on
     b = boxes.index_select(0, on)
     u0, u1 = int(b[:, 0].min()), int(b[:, 1].max())
     v0, v1 = int(b[:, 2].min()), int(b[:, 3].max())
-    w, h = u1 - u0 + 1, v1 - v0 + 1
-    off = torch.tensor([u0, v0], dtype=m2.dtype)
-    m2s = m2.index_select(0, on) - off
-    bs = b - torch.tensor([u0, u0, v0, v0])
-    cs, os_, zs, rs = conics.index_select(0, on), opac.index_select(0, on), z.index_select(0, on), radii.index_select(0, on)
+    return (u0, v0, u1 - u0 + 1, v1 - v0 + 1), on
+
+
+def _render_crop(m2, conics, opac, z, radii, boxes, colors, idx):
+    """Composite the Gaussians idx alone inside their own screen box: the (pixel, Gaussian) lists,
+    transmittance buffers and per-pixel reductions then scale with the box, not with the image
+    (at 1600x900 a distant cyclist covers a few thousand of its 1.4M pixels).
+    -> (crop (u0, v0, w, h), pairs, rgb, alpha, depth) or None when nothing is on screen."""
+    crop, on = _crop(radii, boxes, idx)
+    if crop is None:
+        return None
+    u0, v0, w, h = crop
+    m2s = m2.index_select(0, on) - torch.tensor([u0, v0], dtype=m2.dtype)
+    bs = boxes.index_select(0, on) - torch.tensor([u0, u0, v0, v0])
+    cs, os_, zs, rs = (t.index_select(0, on) for t in (conics, opac, z, radii))
     pairs = intersect(m2s, cs, os_, zs, bs, rs, w, h)
-    _, a, _ = composite(m2s, cs, os_, torch.zeros(len(on), 3), zs, None, pairs, h, w)
+    col = colors.index_select(0, on) if colors is not None else torch.zeros(len(on), 3)
+    rgb, a, d = composite(m2s, cs, os_, col, zs, None, pairs, h, w)
+    # pair gids index `on`: map them back to the caller's Gaussian ids
+    pairs = (pairs[0], on.index_select(0, pairs[1].long()).int()) + tuple(pairs[2:])
+    return crop, pairs, rgb, a, d
+
+
+def _subset_alpha(m2, conics, opac, z, radii, boxes, idx, W, H):
+    """Alpha of the Gaussians idx alone, as (alpha crop (h, w) numpy, (u0, v0)) or None if off screen."""
+    r = _render_crop(m2, conics, opac, z, radii, boxes, None, idx)
+    if r is None:
+        return None
+    (u0, v0, _, _), _, _, a, _ = r
     return a.numpy(), (u0, v0)
 
 
@@ -77,27 +98,32 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=()):
     dirs = means - camera.centre.to(means.dtype)
     dirs = dirs / dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     colors = eval_sh(g.sh.float(), dirs)
-    pairs = intersect(m2, conics, opac, z, boxes, radii, W, H)
-    rgb, alpha, depth = composite(m2, conics, opac, colors, z, None, pairs, H, W)
-    # label: argmax over slots of the summed weights, on the covered pixels only (dense per slot
-    # over the whole image would be n_slots x 1.4M floats at 1600x900)
-    covered = (alpha > MASK_ALPHA).reshape(-1)
-    label = torch.full((H * W,), -1, dtype=torch.int16)
-    n_cov = int(covered.sum())
-    if n_cov:
-        w = pair_weights(pairs, H * W)
-        pix, gid = pairs[0].long(), pairs[1].long()
-        ci = torch.full((H * W,), -1, dtype=torch.long)
-        ci[covered] = torch.arange(n_cov)
-        c = ci.index_select(0, pix)
-        sel = c >= 0
-        acc = torch.zeros(n_cov * n_slots)
-        acc.index_add_(0, c[sel] * n_slots + slots.index_select(0, gid[sel]), w[sel])
-        label[covered] = acc.reshape(n_cov, n_slots).argmax(1).to(torch.int16)
+    rgb, alpha, depth = torch.zeros(H, W, 3), torch.zeros(H, W), torch.zeros(H, W)
+    label = torch.full((H, W), -1, dtype=torch.int16)
+    r = _render_crop(m2, conics, opac, z, radii, boxes, colors, torch.arange(len(means)))
+    if r is not None:
+        (u0, v0, w, h), pairs, rgb_c, a_c, d_c = r
+        rgb[v0:v0 + h, u0:u0 + w], alpha[v0:v0 + h, u0:u0 + w], depth[v0:v0 + h, u0:u0 + w] = rgb_c, a_c, d_c
+        # label: argmax over slots of the summed weights, on the covered pixels only (dense per
+        # slot over the crop would be n_slots floats per pixel)
+        covered = (a_c > MASK_ALPHA).reshape(-1)
+        n_cov = int(covered.sum())
+        if n_cov:
+            wts = pair_weights(pairs, h * w)
+            pix, gid = pairs[0].long(), pairs[1].long()
+            ci = torch.full((h * w,), -1, dtype=torch.long)
+            ci[covered] = torch.arange(n_cov)
+            c = ci.index_select(0, pix)
+            sel = c >= 0
+            acc = torch.zeros(n_cov * n_slots)
+            acc.index_add_(0, c[sel] * n_slots + slots.index_select(0, gid[sel]), wts[sel])
+            lab = torch.full((h * w,), -1, dtype=torch.int16)
+            lab[covered] = acc.reshape(n_cov, n_slots).argmax(1).to(torch.int16)
+            label[v0:v0 + h, u0:u0 + w] = lab.reshape(h, w)
     d = torch.where(alpha > 1e-4, depth / alpha.clamp_min(1e-4), torch.zeros_like(depth))
     amodal = {}
     for s in amodal_slots:
         idx = torch.nonzero(slots == s).squeeze(1)
         amodal[s] = _subset_alpha(m2, conics, opac, z, radii, boxes, idx, W, H) if len(idx) else None
-    return {"rgb": rgb.numpy(), "alpha": alpha.numpy(), "depth": d.numpy(), "label": label.reshape(H, W).numpy(),
+    return {"rgb": rgb.numpy(), "alpha": alpha.numpy(), "depth": d.numpy(), "label": label.numpy(),
             "amodal": amodal}

@@ -138,18 +138,24 @@ def make_sample(cfg, index, assets):
     d = draw(cfg, index)
     street = cfg["mode"] == "street"
     kp_cfg, lab = cfg["keypoints"], cfg["labels"]
-    frames = []
-    for inst in d["instances"]:
-        cyc = assets.cyclist(inst["bike"], inst["rider"])
-        frame = cyc.pose(torch.tensor(inst["pose"], dtype=torch.float64))[0]
-        person = None
-        if inst["rider"] is not None:
+    # instances of one (bike, rider) are posed in one batch: the IK's cost is mostly per iteration,
+    # not per pose.  The groups follow from the draw, so a sample stays a function of its index.
+    groups = {}
+    for j, inst in enumerate(d["instances"]):
+        groups.setdefault((inst["bike"], inst["rider"]), []).append(j)
+    frames = [None] * len(d["instances"])
+    for (bike, rider), js in groups.items():
+        cyc = assets.cyclist(bike, rider)
+        posed = cyc.pose(torch.tensor([d["instances"][j]["pose"] for j in js], dtype=torch.float64))
+        people = [None] * len(js)
+        if rider is not None:
             if kp_cfg["person"] == "coco17":
-                rot, root = assets.avatars[inst["rider"]].last
-                person = assets.persons[inst["rider"]].posed(rot[:1], root[:1])[0].numpy()
+                rot, root = assets.avatars[rider].last
+                people = list(assets.persons[rider].posed(rot, root).numpy())
             else:
-                person = frame.rider_joints
-        frames.append((inst, frame, person))
+                people = [f.rider_joints for f in posed]
+        for j, f, person in zip(js, posed, people):
+            frames[j] = (d["instances"][j], f, person)
 
     if street:
         spec = camera_presets.resolve(cfg["camera"])
