@@ -68,13 +68,36 @@ def _render_crop(m2, conics, opac, z, radii, boxes, colors, idx):
     return crop, pairs, rgb, a, d
 
 
-def _subset_alpha(m2, conics, opac, z, radii, boxes, idx, W, H):
-    """Alpha of the Gaussians idx alone, as (alpha crop (h, w) numpy, (u0, v0)) or None if off screen."""
-    r = _render_crop(m2, conics, opac, z, radii, boxes, None, idx)
+def _subset_alpha(m2, conics, opac, z, radii, boxes, idx, W, H, g=None, camera=None, max_px=None):
+    """Alpha of the Gaussians idx alone, as (alpha crop (h, w) numpy, (u0, v0)) or None if off screen.
+    max_px: when the subset's screen box is larger, it is rendered at max_px / size of the
+    resolution (projected again with the scaled camera) and resampled bilinearly at the full-size
+    pixel centres, so its mask edge is exact to about 1 / scale pixels; None = full resolution."""
+    crop, on = _crop(radii, boxes, idx)
+    if crop is None:
+        return None
+    u0, v0, w, h = crop
+    if max_px is None or max(w, h) <= max_px:
+        r = _render_crop(m2, conics, opac, z, radii, boxes, None, idx)
+        (u0, v0, _, _), _, _, a, _ = r
+        return a.numpy(), (u0, v0)
+    f = max_px / max(w, h)
+    sub = g[idx]
+    cam = camera.scaled(f)
+    # the full-size image's 0.3 px^2 dilation, in small pixels: the same alpha field, sampled coarser
+    pm2, pc, pz, pr, pb = project(sub.means.float(), sub.quats.float(), sub.scales.float(), cam, eps2d=0.3 * f * f)
+    r = _render_crop(pm2, pc, sub.opacities.float(), pz, pr, pb, None, torch.arange(len(sub)))
     if r is None:
         return None
-    (u0, v0, _, _), _, _, a, _ = r
-    return a.numpy(), (u0, v0)
+    (lu, lv, lw, lh), _, _, a, _ = r
+    xs = f * (torch.arange(u0, u0 + w, dtype=torch.float32) + 0.5) - 0.5 - lu  # low-res pixel-centre coords
+    ys = f * (torch.arange(v0, v0 + h, dtype=torch.float32) + 0.5) - 0.5 - lv
+    gx = xs / max(lw - 1, 1) * 2 - 1
+    gy = ys / max(lh - 1, 1) * 2 - 1
+    grid = torch.stack(torch.meshgrid(gy, gx, indexing="ij")[::-1], -1)[None]
+    up = torch.nn.functional.grid_sample(a[None, None], grid, mode="bilinear", padding_mode="zeros",
+                                         align_corners=True)[0, 0]
+    return up.numpy(), (u0, v0)
 
 
 def full_frame(crop, W, H):
@@ -87,10 +110,11 @@ def full_frame(crop, W, H):
 
 
 @torch.no_grad()
-def render_scene(g, slots, n_slots, camera, amodal_slots=()):
+def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None):
     """Gaussians g (N), slots (N,) long in 0..n_slots-1, camera -> dict:
     rgb (H, W, 3) premultiplied, alpha (H, W), depth (H, W) expected camera z (0 where alpha is 0),
-    label (H, W) int16 (-1 where alpha <= 0.5), amodal {slot: (alpha crop, (u0, v0)) or None}."""
+    label (H, W) int16 (-1 where alpha <= 0.5), amodal {slot: (alpha crop, (u0, v0)) or None}
+    (amodal_max_px: see _subset_alpha)."""
     H, W = camera.height, camera.width
     means = g.means.float().contiguous()
     opac = g.opacities.float().contiguous()
@@ -124,6 +148,7 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=()):
     amodal = {}
     for s in amodal_slots:
         idx = torch.nonzero(slots == s).squeeze(1)
-        amodal[s] = _subset_alpha(m2, conics, opac, z, radii, boxes, idx, W, H) if len(idx) else None
+        amodal[s] = _subset_alpha(m2, conics, opac, z, radii, boxes, idx, W, H, g, camera, amodal_max_px) \
+            if len(idx) else None
     return {"rgb": rgb.numpy(), "alpha": alpha.numpy(), "depth": d.numpy(), "label": label.numpy(),
             "amodal": amodal}

@@ -53,6 +53,7 @@ DEFAULTS = {
     "labels": {"formats": ["coco"], "names": dict(DEFAULT_NAMES), "combined": dict(DEFAULT_COMBINED),
                "vehicle_of": {}},
     "depth_maps": False,
+    "amodal_max_px": None,               # amodal masks of larger parts at reduced resolution (speed)
     "png_compress_level": 4,
 }
 
@@ -217,6 +218,9 @@ def _validate_street(cfg):
     for k, v in lab["vehicle_of"].items():
         if v not in VEHICLES:
             raise _err(f"labels.vehicle_of.{k}", f"expected one of {', '.join(VEHICLES)}, got {v!r}")
+    a = cfg["amodal_max_px"]
+    if a is not None and (not isinstance(a, int) or isinstance(a, bool) or a < 32):
+        raise _err("amodal_max_px", f"expected null or an integer >= 32, got {a!r}")
     if not isinstance(cfg["depth_maps"], bool):
         raise _err("depth_maps", f"expected true or false, got {cfg['depth_maps']!r}")
 

@@ -187,7 +187,7 @@ def make_sample(cfg, index, assets):
         slots.append(torch.zeros(len(sc), dtype=torch.long))
     n_slots = 2 * len(frames) + 1
     if parts:
-        L = render_scene(Gaussians.cat(parts), torch.cat(slots), n_slots, cam, range(1, n_slots))
+        L = render_scene(Gaussians.cat(parts), torch.cat(slots), n_slots, cam, range(1, n_slots), cfg["amodal_max_px"])
     else:
         L = {"rgb": np.zeros((H, W, 3), np.float32), "alpha": np.zeros((H, W), np.float32),
              "depth": np.zeros((H, W), np.float32), "label": np.full((H, W), -1, np.int16), "amodal": {}}
