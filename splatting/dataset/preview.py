@@ -54,3 +54,35 @@ def coco_preview(coco_dir, out_png, n=4, tile=256):
     with atomic_path(out_png) as tmp:
         strip.save(tmp, format="PNG")
     return len(images)
+
+
+def keypoint_figure(coco_dir, out_png, image_id=1, scale=2, names=("person", "bicycle")):
+    """One image with the keypoints and skeletons of the given categories drawn and numbered (the
+    label reference's picture of the 17 person points and the 11 bike points)."""
+    from PIL import Image, ImageDraw
+
+    with open(os.path.join(coco_dir, "annotations.json")) as f:
+        ann = json.load(f)
+    cats = {c["id"]: c for c in ann["categories"]}
+    im = next(i for i in ann["images"] if i["id"] == image_id)
+    img = Image.open(os.path.join(coco_dir, "images", im["file_name"])).convert("RGB")
+    img = img.resize((img.width * scale, img.height * scale), Image.LANCZOS)
+    d = ImageDraw.Draw(img)
+    for a in ann["annotations"]:
+        c = cats[a["category_id"]]
+        if a["image_id"] != image_id or c["name"] not in names or not c["keypoints"]:
+            continue
+        kp = np.array(a["keypoints"], dtype=float).reshape(-1, 3)
+        colour = COLOURS.get(_name(c), (255, 255, 255))
+        for i, j in c["skeleton"]:
+            if kp[i - 1, 2] > 0 and kp[j - 1, 2] > 0:
+                d.line([tuple(kp[i - 1, :2] * scale), tuple(kp[j - 1, :2] * scale)], fill=colour, width=2)
+        for k, (u, v, vis) in enumerate(kp):
+            if vis > 0:
+                u, v = u * scale, v * scale
+                d.ellipse([u - 4, v - 4, u + 4, v + 4], fill=(255, 255, 0) if vis == 2 else (150, 150, 150),
+                          outline=(0, 0, 0))
+                d.text((u + 5, v - 6), str(k + 1), fill=colour)
+    with atomic_path(out_png) as tmp:
+        img.save(tmp, format="PNG")
+    return out_png
