@@ -230,7 +230,7 @@ def test_street_dataset_resumes_byte_identical(bikes, tmp_path):
     torch.set_num_threads(1)
     from splatting.dataset.command import generate
     from splatting.dataset.config import validate
-    cfg = validate(street_config(bikes, count=3, labels={"formats": ["coco", "kitti"]}))
+    cfg = validate(street_config(bikes, count=3, labels={"formats": ["coco", "kitti"]}, depth_maps=True))
     a, b = str(tmp_path / "a"), str(tmp_path / "b")
     generate(cfg, a, log=lambda m: None, progress=False)
     generate(cfg, b, log=lambda m: None, progress=False)
@@ -248,6 +248,14 @@ def test_street_dataset_resumes_byte_identical(bikes, tmp_path):
     im = doc["images"][0]
     assert (im["width"], im["height"]) == (621, 188)  # kitti at scale 0.5, non-square
     assert 2 <= sum(i["kind"] == "cyclist" for i in im["instances"]) <= 3
+    # depth map: non-square, millimetres of camera z; a cyclist's pixels lie at its distance
+    from PIL import Image
+    depth = np.asarray(Image.open(os.path.join(a, "depth", "000000.png")))
+    assert depth.shape == (188, 621) and depth.dtype == np.uint16
+    for ann in (x for x in doc["annotations"] if x["image_id"] == 1 and x["category_id"] == 3):
+        m = decode(ann["segmentation"])
+        z = np.median(depth[m & (depth > 0)]) / 1000.0
+        assert abs(z - ann["pose_3d"]["location_cam_m"][2]) < 1.0
 
 
 def test_reduced_resolution_amodal_masks_match_the_full_ones(bikes, assets_for, monkeypatch):
