@@ -34,11 +34,11 @@ def _trained_bikes(root):
 
 
 def _keypoint_bikes(root):
-    from splatting.dataset.config import _has_crank
+    from cyclist_formats.bike_folder import has_crank
     if not os.path.isdir(root):
         return []
     return sorted(b for b in os.listdir(root) if os.path.isfile(os.path.join(root, b, "keypoints.json"))
-                  and _has_crank(os.path.join(root, b)))
+                  and has_crank(os.path.join(root, b)))
 
 
 def _write_spec_bike(root, style="city", number=0):

@@ -29,6 +29,7 @@ STAGES = {
     "ik": ("bench.ik", lambda m, r, out: m.run(r, out)),
     "rider": ("bench.rider", lambda m, r, out: m.run(r, out)),
     "dataset": ("bench.dataset", lambda m, r, out: m.run(r, out)),
+    "street": ("bench.street", lambda m, r, out: m.run(r, out)),
 }
 
 PAPER = {
@@ -51,6 +52,7 @@ TARGETS = {
     "ik_batch_200x50_s": "≤ 2 s",
     "rider_gt": "IoU ≥ 0.9, PSNR ≥ 24 dB (means)",
     "dataset_images_per_hour": "≥ 3000",
+    "street_images_per_hour": "≥ 3000 (nuScenes 1600x900, 1-6 cyclists, photo backgrounds)",
 }
 
 

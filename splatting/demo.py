@@ -90,6 +90,20 @@ def run(args):
     from splatting.dataset.preview import coco_preview
 
     coco_preview(coco, os.path.join(out, "coco_preview.png"))
+    # a few street images (docs/street_scenes.md): the same rider and bike, several per image
+    with open(os.path.join(ROOT, "blend_assets", "datasets", "street.yaml")) as f:
+        scfg = yaml.safe_load(f)
+    scfg.update({"name": "demo_street", "count": 3, "riders": [args.rider], "riders_root": riders,
+                 "bikes": [os.path.basename(bike)], "bikes_root": os.path.join(out, "bikes"), "synthetic_assets": "never",
+                 "labels": {"formats": ["coco", "kitti"]}})
+    scfg["camera"] = dict(scfg.get("camera", {}), scale=0.5)
+    scfg_path = os.path.join(out, "street.yaml")
+    with atomic_path(scfg_path) as tmp:
+        with open(tmp, "w") as f:
+            yaml.safe_dump(scfg, f, sort_keys=False)
+    street = os.path.join(out, "street")
+    st.run("street images", [py, "-m", "splatting", "dataset", "--config", scfg_path, "--out", street, "--quiet"])
+    coco_preview(street, os.path.join(out, "street_preview.png"), n=3)
     st.run("contact sheet", [py, "-m", "splatting", "contact-sheet", "--bikes", os.path.join(out, "bikes"), "--view", "3",
                              "--out", os.path.join(out, "contact_sheet.png")])
     plys = sorted(glob.glob(os.path.join(cyc, "ply", "*.ply")))
@@ -132,9 +146,15 @@ def report(out, bike, args, times, wall):
     if ann:
         lines += ["", "## COCO set", "", f"{len(ann['images'])} images, {len(ann['annotations'])} annotations "
                   f"({', '.join(c['name'] for c in ann['categories'])}) in `coco/`."]
+    ann = _json(os.path.join(out, "street", "annotations.json"))
+    if ann:
+        lines += ["", "## Street images", "", f"{len(ann['images'])} images "
+                  f"({ann['images'][0]['width']}x{ann['images'][0]['height']}), {len(ann['annotations'])} annotations "
+                  f"in `street/` (COCO) and `street/kitti/` (KITTI)."]
     lines += ["", "## Pictures", ""]
     for title, pattern in (("Contact sheet", "contact_sheet.png"), ("Cyclist preview", "cyclist/preview.png"),
                            ("COCO samples with their annotations", "coco_preview.png"),
+                           ("Street images with their annotations", "street_preview.png"),
                            ("Point cloud in Blender (Cycles)", "cyclist_blender.png")):
         for p in sorted(glob.glob(os.path.join(out, pattern)))[:1]:
             lines.append(f"### {title}\n\n![{title}]({rel(p)})\n")

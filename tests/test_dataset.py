@@ -39,8 +39,8 @@ def test_coco_loads_and_self_eval_is_perfect(built):
     gt = COCO(os.path.join(out, "annotations.json"))
     assert len(gt.getImgIds()) == cfg["count"]
     cats = {c["name"]: c for c in gt.loadCats(gt.getCatIds())}
-    assert set(cats) == {"bicycle", "person", "cyclist"}
-    assert len(cats["bicycle"]["keypoints"]) == 11 and len(cats["person"]["keypoints"]) == 24
+    assert {"bicycle", "person", "cyclist", "motorcyclist", "motorcycle", "scooter"} == set(cats)
+    assert len(cats["bicycle"]["keypoints"]) == 11 and len(cats["person"]["keypoints"]) == 17
     for img in gt.loadImgs(gt.getImgIds()):
         assert os.path.isfile(os.path.join(out, "images", img["file_name"]))
         names = {gt.loadCats(a["category_id"])[0]["name"] for a in gt.loadAnns(gt.getAnnIds(imgIds=img["id"]))}
@@ -51,10 +51,11 @@ def test_coco_loads_and_self_eval_is_perfect(built):
         ev = COCOeval(gt, dt, iou)
         ev.evaluate(); ev.accumulate(); ev.summarize()
         assert ev.stats[0] == pytest.approx(1.0), iou
-    for name, n in (("bicycle", 11), ("person", 24)):
+    for name, n in (("bicycle", 11), ("person", 17)):
         ev = COCOeval(gt, dt, "keypoints")
         ev.params.catIds = [cats[name]["id"]]
-        ev.params.kpt_oks_sigmas = np.full(n, 0.05)
+        ev.params.kpt_oks_sigmas = np.array(cats[name]["sigmas"])  # the documented snippet
+        assert len(ev.params.kpt_oks_sigmas) == n
         ev.evaluate(); ev.accumulate(); ev.summarize()
         assert ev.stats[0] == pytest.approx(1.0), name
 
@@ -123,6 +124,14 @@ def test_kill_and_resume_gives_identical_dataset(built, tmp_path):
     ({"count": 0}, "count"),
     ({"backgrounds": {"kinds": ["photo"]}}, "backgrounds.kinds"),
     ({"riders": ["nobody"]}, "riders"),
+    ({"camera": {"preset": "kitty"}}, "camera.preset"),
+    ({"mode": "street", "camera": {"preset": "custom", "width": 640, "height": 480}}, "camera.fx"),
+    ({"mode": "street", "camera": {"preset": "kitti", "height_m": -1}}, "camera.height_m"),
+    ({"mode": "street", "camera": {"preset": "kitti"}, "street": {"cyclists": [3, 1]}}, "street.cyclists"),
+    ({"mode": "street", "camera": {"preset": "kitti"}, "street": {"heading": "north"}}, "street.heading"),
+    ({"labels": {"formats": ["voc"]}}, "labels.formats"),
+    ({"keypoints": {"person": "coco18"}}, "keypoints.person"),
+    ({"backgrounds": {"kinds": ["images"]}}, "backgrounds.images_dir"),
     ({"bikes": ["no_such_bike"]}, "bikes"),
 ])
 def test_config_errors_name_the_field(tmp_path, patch, field):
@@ -154,7 +163,9 @@ def test_presets_are_valid():
     from splatting.dataset.config import load_config
     a = load_config(preset="bike-only")
     b = load_config(preset="cyclist")
-    assert a["mode"] == "bike-only" and b["mode"] == "cyclist"
+    c = load_config(preset="street")
+    assert a["mode"] == "bike-only" and b["mode"] == "cyclist" and c["mode"] == "street"
+    assert a["camera"]["preset"] == b["camera"]["preset"] == "ring" and c["camera"]["preset"] == "nuscenes"
 
 
 def test_other_config_in_same_folder_is_refused(built, tmp_path):

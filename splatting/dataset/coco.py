@@ -1,10 +1,9 @@
-"""COCO layout: categories (keypoint names + skeletons), per-instance annotations from an id map,
-and the final merge of per-sample shards into annotations.json.
+"""COCO layout: the final merge of per-sample shards into annotations.json (categories, keypoint
+schemas and sigmas: splatting.dataset.labels; the fields of an annotation: docs/labels.md).
 
-Categories: 1 bicycle (the 11 docs/contract.md bike keypoints), 2 person (the 24 SMPL joints in SMPL
-order, not COCO-17), 3 cyclist (bicycle + person pixels, the union; no keypoints).
 Keypoint visibility follows COCO: 0 not labelled (outside the image), 1 labelled but occluded,
-2 visible.  Masks are the visible pixels (modal), RLE-encoded by pycocotools.
+2 visible.  Masks are the visible pixels (modal), RLE-encoded by pycocotools; the amodal ones sit
+beside them in `segmentation_amodal`.  `instance()` is the older single-mask helper (ring sets).
 """
 import json
 import os
@@ -53,7 +52,7 @@ def instance(mask, category, keypoints=None):
     return ann
 
 
-def merge(out_dir, count, info):
+def merge(out_dir, count, info, cats=None):
     """shards/%06d.json for 0..count-1 -> annotations.json (atomic); ids in sample order."""
     images, anns = [], []
     for i in range(count):
@@ -63,7 +62,7 @@ def merge(out_dir, count, info):
         for a in shard["annotations"]:
             a = dict(a, id=len(anns) + 1, image_id=shard["image"]["id"])
             anns.append(a)
-    doc = {"info": info, "licenses": [], "images": images, "annotations": anns, "categories": categories()}
+    doc = {"info": info, "licenses": [], "images": images, "annotations": anns, "categories": cats if cats is not None else categories()}
     path = os.path.join(out_dir, "annotations.json")
     with atomic_path(path) as tmp:
         with open(tmp, "w") as f:

@@ -1,7 +1,8 @@
 """`python -m splatting dataset --config CONFIG.yaml | --preset NAME [--out DIR]`: a COCO training set.
 
-Output: DIR/images/%06d.png, DIR/annotations.json (COCO: RLE masks, boxes, keypoints with
-visibility; categories bicycle, person, cyclist), DIR/config.json (the resolved config).
+Output: DIR/images/%06d.png, DIR/annotations.json (COCO: visible and amodal RLE masks and boxes,
+keypoints with visibility and sigmas, occlusion, truncation, 3D pose; docs/labels.md),
+DIR/config.json (the resolved config); with `--format kitti` also DIR/kitti/ (KITTI object layout).
 Per-sample shards (DIR/shards/%06d.json) are written atomically after the sample's image; a rerun
 skips samples whose shard and image exist and merges all shards at the end, so a run killed at
 any moment and rerun gives the same bytes as an uninterrupted one.
@@ -18,12 +19,15 @@ from cyclist_formats.errors import UserError
 def add_arguments(p):
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--config", help="YAML config (see docs/cyclists_and_datasets.md)")
-    src.add_argument("--preset", help="built-in config from blend_assets/datasets/ (bike-only, cyclist)")
+    src.add_argument("--preset", help="built-in config from blend_assets/datasets/ (bike-only, cyclist, street)")
     p.add_argument("--out", help="output folder (default: out/datasets/<name>)")
     p.add_argument("--count", type=int, help="override the config's count")
     p.add_argument("--seed", type=int, help="override the config's seed")
     p.add_argument("--image-size", type=int, help="override the config's image_size")
     p.add_argument("--bikes-root", help="override the config's bikes_root")
+    p.add_argument("--format", action="append", choices=("coco", "kitti"),
+                   help="label format(s) to write (repeat for both); overrides the config's labels.formats")
+    p.add_argument("--camera", help="override the config's camera.preset (street mode)")
     p.add_argument("--workers", type=int, default=1, help="worker processes, one torch thread each (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
 
@@ -61,7 +65,7 @@ def generate(cfg, out_dir, workers=1, log=print, progress=True):
                             f"differ); use another --out or delete it")
     else:
         write_json(cpath, cfg)
-    todo = [i for i in range(cfg["count"]) if not sample_done(out_dir, i)]
+    todo = [i for i in range(cfg["count"]) if not sample_done(out_dir, i, cfg)]
     skipped = cfg["count"] - len(todo)
     if skipped:
         log(f"dataset: {skipped} of {cfg['count']} samples already done, resuming")
@@ -89,9 +93,14 @@ def generate(cfg, out_dir, workers=1, log=print, progress=True):
             with mp.get_context("fork").Pool(workers, _init_worker, (cfg, out_dir)) as pool:
                 for n, _ in enumerate(pool.imap_unordered(_work, todo, chunksize=1), 1):
                     tick(n)
+    from splatting.dataset.labels import categories
     info = {"description": f"3DArticCyclists synthetic {cfg['mode']} set '{cfg['name']}'", "seed": cfg["seed"],
-            "count": cfg["count"], "image_size": cfg["image_size"], "person_keypoints": "smpl24"}
-    path = merge(out_dir, cfg["count"], info)
+            "count": cfg["count"], "image_size": cfg["image_size"], "person_keypoints": cfg["keypoints"]["person"],
+            "camera": cfg["camera"]["preset"], "labels": "docs/labels.md"}
+    path = merge(out_dir, cfg["count"], info, categories(cfg["labels"], cfg["keypoints"]["person"]))
+    if "kitti" in cfg["labels"]["formats"]:
+        from splatting.dataset.kitti import write_imagesets
+        write_imagesets(out_dir, cfg["count"])
     return {"annotations": path, "generated": len(todo), "skipped": skipped, "wall_s": time.time() - t0}
 
 
@@ -99,8 +108,14 @@ def run(args):
     from splatting.dataset.config import load_config
     if args.workers < 1:
         raise UserError("--workers must be >= 1")
+    nested = {}
+    if args.format:
+        nested["labels"] = {"formats": list(dict.fromkeys(args.format))}
+    if args.camera:
+        nested["camera"] = {"preset": args.camera}
     cfg = load_config(args.config, args.preset, {"count": args.count, "seed": args.seed,
-                                                 "image_size": args.image_size, "bikes_root": args.bikes_root})
+                                                 "image_size": args.image_size, "bikes_root": args.bikes_root},
+                      nested)
     out = args.out or os.path.join("out", "datasets", cfg["name"])
     log = (lambda *a: None) if args.quiet else (lambda m: print(m, flush=True))
     r = generate(cfg, out, args.workers, log=log, progress=not args.quiet)

@@ -10,13 +10,18 @@ import os
 
 import yaml
 
+from cyclist_formats import bike_folder
 from cyclist_formats.errors import UserError
 from splatting import paths
 
 PRESET_DIR = str(paths.BLEND_ASSETS / "datasets")
-MODES = ("cyclist", "bike-only")
-BACKGROUNDS = ("solid", "gradient", "noise")
+MODES = ("cyclist", "bike-only", "street")
+BACKGROUNDS = ("solid", "gradient", "noise", "images", "scene")
+PERSON_KEYPOINTS = ("coco17", "smpl24")
+LABEL_FORMATS = ("coco", "kitti")
 from cyclist_formats.pose import POSE_FIELDS as POSE_KEYS  # config keys are the contract's field names
+from splatting.dataset.camera_presets import DEFAULTS as CAMERA_DEFAULTS
+from splatting.dataset.labels import DEFAULT_COMBINED, DEFAULT_NAMES, VEHICLES
 
 DEFAULTS = {
     "name": "dataset",
@@ -37,8 +42,19 @@ DEFAULTS = {
              "t_x_m": [0, 0], "t_y_m": [0, 0], "t_z_m": [0, 0]},
     "views": {"azimuth_deg": [-180, 180], "elevation_deg": [0, 25], "distance_m": [10, 14],
               "focal_px": None, "centre_jitter_m": 0.1},
-    "backgrounds": {"kinds": ["solid", "gradient", "noise"]},
-    "keypoints": {"person": "smpl24", "tolerance_bike_m": 0.08, "tolerance_rider_m": 0.15},
+    "camera": dict(CAMERA_DEFAULTS),
+    "street": {"cyclists": [1, 6], "parked_bikes": [0, 1], "distance_m": [3, 60], "lateral_m": [-15, 15],
+               "border_margin": 0.1, "heading": "road", "road_heading_deg": 0.0, "heading_spread_deg": 15.0,
+               "oncoming_share": 0.4, "footprint_radius_m": 1.0, "max_tries": 50, "parked_steer_deg": [-40, 40]},
+    "backgrounds": {"kinds": ["solid", "gradient", "noise"], "images_dir": None, "image_files": None,
+                    "scene_ply": None,
+                    "scene_transform": {"rotation_deg": [0, 0, 0], "translation_m": [0, 0, 0], "scale": 1.0},
+                    "shadow": True, "shadow_opacity": 0.55},
+    "keypoints": {"person": "coco17", "tolerance_bike_m": 0.08, "tolerance_rider_m": 0.15},
+    "labels": {"formats": ["coco"], "names": dict(DEFAULT_NAMES), "combined": dict(DEFAULT_COMBINED),
+               "vehicle_of": {}},
+    "depth_maps": False,
+    "amodal_max_px": None,               # amodal masks of larger parts at reduced resolution (speed)
     "png_compress_level": 4,
 }
 
@@ -62,6 +78,9 @@ def _range(cfg, field, lo=None, hi=None):
     return [float(x) for x in v]
 
 
+FREE_MAPPINGS = ("labels.vehicle_of",)  # mappings whose keys are the user's (bike ids)
+
+
 def _merge(base, over, prefix=""):
     out = copy.deepcopy(base)
     if not isinstance(over, dict):
@@ -69,8 +88,12 @@ def _merge(base, over, prefix=""):
     for k, v in over.items():
         field = prefix + str(k)
         if k not in base:
-            raise _err(field, f"unknown field (known: {', '.join(base)})")
-        if isinstance(base[k], dict):
+            raise _err(field, f"unknown field (known: {', '.join(base) or 'none'})")
+        if field in FREE_MAPPINGS:
+            if not isinstance(v, dict):
+                raise _err(field, f"expected a mapping, got {type(v).__name__}")
+            out[k] = dict(v)
+        elif isinstance(base[k], dict):
             out[k] = _merge(base[k], v, field + ".")
         else:
             out[k] = v
@@ -133,19 +156,81 @@ def validate(raw):
     kinds = cfg["backgrounds"]["kinds"]
     if not (isinstance(kinds, list) and kinds and all(k in BACKGROUNDS for k in kinds)):
         raise _err("backgrounds.kinds", f"expected a non-empty list of {', '.join(BACKGROUNDS)}, got {kinds!r}")
-    if cfg["keypoints"]["person"] != "smpl24":
-        raise _err("keypoints.person", f"only 'smpl24' is implemented, got {cfg['keypoints']['person']!r}")
+    _validate_street(cfg)
+    if cfg["keypoints"]["person"] not in PERSON_KEYPOINTS:
+        raise _err("keypoints.person", f"expected one of {', '.join(PERSON_KEYPOINTS)}, got {cfg['keypoints']['person']!r}")
     for f in ("tolerance_bike_m", "tolerance_rider_m"):
         if not (_num(cfg["keypoints"][f]) and cfg["keypoints"][f] >= 0):
             raise _err(f"keypoints.{f}", "expected a number >= 0")
     return cfg
 
 
+def _validate_street(cfg):
+    from splatting.dataset import camera_presets
+    cam = camera_presets.resolve(cfg["camera"])
+    if cfg["mode"] == "street" and cam is None:
+        raise _err("camera.preset", "street mode needs a driving camera (kitti, nuscenes, waymo, dashcam, custom)")
+    if cfg["mode"] != "street" and cam is not None:
+        raise _err("camera.preset", f"{cfg['mode']} mode uses the ring camera (set mode: street for driving cameras)")
+    st = cfg["street"]
+    for f, lo in (("cyclists", 0), ("parked_bikes", 0)):
+        v = st[f]
+        if not (isinstance(v, list) and len(v) == 2 and all(isinstance(x, int) and not isinstance(x, bool) for x in v)
+                and lo <= v[0] <= v[1] <= 64):
+            raise _err(f"street.{f}", f"expected [min, max] integers within 0..64, got {v!r}")
+    _range(cfg, "street.distance_m", 0.5, None)
+    _range(cfg, "street.lateral_m")
+    _range(cfg, "street.parked_steer_deg", -90, 90)
+    for f, lo, hi in (("border_margin", 0, 1), ("road_heading_deg", -360, 360), ("heading_spread_deg", 0, 180),
+                      ("oncoming_share", 0, 1), ("footprint_radius_m", 0.05, 10)):
+        if not (_num(st[f]) and lo <= st[f] <= hi):
+            raise _err(f"street.{f}", f"expected a number within [{lo}, {hi}], got {st[f]!r}")
+    if not isinstance(st["max_tries"], int) or st["max_tries"] < 1:
+        raise _err("street.max_tries", f"expected an integer >= 1, got {st['max_tries']!r}")
+    if st["heading"] not in ("road", "uniform"):
+        raise _err("street.heading", f"expected road or uniform, got {st['heading']!r}")
+    b = cfg["backgrounds"]
+    if "images" in b["kinds"] and not (isinstance(b["images_dir"], str) or isinstance(b["image_files"], list)):
+        raise _err("backgrounds.images_dir", "the 'images' background needs a folder of JPG/PNG files")
+    if "scene" in b["kinds"] and not isinstance(b["scene_ply"], str):
+        raise _err("backgrounds.scene_ply", "the 'scene' background needs a 3DGS .ply (INRIA layout)")
+    t = b["scene_transform"]
+    for f in ("rotation_deg", "translation_m"):
+        if not (isinstance(t[f], list) and len(t[f]) == 3 and all(_num(x) for x in t[f])):
+            raise _err(f"backgrounds.scene_transform.{f}", f"expected [x, y, z], got {t[f]!r}")
+    if not (_num(t["scale"]) and t["scale"] > 0):
+        raise _err("backgrounds.scene_transform.scale", f"expected a positive number, got {t['scale']!r}")
+    if not isinstance(b["shadow"], bool):
+        raise _err("backgrounds.shadow", f"expected true or false, got {b['shadow']!r}")
+    if not (_num(b["shadow_opacity"]) and 0 <= b["shadow_opacity"] <= 0.99):
+        raise _err("backgrounds.shadow_opacity", f"expected a number within [0, 0.99], got {b['shadow_opacity']!r}")
+    lab = cfg["labels"]
+    fm = lab["formats"]
+    if not (isinstance(fm, list) and fm and all(f in LABEL_FORMATS for f in fm)):
+        raise _err("labels.formats", f"expected a non-empty list of {', '.join(LABEL_FORMATS)}, got {fm!r}")
+    for k, v in lab["names"].items():
+        if not (isinstance(v, str) and v):
+            raise _err(f"labels.names.{k}", f"expected a non-empty name, got {v!r}")
+    if len(set(lab["names"].values())) != len(lab["names"]):
+        raise _err("labels.names", "category names must differ")
+    for k, v in lab["combined"].items():
+        if v not in ("cyclist", "motorcyclist"):
+            raise _err(f"labels.combined.{k}", f"expected cyclist or motorcyclist, got {v!r}")
+    for k, v in lab["vehicle_of"].items():
+        if v not in VEHICLES:
+            raise _err(f"labels.vehicle_of.{k}", f"expected one of {', '.join(VEHICLES)}, got {v!r}")
+    a = cfg["amodal_max_px"]
+    if a is not None and (not isinstance(a, int) or isinstance(a, bool) or a < 32):
+        raise _err("amodal_max_px", f"expected null or an integer >= 32, got {a!r}")
+    if not isinstance(cfg["depth_maps"], bool):
+        raise _err("depth_maps", f"expected true or false, got {cfg['depth_maps']!r}")
+
+
 def resolve_assets(cfg):
     """Expand 'all' and check that every rider and bike exists (config field named on failure)."""
     from splatting.rider.roster import load_roster
     cfg = copy.deepcopy(cfg)
-    if cfg["mode"] == "cyclist":
+    if cfg["mode"] in ("cyclist", "street"):
         known = [r["id"] for r in load_roster()]
         riders = known if cfg["riders"] == "all" else cfg["riders"]
         bad = [r for r in riders if r not in known]
@@ -154,13 +239,19 @@ def resolve_assets(cfg):
         cfg["riders"] = list(riders)
     else:
         cfg["riders"] = []
+    b = cfg["backgrounds"]
+    if "images" in b["kinds"] and b["image_files"] is None:
+        from splatting.dataset.backgrounds import list_images
+        b["image_files"] = [os.path.abspath(f) for f in list_images(b["images_dir"])]
+    if "scene" in b["kinds"] and not os.path.isfile(b["scene_ply"]):
+        raise _err("backgrounds.scene_ply", f"no such file {b['scene_ply']!r}")
     root = cfg["bikes_root"]
     if cfg["bikes"] == "all":
         if not os.path.isdir(root):
             raise _err("bikes_root", f"no such folder {root!r}")
         bikes = sorted(d for d in os.listdir(root) if os.path.isfile(os.path.join(root, d, "keypoints.json")))
-        if cfg["mode"] == "cyclist":  # a rider needs pedals and a seat
-            bikes = [b for b in bikes if _has_crank(os.path.join(root, b))]
+        if cfg["mode"] in ("cyclist", "street"):  # a rider needs pedals and a seat
+            bikes = [b for b in bikes if bike_folder.has_crank(os.path.join(root, b))]
         if not bikes:
             raise _err("bikes", f"'all' found no bike folders with keypoints.json under {root!r}")
         cfg["bikes"] = bikes
@@ -172,17 +263,9 @@ def resolve_assets(cfg):
     return cfg
 
 
-def _has_crank(d):
-    import json
-    try:
-        with open(os.path.join(d, "meta.json")) as f:
-            return bool(json.load(f).get("has_crank", True))
-    except (OSError, ValueError):
-        return False
-
-
-def load_config(path=None, preset=None, overrides=None):
-    """Config from a YAML file or a preset name (not both), with CLI overrides {field: value}."""
+def load_config(path=None, preset=None, overrides=None, nested=None):
+    """Config from a YAML file or a preset name (not both), with CLI overrides {field: value} and
+    nested ones {section: {field: value}} merged into the file's sections."""
     if (path is None) == (preset is None):
         raise UserError("give exactly one of --config FILE or --preset NAME")
     raw = load_yaml(path if path else preset_path(preset))
@@ -191,4 +274,8 @@ def load_config(path=None, preset=None, overrides=None):
     for k, v in (overrides or {}).items():
         if v is not None:
             raw[k] = v
+    for sec, fields in (nested or {}).items():
+        if not isinstance(raw.get(sec, {}), dict):
+            raise _err(sec, "expected a mapping")
+        raw[sec] = dict(raw.get(sec) or {}, **fields)
     return validate(raw)

@@ -1,7 +1,7 @@
 """One dataset sample as a pure function of (config, sample index).
 
 All randomness comes from numpy's Generator seeded with [seed, index] and is drawn in a fixed
-order (asset choice, pose, camera, background), and everything after that is single-threaded
+order (assets, poses and placements, camera, background), and everything after that is single-threaded
 torch on CPU, so a sample renders to the same bytes whenever and in whichever worker it runs.
 That is what makes a killed-and-resumed run identical to an uninterrupted one.
 """
@@ -12,20 +12,28 @@ import numpy as np
 import torch
 
 from cyclist_formats.atomic import atomic_path, write_json
+from cyclist_formats.instances import RIDER_ID
 from splatting.bike.model import KEYPOINTS as BIKE_KEYPOINTS
 from splatting.cyclist.assets import bike_dir, load_avatar, load_bike
 from splatting.cyclist.compose import Cyclist
-from splatting.cyclist.render import keypoint_visibility, orbit_camera, over, project_points, render_layers
-from splatting.dataset.coco import instance
+from splatting.cyclist.render import keypoint_visibility, orbit_camera, over, project_points
+from splatting.cyclist.scene_render import MASK_ALPHA, full_frame, render_scene
+from splatting.dataset import camera_presets, kitti
+from splatting.dataset.backgrounds import contact_shadows, generated, load_scene, photo
 from splatting.dataset.config import POSE_KEYS
+from splatting.dataset.labels import annotation, vehicle_class
+from splatting.dataset.person_keypoints import COCO17_TOLERANCE_M, PersonKeypoints, RecordingAvatar
+from splatting.dataset.street import draw_street
+from splatting.gaussians.container import Gaussians
 
 
 class Assets:
-    """Per-process cache of loaded bikes and rider avatars."""
+    """Per-process cache of loaded bikes, rider avatars, body keypoint regressors and the 3DGS scene."""
 
     def __init__(self, cfg, log=None):
         self.cfg, self.log = cfg, log
-        self.bikes, self.avatars, self.cyclists = {}, {}, {}
+        self.bikes, self.avatars, self.cyclists, self.persons = {}, {}, {}, {}
+        self._scene = None
 
     def cyclist(self, bike, rider):
         key = (bike, rider)
@@ -37,104 +45,260 @@ class Assets:
             av = None
             if rider is not None:
                 if rider not in self.avatars:
-                    self.avatars[rider] = load_avatar(rider, c["riders_root"], c["synthetic_assets"],
-                                                      c["rider_gaussians"], log=self.log)[0]
+                    avatar, body = load_avatar(rider, c["riders_root"], c["synthetic_assets"],
+                                               c["rider_gaussians"], log=self.log)
+                    # the recorder hands the IK's pose to the COCO-17 mesh keypoints
+                    self.avatars[rider] = RecordingAvatar(avatar)
+                    if c["keypoints"]["person"] == "coco17":
+                        self.persons[rider] = PersonKeypoints(body)
                 av = self.avatars[rider]
             self.cyclists[key] = Cyclist(self.bikes[bike], av, c["ik_iterations"])
         return self.cyclists[key]
 
+    def meta(self, bike):
+        return getattr(self.bikes[bike], "meta", None) or {}
+
+    def scene(self):
+        if self._scene is None:
+            b = self.cfg["backgrounds"]
+            self._scene = load_scene(b["scene_ply"], b["scene_transform"])
+        return self._scene
+
 
 def draw(cfg, index):
-    """The random choices of sample `index`: asset ids, pose (8,), camera and background params."""
+    """The random choices of sample `index`: instances (asset ids, pose (8,)), camera, background."""
     rng = np.random.default_rng([cfg["seed"], index])
-    bike = cfg["bikes"][int(rng.integers(len(cfg["bikes"])))]
-    rider = cfg["riders"][int(rng.integers(len(cfg["riders"])))] if cfg["mode"] == "cyclist" else None
-    pose = [float(rng.uniform(*cfg["pose"][k])) for k in POSE_KEYS]
-    v = cfg["views"]
-    cam = {"azimuth_deg": float(rng.uniform(*v["azimuth_deg"])), "elevation_deg": float(rng.uniform(*v["elevation_deg"])),
-           "distance_m": float(rng.uniform(*v["distance_m"])),
-           "jitter": (rng.uniform(-1, 1, 3) * v["centre_jitter_m"]).tolist()}
+    if cfg["mode"] == "street":
+        cam = camera_presets.resolve(cfg["camera"])
+        instances, dropped = draw_street(cfg, rng, cam)
+        camera = {"preset": cam["preset"]}
+    else:
+        bike = cfg["bikes"][int(rng.integers(len(cfg["bikes"])))]
+        rider = cfg["riders"][int(rng.integers(len(cfg["riders"])))] if cfg["mode"] == "cyclist" else None
+        pose = [float(rng.uniform(*cfg["pose"][k])) for k in POSE_KEYS]
+        v = cfg["views"]
+        camera = {"preset": "ring", "azimuth_deg": float(rng.uniform(*v["azimuth_deg"])),
+                  "elevation_deg": float(rng.uniform(*v["elevation_deg"])),
+                  "distance_m": float(rng.uniform(*v["distance_m"])),
+                  "jitter": (rng.uniform(-1, 1, 3) * v["centre_jitter_m"]).tolist()}
+        instances, dropped = [{"kind": "cyclist" if rider else "parked", "bike": bike, "rider": rider, "pose": pose}], 0
     kind = cfg["backgrounds"]["kinds"][int(rng.integers(len(cfg["backgrounds"]["kinds"])))]
     bg_seed = int(rng.integers(2 ** 31))
-    return {"bike": bike, "rider": rider, "pose": pose, "camera": cam, "background": {"kind": kind, "seed": bg_seed}}
+    return {"instances": instances, "dropped": dropped, "camera": camera,
+            "background": {"kind": kind, "seed": bg_seed}}
 
 
 def background(kind, seed, size):
     """(size, size, 3) float32 in [0, 1], generated from the seed (nothing downloaded)."""
-    rng = np.random.default_rng(seed)
-    if kind == "solid":
-        return np.broadcast_to(rng.uniform(0, 1, 3).astype(np.float32), (size, size, 3)).copy()
-    if kind == "gradient":
-        a, b = rng.uniform(0, 1, 3), rng.uniform(0, 1, 3)
-        ang = rng.uniform(0, 2 * np.pi)
-        y, x = np.mgrid[0:size, 0:size] / max(size - 1, 1) - 0.5
-        t = np.clip(x * np.cos(ang) + y * np.sin(ang) + 0.5, 0, 1)[..., None]
-        return ((1 - t) * a + t * b).astype(np.float32)
-    # noise: a few octaves of bilinearly upsampled random grids (value noise)
-    img = np.zeros((size, size, 3))
-    amp, total = 1.0, 0.0
-    for cells in (4, 8, 16, 64):
-        grid = rng.uniform(0, 1, (cells + 1, cells + 1, 3))
-        c = np.linspace(0, cells, size)
-        i0 = np.minimum(c.astype(int), cells - 1)
-        f = (c - i0)[:, None]
-        rows = grid[i0] * (1 - f[..., None]) + grid[i0 + 1] * f[..., None]  # (size, cells+1, 3)
-        img += amp * (rows[:, i0] * (1 - f.T[..., None]) + rows[:, i0 + 1] * f.T[..., None])
-        total += amp
-        amp *= 0.5
-    return (img / total).astype(np.float32)
+    return generated(kind, seed, size, size)
+
+
+def _ry(deg):
+    a = np.radians(deg)
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def extent_box(g, pose, min_opacity=0.1):
+    """The posed instance's 3D box in its heading frame -> {bottom_centre (world), heading_deg, h, w, l}.
+    Gaussians with opacity >= min_opacity count, each widened by the radius where it alone renders
+    alpha 0.5 (sigma sqrt(2 ln 2o) of its largest scale; none below opacity 0.5): the extent of
+    the masks, whose threshold is alpha 0.5."""
+    o = g.opacities
+    keep = o >= min_opacity
+    m = g.means[keep].double().numpy()
+    oo = o[keep].double().clamp_max(0.99).numpy()
+    r = (g.scales[keep].max(1).values.double().numpy() * np.sqrt(np.maximum(2 * np.log(2 * oo), 0.0)))[:, None]
+    t = np.asarray(pose[5:8], float)
+    R = _ry(pose[3])
+    local = (m - t) @ R  # R^T (p - t) for row vectors
+    lo, hi = (local - r).min(0), (local + r).max(0)
+    bottom = np.array([(lo[0] + hi[0]) / 2, lo[1], (lo[2] + hi[2]) / 2])
+    return {"bottom_centre": (R @ bottom + t).tolist(), "heading_deg": float(pose[3]),
+            "h": float(hi[1] - lo[1]), "w": float(hi[2] - lo[2]), "l": float(hi[0] - lo[0])}
+
+
+def projected_extent(points, cam):
+    uv, z = project_points(points, cam)
+    ok = z > 1e-3
+    if not ok.any():
+        return [0.0, 0.0, 0.0, 0.0]
+    uv = uv[ok]
+    return [float(uv[:, 0].min()), float(uv[:, 1].min()), float(uv[:, 0].max()), float(uv[:, 1].max())]
+
+
+def _bbox_xyxy(mask):
+    ys, xs = np.nonzero(mask)
+    return [float(xs.min()), float(ys.min()), float(xs.max() + 1), float(ys.max() + 1)]
 
 
 def make_sample(cfg, index, assets):
-    """Render sample `index` -> (rgb uint8 (H, W, 3), image record, list of annotations)."""
+    """Render sample `index` -> (rgb uint8 (H, W, 3), image record, annotations, extras)
+    extras: {"depth": (H, W) float32, "kitti": [objects], "calib": {...}}."""
     d = draw(cfg, index)
-    cyc = assets.cyclist(d["bike"], d["rider"])
-    frame = cyc.pose(torch.tensor(d["pose"], dtype=torch.float64))[0]
-    size = cfg["image_size"]
-    g = frame.gaussians
-    lo, hi = g.means.min(0).values, g.means.max(0).values
-    centre = (0.5 * (lo + hi)).double() + torch.tensor(d["camera"]["jitter"], dtype=torch.float64)
-    cam = orbit_camera(d["camera"]["azimuth_deg"], d["camera"]["elevation_deg"], d["camera"]["distance_m"],
-                       centre.tolist(), size, cfg["views"]["focal_px"])
-    L = render_layers(g, frame.ids, cam)
-    bg = background(d["background"]["kind"], d["background"]["seed"], size)
+    street = cfg["mode"] == "street"
+    kp_cfg, lab = cfg["keypoints"], cfg["labels"]
+    # instances of one (bike, rider) are posed in one batch: the IK's cost is mostly per iteration,
+    # not per pose.  The groups follow from the draw, so a sample stays a function of its index.
+    groups = {}
+    for j, inst in enumerate(d["instances"]):
+        groups.setdefault((inst["bike"], inst["rider"]), []).append(j)
+    frames = [None] * len(d["instances"])
+    for (bike, rider), js in groups.items():
+        cyc = assets.cyclist(bike, rider)
+        posed = cyc.pose(torch.tensor([d["instances"][j]["pose"] for j in js], dtype=torch.float64))
+        people = [None] * len(js)
+        if rider is not None:
+            if kp_cfg["person"] == "coco17":
+                rot, root = assets.avatars[rider].last
+                people = list(assets.persons[rider].posed(rot, root).numpy())
+            else:
+                people = [f.rider_joints for f in posed]
+        for j, f, person in zip(js, posed, people):
+            frames[j] = (d["instances"][j], f, person)
+
+    if street:
+        spec = camera_presets.resolve(cfg["camera"])
+        cam = camera_presets.street_camera(spec)
+    else:
+        g = frames[0][1].gaussians
+        lo, hi = g.means.min(0).values, g.means.max(0).values
+        centre = (0.5 * (lo + hi)).double() + torch.tensor(d["camera"]["jitter"], dtype=torch.float64)
+        cam = orbit_camera(d["camera"]["azimuth_deg"], d["camera"]["elevation_deg"], d["camera"]["distance_m"],
+                           centre.tolist(), cfg["image_size"], cfg["views"]["focal_px"])
+    H, W = cam.height, cam.width
+    bg_kind = d["background"]["kind"]
+
+    parts, slots, boxes = [], [], []
+    for k, (inst, frame, _) in enumerate(frames):
+        g = frame.gaussians
+        parts.append(g)
+        slots.append(torch.where(frame.ids == RIDER_ID, 2 * k + 2, 2 * k + 1).long())
+        boxes.append(extent_box(g, inst["pose"]))
+    b = cfg["backgrounds"]
+    if b["shadow"] and bg_kind in ("images", "scene") and frames:
+        sh = contact_shadows([(inst["pose"][5], inst["pose"][7], inst["pose"][3], bx["l"], bx["w"])
+                              for (inst, _, _), bx in zip(frames, boxes)], b["shadow_opacity"])
+        parts.append(sh)
+        slots.append(torch.zeros(len(sh), dtype=torch.long))
+    if bg_kind == "scene":
+        sc = assets.scene()
+        parts.append(sc)
+        slots.append(torch.zeros(len(sc), dtype=torch.long))
+    n_slots = 2 * len(frames) + 1
+    if parts:
+        L = render_scene(Gaussians.cat(parts), torch.cat(slots), n_slots, cam, range(1, n_slots), cfg["amodal_max_px"])
+    else:
+        L = {"rgb": np.zeros((H, W, 3), np.float32), "alpha": np.zeros((H, W), np.float32),
+             "depth": np.zeros((H, W), np.float32), "label": np.full((H, W), -1, np.int16), "amodal": {}}
+    bg_rec = dict(d["background"])
+    if bg_kind == "images":
+        bg, rec = photo(b["image_files"], d["background"]["seed"], W, H)
+        bg_rec.update(rec)
+    elif bg_kind == "scene":
+        bg = np.zeros((H, W, 3), np.float32)
+    else:
+        bg = generated(bg_kind, d["background"]["seed"], W, H)
     rgb = over(L, bg)
 
-    kp_cfg = cfg["keypoints"]
-    bk = np.array([frame.bike_keypoints.get(n, [np.nan] * 3) for n in BIKE_KEYPOINTS], dtype=np.float64)
-    have = np.isfinite(bk).all(1)
-    uv, z = project_points(np.nan_to_num(bk), cam)
-    vis = keypoint_visibility(uv, z, L["alpha"], L["depth"], kp_cfg["tolerance_bike_m"]) * have
-    anns = [instance((L["ids"] >= 1) & (L["ids"] <= 3), "bicycle", np.column_stack([uv, vis]))]
-    if frame.rider_joints is not None:
-        uvr, zr = project_points(frame.rider_joints, cam)
-        visr = keypoint_visibility(uvr, zr, L["alpha"], L["depth"], kp_cfg["tolerance_rider_m"])
-        anns.append(instance(L["ids"] == 4, "person", np.column_stack([uvr, visr])))
-        anns.append(instance(L["ids"] >= 1, "cyclist"))
-    anns = [a for a in anns if a is not None]
-    image = {"id": index + 1, "file_name": f"{index:06d}.png", "width": size, "height": size,
-             "bike": d["bike"], "rider": d["rider"], "pose": d["pose"], "pose_fields": list(POSE_KEYS),
-             "camera": {"K": cam.K.tolist(), "R": cam.R.tolist(), "T": cam.T.tolist(), **{k: v for k, v in d["camera"].items() if k != "jitter"}},
-             "background": d["background"]}
-    if frame.ik is not None:
-        image["ik"] = frame.ik
-    return rgb, image, anns
+    K, R, T = cam.K.double().numpy(), cam.R.double().numpy(), cam.T.double().numpy()
+    # the depth test compares with the surface seen through the keypoint's whole pixel, whose
+    # footprint (z / f metres) adds to every tolerance: a far cyclist's pixel spans centimetres
+    px = 1.0 / float(K[0, 0])
+    anns, kitti_objs = [], []
+    for k, (inst, frame, person) in enumerate(frames):
+        sb, sr = 2 * k + 1, 2 * k + 2
+        vis_b, vis_r = L["label"] == sb, L["label"] == sr
+        am_b = (full_frame(L["amodal"].get(sb), W, H) > MASK_ALPHA) | vis_b
+        am_r = (full_frame(L["amodal"].get(sr), W, H) > MASK_ALPHA) | vis_r
+        g = frame.gaussians
+        dense = (g.opacities >= 0.1).numpy()
+        is_r = (frame.ids == RIDER_ID).numpy()
+        ext_b = projected_extent(g.means.numpy()[dense & ~is_r], cam)
+        bx = boxes[k]
+        loc, ry, alpha = kitti.box3d(R, T, bx)
+        vclass = vehicle_class(assets.meta(inst["bike"]), lab["vehicle_of"].get(inst["bike"]))
+        extra = {"instance": k + 1, "track_id": index * 1000 + k + 1, "parked": inst["rider"] is None,
+                 "bike": inst["bike"], "rider": inst["rider"], "vehicle": vclass,
+                 "pose_3d": {"pose": [float(x) for x in inst["pose"]], "pose_fields": list(POSE_KEYS),
+                             "bottom_centre_world_m": bx["bottom_centre"], "heading_deg": bx["heading_deg"],
+                             "dimensions_hwl_m": [bx["h"], bx["w"], bx["l"]],
+                             "location_cam_m": [float(x) for x in loc], "rotation_y": float(ry), "alpha": float(alpha),
+                             "depth_m": float(loc[2])}}
+        bk = np.array([frame.bike_keypoints.get(n, [np.nan] * 3) for n in BIKE_KEYPOINTS], dtype=np.float64)
+        have = np.isfinite(bk).all(1)
+        uv, z = project_points(np.nan_to_num(bk), cam)
+        vis = keypoint_visibility(uv, z, L["alpha"], L["depth"], kp_cfg["tolerance_bike_m"] + z * px) * have
+        a_b = annotation(vclass, vis_b, am_b, ext_b, W, H, np.column_stack([uv, vis]), extra)
+        inst_anns = [a_b]
+        if inst["rider"] is not None:
+            ext_r = projected_extent(g.means.numpy()[dense & is_r], cam)
+            uvr, zr = project_points(person, cam)
+            # COCO-17: per-point depths under the skin; SMPL joints: one tolerance for joint centres
+            tol = COCO17_TOLERANCE_M if kp_cfg["person"] == "coco17" else kp_cfg["tolerance_rider_m"]
+            visr = keypoint_visibility(uvr, zr, L["alpha"], L["depth"], np.asarray(tol) + zr * px)
+            inst_anns.append(annotation("rider", vis_r, am_r, ext_r, W, H, np.column_stack([uvr, visr]), extra))
+            ext_c = [min(ext_b[0], ext_r[0]), min(ext_b[1], ext_r[1]), max(ext_b[2], ext_r[2]), max(ext_b[3], ext_r[3])]
+            combined = lab["combined"][vclass]
+            a_c = annotation(combined, vis_b | vis_r, am_b | am_r, ext_c, W, H, None, extra)
+            inst_anns.append(a_c)
+            main, main_am, ktype = a_c, am_b | am_r, kitti.KITTI_TYPES[combined]
+        else:
+            main, main_am, ktype = a_b, am_b, kitti.KITTI_TYPES["parked"]
+        anns += [a for a in inst_anns if a is not None]
+        if main is not None:
+            x0, y0, x1, y1 = _bbox_xyxy(main_am)
+            kitti_objs.append({"type": ktype, "truncated": main["truncation"], "occluded": main["occlusion"],
+                               "alpha": alpha, "x1": x0, "y1": y0, "x2": x1, "y2": y1,
+                               "h": bx["h"], "w": bx["w"], "l": bx["l"], "x": loc[0], "y": loc[1], "z": loc[2],
+                               "rotation_y": ry})
+
+    cam_rec = {"K": K.tolist(), "R": R.tolist(), "T": T.tolist(), **{k: v for k, v in d["camera"].items() if k != "jitter"}}
+    if street:
+        cam_rec.update(height_m=spec["height_m"], pitch_deg=spec["pitch_deg"], roll_deg=spec["roll_deg"])
+    image = {"id": index + 1, "file_name": f"{index:06d}.png", "width": W, "height": H,
+             "instances": [{"kind": i["kind"], "bike": i["bike"], "rider": i["rider"], "pose": i["pose"]}
+                           for i, _, _ in frames],
+             "pose_fields": list(POSE_KEYS), "camera": cam_rec, "background": bg_rec}
+    if street:
+        image["dropped_placements"] = d["dropped"]
+    else:
+        inst, frame, _ = frames[0]
+        image.update(bike=inst["bike"], rider=inst["rider"], pose=inst["pose"])
+        if frame.ik is not None:
+            image["ik"] = frame.ik
+    extras = {"depth": L["depth"], "kitti": kitti_objs, "calib": kitti.calib(K, R, T)}
+    return rgb, image, anns, extras
 
 
 def write_sample(cfg, index, out_dir, assets):
-    """Render and store one sample: image first, then its shard (the shard marks it complete)."""
+    """Render and store one sample: image, depth map, KITTI files, then its shard (the shard marks it
+    complete: a killed run redoes the sample, overwriting whatever part of it was written)."""
     from PIL import Image
-    rgb, image, anns = make_sample(cfg, index, assets)
+    rgb, image, anns, extras = make_sample(cfg, index, assets)
     img_path = os.path.join(out_dir, "images", image["file_name"])
+    os.makedirs(os.path.dirname(img_path), exist_ok=True)
     with atomic_path(img_path) as tmp:
         Image.fromarray(rgb).save(tmp, format="PNG", compress_level=cfg["png_compress_level"])
+    if cfg["depth_maps"]:
+        dpath = os.path.join(out_dir, "depth", image["file_name"])
+        os.makedirs(os.path.dirname(dpath), exist_ok=True)
+        mm = np.clip(np.round(extras["depth"] * 1000.0), 0, 65535).astype(np.uint16)
+        with atomic_path(dpath) as tmp:
+            Image.fromarray(mm).save(tmp, format="PNG", compress_level=cfg["png_compress_level"])
+    if "kitti" in cfg["labels"]["formats"]:
+        kitti.write_sample(out_dir, index, img_path, extras["kitti"], extras["calib"])
+    os.makedirs(os.path.join(out_dir, "shards"), exist_ok=True)
     write_json(os.path.join(out_dir, "shards", f"{index:06d}.json"), {"image": image, "annotations": anns}, indent=None)
     return index
 
 
-def sample_done(out_dir, index):
-    return (os.path.isfile(os.path.join(out_dir, "shards", f"{index:06d}.json"))
+def sample_done(out_dir, index, cfg=None):
+    done = (os.path.isfile(os.path.join(out_dir, "shards", f"{index:06d}.json"))
             and os.path.isfile(os.path.join(out_dir, "images", f"{index:06d}.png")))
+    if done and cfg is not None and "kitti" in cfg["labels"]["formats"]:
+        done = kitti.sample_done(out_dir, index)
+    return done
 
 
 def config_record(cfg):

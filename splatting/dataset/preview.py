@@ -6,7 +6,14 @@ import numpy as np
 
 from cyclist_formats.atomic import atomic_path
 
-COLOURS = {"bicycle": (40, 120, 255), "person": (255, 60, 60), "cyclist": (40, 200, 90)}
+COLOURS = {"bicycle": (40, 120, 255), "person": (255, 60, 60), "cyclist": (40, 200, 90),
+           "motorcyclist": (200, 200, 40), "motorcycle": (40, 200, 200), "scooter": (200, 40, 200)}
+KEY_NAMES = {"rider": "person"}  # category key -> colour name (names are configurable, keys are not)
+COMBINED = ("cyclist", "motorcyclist")
+
+
+def _name(c):
+    return KEY_NAMES.get(c.get("key"), c.get("key")) if c.get("key") else c["name"]
 
 
 def coco_preview(coco_dir, out_png, n=4, tile=256):
@@ -15,31 +22,67 @@ def coco_preview(coco_dir, out_png, n=4, tile=256):
 
     with open(os.path.join(coco_dir, "annotations.json")) as f:
         ann = json.load(f)
-    cats = {c["id"]: c["name"] for c in ann["categories"]}
+    cats = {c["id"]: _name(c) for c in ann["categories"]}
     images = ann["images"][:n]
-    strip = Image.new("RGB", (tile * len(images), tile), (255, 255, 255))
+    widths = [max(1, round(tile * im["width"] / im["height"])) for im in images]  # keep the aspect
+    strip = Image.new("RGB", (max(1, sum(widths)), tile), (255, 255, 255))
+    x_at = 0
     for i, im in enumerate(images):
         img = Image.open(os.path.join(coco_dir, "images", im["file_name"])).convert("RGB")
         arr = np.asarray(img).astype(np.float32)
         anns = [a for a in ann["annotations"] if a["image_id"] == im["id"]]
         for a in anns:  # tint the instance masks (the cyclist union is drawn as its box only)
             name = cats[a["category_id"]]
-            if name == "cyclist":
+            if name in COMBINED:
                 continue
             m = mask_utils.decode(a["segmentation"]).astype(bool)
-            arr[m] = 0.6 * arr[m] + 0.4 * np.array(COLOURS[name])
+            arr[m] = 0.6 * arr[m] + 0.4 * np.array(COLOURS.get(name, (255, 255, 255)))
         img = Image.fromarray(arr.clip(0, 255).astype(np.uint8))
         d = ImageDraw.Draw(img)
         for a in anns:
             name = cats[a["category_id"]]
             x, y, w, h = a["bbox"]
-            d.rectangle([x, y, x + w, y + h], outline=COLOURS[name], width=2)
+            lw = max(1, round(2 * im["height"] / tile))  # about 2 px after the resize
+            d.rectangle([x, y, x + w, y + h], outline=COLOURS.get(name, (255, 255, 255)), width=lw)
             kp = np.array(a.get("keypoints", []), dtype=float).reshape(-1, 3)
             for u, v, vis in kp:
                 if vis > 0:
-                    r = 3 if vis == 2 else 2
+                    r = (3 if vis == 2 else 2) * max(1, round(im["height"] / tile))
                     d.ellipse([u - r, v - r, u + r, v + r], fill=(255, 255, 0) if vis == 2 else (120, 120, 120))
-        strip.paste(img.resize((tile, tile)), (i * tile, 0))
+        strip.paste(img.resize((widths[i], tile)), (x_at, 0))
+        x_at += widths[i]
     with atomic_path(out_png) as tmp:
         strip.save(tmp, format="PNG")
     return len(images)
+
+
+def keypoint_figure(coco_dir, out_png, image_id=1, scale=2, names=("person", "bicycle")):
+    """One image with the keypoints and skeletons of the given categories drawn and numbered (the
+    label reference's picture of the 17 person points and the 11 bike points)."""
+    from PIL import Image, ImageDraw
+
+    with open(os.path.join(coco_dir, "annotations.json")) as f:
+        ann = json.load(f)
+    cats = {c["id"]: c for c in ann["categories"]}
+    im = next(i for i in ann["images"] if i["id"] == image_id)
+    img = Image.open(os.path.join(coco_dir, "images", im["file_name"])).convert("RGB")
+    img = img.resize((img.width * scale, img.height * scale), Image.LANCZOS)
+    d = ImageDraw.Draw(img)
+    for a in ann["annotations"]:
+        c = cats[a["category_id"]]
+        if a["image_id"] != image_id or c["name"] not in names or not c["keypoints"]:
+            continue
+        kp = np.array(a["keypoints"], dtype=float).reshape(-1, 3)
+        colour = COLOURS.get(_name(c), (255, 255, 255))
+        for i, j in c["skeleton"]:
+            if kp[i - 1, 2] > 0 and kp[j - 1, 2] > 0:
+                d.line([tuple(kp[i - 1, :2] * scale), tuple(kp[j - 1, :2] * scale)], fill=colour, width=2)
+        for k, (u, v, vis) in enumerate(kp):
+            if vis > 0:
+                u, v = u * scale, v * scale
+                d.ellipse([u - 4, v - 4, u + 4, v + 4], fill=(255, 255, 0) if vis == 2 else (150, 150, 150),
+                          outline=(0, 0, 0))
+                d.text((u + 5, v - 6), str(k + 1), fill=colour)
+    with atomic_path(out_png) as tmp:
+        img.save(tmp, format="PNG")
+    return out_png

@@ -1,0 +1,146 @@
+"""Street-scene throughput benchmark (issue 12).
+
+Key: `street_images_per_hour` = street images per hour written by `dataset` with 2 worker
+processes (one torch thread each): the street preset's scene (1-6 cyclists, up to one parked bike,
+3-60 m) on the nuScenes CAM_FRONT camera (1600x900), photo backgrounds (JPGs made here, 1920x1080,
+scaled and cropped per sample), COCO annotations (visible + amodal RLE masks, 17 + 11 keypoints,
+3D fields) written; from start to the finished annotations.json (worker start-up and asset
+loading included).  Goal >= 3000/h on 2 cores.
+Also `street_bench`: the per-image median of one worker's samples, split into posing (IK + LBS),
+rendering (one joint rasterization + the amodal ones) and the rest (labels, PNG, files), measured
+in-process on the same config.  Assets as in bench.dataset: trained ones where they exist, else
+stand-ins (said in the results).  Run alone: `python -m bench.street [--out DIR] [--count N]`.
+"""
+import argparse
+import json
+import os
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if ROOT not in sys.path:
+    sys.path.insert(0, ROOT)
+
+RIDER = "m_adult_average_185"
+
+
+def write_photos(folder, n=4, size=(1920, 1080)):
+    """A few photo-sized JPGs (value noise: no download) for the `images` background."""
+    import numpy as np
+    from PIL import Image
+    from splatting.dataset.backgrounds import generated
+    os.makedirs(folder, exist_ok=True)
+    for i in range(n):
+        img = (generated("noise", 100 + i, *size) * 255).astype(np.uint8)
+        Image.fromarray(img).save(os.path.join(folder, f"street_{i}.jpg"), quality=90)
+    return folder
+
+
+def bench_config(scratch, out_dir, count):
+    from bench.dataset import pick_assets
+    from splatting.dataset.config import load_yaml, preset_path
+    bikes_root, bikes, synth, desc = pick_assets(out_dir, scratch)
+    cfg = load_yaml(preset_path("street"))
+    cfg.update(name="bench_street", count=count, bikes=bikes, bikes_root=bikes_root, synthetic_assets=synth,
+               riders=[RIDER], riders_root=os.path.join(ROOT, "data", "riders"))
+    cfg["camera"] = {"preset": "nuscenes"}
+    cfg["street"] = dict(cfg.get("street", {}), cyclists=[1, 6])
+    cfg["backgrounds"] = {"kinds": ["images"], "images_dir": write_photos(os.path.join(scratch, "photos"))}
+    cfg["labels"] = {"formats": ["coco"]}
+    return cfg, desc
+
+
+def split_timings(cfg, n):
+    """Median seconds per image of one in-process worker, split by stage (wrapped functions)."""
+    import torch
+    torch.set_num_threads(1)
+    from splatting.dataset import generate as G
+    from splatting.dataset.config import resolve_assets, validate
+    cfg = resolve_assets(validate(cfg))
+    assets = G.Assets(cfg)
+    spent = {"pose": 0.0, "render": 0.0}
+    orig_render = G.render_scene
+
+    def timed_render(*a, **k):
+        t = time.perf_counter()
+        try:
+            return orig_render(*a, **k)
+        finally:
+            spent["render"] += time.perf_counter() - t
+    G.render_scene = timed_render
+    from splatting.cyclist.compose import Cyclist
+    orig_pose = Cyclist.pose
+
+    def timed_pose(self, *a, **k):
+        t = time.perf_counter()
+        try:
+            return orig_pose(self, *a, **k)
+        finally:
+            spent["pose"] += time.perf_counter() - t
+    Cyclist.pose = timed_pose
+    rows = []
+    scratch = tempfile.mkdtemp(prefix="bench_street_split_")
+    try:
+        G.write_sample(cfg, cfg["count"] - 1, scratch, assets)  # load assets outside the timing
+        for i in range(n):
+            spent.update(pose=0.0, render=0.0)
+            t = time.perf_counter()
+            G.write_sample(cfg, i, scratch, assets)
+            total = time.perf_counter() - t
+            rows.append((total, spent["pose"], spent["render"], total - spent["pose"] - spent["render"]))
+    finally:
+        G.render_scene, Cyclist.pose = orig_render, orig_pose
+        shutil.rmtree(scratch, ignore_errors=True)
+    med = lambda k: round(statistics.median(r[k] for r in rows), 3)  # noqa: E731
+    return {"total_s": med(0), "pose_s": med(1), "render_s": med(2), "rest_s": med(3), "images": n}
+
+
+def run(results, out_dir, count=12):
+    import torch
+    torch.set_num_threads(1)
+    from splatting.dataset.command import generate
+    from splatting.dataset.config import validate
+    scratch = tempfile.mkdtemp(prefix="bench_street_")
+    try:
+        cfg, desc = bench_config(scratch, out_dir, count)
+        avatar = "trained avatar" if os.path.isfile(os.path.join(ROOT, "data", "riders", RIDER, "skinning.npz")) \
+            else "untrained mesh avatar"
+        print(f"street bench: bikes: {desc}; rider {RIDER}: {avatar}")
+        out = os.path.join(scratch, "out")
+        t = time.time()
+        generate(validate(cfg), out, workers=2, log=lambda m: None, progress=False)
+        wall = time.time() - t
+        with open(os.path.join(out, "annotations.json")) as f:
+            doc = json.load(f)
+        n_inst = sum(len(im["instances"]) for im in doc["images"])
+        iph = count * 3600.0 / wall
+        print(f"street bench: {count} images 1600x900 ({n_inst} instances, {len(doc['annotations'])} annotations) "
+              f"with 2 workers in {wall:.1f} s -> {iph:.0f} images/hour (goal >= 3000; shared cores, noisy)")
+        split = split_timings(dict(cfg, count=count), max(3, count // 3))
+        print(f"street bench: 1 worker, median per image {split['total_s']} s = posing {split['pose_s']} + "
+              f"rendering {split['render_s']} + labels/files {split['rest_s']}")
+        results["street_images_per_hour"] = round(iph, 1)
+        results["street_bench"] = {"images": count, "workers": 2, "wall_s": round(wall, 2), "instances": n_inst,
+                                   "camera": "nuscenes 1600x900", "bikes": desc, "rider": avatar,
+                                   "one_worker_split": split}
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    return results
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m bench.street", description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench"))
+    ap.add_argument("--count", type=int, default=12)
+    args = ap.parse_args(argv)
+    results = {}
+    run(results, args.out, args.count)
+    print(json.dumps(results, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

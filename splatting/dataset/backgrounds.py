@@ -1,0 +1,139 @@
+"""Backgrounds: generated ones (solid, gradient, value noise), the user's photos, a 3DGS scene, and
+the soft contact shadows that keep cyclists from floating over photos and scenes.
+
+- Generated: a function of the sample's background seed and the image size (nothing downloaded).
+- `images`: JPG/PNG files of `backgrounds.images_dir` (listed, sorted, when the config is
+  resolved, so the list is part of config.json and a resumed run sees the same files).  The
+  sample's seed picks a file and a crop: the photo is scaled by the smallest factor that covers
+  the image (aspect kept) and cropped at a random offset, so any photo size fits any camera.
+- `scene`: an INRIA-layout 3DGS .ply (`backgrounds.scene_ply`: x, y, z, f_dc_*, f_rest_*,
+  opacity, scale_*, rot_*; as the INRIA, gsplat and nerfstudio trainers write) moved into the
+  street world by `backgrounds.scene_transform` (world = T(translation) Rz Ry Rx S(scale) ply,
+  degrees and metres; put the road on Y = 0 with up = +Y).  Its Gaussians are rasterized together
+  with the cyclists, so the scene hides what stands behind its objects.
+- Contact shadows: a few flat, dark Gaussians on the road under each instance, elongated along its
+  heading, composited with everything else (slot 0: they never enter an instance's mask).
+"""
+import math
+import os
+
+import numpy as np
+import torch
+
+from cyclist_formats.errors import UserError
+
+GENERATED = ("solid", "gradient", "noise")
+IMAGE_EXTS = (".jpg", ".jpeg", ".png")
+
+
+def generated(kind, seed, width, height):
+    """(height, width, 3) float32 in [0, 1] from the seed."""
+    rng = np.random.default_rng(seed)
+    H, W = int(height), int(width)
+    if kind == "solid":
+        return np.broadcast_to(rng.uniform(0, 1, 3).astype(np.float32), (H, W, 3)).copy()
+    if kind == "gradient":
+        a, b = rng.uniform(0, 1, 3), rng.uniform(0, 1, 3)
+        ang = rng.uniform(0, 2 * np.pi)
+        y, x = np.mgrid[0:H, 0:W].astype(np.float64)
+        y, x = y / max(H - 1, 1) - 0.5, x / max(W - 1, 1) - 0.5
+        t = np.clip(x * np.cos(ang) + y * np.sin(ang) + 0.5, 0, 1)[..., None]
+        return ((1 - t) * a + t * b).astype(np.float32)
+    if kind != "noise":
+        raise ValueError(f"not a generated background: {kind}")
+    # a few octaves of bilinearly upsampled random grids (value noise)
+    img = np.zeros((H, W, 3))
+    amp, total = 1.0, 0.0
+    for cells in (4, 8, 16, 64):
+        grid = rng.uniform(0, 1, (cells + 1, cells + 1, 3))
+        cy, cx = np.linspace(0, cells, H), np.linspace(0, cells, W)
+        iy, ix = np.minimum(cy.astype(int), cells - 1), np.minimum(cx.astype(int), cells - 1)
+        fy, fx = (cy - iy)[:, None, None], (cx - ix)[None, :, None]
+        rows = grid[iy] * (1 - fy) + grid[iy + 1] * fy  # (H, cells+1, 3)
+        img += amp * (rows[:, ix] * (1 - fx) + rows[:, ix + 1] * fx)
+        total += amp
+        amp *= 0.5
+    return (img / total).astype(np.float32)
+
+
+def list_images(folder, field="backgrounds.images_dir"):
+    if not os.path.isdir(folder):
+        raise UserError(f"config field '{field}': no such folder {folder!r}")
+    files = sorted(f for f in os.listdir(folder) if f.lower().endswith(IMAGE_EXTS) and not f.startswith("."))
+    if not files:
+        raise UserError(f"config field '{field}': no .jpg/.jpeg/.png files in {folder!r}")
+    return [os.path.join(folder, f) for f in files]
+
+
+def photo(files, seed, width, height):
+    """(height, width, 3) float32: one of the files, scaled to cover and cropped (from the seed);
+    also returns {"file", "crop"} for the image record."""
+    from PIL import Image
+    rng = np.random.default_rng(seed)
+    path = files[int(rng.integers(len(files)))]
+    fx, fy = float(rng.uniform()), float(rng.uniform())
+    try:
+        with Image.open(path) as im:
+            # JPEG draft decodes at 1/2..1/8 scale when that still covers the target: same bytes every time
+            w0, h0 = im.size
+            s = max(width / w0, height / h0)
+            im.draft("RGB", (max(int(w0 * s), width), max(int(h0 * s), height)))
+            im = im.convert("RGB")
+            w, h = im.size
+            s = max(width / w, height / h)
+            cw, ch = width / s, height / s
+            x0, y0 = fx * (w - cw), fy * (h - ch)
+            out = im.resize((int(width), int(height)), Image.BILINEAR, box=(x0, y0, x0 + cw, y0 + ch))
+    except OSError as e:
+        raise UserError(f"background image {path} cannot be read: {e}") from None
+    rec = {"file": os.path.basename(path), "crop_xywh_source": [round(x0 * w0 / w, 2), round(y0 * h0 / h, 2),
+                                                                round(cw * w0 / w, 2), round(ch * h0 / h, 2)]}
+    return np.asarray(out, dtype=np.float32) / 255.0, rec
+
+
+def euler_matrix(rotation_deg):
+    """Rz Ry Rx of (rx, ry, rz) degrees (the order of the bike pose's H_g)."""
+    rx, ry, rz = (math.radians(a) for a in rotation_deg)
+    Rx = np.array([[1, 0, 0], [0, math.cos(rx), -math.sin(rx)], [0, math.sin(rx), math.cos(rx)]])
+    Ry = np.array([[math.cos(ry), 0, math.sin(ry)], [0, 1, 0], [-math.sin(ry), 0, math.cos(ry)]])
+    Rz = np.array([[math.cos(rz), -math.sin(rz), 0], [math.sin(rz), math.cos(rz), 0], [0, 0, 1]])
+    return Rz @ Ry @ Rx
+
+
+def load_scene(path, transform):
+    """The 3DGS scene .ply in the street world (Gaussians)."""
+    from dataclasses import replace
+    from splatting.bike.pose import transform_gaussians
+    from splatting.gaussians.container import read_ply
+    g = read_ply(path)
+    s = float(transform["scale"])
+    H = np.eye(4)
+    H[:3, :3] = euler_matrix(transform["rotation_deg"])
+    H[:3, 3] = transform["translation_m"]
+    if s != 1.0:
+        g = replace(g, means=g.means * s, log_scales=g.log_scales + math.log(s))
+    return transform_gaussians(g, H)
+
+
+def contact_shadows(footprints, opacity, n=5):
+    """Flat dark Gaussians on the road: footprints = [(x, z, heading_deg, length_m, width_m)]."""
+    from splatting.gaussians.container import Gaussians
+    from splatting.gaussians.sh import rgb_to_sh0
+    means, quats, scales = [], [], []
+    for x, z, yaw, length, width in footprints:
+        a = math.radians(yaw)
+        fwd = np.array([math.cos(a), 0.0, -math.sin(a)])
+        q = [math.cos(a / 2), 0.0, math.sin(a / 2), 0.0]  # about +Y: local x -> heading
+        for t in np.linspace(-0.5, 0.5, n):
+            means.append(np.array([x, 0.004, z]) + t * 0.7 * length * fwd)
+            quats.append(q)
+            scales.append([0.45 * length / n * 1.6, 0.002, 0.35 * width])
+    if not means:
+        return None
+    k = len(means)
+    o = min(max(opacity, 1e-4), 0.99)
+    return Gaussians(means=torch.tensor(np.array(means), dtype=torch.float32),
+                     quats=torch.tensor(quats, dtype=torch.float32),
+                     log_scales=torch.log(torch.tensor(scales, dtype=torch.float32)),
+                     opacity_logits=torch.full((k,), math.log(o / (1 - o))),
+                     sh=rgb_to_sh0(torch.full((k, 3), 0.03))[:, None, :])
