@@ -150,3 +150,63 @@ def write_views_meta(views_dir, cameras, transforms=None, keypoints=None):
         write_json(os.path.join(views_dir, "transforms.json"), transforms)
     if keypoints is not None:
         write_json(os.path.join(views_dir, "keypoints.json"), keypoints_doc(keypoints))
+
+
+# -- relighting passes (docs/relighting.md) --------------------------------------------------------
+# Per view, beside rgba/img/mask, from the same Cycles render:
+#   <bike>/views/<part>/albedo/cameraNNNN/0000.png  Cycles "Diffuse Color", linear, stored sRGB-encoded
+#                                                   (the view transform every colour PNG here uses)
+#   <bike>/views/<part>/normal/cameraNNNN/0000.png  Cycles "Normal", canonical world frame, stored as
+#                                                   round((n + 1) / 2 * 255)
+# Both are RGB and, like the passes they come from, averaged over the pixel's samples with the
+# empty film counting as 0: premultiplied by coverage, as the rasterizer composites.
+PASSES = ("albedo", "normal")
+
+
+def pass_paths(views_dir, name):
+    return {p: os.path.join(views_dir, p, name, FRAME + ".png") for p in PASSES}
+
+
+def srgb_encode(x):
+    """Linear [0, 1] -> sRGB-encoded [0, 1] (the piecewise IEC 61966-2-1 curve; Blender's 'Standard')."""
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def srgb_decode(y):
+    """sRGB-encoded [0, 1] -> linear [0, 1]."""
+    y = np.clip(np.asarray(y, dtype=np.float64), 0.0, 1.0)
+    return np.where(y <= 0.04045, y / 12.92, np.power((y + 0.055) / 1.055, 2.4))
+
+
+def encode_passes(albedo_linear, normal_canonical):
+    """(H, W, 3) float albedo (linear) and normal (canonical, premultiplied) -> two uint8 RGB images."""
+    alb = np.clip(srgb_encode(albedo_linear) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    nrm = np.clip((np.asarray(normal_canonical, dtype=np.float64) + 1.0) * 127.5 + 0.5, 0, 255).astype(np.uint8)
+    return alb, nrm
+
+
+def write_passes(paths, albedo_linear, normal_canonical):
+    """Write pass_paths() images atomically (see encode_passes)."""
+    from PIL import Image
+
+    alb, nrm = encode_passes(albedo_linear, normal_canonical)
+    for key, img in (("albedo", alb), ("normal", nrm)):
+        with atomic_path(paths[key]) as tmp:
+            Image.fromarray(img).save(tmp, format="PNG")
+    return paths
+
+
+def read_passes(paths):
+    """pass_paths() -> (albedo linear (H, W, 3) float32, normal canonical (H, W, 3) float32); UserError when
+    a file is missing (a folder rendered before the passes existed: rerun render_views)."""
+    from PIL import Image
+
+    out = []
+    for key in PASSES:
+        p = paths[key]
+        if not os.path.isfile(p):
+            raise UserError(f"{p}: missing {key} pass (render the views again with render_views to add it)")
+        a = np.asarray(Image.open(p).convert("RGB")).astype(np.float64) / 255.0
+        out.append(srgb_decode(a) if key == "albedo" else a * 2.0 - 1.0)
+    return tuple(x.astype(np.float32) for x in out)
