@@ -210,3 +210,33 @@ def read_passes(paths):
         a = np.asarray(Image.open(p).convert("RGB")).astype(np.float64) / 255.0
         out.append(srgb_decode(a) if key == "albedo" else a * 2.0 - 1.0)
     return tuple(x.astype(np.float32) for x in out)
+
+
+# Relightable Gaussians: beside gaussians/<part>.ply, gaussians/<part>.relight.npz holds "albedo" (N, 3)
+# linear diffuse colour and "normal" (N, 3) unit normals in the part's canonical frame, float32, row i
+# belonging to the PLY's Gaussian i.
+def relight_path(ply_path):
+    return os.path.splitext(os.fspath(ply_path))[0] + ".relight.npz"
+
+
+def write_relight(ply_path, albedo, normal):
+    path = relight_path(ply_path)
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            np.savez(f, albedo=np.asarray(albedo, np.float32), normal=np.asarray(normal, np.float32))
+    return path
+
+
+def read_relight(ply_path, n=None):
+    """-> (albedo (N, 3), normal (N, 3)) float32; UserError when missing or not matching n Gaussians."""
+    path = relight_path(ply_path)
+    if not os.path.isfile(path):
+        raise UserError(f"{path}: missing (fit it with `python -m splatting relight-fit`)")
+    try:
+        with np.load(path) as z:
+            albedo, normal = z["albedo"], z["normal"]
+    except (OSError, KeyError, ValueError) as e:
+        raise UserError(f"{path}: unreadable relight file ({e})") from None
+    if albedo.shape != normal.shape or albedo.ndim != 2 or albedo.shape[1] != 3 or (n is not None and len(albedo) != n):
+        raise UserError(f"{path}: albedo {albedo.shape} / normal {normal.shape} do not match {n} Gaussians")
+    return albedo, normal
