@@ -28,6 +28,7 @@ STAGES = {
     "ik": ("bench.ik", lambda m, r, out: m.run(r, out)),
     "rider": ("bench.rider", lambda m, r, out: m.run(r, out)),
     "dataset": ("bench.dataset", lambda m, r, out: m.run(r, out)),
+    "bike_relit": ("bench.relight", lambda m, r, out: m.run(r, out)),
 }
 
 PAPER = {
@@ -47,6 +48,8 @@ TARGETS = {
     "ik_batch_200x50_s": "≤ 2 s",
     "rider_gt": "IoU ≥ 0.9, PSNR ≥ 24 dB (means)",
     "dataset_images_per_hour": "≥ 3000",
+    "bike_relit": "box PSNR ≥ 30 dB, IoU ≥ 0.97 (means)",
+    "relight_render_overhead": "≤ 0.2",
 }
 
 

@@ -5,7 +5,9 @@
     <bike>/views/<part>/rgba/cameraNNNN/0000.png   straight alpha (what training reads)
     <bike>/views/<part>/img/cameraNNNN/0000.jpg    RGB composited on black (SHERF)
     <bike>/views/<part>/mask/cameraNNNN/0000.png   alpha > 0.5 -> 255
+    <bike>/views/<part>/albedo|normal/cameraNNNN/0000.png   the render's passes (PASSES below)
     <bike>/gaussians/<part>.ply + <part>.json      trained part Gaussians and their metrics
+    <bike>/gaussians/<part>.relight.npz            optional per-Gaussian albedo + normal (relight_path)
 """
 import json
 import os

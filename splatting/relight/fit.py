@@ -19,6 +19,7 @@ from cyclist_formats import bike_folder
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import read_ply
 from splatting.progress import Progress
+from splatting.raster.sparse import composite
 from splatting.relight.render import composite_features, prepare
 from splatting.gaussians.sh import C0
 from splatting.relight.shading import srgb_decode
@@ -60,12 +61,19 @@ def initial_normals(g, items):
     k = g.log_scales.argmin(-1)
     n = R[torch.arange(len(g)), :, k].float()
     vote = torch.zeros(len(g))
+    # metres: "at the visible surface" -- tighter than a thin tube is thick (its back is ~2 radii behind)
+    tol = g.scales.min(-1).values.float() + 0.004
     for prep, _, tn in items:
         H, W = tn.shape[:2]
+        with torch.no_grad():
+            _, alpha, depth = composite(prep["m2"], prep["conics"], prep["opac"], torch.zeros(len(g), 3), prep["z"],
+                                        None, prep["pairs"], H, W)
+        surface = depth / alpha.clamp_min(1e-4)
         u, v = prep["m2"][:, 0].floor().long(), prep["m2"][:, 1].floor().long()
         ok = (u >= 0) & (u < W) & (v >= 0) & (v < H) & (prep["z"] > 0)
+        ok[ok.clone()] &= (alpha[v[ok], u[ok]] > 0.5) & ((prep["z"][ok] - surface[v[ok], u[ok]]).abs() < tol[ok])
         t = torch.zeros(len(g), 3)
-        t[ok] = tn[v[ok], u[ok]]
+        t[ok] = tn[v[ok], u[ok]]  # only where the Gaussian is the surface seen there (not occluded)
         vote += (n * t).sum(-1)
     return torch.where(vote[:, None] < 0, -n, n)
 
