@@ -59,18 +59,19 @@ def test_normals_turn_with_their_part(tmp_path):
 
         n = len(read_ply(bike_folder.gaussians_path(d, part)))
         nrm = torch.nn.functional.normalize(torch.randn(n, 3, generator=g), dim=-1)
-        bike_folder.write_relight(bike_folder.gaussians_path(d, part), torch.rand(n, 3).numpy(), nrm.numpy())
+        bike_folder.write_relight(bike_folder.gaussians_path(d, part), torch.rand(n, 3).numpy(), nrm.numpy(),
+                                  torch.rand(n, 3).numpy())
     bike = RelightableBike.load(d)
     rng = np.random.default_rng(3)
     for _ in range(3):
         pose = random_pose(rng)
-        _, albedo, world = bike.pose(torch.tensor(pose, dtype=torch.float64))
+        _, albedo, world, gloss = bike.pose(torch.tensor(pose, dtype=torch.float64))
         for name, (a, e) in zip(bike.model.part_names, bike.model.ranges):
             R = ref_part_R(name, pose)
             for i in (a, (a + e) // 2, e - 1):
                 expect = mat_vec(R, bike.normals[i].tolist())
                 np.testing.assert_allclose(world[i].numpy(), expect, atol=1e-5)
-        assert torch.equal(albedo, bike.albedo)  # albedo does not depend on the pose
+        assert torch.equal(albedo, bike.albedo) and torch.equal(gloss, bike.gloss)  # colours do not turn
 
 
 def test_relight_file_must_match_the_part(tmp_path):
@@ -78,7 +79,7 @@ def test_relight_file_must_match_the_part(tmp_path):
     p = bike_folder.gaussians_path(d, "frame")
     with pytest.raises(bike_folder.UserError, match="missing"):
         bike_folder.read_relight(p)
-    bike_folder.write_relight(p, np.zeros((5, 3)), np.zeros((5, 3)))
+    bike_folder.write_relight(p, np.zeros((5, 3)), np.zeros((5, 3)), np.zeros((5, 3)))
     with pytest.raises(bike_folder.UserError, match="do not match 200"):
         bike_folder.read_relight(p, n=200)
 
@@ -105,29 +106,32 @@ def test_fit_recovers_albedo_and_normals():
     true_nrm = torch.tensor([0.0, 0.0, -1.0]).repeat(n, 1)
     cams = [ring_camera(a, orbit_centre=(0, 1, 0), size=64, focal=2084.97 * 64 / 512 * 2, name=f"camera{i:04d}")
             for i, a in enumerate((-30, -15, 0, 15, 30))]
-    targets_a, targets_n, imgs = [], [], []
+    true_gl = torch.where(g.means[:, 1:2] > 1, torch.tensor([0.3, 0.3, 0.3]), torch.tensor([0.05, 0.05, 0.05]))
+    targets, imgs = {"albedo": [], "normal": [], "gloss": []}, []
     for c in cams:
         prep = prepare(g, c)
-        (a, nn_), alpha = composite_features(prep, [true_alb, true_nrm])
-        targets_a.append(a)
-        targets_n.append(nn_)
+        (a, nn_, gl), alpha = composite_features(prep, [true_alb, true_nrm, true_gl])
+        for k, x in zip(("albedo", "normal", "gloss"), (a, nn_, gl)):
+            targets[k].append(x)
         imgs.append(torch.cat([a, alpha[..., None]], -1))
     views = Views(cams, torch.stack(imgs), [f"camera{i:04d}" for i in range(len(cams))], "<memory>")
 
     import splatting.relight.fit as fit
 
     orig = fit.load_pass_targets
-    fit.load_pass_targets = lambda v, s: (torch.stack(targets_a), torch.stack(targets_n))
+    fit.load_pass_targets = lambda v, s: {k: torch.stack(x) for k, x in targets.items()}
     try:
-        alb, nrm, m = fit_relight(g, views, RelightFitConfig(iterations=150, holdout=(2,), progress=False))
+        feats, m = fit_relight(g, views, RelightFitConfig(iterations=150, holdout=(2,), progress=False))
+        alb, nrm = feats["albedo"], feats["normal"]
     finally:
         fit.load_pass_targets = orig
     vis = (g.means[:, 0].abs() < 0.45) & ((g.means[:, 1] - 1).abs() < 0.45)  # edge splats: partial coverage
     assert (alb[vis] - true_alb[vis]).abs().max() < 0.05
+    assert (feats["gloss"][vis] - true_gl[vis]).abs().max() < 0.05
     # the initial normal is the shortest axis turned away from the centroid: +-Z, so this also
     # checks the fit flips a wrong sign
     assert float((nrm[vis] * true_nrm[vis]).sum(-1).min()) > 0.98
-    assert m["heldout_albedo_psnr"] > 35 and m["heldout_normal_err_deg"] < 3
+    assert m["heldout_albedo_psnr"] > 35 and m["heldout_gloss_psnr"] > 35 and m["heldout_normal_err_deg"] < 3
 
 
 def test_relit_render_of_a_lit_patch():
@@ -142,6 +146,24 @@ def test_relit_render_of_a_lit_patch():
     # sun head-on: linear 0.5 -> sRGB 0.7354; sun behind, sky 0.1: linear 0.05 -> sRGB 0.2478
     np.testing.assert_allclose(lit["rgb"][inside].numpy(), 0.7354, atol=0.01)
     np.testing.assert_allclose(dark["rgb"][inside].numpy(), 0.2478, atol=0.01)
+
+
+def test_fused_composite_equals_the_rasterizer_channels():
+    from splatting.relight.render import composite_forward
+
+    g = _flat_patch()
+    gen = torch.Generator().manual_seed(2)
+    g = g.map(lambda x: x)
+    g.opacity_logits = torch.randn(len(g), generator=gen)  # semi-transparent: T and the cut-offs matter
+    g.means = g.means + 0.05 * torch.randn(len(g), 3, generator=gen)
+    cam = ring_camera(20, orbit_centre=(0, 1, 0), size=48, focal=2084.97 * 48 / 512 * 2)
+    f1, f2 = torch.rand(len(g), 3, generator=gen), torch.randn(len(g), 3, generator=gen)
+    prep = prepare(g, cam)
+    (a, b), alpha = composite_features(prep, [f1, f2])
+    out, alpha2 = composite_forward(prep, torch.cat([f1, f2], 1))
+    assert float(alpha.max()) > 0.5
+    torch.testing.assert_close(out, torch.cat([a, b], -1), atol=1e-5, rtol=1e-4)
+    torch.testing.assert_close(alpha2, alpha, atol=1e-5, rtol=1e-4)
 
 
 def test_relight_fit_command_bad_input(tmp_path):

@@ -1,4 +1,4 @@
-"""The albedo and normal passes render_part writes beside each view (bpy module, in-process).
+"""The albedo, normal and gloss passes render_part writes beside each view (bpy module, in-process).
 
 A square plane of known colour faces ring view 0: its albedo pass must be that colour and its
 normal pass the plane's normal in the canonical frame, in the pixels the mask covers; the EXR
@@ -49,7 +49,8 @@ def test_passes_match_the_plane(plane_views):
         paths = bike_folder.pass_paths(str(plane_views), name)
         for p in paths.values():
             assert os.path.isfile(p), p
-        albedo, normal = bike_folder.read_passes(paths)
+        got = bike_folder.read_passes(paths)
+        albedo, normal, gloss = got["albedo"], got["normal"], got["gloss"]
         mask = np.asarray(Image.open(plane_views / "mask" / name / "0000.png")) > 0
         # interior: the mask eroded by one pixel (edge pixels are coverage-weighted)
         inner = mask[1:-1, 1:-1] & mask[:-2, 1:-1] & mask[2:, 1:-1] & mask[1:-1, :-2] & mask[1:-1, 2:]
@@ -58,9 +59,12 @@ def test_passes_match_the_plane(plane_views):
         # Blender 5.0's Principled BSDF takes ~1.5% of the diffuse for its specular layer
         np.testing.assert_allclose(np.median(albedo[inner], 0), BASE, atol=0.02)
         np.testing.assert_allclose(normal[inner], np.broadcast_to([0.0, 0.0, -1.0], normal[inner].shape), atol=0.02)
+        # a non-metallic rough surface: a small grey glossy colour (Fresnel at F0 ~ 0.04..0.08)
+        g = np.median(gloss[inner], 0)
+        assert np.all(g > 0.01) and np.all(g < 0.2) and np.ptp(g) < 0.01, g
         # outside the object both passes are empty (0 albedo, zero normal)
         out = ~np.pad(mask, 1)[:-2, 1:-1] & ~mask
-        assert np.abs(albedo[out]).max() < 0.01 and np.abs(normal[out]).max() < 0.01
+        assert max(np.abs(x[out]).max() for x in (albedo, normal, gloss)) < 0.01
 
 
 def test_rerun_skips_complete_views_and_redoes_missing_passes(plane_views, fresh_scene):
@@ -90,7 +94,9 @@ def test_pass_encoding_round_trip():
     alb = rng.random((4, 5, 3))
     n = rng.normal(size=(4, 5, 3))
     n /= np.linalg.norm(n, axis=-1, keepdims=True)
-    a8, n8 = bike_folder.encode_passes(alb, n)
+    enc = bike_folder.encode_passes(alb, n, alb[::-1])
+    a8, n8 = enc["albedo"], enc["normal"]
+    assert np.array_equal(enc["gloss"], a8[::-1])
     back_a = bike_folder.srgb_decode(a8 / 255.0)
     back_n = n8 / 255.0 * 2 - 1
     assert np.abs(back_n - n).max() < 1.0 / 127.5 + 1e-9

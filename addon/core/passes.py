@@ -1,4 +1,4 @@
-"""The diffuse-albedo and normal passes of a Cycles render, read the same way in Blender 3.4 and 5.0.
+"""The diffuse-albedo, normal and glossy-colour passes of a Cycles render, read the same way in Blender 3.4 and 5.0.
 
 Why not the compositor: Blender 5.0 replaced scene.node_tree (and the File Output node's slots)
 with node groups, so a compositor graph needs two code paths.  Saving the finished Render Result
@@ -16,6 +16,7 @@ from . import frames
 from .contract import bike_folder, temp_name
 
 ALBEDO_NAMES = ("DiffCol", "Diffuse Color")
+GLOSS_NAMES = ("GlossCol", "Glossy Color")
 NORMAL_NAMES = ("Normal",)
 _PIXEL = {0: np.uint32, 1: np.float16, 2: np.float32}  # EXR pixel types UINT, HALF, FLOAT
 
@@ -23,6 +24,7 @@ _PIXEL = {0: np.uint32, 1: np.float16, 2: np.float32}  # EXR pixel types UINT, H
 def enable(view_layer):
     """Turn on the passes this module reads (cheap: Cycles fills them on the camera ray's first hit)."""
     view_layer.use_pass_diffuse_color = True
+    view_layer.use_pass_glossy_color = True
     view_layer.use_pass_normal = True
 
 
@@ -123,21 +125,22 @@ def _find(channels, names, comps):
     raise ValueError(f"no {'/'.join(names)} pass among the EXR channels {sorted(channels)[:12]}")
 
 
-def albedo_normal(channels):
-    """read_exr() output -> (albedo (H, W, 3) linear, normal (H, W, 3) in the canonical frame)."""
-    albedo = _find(channels, ALBEDO_NAMES, "RGB")
-    normal = _find(channels, NORMAL_NAMES, "XYZ")
-    return albedo, frames.to_canonical(normal)
+def view_passes(channels):
+    """read_exr() output -> {"albedo": (H, W, 3) linear diffuse colour, "normal": (H, W, 3) canonical frame,
+    "gloss": (H, W, 3) linear glossy colour}."""
+    return {"albedo": _find(channels, ALBEDO_NAMES, "RGB"),
+            "normal": frames.to_canonical(_find(channels, NORMAL_NAMES, "XYZ")),
+            "gloss": _find(channels, GLOSS_NAMES, "RGB")}
 
 
 def write_view_passes(scene, paths):
-    """After a render: its albedo and normal passes -> the bike_folder.pass_paths() PNGs, atomically."""
+    """After a render: its albedo, normal and gloss passes -> the bike_folder.pass_paths() PNGs, atomically."""
     exr = temp_name(paths["albedo"]) + ".exr"
     os.makedirs(os.path.dirname(exr), exist_ok=True)
     try:
         save_exr(scene, exr)
-        albedo, normal = albedo_normal(read_exr(exr))
+        images = view_passes(read_exr(exr))
     finally:
         if os.path.exists(exr):
             os.remove(exr)
-    return bike_folder.write_passes(paths, albedo, normal)
+    return bike_folder.write_passes(paths, **images)

@@ -10,23 +10,24 @@ from splatting.bike.model import BikeModel
 
 
 class RelightableBike:
-    def __init__(self, model: BikeModel, albedo, normals):
-        """albedo, normals: (N, 3) in the model's Gaussian order (model.part_names, model.ranges)."""
-        if albedo.shape != (len(model), 3) or normals.shape != (len(model), 3):
-            raise ValueError(f"albedo {tuple(albedo.shape)} / normals {tuple(normals.shape)} != ({len(model)}, 3)")
+    def __init__(self, model: BikeModel, albedo, normals, gloss=None):
+        """albedo, normals, gloss: (N, 3) in the model's Gaussian order (model.part_names, model.ranges)."""
+        gloss = torch.zeros_like(albedo) if gloss is None else gloss
+        if any(x.shape != (len(model), 3) for x in (albedo, normals, gloss)):
+            raise ValueError(f"albedo {tuple(albedo.shape)} / normals {tuple(normals.shape)} / gloss "
+                             f"{tuple(gloss.shape)} != ({len(model)}, 3)")
         self.model = model
         self.albedo = albedo.float()
+        self.gloss = gloss.float()
         self.normals = normals.float()
 
     @classmethod
     def load(cls, bike_dir):
         model = BikeModel.load(bike_dir)
-        albs, nrms = [], []
-        for name, (a, e) in zip(model.part_names, model.ranges):
-            alb, nrm = bike_folder.read_relight(bike_folder.gaussians_path(bike_dir, name), n=e - a)
-            albs.append(torch.from_numpy(alb))
-            nrms.append(torch.from_numpy(nrm))
-        return cls(model, torch.cat(albs), torch.cat(nrms))
+        parts = [bike_folder.read_relight(bike_folder.gaussians_path(bike_dir, name), n=e - a)
+                 for name, (a, e) in zip(model.part_names, model.ranges)]
+        cat = lambda k: torch.cat([torch.from_numpy(p[k]) for p in parts])
+        return cls(model, cat("albedo"), cat("normal"), cat("gloss"))
 
     def posed_normals(self, pose):
         """(8,) pose -> world-frame normals (N, 3)."""
@@ -38,5 +39,5 @@ class RelightableBike:
         return out
 
     def pose(self, pose):
-        """(8,) pose -> (PosedBike, albedo (N, 3), world normals (N, 3))."""
-        return self.model.pose(pose), self.albedo, self.posed_normals(pose)
+        """(8,) pose -> (PosedBike, albedo (N, 3), world normals (N, 3), gloss (N, 3))."""
+        return self.model.pose(pose), self.albedo, self.posed_normals(pose), self.gloss

@@ -424,9 +424,9 @@ def train(views_dir, out_ply=None, config: TrainConfig = None, relight=False):
         from cyclist_formats.bike_folder import write_relight
         from splatting.relight.fit import RelightFitConfig, fit_relight
 
-        albedo, normals, metrics["relight"] = fit_relight(g, views, RelightFitConfig(holdout=cfg.holdout, seed=cfg.seed,
-                                                                                     progress=cfg.progress))
-        write_relight(out_ply, albedo.numpy(), normals.numpy())
+        feats, metrics["relight"] = fit_relight(g, views, RelightFitConfig(holdout=cfg.holdout, seed=cfg.seed,
+                                                                           progress=cfg.progress))
+        write_relight(out_ply, **{k: v.numpy() for k, v in feats.items()})
     write_ply(g, out_ply)
     write_json(os.path.splitext(out_ply)[0] + ".json", metrics)
     return metrics
