@@ -8,6 +8,10 @@ radiance L (Blender's background colour x strength) adds a L whatever the normal
 lights the surface; self-occlusion is not modelled).  Shading happens in linear light; the
 display image is the sRGB encoding of the straight colour, as Blender's "Standard" view transform.
 
+The glossy colour (Cycles' Glossy Color pass) is shaded like the albedo: exact for the uniform sky
+(a glossy lobe returns its directional albedo from a uniform environment), a diffuse-like average
+for the sun (no highlight), so callers pass albedo + gloss as `albedo`.
+
 Inputs are premultiplied by coverage, as the rasterizer composites them: albedo (H, W, 3) linear,
 normal (H, W, 3) the composited unit normals (its direction is the pixel's normal), alpha (H, W).
 """
