@@ -81,6 +81,8 @@ def test_rerun_skips_complete_views_and_redoes_missing_passes(plane_views, fresh
                              settings=s, progress=lambda *_: None)
     assert res["skipped"] == 1 and res["rendered"] == 1
     assert os.path.isfile(p)
+    leftovers = [f for f in plane_views.rglob("*") if f.name.startswith(".")]
+    assert not leftovers, leftovers  # no temporary (EXR or PNG) stays behind
 
 
 def test_read_passes_names_a_missing_pass(tmp_path):

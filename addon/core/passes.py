@@ -135,8 +135,7 @@ def view_passes(channels):
 
 def write_view_passes(scene, paths):
     """After a render: its albedo, normal and gloss passes -> the bike_folder.pass_paths() PNGs, atomically."""
-    exr = temp_name(paths["albedo"]) + ".exr"
-    os.makedirs(os.path.dirname(exr), exist_ok=True)
+    exr = temp_name(os.path.splitext(paths["albedo"])[0] + ".exr")  # creates it; removed below
     try:
         save_exr(scene, exr)
         images = view_passes(read_exr(exr))
