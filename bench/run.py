@@ -30,6 +30,7 @@ STAGES = {
     "rider": ("bench.rider", lambda m, r, out: m.run(r, out)),
     "dataset": ("bench.dataset", lambda m, r, out: m.run(r, out)),
     "street": ("bench.street", lambda m, r, out: m.run(r, out)),
+    "bike_relit": ("bench.relight", lambda m, r, out: m.run(r, out)),
 }
 
 PAPER = {
@@ -53,6 +54,8 @@ TARGETS = {
     "rider_gt": "IoU ≥ 0.9, PSNR ≥ 24 dB (means)",
     "dataset_images_per_hour": "≥ 3000",
     "street_images_per_hour": "≥ 3000 (nuScenes 1600x900, 1-6 cyclists, photo backgrounds)",
+    "bike_relit": "box PSNR ≥ 30 dB, IoU ≥ 0.97 (means)",
+    "relight_render_overhead": "≤ 0.2",
 }
 
 

@@ -5,7 +5,9 @@
     <bike>/views/<part>/rgba/cameraNNNN/0000.png   straight alpha (what training reads)
     <bike>/views/<part>/img/cameraNNNN/0000.jpg    RGB composited on black (SHERF)
     <bike>/views/<part>/mask/cameraNNNN/0000.png   alpha > 0.5 -> 255
+    <bike>/views/<part>/albedo|normal/cameraNNNN/0000.png   the render's passes (PASSES below)
     <bike>/gaussians/<part>.ply + <part>.json      trained part Gaussians and their metrics
+    <bike>/gaussians/<part>.relight.npz            optional per-Gaussian albedo + normal (relight_path)
 """
 import json
 import os
@@ -192,3 +194,100 @@ def write_views_meta(views_dir, cameras, transforms=None, keypoints=None):
         write_json(os.path.join(views_dir, "transforms.json"), transforms)
     if keypoints is not None:
         write_json(os.path.join(views_dir, "keypoints.json"), keypoints_doc(keypoints))
+
+
+# -- relighting passes (docs/relighting.md) --------------------------------------------------------
+# Per view, beside rgba/img/mask, from the same Cycles render:
+#   <bike>/views/<part>/albedo/cameraNNNN/0000.png  Cycles "Diffuse Color", linear, stored sRGB-encoded
+#                                                   (the view transform every colour PNG here uses)
+#   <bike>/views/<part>/normal/cameraNNNN/0000.png  Cycles "Normal", canonical world frame, stored as
+#                                                   round((n + 1) / 2 * 255)
+#   <bike>/views/<part>/gloss/cameraNNNN/0000.png   Cycles "Glossy Color", linear, stored sRGB-encoded
+# All are RGB and, like the passes they come from, averaged over the pixel's samples with the
+# empty film counting as 0: premultiplied by coverage, as the rasterizer composites.
+PASSES = ("albedo", "normal", "gloss")
+
+
+def pass_paths(views_dir, name):
+    return {p: os.path.join(views_dir, p, name, FRAME + ".png") for p in PASSES}
+
+
+def srgb_encode(x):
+    """Linear [0, 1] -> sRGB-encoded [0, 1] (the piecewise IEC 61966-2-1 curve; Blender's 'Standard')."""
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def srgb_decode(y):
+    """sRGB-encoded [0, 1] -> linear [0, 1]."""
+    y = np.clip(np.asarray(y, dtype=np.float64), 0.0, 1.0)
+    return np.where(y <= 0.04045, y / 12.92, np.power((y + 0.055) / 1.055, 2.4))
+
+
+def _to8(x):
+    return np.clip(np.asarray(x, dtype=np.float64) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+
+
+def encode_passes(albedo, normal, gloss):
+    """(H, W, 3) float passes (colours linear, normal canonical; premultiplied) -> {name: uint8 RGB}."""
+    return {"albedo": _to8(srgb_encode(albedo)), "normal": _to8((np.asarray(normal, dtype=np.float64) + 1.0) * 0.5),
+            "gloss": _to8(srgb_encode(gloss))}
+
+
+def write_passes(paths, albedo, normal, gloss):
+    """Write pass_paths() images atomically (see encode_passes)."""
+    from PIL import Image
+
+    for key, img in encode_passes(albedo, normal, gloss).items():
+        with atomic_path(paths[key]) as tmp:
+            Image.fromarray(img).save(tmp, format="PNG")
+    return paths
+
+
+def read_passes(paths):
+    """pass_paths() -> {"albedo", "normal", "gloss"}: (H, W, 3) float32, colours linear, normal canonical;
+    UserError when a file is missing (a folder rendered before the passes existed: rerun render_views)."""
+    from PIL import Image
+
+    out = {}
+    for key in PASSES:
+        p = paths[key]
+        if not os.path.isfile(p):
+            raise UserError(f"{p}: missing {key} pass (render the views again with render_views to add it)")
+        a = np.asarray(Image.open(p).convert("RGB")).astype(np.float64) / 255.0
+        out[key] = (a * 2.0 - 1.0 if key == "normal" else srgb_decode(a)).astype(np.float32)
+    return out
+
+
+# Relightable Gaussians: beside gaussians/<part>.ply, gaussians/<part>.relight.npz holds "albedo" (N, 3)
+# linear diffuse colour, "gloss" (N, 3) linear glossy colour and "normal" (N, 3) unit normals in the
+# part's canonical frame, float32, row i belonging to the PLY's Gaussian i.
+RELIGHT_KEYS = ("albedo", "normal", "gloss")
+
+
+def relight_path(ply_path):
+    return os.path.splitext(os.fspath(ply_path))[0] + ".relight.npz"
+
+
+def write_relight(ply_path, albedo, normal, gloss):
+    path = relight_path(ply_path)
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            np.savez(f, **{k: np.asarray(v, np.float32) for k, v in zip(RELIGHT_KEYS, (albedo, normal, gloss))})
+    return path
+
+
+def read_relight(ply_path, n=None):
+    """-> {"albedo", "normal", "gloss"}: (N, 3) float32; UserError when missing or not matching n Gaussians."""
+    path = relight_path(ply_path)
+    if not os.path.isfile(path):
+        raise UserError(f"{path}: missing (fit it with `python -m splatting relight-fit`)")
+    try:
+        with np.load(path) as z:
+            out = {k: z[k] for k in RELIGHT_KEYS}
+    except (OSError, KeyError, ValueError) as e:
+        raise UserError(f"{path}: unreadable relight file ({e})") from None
+    shapes = {k: v.shape for k, v in out.items()}
+    if any(s != ((n if n is not None else s[0]), 3) for s in shapes.values()) or len(set(shapes.values())) != 1:
+        raise UserError(f"{path}: arrays {shapes} do not match {n} Gaussians")
+    return out

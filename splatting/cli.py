@@ -20,6 +20,7 @@ COMMANDS = {
     "rider-avatar": ("splatting.rider.avatar_build", "build a rider's Gaussian avatar (render, train, skin)"),
     "cyclist": ("splatting.cyclist.command", "pose, fit and render a rider on a bike over a sequence of frames"),
     "dataset": ("splatting.dataset.command", "COCO training images + annotations from a YAML config or preset"),
+    "relight-fit": ("splatting.relight.fit", "fit per-Gaussian albedo and normal of trained Gaussians to the render passes"),
 }
 
 

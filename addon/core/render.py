@@ -233,12 +233,17 @@ def show_only(scene, keep):
 
 
 def render_part(scene, part_objs, views_dir, keypoints, views=None, settings=RenderSettings(),
-                n_points=20000, progress=print, label=""):
+                n_points=20000, progress=print, label="", passes=True):
     """Render one part (or the whole bike) from the ring into views_dir; resumable.
 
     part_objs: the mesh objects to show; keypoints: {name: canonical xyz} of this part.
     views: indices of the ring to render (default all 36).
+    passes: also write the albedo and normal passes of each render (addon/core/passes.py).
     """
+    from . import passes as render_passes
+
+    if passes:
+        render_passes.enable(bpy.context.view_layer)
     os.makedirs(views_dir, exist_ok=True)
     atomic.remove_stale(views_dir)
     show_only(scene, part_objs)
@@ -260,13 +265,16 @@ def render_part(scene, part_objs, views_dir, keypoints, views=None, settings=Ren
     for n_i, i in enumerate(todo):
         name = names[i]
         paths = bike_folder.view_paths(views_dir, name)
-        if bike_folder.view_complete(paths):
+        extra = bike_folder.pass_paths(views_dir, name) if passes else {}
+        if bike_folder.view_complete({**paths, **extra}):
             done += 1
             continue
         place_camera(cam, cams[name]["R"], cams[name]["T"])
         tmp = temp_name(paths["rgba"])
         try:
             render_still(scene, tmp)
+            if passes:  # before the rgba file, whose presence (with img and mask) marks the view done
+                render_passes.write_view_passes(scene, extra)
             bike_folder.write_derived(paths, rendered_png=tmp)  # moves tmp onto the final rgba path, last
         finally:
             if os.path.exists(tmp):

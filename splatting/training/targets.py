@@ -26,7 +26,7 @@ def crop_camera(cam: Camera, box):
     return Camera(cam.R, cam.T, K, x1 - x0, y1 - y0, cam.name)
 
 
-def _box(alpha, margin, min_size=16):
+def crop_box(alpha, margin, min_size=16):
     """Bounding box (x0, y0, x1, y1) of alpha > 0 plus margin, at least min_size (SSIM's 11 px window)."""
     H, W = alpha.shape
     ys, xs = torch.nonzero(alpha > 0, as_tuple=True)
@@ -66,7 +66,7 @@ class Targets:
                 img = F.interpolate(self.premult, size=(round(H * scale), round(W * scale)), mode="area")
             cams = [c.scaled(scale) if scale != 1.0 else c for c in self.views.cameras]
             m = max(2, int(round(self.margin_px * scale)))
-            boxes = [_box(img[i, 3], m) for i in range(len(cams))]
+            boxes = [crop_box(img[i, 3], m) for i in range(len(cams))]
             self._cache[scale] = (img, cams, boxes)
         return self._cache[scale]
 

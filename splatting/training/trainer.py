@@ -245,13 +245,23 @@ def default_out(views_dir):
     return os.path.join(os.path.dirname(parent), "gaussians", part + ".ply")
 
 
-def train(views_dir, out_ply=None, config: TrainConfig = None):
-    """Load a views folder, train, write <out>.ply and <out>.json atomically. Returns the metrics."""
+def train(views_dir, out_ply=None, config: TrainConfig = None, relight=False):
+    """Load a views folder, train, write <out>.ply and <out>.json atomically. Returns the metrics.
+
+    relight=True also fits per-Gaussian albedo and normal to the views' albedo/normal passes
+    (splatting/relight/fit.py) and writes <out>.relight.npz; off, nothing changes."""
     cfg = config or TrainConfig()
     out_ply = out_ply or default_out(views_dir)
     views = load_views(views_dir)
     g, metrics = train_views(views, cfg)
     metrics["part"] = os.path.basename(os.path.abspath(views_dir))
+    if relight:
+        from cyclist_formats.bike_folder import write_relight
+        from splatting.relight.fit import RelightFitConfig, fit_relight
+
+        feats, metrics["relight"] = fit_relight(g, views, RelightFitConfig(holdout=cfg.holdout, seed=cfg.seed,
+                                                                           progress=cfg.progress))
+        write_relight(out_ply, **{k: v.numpy() for k, v in feats.items()})
     write_ply(g, out_ply)
     write_json(os.path.splitext(out_ply)[0] + ".json", metrics)
     return metrics

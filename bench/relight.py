@@ -1,0 +1,248 @@
+"""Relit bike vs Blender under a random sun that stays in the world (issue 16), on a tiny budget.
+
+One procedural bike, its frame/steering/crank rendered at SIZE px from the 36-view ring with the
+albedo and normal passes, each part trained small (MAX_GAUSSIANS, ITERATIONS) with the relight fit;
+then for the same random poses and ring cameras as bike_gt (bench/bike_gt.sample_poses) and one
+random sun + sky per pose (splatting/relight/shading.random_light), Blender renders the articulated
+mesh lit by that sun (render_pose with lights not following the bike) and the Gaussians render
+twice: relit (albedo + normal shaded per pixel) and baked (today's colours, trained under the studio
+lights).  Keys: bike_relit = {box_psnr_mean, iou_mean, poses, baked_box_psnr_mean, baked_iou_mean},
+relight_render_overhead = relit / baked render time - 1 (median of interleaved repeats per pose).
+Box PSNR: RGB on black inside the union of both masks' box plus 8 px.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+PY = sys.executable
+PARTS = ("frame", "steering", "crank")
+SIZE = 96
+RENDER_SAMPLES = 4      # the training views (denoise off: Debian's 3.4 has no OIDN)
+GT_SAMPLES = 16         # the ground truth
+ITERATIONS = 600
+MAX_GAUSSIANS = 4000
+
+
+def _run(args, what):
+    r = subprocess.run([PY, *args], cwd=ROOT, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise RuntimeError(f"{what} failed: {r.stderr[-1500:]}")
+    return r
+
+
+def prepare_bike(work, size=SIZE, progress=print):
+    """make_bikes (1 bike) -> render_views at `size` with passes -> train + relight-fit each part."""
+    bikes = os.path.join(work, "bikes")
+    if not os.path.isdir(bikes) or not os.listdir(bikes):
+        progress("  bike_relit: making one procedural bike")
+        _run([os.path.join(ROOT, "blender_scripts", "make_bikes.py"), "--out", work, "--count", "1", "--seed", "0",
+              "--no-extras"], "make_bikes")
+    bike = os.path.join(bikes, sorted(os.listdir(bikes))[0])
+    t = time.time()
+    _run([os.path.join(ROOT, "blender_scripts", "render_views.py"), "--bike", bike, "--parts", ",".join(PARTS),
+          "--size", str(size), "--samples", str(RENDER_SAMPLES), "--denoise", "NONE", "--threads", "1"], "render_views")
+    progress(f"  bike_relit: views at {size} px with passes ({time.time() - t:.0f} s)")
+    from cyclist_formats import bike_folder
+    from splatting.training.trainer import TrainConfig, train
+
+    from splatting.relight.fit import fit_file
+
+    train_stats = {}
+    for part in PARTS:
+        ply = bike_folder.gaussians_path(bike, part)
+        if os.path.isfile(ply):  # trained before: (re)fit the relight channels only if they are missing or stale
+            try:
+                bike_folder.read_relight(ply)
+                continue
+            except bike_folder.UserError:
+                m = fit_file(bike_folder.views_dir(bike, part), ply)
+                train_stats[part] = {k: m.get(k) for k in ("wall_s", "heldout_albedo_psnr", "heldout_gloss_psnr",
+                                                           "heldout_normal_err_deg")}
+                progress(f"  bike_relit: {part} relight refit {train_stats[part]}")
+                continue
+        cfg = TrainConfig(iterations=ITERATIONS, progress=False, eval_every=100)
+        cfg.densify.max_gaussians = MAX_GAUSSIANS
+        cfg.densify.stop = ITERATIONS // 2
+        m = train(bike_folder.views_dir(bike, part), ply, cfg, relight=True)
+        train_stats[part] = {"psnr": m["psnr"], "gaussians": m["gaussians"], "train_s": m["wall_s"],
+                             "relight_fit_s": m["relight"]["wall_s"],
+                             "albedo_psnr": m["relight"].get("heldout_albedo_psnr"),
+                             "gloss_psnr": m["relight"].get("heldout_gloss_psnr"),
+                             "normal_err_deg": m["relight"].get("heldout_normal_err_deg")}
+        progress(f"  bike_relit: {part} {train_stats[part]}")
+    return bike, train_stats
+
+
+def blender_worker(job_path):
+    """Runs under bpy: per pose, the studio lights replaced by that pose's sun and sky."""
+    sys.path.insert(0, ROOT)
+    from dataclasses import replace
+
+    import bpy
+
+    from addon.core import frames, render
+    from addon.core.render_pose import render_pose
+
+    with open(job_path) as f:
+        job = json.load(f)
+
+    def sun_and_sky(light):
+        def setup(scene):
+            for o in list(scene.objects):
+                if o.type == "LIGHT":
+                    bpy.data.objects.remove(o)
+            world = scene.world or bpy.data.worlds.new("sky")
+            scene.world = world
+            world.use_nodes = True
+            bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
+            bg.inputs["Color"].default_value = (*light["sky"], 1.0)
+            bg.inputs["Strength"].default_value = 1.0
+            sun = bpy.data.lights.new("relight_sun", "SUN")
+            sun.energy = light["sun_strength"]
+            sun.color = light["sun_colour"]
+            sun.angle = 0.01
+            obj = bpy.data.objects.new("relight_sun", sun)
+            scene.collection.objects.link(obj)
+            d = frames.to_blender(np.asarray(light["sun_direction"], float))
+            obj.rotation_mode = "QUATERNION"
+            obj.rotation_quaternion = render._quat_z_to(d / np.linalg.norm(d))
+        return setup
+
+    s = replace(render.RenderSettings(), samples=job["samples"], threads=1)
+    for i, (pose, cam, light) in enumerate(zip(job["poses"], job["cameras"], job["lights"])):
+        out = os.path.join(job["out"], f"gt_{i:03d}.png")
+        if os.path.isfile(out):
+            continue
+        render.setup_lighting = sun_and_sky(light)  # render_pose calls it after opening the bike
+        render_pose(job["bike"], pose, cam, out, None, s, lights_follow=False)
+        print(f"  blender pose {i + 1}/{len(job['poses'])}", flush=True)
+
+
+def _box(m_a, m_b, size, pad=8):
+    ys, xs = np.nonzero(m_a | m_b)
+    if len(xs) == 0:
+        return 0, 0, size, size
+    return max(0, xs.min() - pad), max(0, ys.min() - pad), min(size, xs.max() + pad + 1), min(size, ys.max() + pad + 1)
+
+
+def run(results, out_dir, n_poses=6, seed=0, size=SIZE, repeats=5, progress=print):
+    import torch
+    from PIL import Image
+
+    from bench.bike_gt import sample_poses
+    from bench.compare import mask_iou, psnr, side_by_side
+    from cyclist_formats import bike_folder
+    from splatting.raster.camera import load_cameras
+    from splatting.raster.sparse import render_gaussians
+    from splatting.relight.bike import RelightableBike
+    from splatting.relight.render import render_relit
+    from splatting.relight.shading import Light, random_light
+
+    torch.set_num_threads(1)
+    work = os.path.join(out_dir, "relight")
+    t0 = time.time()
+    bike, train_stats = prepare_bike(work, size, progress)
+    prep_s = time.time() - t0
+    poses, cams = sample_poses(n_poses, seed)
+    rng = np.random.default_rng(seed + 16)
+    lights = [random_light(rng) for _ in range(n_poses)]
+    ring_path = os.path.join(bike_folder.views_dir(bike, "frame"), "cameras.json")
+    with open(ring_path) as f:
+        ring_json = json.load(f)
+    gt_dir = os.path.join(work, "gt")
+    os.makedirs(gt_dir, exist_ok=True)
+    cam_files = []
+    for i, c in enumerate(cams):
+        p = os.path.join(gt_dir, f"camera_{i:03d}.json")
+        with open(p, "w") as f:
+            json.dump(ring_json[f"camera{int(c):04d}"], f)
+        cam_files.append(p)
+    job = {"bike": bike, "poses": poses.tolist(), "cameras": cam_files, "out": gt_dir, "samples": GT_SAMPLES,
+           "lights": [{"sun_direction": list(map(float, l.direction(torch.float64))), "sun_colour": list(l.sun_colour),
+                       "sun_strength": l.sun_strength, "sky": list(l.sky)} for l in lights]}
+    job_path = os.path.join(gt_dir, "job.json")
+    with open(job_path, "w") as f:
+        json.dump(job, f)
+    t = time.time()
+    _run([__file__, "--worker", job_path], "blender ground truth")
+    progress(f"  bike_relit: {n_poses} Blender renders ({time.time() - t:.0f} s)")
+
+    rb = RelightableBike.load(bike)
+    ring, _ = load_cameras(ring_path)
+    rows, shots, t_baked, t_relit = [], [], [], []
+    with torch.no_grad():
+        for i, (pose, c, light) in enumerate(zip(poses, cams, lights)):
+            cam = ring[int(c)]
+            posed, albedo, normals, gloss = rb.pose(torch.tensor(pose, dtype=torch.float64))
+            g = posed.gaussians.map(lambda x: x.contiguous())
+            tb, tr = [], []
+            for _ in range(repeats):  # interleaved, so load changes hit both alike
+                a = time.perf_counter()
+                baked = render_gaussians(g, cam)
+                b = time.perf_counter()
+                relit = render_relit(g, albedo, normals, cam, light, gloss)
+                tr.append(time.perf_counter() - b)
+                tb.append(b - a)
+            t_baked.append(np.median(tb))
+            t_relit.append(np.median(tr))
+            gt = np.asarray(Image.open(os.path.join(gt_dir, f"gt_{i:03d}.png")).convert("RGBA")).astype(np.float64) / 255
+            gt_rgb, m_gt = gt[..., :3] * gt[..., 3:4], gt[..., 3] > 0.5
+            row = {"pose": [round(float(v), 2) for v in pose], "camera": int(c),
+                   "sun_elevation_deg": round(float(np.degrees(np.arcsin(light.direction()[1]))), 1)}
+            for key, out in (("relit", relit), ("baked", baked)):
+                rgb = out["rgb"].clamp(0, 1).numpy().astype(np.float64)
+                m = out["alpha"].numpy() > 0.5
+                x0, y0, x1, y1 = _box(m, m_gt, size)
+                row[f"{key}_iou"] = mask_iou(m, m_gt)
+                row[f"{key}_box_psnr"] = psnr(rgb[y0:y1, x0:x1], gt_rgb[y0:y1, x0:x1])
+                if key == "relit":
+                    shots.append((gt_rgb, rgb, (x0, y0, x1, y1)))
+            rows.append(row)
+    mean = lambda k: float(np.mean([r[k] for r in rows]))
+    worst = int(np.argmin([r["relit_box_psnr"] for r in rows]))
+    side_by_side(*shots[worst][:2], os.path.join(out_dir, "bike_relit_worst.png"), shots[worst][2], zoom=3)
+    overhead = float(np.median(np.asarray(t_relit) / np.asarray(t_baked)) - 1)
+    results["bike_relit"] = {"poses": len(rows), "box_psnr_mean": mean("relit_box_psnr"), "iou_mean": mean("relit_iou"),
+                             "baked_box_psnr_mean": mean("baked_box_psnr"), "baked_iou_mean": mean("baked_iou"),
+                             "size_px": size, "gaussians": len(rb.model), "prepare_s": round(prep_s, 1),
+                             "train": train_stats}
+    results["relight_render_overhead"] = overhead
+    results["relight_render_ms"] = {"baked_median": 1000 * float(np.median(t_baked)),
+                                    "relit_median": 1000 * float(np.median(t_relit))}
+    lines = ["| # | pose p,s,X,Y,Z | camera | sun elev ° | relit IoU | relit box PSNR | baked IoU | baked box PSNR |",
+             "|---|---|---|---|---|---|---|---|"]
+    for i, r in enumerate(rows):
+        lines.append(f"| {i} | {', '.join(f'{v:.0f}' for v in r['pose'][:5])} | {r['camera']} | {r['sun_elevation_deg']} "
+                     f"| {r['relit_iou']:.4f} | {r['relit_box_psnr']:.2f} | {r['baked_iou']:.4f} | {r['baked_box_psnr']:.2f} |")
+    lines.append(f"| mean | | | | {mean('relit_iou'):.4f} | {mean('relit_box_psnr'):.2f} | {mean('baked_iou'):.4f} "
+                 f"| {mean('baked_box_psnr'):.2f} |")
+    lines.append(f"\nRender time (median per pose of {repeats} interleaved repeats, {size} px, {len(rb.model)} Gaussians): "
+                 f"baked {results['relight_render_ms']['baked_median']:.1f} ms, relit {results['relight_render_ms']['relit_median']:.1f} ms, "
+                 f"overhead {overhead:+.2f}. Worst pose (GT | relit | 4x |diff|) in bike_relit_worst.png.")
+    with open(os.path.join(out_dir, "bike_relit_table.md"), "w") as f:
+        f.write("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return rows
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description="relit bike vs Blender under random suns (worker runs under bpy)")
+    ap.add_argument("--worker", metavar="JOB_JSON")
+    ap.add_argument("--out", help="bench output folder (standalone run)")
+    ap.add_argument("--poses", type=int, default=6)
+    a = ap.parse_args()
+    if a.worker:
+        blender_worker(a.worker)
+    else:
+        if not a.out:
+            ap.error("--out is required")
+        sys.path.insert(0, ROOT)
+        res = {}
+        run(res, a.out, n_poses=a.poses)
+        print(json.dumps({k: res[k] for k in ("bike_relit", "relight_render_overhead", "relight_render_ms")}, indent=1))

@@ -1,0 +1,1 @@
+"""Relightable Gaussians: albedo + normal per Gaussian, shaded per pixel (docs/relighting.md)."""

@@ -1,0 +1,43 @@
+"""A relightable bike: the parametric BikeModel plus each part's albedo and normals, posed together.
+
+Normals are directions, so a part's pose turns them with its rotation only (the R of H_g H_s for
+steering, H_g H_p for the crank, H_g for the frame; docs/contract.md), never its translation.
+"""
+import torch
+
+from cyclist_formats import bike_folder
+from splatting.bike.model import BikeModel
+
+
+class RelightableBike:
+    def __init__(self, model: BikeModel, albedo, normals, gloss=None):
+        """albedo, normals, gloss: (N, 3) in the model's Gaussian order (model.part_names, model.ranges)."""
+        gloss = torch.zeros_like(albedo) if gloss is None else gloss
+        if any(x.shape != (len(model), 3) for x in (albedo, normals, gloss)):
+            raise ValueError(f"albedo {tuple(albedo.shape)} / normals {tuple(normals.shape)} / gloss "
+                             f"{tuple(gloss.shape)} != ({len(model)}, 3)")
+        self.model = model
+        self.albedo = albedo.float()
+        self.gloss = gloss.float()
+        self.normals = normals.float()
+
+    @classmethod
+    def load(cls, bike_dir):
+        model = BikeModel.load(bike_dir)
+        parts = [bike_folder.read_relight(bike_folder.gaussians_path(bike_dir, name), n=e - a)
+                 for name, (a, e) in zip(model.part_names, model.ranges)]
+        cat = lambda k: torch.cat([torch.from_numpy(p[k]) for p in parts])
+        return cls(model, cat("albedo"), cat("normal"), cat("gloss"))
+
+    def posed_normals(self, pose):
+        """(8,) pose -> world-frame normals (N, 3)."""
+        T = self.model.part_transforms(pose)
+        out = torch.empty_like(self.normals)
+        for name, (a, e) in zip(self.model.part_names, self.model.ranges):
+            R = T[name][0, :3, :3].to(self.normals.dtype)
+            out[a:e] = self.normals[a:e] @ R.T
+        return out
+
+    def pose(self, pose):
+        """(8,) pose -> (PosedBike, albedo (N, 3), world normals (N, 3), gloss (N, 3))."""
+        return self.model.pose(pose), self.albedo, self.posed_normals(pose), self.gloss

@@ -1,0 +1,182 @@
+"""Fit per-Gaussian albedo, gloss and normal of trained Gaussians to a views folder's render passes.
+
+`python -m splatting relight-fit --views OUT/bikes/ID/views/PART [--ply gaussians/PART.ply]` writes
+gaussians/PART.relight.npz (cyclist_formats.bike_folder.relight_path).  The geometry (means,
+scales, rotations, opacities) is the colour training's and stays fixed, so every view's projection
+and pair list is computed once and each step is only the compositing of two 3-channel features
+with its backward: seconds, not minutes.  Loss: L1 of the composited (premultiplied) linear albedo
+gloss and of the composited unit normals against the passes, in the object's box of each training view.
+"""
+import math
+import os
+import time
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+
+from cyclist_formats import bike_folder
+from cyclist_formats.errors import UserError
+from splatting.gaussians.container import read_ply
+from splatting.progress import Progress
+from splatting.relight.render import composite_features, prepare
+from splatting.gaussians.sh import C0
+from splatting.relight.shading import srgb_decode
+from splatting.rotations import quat_to_rotmat
+from splatting.training.targets import crop_box, crop_camera, split_views
+from splatting.training.trainer import DEFAULT_HOLDOUT
+from splatting.training.views import load_views
+
+
+@dataclass
+class RelightFitConfig:
+    iterations: int = 300
+    lr: float = 0.05
+    max_size: int = 256        # fit at most at this image size (premultiplied passes area-averaged)
+    holdout: tuple = DEFAULT_HOLDOUT
+    seed: int = 0
+    progress: bool = True
+
+
+def load_pass_targets(views, scale):
+    """{"albedo", "normal", "gloss"}: (V, H, W, 3) targets of views (premultiplied), resized by scale."""
+    per_view = [bike_folder.read_passes(bike_folder.pass_paths(views.folder, name)) for name in views.names]
+    out = {}
+    for key in bike_folder.PASSES:
+        X = torch.stack([torch.from_numpy(v[key]) for v in per_view]).permute(0, 3, 1, 2)
+        if scale != 1.0:
+            X = F.interpolate(X, size=(round(X.shape[2] * scale), round(X.shape[3] * scale)), mode="area")
+        out[key] = X.permute(0, 2, 3, 1).contiguous()
+    return out
+
+
+def initial_normals(g, items):
+    """Each Gaussian's shortest axis (a flat splat's normal), its sign voted by the normal passes.
+
+    Gaussian k's vote is sum over pixels of w_k(pixel) (n_k . target(pixel)), w_k = alpha_k T_k its
+    compositing weight there, so only what is seen votes (a Gaussian behind a surface has w ~ 0).
+    Compositing is linear in the colours, so that sum is the gradient of sum(composite(f) . target)
+    with respect to f_k, dotted with n_k: one forward and backward per view.  (Why vote at all: an
+    exactly reversed normal is a stationary point of the loss through the normalisation, since its
+    gradient is parallel to it, so the fit alone could not flip it.)"""
+    R = quat_to_rotmat(g.quats / g.quats.norm(dim=-1, keepdim=True))  # columns are the local axes
+    k = g.log_scales.argmin(-1)
+    n = R[torch.arange(len(g)), :, k].float()
+    vote = torch.zeros(len(g))
+    for prep, targets in items:
+        f = torch.zeros(len(g), 3, requires_grad=True)
+        (img,), _ = composite_features(prep, [f])
+        (img * targets["normal"]).sum().backward()
+        vote += (f.grad * n).sum(-1)
+    return torch.where(vote[:, None] < 0, -n, n)
+
+
+def _views_at(g, views, idx, targets, scale, margin=4):
+    """Per view: fixed projection + pairs in the cropped camera, and the cropped targets."""
+    out = []
+    for i in idx:
+        cam = views.cameras[i].scaled(scale) if scale != 1.0 else views.cameras[i]
+        cover = (targets["albedo"][i].abs().sum(-1) + (targets["normal"][i].abs().sum(-1) > 0.02)) > 0
+        box = crop_box(cover.float(), margin)
+        x0, y0, x1, y1 = box
+        out.append((prepare(g, crop_camera(cam, box)), {k: t[i, y0:y1, x0:x1] for k, t in targets.items()}))
+    return out
+
+
+def _psnr(a, b):
+    return 10 * math.log10(1.0 / max(float(((a - b) ** 2).mean()), 1e-12))
+
+
+def _evaluate(feats, items):
+    """Mean albedo and gloss PSNR (linear, box) and mean angular error (degrees) of the normals where covered."""
+    pa, pg, ang = [], [], []
+    with torch.no_grad():
+        for prep, t in items:
+            (a, n, gl), alpha = composite_features(prep, [feats["albedo"], feats["normal"], feats["gloss"]])
+            pa.append(_psnr(a, t["albedo"]))
+            pg.append(_psnr(gl, t["gloss"]))
+            m = (t["normal"].norm(dim=-1) > 0.5) & (alpha > 0.5)
+            if m.any():
+                cos = F.cosine_similarity(n[m], t["normal"][m], dim=-1).clamp(-1, 1)
+                ang.append(float(torch.rad2deg(torch.acos(cos)).mean()))
+    return {"heldout_albedo_psnr": round(sum(pa) / len(pa), 3), "heldout_gloss_psnr": round(sum(pg) / len(pg), 3),
+            "heldout_normal_err_deg": round(sum(ang) / len(ang), 2) if ang else None}
+
+
+def fit_relight(g, views, cfg: RelightFitConfig = None):
+    """Gaussians g (trained on views) -> ({"albedo", "normal", "gloss"}: (N, 3); colours linear, normals
+    unit), metrics)."""
+    cfg = cfg or RelightFitConfig()
+    t0 = time.time()
+    torch.manual_seed(cfg.seed)
+    scale = min(1.0, cfg.max_size / max(views.height, views.width))
+    targets = load_pass_targets(views, scale)
+    train_idx, hold_idx = split_views(views, cfg.holdout)
+    tr = _views_at(g, views, train_idx, targets, scale)
+    ho = _views_at(g, views, hold_idx, targets, scale) if hold_idx else []
+
+    base = srgb_decode(g.sh[:, 0].float() * C0 + 0.5).clamp(0.02, 0.98)  # SH0 -> colour
+    albedo_logit = torch.nn.Parameter(torch.logit(base))
+    gloss_logit = torch.nn.Parameter(torch.full((len(g), 3), math.log(0.04 / 0.96)))  # dielectric F0
+    normal_raw = torch.nn.Parameter(initial_normals(g, tr).clone())
+    opt = torch.optim.Adam([albedo_logit, gloss_logit, normal_raw], lr=cfg.lr)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    order, loss_v = [], float("nan")
+    prog = Progress(cfg.progress)
+    for it in range(1, cfg.iterations + 1):
+        if not order:
+            order = torch.randperm(len(tr), generator=gen).tolist()
+        prep, t = tr[order.pop()]
+        nrm = normal_raw / normal_raw.norm(dim=-1, keepdim=True).clamp_min(1e-6)
+        (a, n, gl), _ = composite_features(prep, [torch.sigmoid(albedo_logit), nrm, torch.sigmoid(gloss_logit)])
+        loss = (a - t["albedo"]).abs().mean() + (n - t["normal"]).abs().mean() + (gl - t["gloss"]).abs().mean()
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        loss_v = float(loss.detach())
+        prog.line(f"relight fit {it}/{cfg.iterations} loss {loss_v:.4f} {time.time() - t0:5.1f}s")
+    prog.close()
+    feats = {"albedo": torch.sigmoid(albedo_logit).detach(),
+             "normal": (normal_raw / normal_raw.norm(dim=-1, keepdim=True).clamp_min(1e-6)).detach(),
+             "gloss": torch.sigmoid(gloss_logit).detach()}
+    metrics = {"iterations": cfg.iterations, "loss": round(loss_v, 5), "scale": round(scale, 4),
+               "wall_s": round(time.time() - t0, 2)}
+    if ho:
+        metrics.update(_evaluate(feats, ho))
+    return feats, metrics
+
+
+def fit_file(views_dir, ply_path=None, cfg: RelightFitConfig = None):
+    """Fit and write <ply>.relight.npz beside the Gaussians; returns the metrics."""
+    from splatting.training.trainer import default_out
+
+    ply_path = ply_path or default_out(views_dir)
+    if not os.path.isfile(ply_path):
+        raise UserError(f"{ply_path}: no trained Gaussians (run `python -m splatting train --views {views_dir}` first)")
+    views = load_views(views_dir)
+    missing = [n for n in views.names if not os.path.isfile(bike_folder.pass_paths(views_dir, n)["albedo"])]
+    if missing:
+        raise UserError(f"{views_dir}: {len(missing)} views lack the albedo/normal passes (e.g. {missing[0]}); "
+                        "render them again with render_views")
+    g = read_ply(ply_path)
+    feats, metrics = fit_relight(g, views, cfg)
+    metrics["path"] = bike_folder.write_relight(ply_path, **{k: v.numpy() for k, v in feats.items()})
+    return metrics
+
+
+def add_arguments(p):
+    p.add_argument("--views", required=True, help="a part's views folder with albedo/ and normal/ passes")
+    p.add_argument("--ply", help="the trained Gaussians (default OUT/bikes/ID/gaussians/PART.ply)")
+    p.add_argument("--iterations", type=int, default=RelightFitConfig.iterations, help="optimisation steps (default %(default)s)")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+
+
+def run(args):
+    if args.iterations < 1:
+        raise UserError("--iterations must be >= 1")
+    if not os.path.isdir(args.views):
+        raise UserError(f"views folder not found: {args.views}")
+    m = fit_file(args.views, args.ply, RelightFitConfig(iterations=args.iterations, progress=not args.quiet))
+    print(f"{m['path']}: albedo PSNR {m.get('heldout_albedo_psnr')} dB, normal error "
+          f"{m.get('heldout_normal_err_deg')} deg (held-out views), {m['wall_s']} s")
+    return 0

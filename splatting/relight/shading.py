@@ -1,0 +1,84 @@
+"""Per-pixel shading of composited albedo and normal under a sun plus a uniform sky (docs/relighting.md).
+
+Units follow Blender's Cycles so that a light set up here and in Blender renders alike: a sun of
+strength E (W/m^2) lights a Lambertian surface of albedo a, normal n with outgoing radiance
+a E max(0, n.l) / pi (measured: a 0.5-albedo plane facing a strength-1 sun renders 0.163 in the
+Combined pass, 1/pi = 0.318 per unit albedo plus a little specular); a uniform world colour of
+radiance L (Blender's background colour x strength) adds a L whatever the normal (the whole sphere
+lights the surface; self-occlusion is not modelled).  Shading happens in linear light; the
+display image is the sRGB encoding of the straight colour, as Blender's "Standard" view transform.
+
+The glossy colour (Cycles' Glossy Color pass) is shaded like the albedo: exact for the uniform sky
+(a glossy lobe returns its directional albedo from a uniform environment), a diffuse-like average
+for the sun (no highlight), so callers pass albedo + gloss as `albedo`.
+
+Inputs are premultiplied by coverage, as the rasterizer composites them: albedo (H, W, 3) linear,
+normal (H, W, 3) the composited unit normals (its direction is the pixel's normal), alpha (H, W).
+"""
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+
+@dataclass
+class Light:
+    sun_direction: tuple = (0.4, 0.6, 1.0)   # towards the sun, canonical world frame (normalised here)
+    sun_colour: tuple = (1.0, 1.0, 1.0)
+    sun_strength: float = 3.0                 # W/m^2, as Blender's sun "Strength"
+    sky: tuple = (0.48, 0.492, 0.51)          # world background radiance (colour x strength)
+
+    def direction(self, dtype=torch.float32):
+        d = torch.as_tensor(self.sun_direction, dtype=dtype)
+        return d / d.norm().clamp_min(1e-12)
+
+
+def random_light(rng, min_elevation_deg=15.0, strength=(2.0, 5.0), sky=(0.1, 0.6)):
+    """A sun somewhere above the horizon (uniform azimuth, elevation in [min, 90]) with a random warm/cool
+    tint and a grey-blue sky; rng: numpy Generator.  What bench/relight.py uses against Blender."""
+    az = rng.uniform(0.0, 2 * math.pi)
+    el = math.radians(rng.uniform(min_elevation_deg, 90.0))
+    d = (math.cos(el) * math.cos(az), math.sin(el), math.cos(el) * math.sin(az))  # canonical: Y up
+    tint = rng.uniform(0.85, 1.0, 3)
+    s = rng.uniform(*sky)
+    return Light(sun_direction=d, sun_colour=tuple(float(x) for x in tint / tint.max()),
+                 sun_strength=float(rng.uniform(*strength)), sky=(0.92 * s, 0.96 * s, s))
+
+
+def srgb_encode(x):
+    """Linear -> sRGB-encoded (IEC 61966-2-1), torch; clamps to [0, 1]."""
+    x = x.clamp(0.0, 1.0)
+    return torch.where(x <= 0.0031308, 12.92 * x, 1.055 * x.clamp_min(1e-12) ** (1 / 2.4) - 0.055)
+
+
+def srgb_decode(y):
+    y = y.clamp(0.0, 1.0)
+    return torch.where(y <= 0.04045, y / 12.92, ((y + 0.055) / 1.055) ** 2.4)
+
+
+def shade_linear(albedo, normal, light: Light):
+    """Premultiplied linear radiance (H, W, 3) of premultiplied albedo and composited normals."""
+    n = normal / normal.norm(dim=-1, keepdim=True).clamp_min(1e-6)
+    l = light.direction(albedo.dtype)
+    cos = (n @ l).clamp_min(0.0)[..., None]
+    sun = torch.as_tensor(light.sun_colour, dtype=albedo.dtype) * (light.sun_strength / math.pi)
+    return albedo * (cos * sun + torch.as_tensor(light.sky, dtype=albedo.dtype))
+
+
+def shade(albedo, normal, alpha, light: Light):
+    """Display colour premultiplied by alpha (H, W, 3) in [0, 1]: the sRGB encoding of the straight
+    linear colour, times coverage (what an RGBA render composited over black shows)."""
+    lin = shade_linear(albedo, normal, light)
+    a = alpha[..., None]
+    straight = torch.where(a > 1e-6, lin / a.clamp_min(1e-6), torch.zeros_like(lin))
+    return srgb_encode(straight) * a
+
+
+def lambert_reference(albedo, normal, light: Light):
+    """One surface point, plain numpy: a (E cos / pi + sky) with cos = max(0, n.l) -- the formula
+    the tests hold shade_linear to."""
+    n = np.asarray(normal, float) / np.linalg.norm(normal)
+    l = np.asarray(light.sun_direction, float) / np.linalg.norm(light.sun_direction)
+    return np.asarray(albedo, float) * (max(0.0, float(n @ l)) * light.sun_strength / math.pi
+                                        * np.asarray(light.sun_colour, float) + np.asarray(light.sky, float))
