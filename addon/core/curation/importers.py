@@ -3,11 +3,12 @@
 Operator names changed between versions (OBJ: wm.obj_import since 3.2, import_scene.obj until
 3.x; PLY: wm.ply_import since 3.6, import_mesh.ply before; STL: wm.stl_import since 4.1,
 import_mesh.stl before), so each format lists the operators to try in order.  A .blend is
-appended: the objects of its first scene are linked into the current scene (other scenes hold
+appended: the objects of its main scene (named "Scene", else the first) are linked into the current scene (other scenes hold
 alternatives, studio sets, not the bike).  glTF files with Draco-compressed meshes go through the
 same importer (it carries the Draco decoder).
 """
 import os
+import re
 
 import bpy
 
@@ -54,7 +55,10 @@ def import_model(path):
             res = op(filepath=path)
         except Exception as e:  # importers raise RuntimeError or their own errors on bad files
             lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
-            msg = (lines[-1] if lines else type(e).__name__)[:300]  # a traceback's last line says why
+            # the exception's own line in a wrapped traceback says why; else the last line
+            why = [ln for ln in lines if re.match(r"^[A-Za-z_.]*(Error|Exception)\b[^:]*:", ln)
+                   and not ln.startswith("Error: Python")]
+            msg = (why[-1] if why else lines[-1] if lines else type(e).__name__)[:300]
             made = [o for o in bpy.data.objects if o not in before]
             where = ""
             if made:  # the importer builds objects in file order: it broke on the one after these
@@ -71,7 +75,10 @@ def import_model(path):
 def _append_blend(path):
     try:
         with bpy.data.libraries.load(path, link=False) as (src, dst):
-            dst.scenes = list(src.scenes[:1])
+            # the main scene: Blender's default name when present (a library lists scenes
+            # by name, not in the order the author made them), else the first
+            main = [n for n in src.scenes if n == "Scene"] or list(src.scenes[:1])
+            dst.scenes = main
             if not src.scenes:
                 dst.objects = list(src.objects)
     except (OSError, RuntimeError) as e:

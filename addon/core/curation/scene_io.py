@@ -239,6 +239,7 @@ def auto_curate(wheel_diameter=pipeline.DEFAULT_WHEEL_DIAMETER, keypoints=None, 
         src = join_meshes(scene)
     wheel_centres = None
     if from_wheel_empties:
+        bpy.context.view_layer.update()   # empties just moved by a script: refresh matrix_world
         inv = np.array(src.matrix_world.inverted())
         pts = []
         for name in ("front_axle", "rear_axle"):

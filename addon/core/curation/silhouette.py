@@ -395,8 +395,9 @@ def rings_from_centres(soup, front, rear):
         rs = np.arange(max(3, int(0.1 * L / sv.px)), int(0.7 * L / sv.px) + 1)
         if len(rs) == 0:
             raise UserError("the wheel centres are too close for wheels to fit between them")
-        sup = np.array([circle_support(edge, x, y, r) for r in rs])
-        r = float(rs[int(np.argmax(sup))]) * sv.px
+        sup = np.array([circle_support(edge, x, y, r, img=sv.image) for r in rs])
+        # the outermost well-supported circle: the tyre, not the rim or hub inside it
+        r = float(rs[np.nonzero(sup >= 0.8 * sup.max())[0].max()]) * sv.px
         c2f, rf, band = refine(P, sv, Circle(c2, r, 1.0))
         if abs(rf - r) > 0.2 * r or np.linalg.norm(c2f - c2) > 0.2 * r:   # refinement wandered off
             c2f, rf = c2, r

@@ -55,7 +55,12 @@ def regions(X, kp, head_radius=None, wheel_radius=None, head_span=None, with_hea
     steer |= (np.hypot(X[:, 0] - fa[0], X[:, 1] - fa[1]) < R + 0.03) & (np.abs(X[:, 2]) < 0.15)
     steer |= (_seg_dist(X[:, :2], fa[:2], sb[:2]) < 0.07) & (np.abs(X[:, 2]) < 0.15) & (t < 0)
     cockpit_x = kp["seat"][0] + 0.15 if "seat" in kp else ca[0] + 0.1
-    steer |= (X[:, 1] > st[1] - 0.16) & (X[:, 0] > cockpit_x)
+    cockpit = (X[:, 1] > st[1] - 0.16) & (X[:, 0] > cockpit_x)
+    if head_span is not None:
+        # keypoints from the shape (a real model, maybe one fused body): the cockpit is what
+        # sits near the steering axis, not a motorcycle's tank behind it
+        cockpit &= rho < 0.3
+    steer |= cockpit
     steer = np.where(in_head, rho < 0.8 * r_ht, steer)
     out[steer] = STEERING
     out[crank & ~steer] = CRANK
