@@ -61,6 +61,8 @@ def main(argv):
     p = argparse.ArgumentParser(prog="build_addon.py", description=__doc__.split("\n\n")[0])
     p.add_argument("--out", default=os.path.join(ROOT, "dist"), help="output folder (default dist/)")
     args = p.parse_args(argv)
+    from cyclist_formats import checks
+    checks.output_dir("out", args.out)
     print(build(args.out))
     return 0
 
