@@ -112,6 +112,9 @@ def build(args):
     root = args.out
     settings = settings_of(args)
     graph = make_graph(root, bikes, riders)
+    from splatting.library.tasks import task_settings
+    for t in graph:  # a settings clash is refused before any task runs
+        manifest.check_settings(root, t.id, task_settings(t.kind, settings))
     for d in bikes.values():  # a killed run's half-written temporaries; their tasks are not recorded
         remove_stale(d)
     t0 = time.time()

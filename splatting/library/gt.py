@@ -82,8 +82,10 @@ def ground_truth(bike_dir, out_dir, n_poses=3, samples=None, seed=0):
         rows.append({"pose": [round(float(v), 3) for v in pose], "camera": int(cam),
                      "iou": round(mask_iou(m, m_gt), 4), "box_psnr": round(box_psnr(rgb, gt_rgb, m, m_gt), 3)})
         splat_png = os.path.join(out_dir, f"splat_{i:03d}.png")
-        with atomic_path(splat_png) as tmp:
-            Image.fromarray((np.concatenate([rgb, alpha[..., None]], -1) * 255).round().astype(np.uint8)).save(tmp, format="PNG")
+        straight = np.where(alpha[..., None] > 1e-6, rgb / np.maximum(alpha[..., None], 1e-6), 0.0).clip(0, 1)
+        with atomic_path(splat_png) as tmp:  # straight alpha, like the Blender RGBA beside it
+            rgba = np.concatenate([straight, alpha[..., None].clip(0, 1)], -1)
+            Image.fromarray((rgba * 255).round().astype(np.uint8)).save(tmp, format="PNG")
         files += [gt_png, splat_png]
     iou = np.array([r["iou"] for r in rows])
     ps = np.array([r["box_psnr"] for r in rows])
