@@ -28,6 +28,7 @@ STAGES = {
     "ik": ("bench.ik", lambda m, r, out: m.run(r, out)),
     "rider": ("bench.rider", lambda m, r, out: m.run(r, out)),
     "dataset": ("bench.dataset", lambda m, r, out: m.run(r, out)),
+    "library": ("bench.library", lambda m, r, out: m.run(r, out)),  # library_build_s, dataset_ray_overhead
 }
 
 PAPER = {
@@ -47,6 +48,7 @@ TARGETS = {
     "ik_batch_200x50_s": "≤ 2 s",
     "rider_gt": "IoU ≥ 0.9, PSNR ≥ 24 dB (means)",
     "dataset_images_per_hour": "≥ 3000",
+    "dataset_ray_overhead": "< 0.1",
 }
 
 
