@@ -10,7 +10,7 @@ OUT ?= out
 DEMO := $(OUT)/demo
 BLENDER ?= blender
 
-.PHONY: setup raster-lib test test-all demo bench bikes views contact-sheet addon clean
+.PHONY: setup raster-lib test test-all demo bench bikes views library contact-sheet addon clean
 
 setup: $(STAMP) raster-lib
 
@@ -47,6 +47,13 @@ bikes: setup
 
 views: bikes
 	for b in $(OUT)/bikes/*/; do $(PY) blender_scripts/render_views.py --bike $$b --parts all || exit 1; done
+
+# The trained library: every bike's views, part Gaussians and ground-truth check, and every
+# roster rider's avatar; resumable, writes $(OUT)/library.json (docs/scale_out.md).
+# e.g. make library LIBRARY_ARGS="--engine ray --address auto --riders all"
+LIBRARY_ARGS ?= --riders all
+library: bikes
+	$(PY) -m splatting library build --out $(OUT) $(LIBRARY_ARGS)
 
 contact-sheet: setup
 	$(PY) blender_scripts/make_bikes.py --out $(OUT) --count 23 --seed 0

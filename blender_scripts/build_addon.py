@@ -95,6 +95,8 @@ def main(argv):
     p.add_argument("--no-validate", action="store_true",
                    help="skip Blender's strict manifest check (needs the bpy module's bundled tooling)")
     args = p.parse_args(argv)
+    from cyclist_formats import checks
+    checks.output_dir("out", args.out)
     path = build(args.out, check=not args.no_validate)
     print(path if args.no_validate else f"{path} (passes Blender's extension validate)")
     return 0

@@ -47,6 +47,9 @@ def _op(call, **kw):
 
 def main(argv):
     args = parse(argv)
+    from cyclist_formats import checks
+    checks.input_file("input", args.input)
+    checks.output_dir("out", args.out)
     if not os.path.isfile(args.input):
         raise UserError(f"model file not found: {args.input}")
     if args.wheel_diameter == "auto":

@@ -44,6 +44,11 @@ def main(argv):
     p.add_argument("--radius-scale", type=float, default=None,
                    help="preview mode: sphere radius = this * sqrt(product of the two largest scales) (default sqrt 2)")
     args = p.parse_args(argv)
+    from cyclist_formats import checks
+    checks.image_size("size", args.size, lo=8)
+    checks.count("samples", args.samples, hi=1 << 16)
+    checks.output_file("render", args.render)
+    checks.output_file("save", args.save)
     if args.render and not args.render.lower().endswith(".png"):
         raise UserError(f"--render must name a .png file, got {args.render}")
     if args.save and not args.save.lower().endswith(".blend"):

@@ -30,6 +30,14 @@ def parse(argv):
 
 def main(argv):
     args = parse(argv)
+    from cyclist_formats import checks
+    checks.output_dir("out", args.out)
+    checks.integer("count", args.count, 0, 10_000)
+    checks.integer("seed", args.seed, 0)
+    if args.count == 0 and args.no_extras:
+        raise UserError("--count 0 with --no-extras makes no bikes")
+    if args.styles is not None:
+        checks.input_file("styles", args.styles)
     if args.count < 0:
         raise UserError(f"--count must be >= 0, got {args.count}")
     import bpy

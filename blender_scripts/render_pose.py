@@ -26,6 +26,11 @@ def main(argv):
     p.add_argument("--lights", choices=["follow", "world"], default="follow",
                    help="sun lights move with the bike's global pose (default) or stay in the world")
     args = p.parse_args(argv)
+    from cyclist_formats import checks
+    checks.input_dir("bike", args.bike)
+    checks.count("samples", args.samples, hi=1 << 16)
+    checks.output_file("out", args.out, (".png",))
+    checks.output_file("keypoints_out", args.keypoints_out, (".json",))
     from dataclasses import replace
 
     from addon.core import render, render_pose

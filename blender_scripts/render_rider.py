@@ -52,6 +52,18 @@ def _views(text):
 
 def main(argv):
     args = parse(argv)
+    from cyclist_formats import checks
+    checks.count("samples", args.samples, hi=1 << 16)
+    checks.threads("threads", args.threads)
+    checks.finite("light_yaw_deg", args.light_yaw_deg)
+    if args.batch:
+        checks.input_file("batch", args.batch)
+    else:
+        checks.input_file("mesh", args.mesh)
+        if args.camera:
+            checks.output_file("out", args.out, (".png",))
+        else:
+            checks.output_dir("out", args.out)
     from dataclasses import replace
 
     from addon.core import render, rider_import

@@ -28,6 +28,11 @@ def parse(argv):
 
 def main(argv):
     args = parse(argv)
+    from cyclist_formats import checks
+    checks.input_dir("bike", args.bike)
+    checks.count("samples", args.samples, hi=1 << 16)
+    checks.image_size("size", args.size)
+    checks.threads("threads", args.threads)
     from addon.core import render_views
 
     render_views.render_bike(args.bike, parts=args.parts, views=args.views, samples=args.samples,

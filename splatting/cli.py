@@ -21,7 +21,18 @@ COMMANDS = {
     "cyclist": ("splatting.cyclist.command", "pose, fit and render a rider on a bike over a sequence of frames"),
     "dataset": ("splatting.dataset.command", "COCO training images + annotations from a YAML config or preset"),
     "relight-fit": ("splatting.relight.fit", "fit per-Gaussian albedo and normal of trained Gaussians to the render passes"),
+    # two-word commands: `python -m splatting dataset merge ...`
+    "dataset merge": ("splatting.dataset.merge", "merge a dataset's per-sample shards into annotations.json (idempotent)"),
+    "library build": ("splatting.library.command", "build every bike's views + part Gaussians + ground-truth check "
+                                                   "and every rider's avatar, resumable, into library.json"),
 }
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """Usage errors as one stderr line (the usage text is in --help), like every other bad input."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
 def _available():
@@ -31,19 +42,24 @@ def _available():
 def main(argv=None):
     argv = list(sys.argv[1:] if argv is None else argv)
     cmds = _available()
-    top = argparse.ArgumentParser(prog="python -m splatting", description=__doc__.splitlines()[0])
+    top = OneLineParser(prog="python -m splatting", description=__doc__.splitlines()[0])
     sub = top.add_subparsers(dest="command", metavar="COMMAND")
     for name, (_, helptext) in cmds.items():
         sub.add_parser(name, help=helptext, add_help=False)
-    if not argv or argv[0] not in cmds:
+    if argv[:2] and " ".join(argv[:2]) in cmds:
+        name, rest = " ".join(argv[:2]), argv[2:]
+    elif not argv or argv[0] not in cmds:
         top.parse_args(argv or ["--help"])  # prints help / usage error and exits
         return 2
-    name, rest = argv[0], argv[1:]
+    else:
+        name, rest = argv[0], argv[1:]
     module = importlib.import_module(cmds[name][0])
-    parser = argparse.ArgumentParser(prog=f"python -m splatting {name}", description=cmds[name][1])
+    parser = OneLineParser(prog=f"python -m splatting {name}", description=cmds[name][1])
     module.add_arguments(parser)
     args = parser.parse_args(rest)
     try:
+        if hasattr(module, "check_args"):  # impossible values, unusable paths: refused before any work
+            module.check_args(args)
         return module.run(args) or 0
     except UserError as e:
         sys.stderr.write(f"splatting {name}: error: {e}\n")

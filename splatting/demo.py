@@ -50,6 +50,17 @@ class Steps:
             raise UserError(f"step '{name}' failed (exit {r.returncode}): {' '.join(cmd)}")
 
 
+def check_args(args):
+    from cyclist_formats import checks
+    checks.output_dir("out", args.out)
+    checks.count("bikes", args.bikes, hi=1000)
+    checks.positive("train_seconds", args.train_seconds)
+    checks.positive("rider_train_seconds", args.rider_train_seconds)
+    checks.gaussians("max_gaussians", args.max_gaussians)
+    checks.count("frames", args.frames, hi=1_000_000)
+    checks.count("coco_count", args.coco_count)
+
+
 def run(args):
     out = os.path.abspath(args.out)
     py = sys.executable

@@ -162,7 +162,7 @@ def small_config(bikes_root, **kw):
     cfg = {"name": "t", "mode": "cyclist", "seed": 3, "count": 6, "image_size": 64, "riders": [RIDER],
            "bikes": ["city_t"], "bikes_root": bikes_root, "riders_root": os.path.join(bikes_root, "no_avatars"),
            "synthetic_gaussians_per_part": 600, "rider_gaussians": 2500, "ik_iterations": 10,
-           "png_compress_level": 1}
+           "png_compress_level": 1, "synthetic_assets": "always"}  # stand-ins are an explicit opt-in (issue 15)
     cfg.update(kw)
     return cfg
 

@@ -3,6 +3,7 @@
 Each script runs both as `blender -b -P blender_scripts/X.py -- ARGS` (Debian's Blender 3.4)
 and as `python blender_scripts/X.py ARGS` (the bpy 5.0 module).  No bpy import here.
 """
+import argparse
 import sys
 import traceback
 
@@ -24,6 +25,9 @@ def run_main(main, prog):
     The Blender binary returns 0 after an uncaught exception in a -P script, so every
     failure must end in an explicit exit code.
     """
+    # The scripts' own argparse parsers: a usage error becomes one stderr line like every other
+    # bad input (the usage text stays in --help).  restored when main returns.
+    saved_error, argparse.ArgumentParser.error = argparse.ArgumentParser.error, _one_line_usage_error
     try:
         code = main(script_argv())
     except UserError as e:
@@ -38,7 +42,13 @@ def run_main(main, prog):
     except Exception:
         traceback.print_exc()
         _exit(1)
+    finally:
+        argparse.ArgumentParser.error = saved_error
     _exit(code or 0)
+
+
+def _one_line_usage_error(parser, message):
+    parser.exit(2, f"{parser.prog}: error: {message} (see --help)\n")
 
 
 def _exit(code):

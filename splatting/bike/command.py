@@ -35,6 +35,16 @@ def keypoints_doc(model, pose, keypoints):
             "keypoints": {k: [float(x) for x in v.tolist()] for k, v in keypoints.items()}}
 
 
+def check_args(args):
+    from cyclist_formats import checks
+    checks.input_dir("bike", args.bike)
+    if args.pose is not None:
+        checks.output_file("out", args.out, (".ply",))
+        checks.output_file("keypoints_out", args.keypoints_out, (".json",))
+    else:
+        checks.output_dir("out", args.out)
+
+
 def run(args):
     from splatting.bike.pose import parse_pose_string, poses_from_json
     from splatting.gaussians.container import write_ply

@@ -55,6 +55,15 @@ def _square(bbox, size, pad):
     return (int(cx - half), int(cy - half), int(cx + half), int(cy + half))
 
 
+def check_args(args):
+    from cyclist_formats import checks
+    checks.input_dir("bikes", args.bikes)
+    checks.index("view", args.view, 36)
+    checks.integer("cols", args.cols, 1, 1000)
+    checks.image_size("tile", args.tile)
+    checks.output_file("out", args.out, (".png",))
+
+
 def run(args):
     n = contact_sheet(args.bikes, args.out, args.view, args.cols, args.tile)
     print(f"contact sheet of {n} bikes -> {args.out}")

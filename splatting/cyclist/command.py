@@ -97,6 +97,25 @@ def run_one(args, rider_id, bike, out, log):
     return r
 
 
+def check_args(args):
+    """Impossible values (a negative camera distance, an image beyond memory) and unusable paths."""
+    from cyclist_formats import checks
+    checks.count("frames", args.frames, hi=1_000_000)
+    checks.image_size("size", args.size)
+    checks.positive("distance", args.distance, hi=1e4)
+    checks.number("elevation", args.elevation, -90, 90, lo_open=True, hi_open=True)
+    checks.positive("fps", args.fps, hi=10_000)
+    checks.number("pedal_rpm", args.pedal_rpm, 0, 1000)
+    checks.count("ik_iterations", args.ik_iterations, hi=100_000)
+    checks.gaussians("rider_gaussians", args.rider_gaussians, lo=100)
+    tol = _floats(args.kp_tolerance, 2, "--kp-tolerance")
+    if min(tol) < 0:
+        raise UserError(f"--kp-tolerance values must be >= 0, got {args.kp_tolerance!r}")
+    if args.motion is not None:
+        checks.input_file("motion", args.motion)
+    checks.output_dir("out", args.out)
+
+
 def run(args):
     if args.frames < 1:
         raise UserError("--frames must be >= 1")

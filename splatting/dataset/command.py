@@ -30,6 +30,15 @@ def add_arguments(p):
     p.add_argument("--camera", help="override the config's camera.preset (street mode)")
     p.add_argument("--workers", type=int, default=1, help="worker processes, one torch thread each (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    # scale-out (docs/scale_out.md)
+    p.add_argument("--shard", help="K/N: generate only the samples whose index is K mod N, no merge "
+                                   "(a Slurm array / Kubernetes Indexed Job task); then `dataset merge --out DIR`")
+    p.add_argument("--engine", choices=("local", "ray"), default="local",
+                   help="local: a process pool (--workers); ray: Ray tasks over index ranges, merged at the end")
+    p.add_argument("--address", help="with --engine ray: 'auto' or HOST:PORT of a running cluster "
+                                     "(default: start a local one)")
+    p.add_argument("--allow-low-quality", action="store_true",
+                   help="use library assets marked below the quality floor in library.json")
 
 
 _WORKER = {}
@@ -47,11 +56,14 @@ def _work(index):
     return write_sample(_WORKER["cfg"], index, _WORKER["out"], _WORKER["assets"])
 
 
-def generate(cfg, out_dir, workers=1, log=print, progress=True):
-    """Make (or finish) the dataset in out_dir; returns {"annotations", "generated", "skipped", "wall_s"}."""
-    from splatting.dataset.coco import merge
+def generate(cfg, out_dir, workers=1, log=print, progress=True, shard=None, engine="local", address=None):
+    """Make (or finish) the dataset in out_dir; returns {"annotations", "generated", "skipped", "wall_s"}.
+
+    shard (k, n): only indices = k mod n, and no merge (annotations None).  engine "ray": the
+    samples as Ray tasks (splatting.library.dataset_ray), merged here at the end."""
     from splatting.dataset.config import resolve_assets
     from splatting.dataset.generate import config_record, sample_done
+    from splatting.dataset.merge import merge_dataset
 
     cfg = config_record(resolve_assets(cfg))
     os.makedirs(out_dir, exist_ok=True)
@@ -65,8 +77,9 @@ def generate(cfg, out_dir, workers=1, log=print, progress=True):
                             f"differ); use another --out or delete it")
     else:
         write_json(cpath, cfg)
-    todo = [i for i in range(cfg["count"]) if not sample_done(out_dir, i, cfg)]
-    skipped = cfg["count"] - len(todo)
+    mine = range(cfg["count"]) if shard is None else range(shard[0], cfg["count"], shard[1])
+    todo = [i for i in mine if not sample_done(out_dir, i, cfg)]
+    skipped = len(mine) - len(todo)
     if skipped:
         log(f"dataset: {skipped} of {cfg['count']} samples already done, resuming")
     t0, last = time.time(), 0.0
@@ -81,7 +94,10 @@ def generate(cfg, out_dir, workers=1, log=print, progress=True):
             sys.stderr.write(f"dataset: {skipped + done}/{cfg['count']} samples, {rate:.2f} img/s, eta {eta:.0f} s\n")
             sys.stderr.flush()
 
-    if todo:
+    if todo and engine == "ray":
+        from splatting.library.dataset_ray import generate_ray
+        generate_ray(cfg, out_dir, todo, address=address, tick=tick)
+    elif todo:
         if workers <= 1:
             _init_worker(cfg, out_dir)
             _WORKER["assets"].log = log
@@ -93,21 +109,34 @@ def generate(cfg, out_dir, workers=1, log=print, progress=True):
             with mp.get_context("fork").Pool(workers, _init_worker, (cfg, out_dir)) as pool:
                 for n, _ in enumerate(pool.imap_unordered(_work, todo, chunksize=1), 1):
                     tick(n)
-    from splatting.dataset.labels import categories
-    info = {"description": f"3DArticCyclists synthetic {cfg['mode']} set '{cfg['name']}'", "seed": cfg["seed"],
-            "count": cfg["count"], "image_size": cfg["image_size"], "person_keypoints": cfg["keypoints"]["person"],
-            "camera": cfg["camera"]["preset"], "labels": "docs/labels.md"}
-    path = merge(out_dir, cfg["count"], info, categories(cfg["labels"], cfg["keypoints"]["person"]))
-    if "kitti" in cfg["labels"]["formats"]:
-        from splatting.dataset.kitti import write_imagesets
-        write_imagesets(out_dir, cfg["count"])
+    path = None if shard is not None else merge_dataset(out_dir)
     return {"annotations": path, "generated": len(todo), "skipped": skipped, "wall_s": time.time() - t0}
+
+
+def check_args(args):
+    """Impossible overrides, an empty config file and an unusable --out, before any work."""
+    from cyclist_formats import checks
+    if args.config is not None:
+        checks.non_empty_file("config", args.config)
+    checks.count("count", args.count)
+    checks.integer("seed", args.seed, 0)
+    checks.image_size("image_size", args.image_size)
+    checks.integer("workers", args.workers, 1, 1024)
+    checks.output_dir("out", args.out)
+    parse_shard(args.shard)
+    if args.shard and args.engine == "ray":
+        raise UserError("--shard is the engine-free form (one process per shard); leave out --engine ray")
+    if args.address and args.engine != "ray":
+        raise UserError("--address goes with --engine ray")
 
 
 def run(args):
     from splatting.dataset.config import load_config
     if args.workers < 1:
         raise UserError("--workers must be >= 1")
+    from cyclist_formats import checks
+    from splatting.library.use import check_dataset_assets
+    shard = parse_shard(args.shard)
     nested = {}
     if args.format:
         nested["labels"] = {"formats": list(dict.fromkeys(args.format))}
@@ -116,8 +145,30 @@ def run(args):
     cfg = load_config(args.config, args.preset, {"count": args.count, "seed": args.seed,
                                                  "image_size": args.image_size, "bikes_root": args.bikes_root},
                       nested)
+    checks.image_size("config field 'image_size'", cfg["image_size"])
+    checks.count("config field 'count'", cfg["count"])
     out = args.out or os.path.join("out", "datasets", cfg["name"])
+    checks.output_dir("out", out)
+    check_dataset_assets(cfg, allow_low_quality=args.allow_low_quality)  # trained assets only, unless opted out
     log = (lambda *a: None) if args.quiet else (lambda m: print(m, flush=True))
-    r = generate(cfg, out, args.workers, log=log, progress=not args.quiet)
+    r = generate(cfg, out, args.workers, log=log, progress=not args.quiet, shard=shard, engine=args.engine,
+                 address=args.address)
+    if shard is not None:
+        print(f"dataset: shard {shard[0]}/{shard[1]} of {out} done ({r['generated']} generated, {r['skipped']} resumed, "
+              f"{r['wall_s']:.1f} s); when every shard is done: python -m splatting dataset merge --out {out}")
+        return
     print(f"dataset: {cfg['count']} images in {out} ({r['generated']} generated, {r['skipped']} resumed, "
           f"{r['wall_s']:.1f} s); annotations: {r['annotations']}")
+
+
+def parse_shard(text):
+    """'K/N' -> (K, N) with 0 <= K < N, or None."""
+    if text is None:
+        return None
+    try:
+        k, n = (int(x) for x in text.split("/"))
+    except ValueError:
+        raise UserError(f"--shard wants K/N (e.g. 0/16), got {text!r}") from None
+    if not (n >= 1 and 0 <= k < n):
+        raise UserError(f"--shard {text}: need N >= 1 and 0 <= K < N")
+    return k, n

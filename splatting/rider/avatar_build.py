@@ -100,6 +100,16 @@ def add_arguments(p):
     p.add_argument("--threads", type=int, default=1, help="torch threads for training")
 
 
+def check_args(args):
+    from cyclist_formats import checks
+    checks.count("iterations", args.iterations)
+    checks.positive("time_budget_s", args.time_budget_s)
+    checks.gaussians("max_gaussians", args.max_gaussians)
+    checks.count("samples", args.samples, hi=1 << 16)
+    checks.threads("threads", args.threads)
+    checks.output_dir("out", args.out)
+
+
 def run(args):
     for name in ("iterations", "max_gaussians", "samples"):
         v = getattr(args, name)

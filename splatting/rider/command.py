@@ -16,6 +16,16 @@ def add_arguments(p):
     p.add_argument("--frame", type=int, default=0, help="frame of --motion (default 0)")
 
 
+def check_args(args):
+    from cyclist_formats import checks
+    checks.finite("theta_p_deg", args.theta_p_deg)
+    checks.finite("theta_s_deg", args.theta_s_deg)
+    checks.integer("frame", args.frame, 0)
+    if args.motion is not None:
+        checks.input_file("motion", args.motion)
+    checks.output_file("out", args.out, (".ply", ".obj"))
+
+
 def run(args):
     from splatting.rider.roster import describe, load_roster
     if args.list:

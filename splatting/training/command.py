@@ -70,6 +70,20 @@ def config_from_args(args):
     return cfg
 
 
+def check_args(args):
+    """Impossible values and unusable paths, refused before any work (cyclist_formats.checks)."""
+    from cyclist_formats import checks
+    checks.count("iterations", args.iterations)
+    checks.positive("time_budget_s", args.time_budget_s)
+    checks.gaussians("max_gaussians", args.densify_max_gaussians)
+    checks.threads("threads", args.threads)
+    checks.integer("seed", args.seed, 0)
+    if any(i < 0 for i in _int_list(args.holdout)):
+        raise UserError(f"--holdout view indices must be >= 0, got {args.holdout!r}")
+    checks.views_folder(args.views)
+    checks.output_file("out", args.out if args.out else default_out(args.views), (".ply",))
+
+
 def run(args):
     cfg = config_from_args(args)
     m = train(args.views, args.out, cfg)

@@ -1,0 +1,73 @@
+"""`python -m splatting dataset merge --out DIR`: per-sample shards -> DIR/annotations.json.
+
+The step after sharded or distributed generation (`dataset --shard K/N`, a Slurm array, a
+Kubernetes Indexed Job, `--engine ray`): it reads the resolved config the generators stored in
+DIR/config.json, refuses while any sample is missing (naming how many and the command that
+finishes them), and writes annotations.json atomically.  Idempotent: the shards fully determine
+the output, so running it twice, or after a single-process run, gives the same bytes.
+"""
+import json
+import os
+
+from cyclist_formats.errors import UserError
+
+
+def coco_info(cfg):
+    return {"description": f"3DArticCyclists synthetic {cfg['mode']} set '{cfg['name']}'", "seed": cfg["seed"],
+            "count": cfg["count"], "image_size": cfg["image_size"], "person_keypoints": cfg["keypoints"]["person"],
+            "camera": cfg["camera"]["preset"], "labels": "docs/labels.md"}
+
+
+def read_config(out_dir):
+    path = os.path.join(out_dir, "config.json")
+    if not os.path.isfile(path):
+        raise UserError(f"{out_dir} holds no dataset (no config.json); generate it with "
+                        f"`python -m splatting dataset --config ... --out {out_dir}` first")
+    try:
+        with open(path) as f:
+            cfg = json.load(f)
+    except (OSError, ValueError) as e:
+        raise UserError(f"cannot read {path}: {e}") from None
+    if not isinstance(cfg, dict) or not isinstance(cfg.get("count"), int):
+        raise UserError(f"{path} is not a dataset config (no integer 'count')")
+    return cfg
+
+
+def missing_samples(out_dir, cfg):
+    from splatting.dataset.generate import sample_done
+    return [i for i in range(cfg["count"]) if not sample_done(out_dir, i, cfg)]
+
+
+def merge_dataset(out_dir):
+    """Merge every shard of the dataset in out_dir; returns the annotations.json path."""
+    from splatting.dataset.coco import merge
+
+    cfg = read_config(out_dir)
+    missing = missing_samples(out_dir, cfg)
+    if missing:
+        raise UserError(f"{out_dir}: {len(missing)} of {cfg['count']} samples are not generated yet "
+                        f"(e.g. {', '.join(map(str, missing[:3]))}); finish them with "
+                        f"`python -m splatting dataset --config {os.path.join(out_dir, 'config.json')} --out {out_dir}` "
+                        f"(or the missing --shard runs), then merge again")
+    from splatting.dataset.labels import categories
+    path = merge(out_dir, cfg["count"], coco_info(cfg), categories(cfg["labels"], cfg["keypoints"]["person"]))
+    if "kitti" in cfg["labels"]["formats"]:
+        from splatting.dataset.kitti import write_imagesets
+        write_imagesets(out_dir, cfg["count"])
+    return path
+
+
+def add_arguments(p):
+    p.add_argument("--out", required=True, help="the dataset folder the shard runs wrote (holds config.json, shards/)")
+
+
+def check_args(args):
+    from cyclist_formats import checks
+    checks.input_dir("out", args.out)
+
+
+def run(args):
+    path = merge_dataset(args.out)
+    cfg = read_config(args.out)
+    print(f"dataset merge: {cfg['count']} samples -> {path}")
+    return 0

@@ -1,0 +1,138 @@
+"""`python -m splatting library build [--bikes ID ...] [--riders ID ...] [--engine local|ray]`.
+
+For every bike under OUT/bikes (or the ones named): its 36-view renders (frame, steering, crank,
+whole) -> its part Gaussians -> a ground-truth check (the composed Gaussian bike against Blender at
+fixed random poses: mask IoU, box PSNR).  For every rider named (`--riders all`: the roster): its
+avatar.  Finished tasks are skipped (OUT/library/tasks/), so a killed build rerun finishes with
+the same files; OUT/library.json lists every asset with its files and hashes, quality numbers,
+build time, settings, and whether it clears the quality floor (datasets use only those).
+The bikes themselves come from `make bikes` (blender_scripts/make_bikes.py).
+"""
+import os
+import time
+
+from cyclist_formats.errors import UserError
+from splatting.library import manifest
+
+
+def add_arguments(p):
+    p.add_argument("--out", default="out", help="library root holding bikes/ (default out); library.json goes here")
+    p.add_argument("--bikes", nargs="*", default=None, help="bike ids under OUT/bikes (default: all of them)")
+    p.add_argument("--riders", nargs="*", default=None,
+                   help="roster rider ids whose avatars to build, or 'all' (default: none)")
+    p.add_argument("--riders-root", default=os.path.join("data", "riders"), help="avatars go to RIDERS_ROOT/ID/")
+    p.add_argument("--engine", choices=("local", "ray"), default="local",
+                   help="local: a pool of --workers on this machine (default); ray: a Ray task graph")
+    p.add_argument("--address", help="with --engine ray: 'auto' or HOST:PORT of a running cluster (default: a local one)")
+    p.add_argument("--workers", type=int, default=1, help="local engine: tasks at a time (default 1)")
+    p.add_argument("--retries", type=int, default=1, help="retries of a failed task (default 1)")
+    b = p.add_argument_group("budget (recorded in library.json; a library keeps one budget)")
+    b.add_argument("--size", type=int, default=512, help="view size in pixels (default 512)")
+    b.add_argument("--samples", type=int, default=None, help="Cycles samples (default: the renderer's)")
+    b.add_argument("--iterations", type=int, default=3000, help="training iterations per part (default 3000)")
+    b.add_argument("--time-budget-s", type=float, default=600.0, help="training wall-time cap per part (default 600)")
+    b.add_argument("--max-gaussians", type=int, default=15000, help="per part / avatar (default 15000)")
+    b.add_argument("--rider-iterations", type=int, default=1500, help="avatar training iterations (default 1500)")
+    b.add_argument("--gt-poses", type=int, default=3, help="ground-truth poses per bike (default 3)")
+    q = p.add_argument_group("quality floor (assets below it are marked unusable)")
+    q.add_argument("--min-part-psnr", type=float, default=manifest.FLOORS["min_part_psnr"])
+    q.add_argument("--min-iou", type=float, default=manifest.FLOORS["min_gt_iou"])
+    q.add_argument("--min-box-psnr", type=float, default=manifest.FLOORS["min_gt_box_psnr"])
+    q.add_argument("--min-rider-psnr", type=float, default=manifest.FLOORS["min_rider_psnr"])
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def check_args(args):
+    from cyclist_formats import checks
+    checks.output_dir("out", args.out)
+    checks.image_size("size", args.size, lo=32)
+    checks.count("samples", args.samples, hi=1 << 16)
+    checks.count("iterations", args.iterations, hi=10_000_000)
+    checks.positive("time_budget_s", args.time_budget_s)
+    checks.gaussians("max_gaussians", args.max_gaussians, lo=100)
+    checks.count("rider_iterations", args.rider_iterations, hi=10_000_000)
+    checks.count("gt_poses", args.gt_poses, hi=1000)
+    checks.integer("workers", args.workers, 1, 1024)
+    checks.integer("retries", args.retries, 0, 100)
+    checks.number("min_part_psnr", args.min_part_psnr, 0, 200)
+    checks.number("min_iou", args.min_iou, 0, 1)
+    checks.number("min_box_psnr", args.min_box_psnr, 0, 200)
+    checks.number("min_rider_psnr", args.min_rider_psnr, 0, 200)
+    checks.output_dir("riders_root", args.riders_root)
+    if args.address and args.engine != "ray":
+        raise UserError("--address goes with --engine ray")
+
+
+def select(args):
+    """({bike id: folder}, [rider ids]) named by the arguments, every one checked to exist."""
+    root = os.path.join(args.out, "bikes")
+    have = sorted(b for b in os.listdir(root) if os.path.isfile(os.path.join(root, b, "bike.blend"))) \
+        if os.path.isdir(root) else []
+    if args.bikes is None:
+        bikes = have
+    else:
+        bad = [b for b in args.bikes if b not in have]
+        if bad:
+            raise UserError(f"no bike {bad[0]!r} under {root} (has {', '.join(have[:5]) or 'none'}"
+                            f"{', ...' if len(have) > 5 else ''}); generate bikes with `make bikes OUT={args.out}`")
+        bikes = list(args.bikes)
+    riders = []
+    if args.riders:
+        from splatting.rider.roster import load_roster
+        known = [r["id"] for r in load_roster()]
+        riders = known if args.riders == ["all"] else list(args.riders)
+        bad = [r for r in riders if r not in known]
+        if bad:
+            raise UserError(f"unknown rider {bad[0]!r} (see `python -m splatting rider --list`)")
+    if not bikes and not riders:
+        raise UserError(f"nothing to build: no bikes under {root} (generate them with `make bikes OUT={args.out}`) "
+                        f"and no --riders")
+    return {b: os.path.join(root, b) for b in bikes}, riders
+
+
+def settings_of(args):
+    return {"view_size": args.size, "samples": args.samples, "iterations": args.iterations,
+            "time_budget_s": args.time_budget_s, "max_gaussians": args.max_gaussians,
+            "rider_iterations": args.rider_iterations, "gt_poses": args.gt_poses, "gt_seed": 0,
+            "riders_root": os.path.abspath(args.riders_root)}
+
+
+def floors_of(args):
+    return {"min_part_psnr": args.min_part_psnr, "min_gt_iou": args.min_iou, "min_gt_box_psnr": args.min_box_psnr,
+            "min_rider_psnr": args.min_rider_psnr}
+
+
+def build(args):
+    """Run (or finish) the build; returns (library.json doc, {task: skipped}, wall seconds)."""
+    from cyclist_formats.atomic import remove_stale
+    from splatting.library import engine
+    from splatting.library.tasks import make_graph
+
+    bikes, riders = select(args)
+    root = args.out
+    settings = settings_of(args)
+    graph = make_graph(root, bikes, riders)
+    from splatting.library.tasks import task_settings
+    for t in graph:  # a settings clash is refused before any task runs
+        manifest.check_settings(root, t.id, task_settings(t.kind, settings))
+    for d in bikes.values():  # a killed run's half-written temporaries; their tasks are not recorded
+        remove_stale(d)
+    t0 = time.time()
+    if args.engine == "ray":
+        state = engine.run_ray(graph, root, settings, args.address, args.retries, args.quiet)
+    else:
+        state = engine.run_local(graph, root, settings, args.workers, args.retries, args.quiet)
+    wall = time.time() - t0
+    doc = manifest.build_manifest(root, graph, floors_of(args), settings, args.engine)
+    return doc, state, wall
+
+
+def run(args):
+    doc, state, wall = build(args)
+    n_skip = sum(state.values())
+    assets = list(doc["bikes"].values()) + list(doc["riders"].values())
+    bad = [a["id"] for a in assets if not a["usable"]]
+    print(f"library: {len(state)} tasks ({len(state) - n_skip} run, {n_skip} done earlier) in {wall:.1f} s; "
+          f"{len(assets) - len(bad)} of {len(assets)} assets usable"
+          f"{' (below the floor: ' + ', '.join(bad) + ')' if bad else ''}; manifest {os.path.join(args.out, manifest.MANIFEST)}")
+    return 0

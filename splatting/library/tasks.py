@@ -1,0 +1,156 @@
+"""The library's task kinds and the graph over them.
+
+    views:<bike>          blender_scripts/render_views.py (subprocess): views/{frame,steering,crank,whole}
+    train:<bike>:<part>   python -m splatting train (subprocess): gaussians/<part>.{ply,json}; after views
+    gt:<bike>             ground-truth check (splatting.library.gt); after every train of the bike
+    avatar:<rider>        python -m splatting rider-avatar (subprocess): RIDERS/<rider>/
+
+Every task is a function of (library root, settings) that does its work in subprocesses, writes
+only its own outputs (atomically, by the commands it runs) and returns its record; the engine
+writes the record (manifest.write_record) once the task succeeded.  Blender and training run in
+subprocesses so an engine (a local pool, a Ray worker) only supervises: a crash there is a failed
+task that is retried, never a dead engine.
+"""
+import json
+import os
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+
+from cyclist_formats.errors import UserError
+from splatting.library import manifest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+PARTS = ("frame", "steering", "crank")
+
+
+@dataclass
+class Task:
+    id: str
+    kind: str
+    asset: str
+    deps: list = field(default_factory=list)
+    cpus: int = 1
+    bike_dir: str = None
+    part: str = None
+
+
+def bike_parts(bike_dir):
+    """The trainable parts of a bike (crankless rideables have no crank)."""
+    try:
+        with open(os.path.join(bike_dir, "meta.json")) as f:
+            has_crank = bool(json.load(f).get("has_crank", True))
+    except (OSError, ValueError):
+        raise UserError(f"{bike_dir}: no readable meta.json (not a generated bike folder)") from None
+    return [p for p in PARTS if p != "crank" or has_crank]
+
+
+def make_graph(root, bikes, riders):
+    """bikes: {id: folder}; riders: [ids] -> [Task] in dependency order."""
+    graph = []
+    for b, d in bikes.items():
+        views = Task(f"views:{b}", "views", b, [], 1, d)
+        trains = [Task(f"train:{b}:{p}", "train", b, [views.id], 1, d, p) for p in bike_parts(d)]
+        gt = Task(f"gt:{b}", "gt", b, [t.id for t in trains], 1, d)
+        graph += [views, *trains, gt]
+    for r in riders:
+        graph.append(Task(f"avatar:{r}", "avatar", r, [], 1))
+    return graph
+
+
+def _run(cmd, what, env_threads=1):
+    env = dict(os.environ, OMP_NUM_THREADS=str(env_threads), OMP_WAIT_POLICY="PASSIVE",
+               PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    r = subprocess.run(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    if r.returncode != 0:
+        tail = " | ".join(r.stdout.strip().splitlines()[-3:])
+        raise RuntimeError(f"{what} failed (exit {r.returncode}): {tail}")
+    return r.stdout
+
+
+def run_views(task, root, s):
+    cmd = [sys.executable, os.path.join(ROOT, "blender_scripts", "render_views.py"), "--bike", task.bike_dir,
+           "--parts", "all", "--size", str(s["view_size"]), "--threads", "1"]
+    if s.get("samples"):
+        cmd += ["--samples", str(s["samples"])]
+    t = time.time()
+    _run(cmd, f"views of {task.asset}")
+    wall = time.time() - t
+    views_root = os.path.join(task.bike_dir, "views")
+    files, n = {}, 0
+    for part in sorted(os.listdir(views_root)):
+        h, k = manifest.tree_hash(os.path.join(views_root, part))
+        files[os.path.relpath(os.path.join(views_root, part), root) + "/"] = h
+        n += k
+    views = sum(len(os.listdir(os.path.join(views_root, p, "rgba"))) for p in os.listdir(views_root)
+                if os.path.isdir(os.path.join(views_root, p, "rgba")))
+    return {"files": files, "metrics": {"views": views, "files": n, "s_per_view": round(wall / max(views, 1), 3)},
+            "wall_s": round(wall, 2)}
+
+
+def run_train(task, root, s):
+    out = os.path.join(task.bike_dir, "gaussians", task.part + ".ply")
+    cmd = [sys.executable, "-m", "splatting", "train", "--views", os.path.join(task.bike_dir, "views", task.part),
+           "--out", out, "--iterations", str(s["iterations"]), "--max-gaussians", str(s["max_gaussians"]),
+           "--time-budget-s", str(s["time_budget_s"]), "--seed", "0", "--threads", "1", "--quiet"]
+    t = time.time()
+    _run(cmd, f"training {task.asset}/{task.part}")
+    wall = time.time() - t
+    metrics_path = out[:-4] + ".json"
+    with open(metrics_path) as f:
+        m = json.load(f)
+    return {"files": manifest.files_record(root, [out, metrics_path]),
+            "metrics": {"psnr": m.get("psnr"), "box_psnr": m.get("psnr_crop"), "ssim": m.get("ssim"),
+                        "gaussians": m.get("gaussians"), "iterations": m.get("iterations")},
+            "wall_s": round(wall, 2)}
+
+
+def run_gt(task, root, s):
+    from splatting.library.gt import ground_truth
+    t = time.time()
+    out_dir = os.path.join(root, "library", "gt", task.asset)
+    m, files = ground_truth(task.bike_dir, out_dir, s["gt_poses"], s.get("samples"), seed=s["gt_seed"])
+    return {"files": manifest.files_record(root, files), "metrics": m, "wall_s": round(time.time() - t, 2)}
+
+
+def run_avatar(task, root, s):
+    folder = os.path.join(s["riders_root"], task.asset)
+    cmd = [sys.executable, "-m", "splatting", "rider-avatar", "--id", task.asset, "--out", folder,
+           "--iterations", str(s["rider_iterations"]), "--max-gaussians", str(s["max_gaussians"]), "--threads", "1"]
+    if s.get("samples"):
+        cmd += ["--samples", str(s["samples"])]
+    t = time.time()
+    _run(cmd, f"avatar of {task.asset}")
+    wall = time.time() - t
+    from splatting.rider.avatar import PLY_NAME, SKINNING_NAME
+    paths = [os.path.join(folder, n) for n in (PLY_NAME, SKINNING_NAME, "rider.json")]
+    with open(paths[2]) as f:
+        m = json.load(f)
+    return {"files": {os.path.abspath(p): manifest.sha256(p) for p in paths}, "folder": os.path.abspath(folder),
+            "metrics": {"psnr": m.get("psnr"), "box_psnr": m.get("psnr_crop"), "gaussians": m.get("gaussians")},
+            "wall_s": round(wall, 2)}
+
+
+RUNNERS = {"views": run_views, "train": run_train, "gt": run_gt, "avatar": run_avatar}
+# the settings each kind depends on: a task is redone/refused only when these change
+SETTING_KEYS = {"views": ("view_size", "samples"),
+                "train": ("view_size", "samples", "iterations", "max_gaussians", "time_budget_s"),
+                "gt": ("view_size", "samples", "iterations", "max_gaussians", "time_budget_s", "gt_poses", "gt_seed"),
+                "avatar": ("samples", "rider_iterations", "max_gaussians", "riders_root")}
+
+
+def task_settings(kind, settings):
+    return {k: settings.get(k) for k in SETTING_KEYS[kind]}
+
+
+def execute(task, root, settings):
+    """Run one task unless its record exists; write the record.  Returns (record, skipped)."""
+    mine = task_settings(task.kind, settings)
+    rec = manifest.check_settings(root, task.id, mine)
+    if rec is not None:
+        return rec, True
+    rec = RUNNERS[task.kind](task, root, settings)
+    rec["settings"] = mine
+    manifest.write_record(root, task.id, rec)
+    return rec, False

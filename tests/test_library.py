@@ -1,0 +1,199 @@
+"""`python -m splatting library build` (issue 15): the task graph, the manifest's quality floor,
+datasets refusing untrained or below-floor assets, and (slow) a tiny two-bike build that a kill +
+rerun and the Ray engine finish with the same files."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from cyclist_formats.errors import UserError
+from tests.test_dataset import ROOT, small_config, write_test_bike
+
+
+def _record(root, task_id, metrics, files=None):
+    from splatting.library.manifest import write_record
+    write_record(str(root), task_id, {"metrics": metrics, "files": files or {}, "wall_s": 1.5, "settings": {}})
+
+
+def test_graph_orders_views_parts_then_ground_truth(tmp_path):
+    from splatting.library.tasks import make_graph
+    a = write_test_bike(str(tmp_path / "bikes"), "city_a")
+    b = write_test_bike(str(tmp_path / "bikes"), "scooter_b")
+    with open(os.path.join(b, "meta.json"), "w") as f:
+        json.dump({"bike_id": "scooter_b", "has_crank": False}, f)
+    g = make_graph(str(tmp_path), {"city_a": a, "scooter_b": b}, ["m_adult_average_185"])
+    ids = [t.id for t in g]
+    assert ids == ["views:city_a", "train:city_a:frame", "train:city_a:steering", "train:city_a:crank", "gt:city_a",
+                   "views:scooter_b", "train:scooter_b:frame", "train:scooter_b:steering", "gt:scooter_b",
+                   "avatar:m_adult_average_185"]
+    by = {t.id: t for t in g}
+    assert by["gt:city_a"].deps == ["train:city_a:frame", "train:city_a:steering", "train:city_a:crank"]
+    assert by["train:scooter_b:frame"].deps == ["views:scooter_b"]
+    for t in g:  # every dependency comes earlier (the Ray engine passes refs in this order)
+        assert all(ids.index(d) < ids.index(t.id) for d in t.deps)
+
+
+def _manifest(tmp_path, gt_iou, part_psnr=30.0, complete=True):
+    from splatting.library.manifest import FLOORS, build_manifest
+    from splatting.library.tasks import make_graph
+    d = write_test_bike(str(tmp_path / "bikes"), "city_a")
+    g = make_graph(str(tmp_path), {"city_a": d}, [])
+    _record(tmp_path, "views:city_a", {"views": 144})
+    for p in ("frame", "steering", "crank"):
+        _record(tmp_path, f"train:city_a:{p}", {"psnr": part_psnr, "box_psnr": part_psnr - 5},
+                {f"bikes/city_a/gaussians/{p}.ply": "ab" * 32})
+    if complete:
+        _record(tmp_path, "gt:city_a", {"gt_iou": gt_iou, "gt_box_psnr": 25.0, "gt_iou_min": gt_iou,
+                                        "gt_box_psnr_min": 24.0, "gt_poses": 3})
+    return build_manifest(str(tmp_path), g, dict(FLOORS), {"view_size": 64}, "local")
+
+
+def test_manifest_marks_assets_below_the_floor(tmp_path):
+    good = _manifest(tmp_path / "good", gt_iou=0.95)["bikes"]["city_a"]
+    assert good["usable"] and good["complete"] and good["below_floor"] == []
+    assert good["quality"]["part_psnr"] == {"frame": 30.0, "steering": 30.0, "crank": 30.0}
+    assert good["build_s"] == 7.5 and len(good["files"]) == 3
+    low = _manifest(tmp_path / "low", gt_iou=0.5)["bikes"]["city_a"]
+    assert not low["usable"] and "IoU" in low["below_floor"][0]
+    blurry = _manifest(tmp_path / "blurry", gt_iou=0.95, part_psnr=12.0)["bikes"]["city_a"]
+    assert not blurry["usable"] and len(blurry["below_floor"]) == 3
+    unfinished = _manifest(tmp_path / "unfinished", gt_iou=0.95, complete=False)["bikes"]["city_a"]
+    assert not unfinished["usable"] and not unfinished["complete"]
+    with open(tmp_path / "good" / "library.json") as f:
+        assert json.load(f)["bikes"]["city_a"]["usable"] is True
+
+
+def _trained(d):
+    os.makedirs(os.path.join(d, "gaussians"), exist_ok=True)
+    for p in ("frame", "steering", "crank"):
+        open(os.path.join(d, "gaussians", p + ".ply"), "wb").close()
+
+
+def test_datasets_use_trained_usable_assets_only(tmp_path):
+    from splatting.dataset.config import validate
+    from splatting.library.use import check_dataset_assets
+    root = tmp_path / "lib"
+    d = write_test_bike(str(root / "bikes"), "city_a")
+    cfg = validate(small_config(str(root / "bikes"), bikes=["city_a"], mode="bike-only", synthetic_assets="auto"))
+    with pytest.raises(UserError, match="library build --out .* --bikes city_a"):
+        check_dataset_assets(cfg)
+    check_dataset_assets(dict(cfg, synthetic_assets="always"))  # the explicit opt-in to stand-ins
+    _trained(d)
+    check_dataset_assets(cfg)  # trained, no manifest: fine
+    _manifest(root, gt_iou=0.5)  # library.json beside bikes/ marks city_a below the floor
+    with pytest.raises(UserError, match="unusable .*IoU"):
+        check_dataset_assets(cfg)
+    check_dataset_assets(cfg, allow_low_quality=True)
+    rider_cfg = validate(small_config(str(root / "bikes"), bikes=["city_a"], synthetic_assets="never"))
+    _manifest(root, gt_iou=0.95)
+    with pytest.raises(UserError, match="no trained avatar .*--riders m_adult_average_185"):
+        check_dataset_assets(rider_cfg)
+
+
+def test_dataset_command_names_the_build_command(tmp_path):
+    from tests.test_dataset import write_yaml
+    write_test_bike(str(tmp_path / "bikes"), "city_a")
+    cfg = small_config(str(tmp_path / "bikes"), bikes=["city_a"], mode="bike-only", synthetic_assets="auto")
+    path = write_yaml(str(tmp_path / "c.yaml"), cfg)
+    r = subprocess.run([sys.executable, "-m", "splatting", "dataset", "--config", path, "--out", str(tmp_path / "d")],
+                       cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert "python -m splatting library build" in r.stderr and "synthetic_assets: always" in r.stderr
+    assert not os.path.exists(tmp_path / "d")
+
+
+# -- a real build (Blender views, training, Blender ground truth): minutes -----------------------
+
+TINY = ["--size", "64", "--samples", "2", "--iterations", "60", "--max-gaussians", "1500", "--gt-poses", "1",
+        "--quiet"]
+
+
+def _build(out, *extra):
+    return subprocess.run([sys.executable, "-m", "splatting", "library", "build", "--out", out, *TINY, *extra],
+                          cwd=ROOT, capture_output=True, text=True, env=dict(os.environ, OMP_NUM_THREADS="1"))
+
+
+def _asset_hashes(out):
+    with open(os.path.join(out, "library.json")) as f:
+        doc = json.load(f)
+    return {b: a["files"] for b, a in doc["bikes"].items()}, doc
+
+
+# What may differ between two builds of the same library: Blender stamps each PNG with the .blend
+# path, date and render time (metadata chunks), and the metrics JSON records wall times and
+# absolute paths.  Everything else - pixels, Gaussians, metrics - must be equal.
+TIMING_KEYS = {"wall_s", "eval_s", "views", "psnr_history"}
+
+
+def _content(path):
+    if path.endswith(".png"):
+        import numpy as np
+        from PIL import Image
+        with Image.open(path) as im:
+            return np.asarray(im).tobytes()
+    if path.endswith(".json"):
+        with open(path) as f:
+            d = json.load(f)
+        return json.dumps({k: v for k, v in d.items() if k not in TIMING_KEYS}, sort_keys=True) \
+            if isinstance(d, dict) else json.dumps(d)
+    with open(path, "rb") as f:
+        return f.read()
+
+
+def same_library(a, b):
+    """Every asset file of library a equals b's (see TIMING_KEYS); returns how many were compared."""
+    n = 0
+    for sub in ("bikes", os.path.join("library", "gt")):
+        for d, _, files in os.walk(os.path.join(a, sub)):
+            for name in files:
+                if name.endswith(".blend") or name.startswith("."):
+                    continue
+                pa = os.path.join(d, name)
+                pb = os.path.join(b, os.path.relpath(pa, a))
+                assert os.path.isfile(pb), pb
+                assert _content(pa) == _content(pb), os.path.relpath(pa, a)
+                n += 1
+    return n
+
+
+@pytest.mark.slow
+def test_tiny_library_build_killed_rerun_and_ray_give_the_same_files(tmp_path):
+    import shutil
+    bikes = str(tmp_path / "seed")
+    r = subprocess.run([sys.executable, os.path.join(ROOT, "blender_scripts", "make_bikes.py"), "--out", bikes,
+                        "--count", "2", "--no-extras"], cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    copies = {k: str(tmp_path / k) for k in ("whole", "killed", "ray")}
+    for c in copies.values():
+        shutil.copytree(bikes, c)
+    r = _build(copies["whole"], "--workers", "2")
+    assert r.returncode == 0, r.stderr
+    ref, doc = _asset_hashes(copies["whole"])
+    assert sorted(ref) == sorted(os.listdir(os.path.join(bikes, "bikes")))
+    for b in doc["bikes"].values():
+        assert b["complete"] and b["quality"]["gt_poses"] == 1 and 0 <= b["quality"]["gt_iou"] <= 1
+        assert set(b["quality"]["part_psnr"]) == {"frame", "steering", "crank"}
+    # killed after its first trained part, then rerun
+    p = subprocess.Popen([sys.executable, "-m", "splatting", "library", "build", "--out", copies["killed"], *TINY],
+                         cwd=ROOT, env=dict(os.environ, OMP_NUM_THREADS="1"), start_new_session=True,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    tasks = os.path.join(copies["killed"], "library", "tasks")
+    t0 = time.time()
+    while p.poll() is None and time.time() - t0 < 900:
+        if os.path.isdir(tasks) and any(f.startswith("train") for f in os.listdir(tasks)):
+            break
+        time.sleep(0.2)
+    os.killpg(p.pid, signal.SIGKILL)  # the driver and its Blender / training subprocesses
+    p.wait()
+    assert not os.path.exists(os.path.join(copies["killed"], "library.json")), "killed too late"
+    r = _build(copies["killed"])
+    assert r.returncode == 0, r.stderr
+    assert same_library(copies["whole"], copies["killed"]) > 400
+    assert {b: sorted(f) for b, f in _asset_hashes(copies["killed"])[0].items()} == {b: sorted(f) for b, f in ref.items()}
+    r = _build(copies["ray"], "--engine", "ray")
+    assert r.returncode == 0, r.stderr
+    assert same_library(copies["whole"], copies["ray"]) > 400
