@@ -71,14 +71,18 @@ def build(out_dir, addon_dir=os.path.join(ROOT, "addon"), check=False):
     os.makedirs(out_dir, exist_ok=True)
     path = os.path.join(out_dir, f"{PKG}-{manifest_v}.zip")
     tmp = path + ".tmp"
+    # the add-on plus its own copy of the file contract (addon/core/contract.py imports it
+    # relatively there): an installed extension sees only its folder
+    trees = [(addon_dir, PKG), (os.path.join(ROOT, "cyclist_formats"), os.path.join(PKG, "cyclist_formats"))]
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-        for d, dirs, files in os.walk(addon_dir):
-            dirs[:] = sorted(x for x in dirs if x not in SKIP_DIRS)
-            for f in sorted(files):
-                if f.endswith(SKIP_EXT):
-                    continue
-                full = os.path.join(d, f)
-                z.write(full, os.path.join(PKG, os.path.relpath(full, addon_dir)))
+        for src, dst in trees:
+            for d, dirs, files in os.walk(src):
+                dirs[:] = sorted(x for x in dirs if x not in SKIP_DIRS)
+                for f in sorted(files):
+                    if f.endswith(SKIP_EXT):
+                        continue
+                    full = os.path.join(d, f)
+                    z.write(full, os.path.join(dst, os.path.relpath(full, src)))
     if check:
         ok, lines = validate(tmp)
         if not ok:
