@@ -9,7 +9,7 @@ Keys:
                        wall times by kind (views s/view, part training s, ground truth s), the
                        inputs of docs/scale_out.md's cost model.
   dataset_images_per_hour_local / _ray: the same bike-only config (stand-in Gaussians, 256 px),
-                       2 local workers vs a 2-CPU local Ray cluster already running; medians of
+                       160 images, 2 local workers vs a 2-CPU local Ray cluster already running; medians of 3
                        interleaved runs.
   dataset_ray_overhead 1 - Ray rate / local rate (goal < 0.1); dataset_ray_start_s: starting the
                        local cluster (paid once per run, not per image).
@@ -76,7 +76,7 @@ def _dataset_config(root, count):
             "png_compress_level": 4}
 
 
-def dataset_overhead(results, out_dir, count=48, rounds=2):
+def dataset_overhead(results, out_dir, count=160, rounds=3):
     from splatting.dataset.command import generate
     from splatting.dataset.config import validate
     from splatting.library.engine import ensure_ray

@@ -12,4 +12,5 @@ docs/contract.md, the source of truth.
     instances    instance ids of the parts and the rider (masks, id channels)
     bike_folder  a bike's folder: bike.blend, keypoints.json, meta.json, views/<part>/
     ply          .ply files: 3DGS Gaussians (INRIA layout), point clouds, coloured meshes
+    checks       up-front checks of command values and paths (impossible numbers, unusable outputs)
 """

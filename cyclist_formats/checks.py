@@ -145,7 +145,7 @@ def input_file(name, path):
     if os.path.isdir(path):
         raise UserError(f"{_flag(name)} {path} is a folder, expected a file")
     if not os.path.isfile(path):
-        raise UserError(f"{_flag(name)}: no such file {path}")
+        raise UserError(f"{_flag(name)}: file not found: {path}")
     return path
 
 
@@ -155,7 +155,7 @@ def input_dir(name, path):
     if os.path.isfile(path):
         raise UserError(f"{_flag(name)} {path} is a file, expected a folder")
     if not os.path.isdir(path):
-        raise UserError(f"{_flag(name)}: no such folder {path}")
+        raise UserError(f"{_flag(name)}: folder not found: {path}")
     return path
 
 
