@@ -1,9 +1,13 @@
-"""Import INRIA 3DGS .ply files (docs/contract.md layout) into Blender as renderable point clouds.
+"""Import INRIA 3DGS .ply files (docs/contract.md layout) into Blender.
+
+import_splats(mode="gaussian") (the default) draws each Gaussian as a Gaussian: see
+splat_gaussian.py.  This module holds the reader, the dispatch, the sequence keyframing and
+the fast "preview" mode.
 
 The .ply is read by cyclist_formats.ply (numpy only: Blender 3.4's bundled Python has numpy but
 neither plyfile nor torch).
 
-Each .ply becomes a vertex-only mesh (Blender frame, via frames.py) carrying per-point
+Preview: each .ply becomes a vertex-only mesh (Blender frame, via frames.py) carrying per-point
 attributes `opacity`, `radius` and `splat_color` (an attribute named plain `color` rendered black
 in Cycles under bpy 5.0), plus a Geometry Nodes modifier (Mesh to Points with the radius
 attribute -> Set Material) and an emission material that reads `splat_color` and mixes in a
