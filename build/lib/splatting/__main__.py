@@ -1,3 +1,0 @@
-from splatting.cli import main
-
-raise SystemExit(main())

@@ -1,1 +1,0 @@
-"""Synthetic COCO training data (`python -m splatting dataset`): config, sampling, COCO writer."""

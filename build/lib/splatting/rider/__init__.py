@@ -1,1 +1,0 @@
-"""The rider: selectable people, SMPL-format motion, Gaussian avatar, keypoint IK on the bike."""

@@ -1,2 +1,0 @@
-"""Training part Gaussians on rendered views: the views folder (views.py), the loop (trainer.py),
-densification strategies (strategy.py), image metrics (metrics.py), the command (command.py)."""
