@@ -139,24 +139,23 @@ def output_dir(name, path):
     return path
 
 
-def input_file(name, path):
+def _existing(name, path, want_dir):
     if path is None:
         return path
-    if os.path.isdir(path):
-        raise UserError(f"{_flag(name)} {path} is a folder, expected a file")
-    if not os.path.isfile(path):
-        raise UserError(f"{_flag(name)}: file not found: {path}")
+    kind, other = ("folder", "file") if want_dir else ("file", "folder")
+    if (os.path.isfile if want_dir else os.path.isdir)(path):
+        raise UserError(f"{_flag(name)} {path} is a {other}, expected a {kind}")
+    if not (os.path.isdir if want_dir else os.path.isfile)(path):
+        raise UserError(f"{_flag(name)}: {kind} not found: {path}")
     return path
+
+
+def input_file(name, path):
+    return _existing(name, path, want_dir=False)
 
 
 def input_dir(name, path):
-    if path is None:
-        return path
-    if os.path.isfile(path):
-        raise UserError(f"{_flag(name)} {path} is a file, expected a folder")
-    if not os.path.isdir(path):
-        raise UserError(f"{_flag(name)}: folder not found: {path}")
-    return path
+    return _existing(name, path, want_dir=True)
 
 
 def non_empty_file(name, path):

@@ -36,15 +36,10 @@ def _scene_arrays():
     for o in bpy.context.scene.objects:
         if o.type != "MESH":
             continue
-        me = bpy.data.meshes.new_from_object(o.evaluated_get(dg))
-        me.transform(o.matrix_world)
-        me.calc_loop_triangles()
-        V = np.empty(len(me.vertices) * 3)
-        me.vertices.foreach_get("co", V)
-        T = np.empty(len(me.loop_triangles) * 3, np.int64)
-        me.loop_triangles.foreach_get("vertices", T)
-        Vs.append(V.reshape(-1, 3))
-        Ts.append(T.reshape(-1, 3) + off)
+        from addon.core.scene import world_mesh_arrays
+        V, T = world_mesh_arrays(o, dg)
+        Vs.append(V)
+        Ts.append(T + off)
         off += len(Vs[-1])
         owner += [(o.parent.name if o.parent else o.name)] * len(Ts[-1])
     return np.concatenate(Vs), np.concatenate(Ts), np.array(owner)

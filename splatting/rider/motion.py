@@ -61,6 +61,16 @@ def _finite(name, a, path):
         raise UserError(f"{path}: '{name}' contains NaN or infinite values")
 
 
+def _arrays(z, path, what, keys):
+    """The arrays `keys` of a loaded .npz, each present and finite, or one UserError naming it."""
+    for k in keys:
+        if k not in z:
+            raise UserError(f"{path}: not {what}, missing key '{k}' (has {sorted(z)})")
+    for k in keys:
+        _finite(k, z[k], path)
+    return [z[k] for k in keys]
+
+
 def _convert(rotmats, root_world, trans_world):
     """SMPL-frame local rotations (N,24,3,3) + file-world translations -> canonical Motion parts."""
     C = torch.from_numpy(C_SMPL)
@@ -80,12 +90,7 @@ def load_cliff(path, world="camera"):
     W = C . Rx(pi). The pelvis is placed at the SMPL translation, i.e. it ignores SMPL's
     template pelvis offset (a per-subject constant that the IK root translation absorbs)."""
     z = _load_npz(path)
-    for k in ("pose", "global_t"):
-        if k not in z:
-            raise UserError(f"{path}: not a CLIFF result, missing key '{k}' (has {sorted(z)})")
-    pose, t = z["pose"], z["global_t"]
-    _finite("pose", pose, path)
-    _finite("global_t", t, path)
+    pose, t = _arrays(z, path, "a CLIFF result", ("pose", "global_t"))
     n = pose.shape[0] if pose.ndim else 0
     if pose.ndim == 2 and pose.shape[1] == 72:
         R = axis_angle_to_rotmat(torch.from_numpy(pose.reshape(n, 24, 3).astype(np.float64)))
@@ -113,12 +118,7 @@ def load_amass(path):
     hand joints stay at rest), `trans` (N,3), Z-up world; `mocap_framerate`, `betas` optional.
     The Z-up world becomes Y up with W = C . Rx(-pi/2)."""
     z = _load_npz(path)
-    for k in ("poses", "trans"):
-        if k not in z:
-            raise UserError(f"{path}: not an AMASS file, missing key '{k}' (has {sorted(z)})")
-    poses, trans = z["poses"], z["trans"]
-    _finite("poses", poses, path)
-    _finite("trans", trans, path)
+    poses, trans = _arrays(z, path, "an AMASS file", ("poses", "trans"))
     if poses.ndim != 2 or poses.shape[1] != 156:
         raise UserError(f"{path}: 'poses' must be (N,156), got {poses.shape}")
     n = poses.shape[0]

@@ -33,14 +33,9 @@ def load_bike(folder):
         o = bpy.data.objects.get(name)
         if o is None:
             continue
-        me = bpy.data.meshes.new_from_object(o.evaluated_get(dg))
-        me.transform(o.matrix_world)
-        me.calc_loop_triangles()
-        V = np.empty(len(me.vertices) * 3)
-        me.vertices.foreach_get("co", V)
-        T = np.empty(len(me.loop_triangles) * 3, np.int64)
-        me.loop_triangles.foreach_get("vertices", T)
-        parts[name] = (to_canonical(V.reshape(-1, 3)), T.reshape(-1, 3))
+        from ..scene import world_mesh_arrays
+        V, T = world_mesh_arrays(o, dg)
+        parts[name] = (to_canonical(V), T)
     with open(os.path.join(folder, "keypoints.json")) as f:
         kp = {k: np.asarray(v, float) for k, v in json.load(f)["keypoints"].items()}
     return parts, kp
