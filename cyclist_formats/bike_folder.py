@@ -128,7 +128,7 @@ def parse_keypoints_doc(doc, has_crank=True, required=(), source="keypoints.json
 def keypoints_doc(keypoints, parts=None):
     doc = {"frame": "canonical", "units": "m", "keypoints": {k: [float(x) for x in v] for k, v in keypoints.items()}}
     if parts is not None:
-        doc["parts"] = parts
+        doc["parts"] = {k: list(v) for k, v in parts.items()}
     return doc
 
 

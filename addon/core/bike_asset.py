@@ -3,25 +3,17 @@
 save_bike writes each file under a temporary name and renames it, meta.json last, so a folder
 holding all three files is complete (make_bikes skips those on a rerun).
 """
-import json
 import os
 
 import bpy
 
-from .contract import atomic_path, write_json
-from .contract import UserError
+from .contract import UserError, atomic_path, bike_folder, write_json
 
-FILES = ("bike.blend", "keypoints.json", "meta.json")
+FILES = bike_folder.FILES
 
 
 def is_complete(bike_dir):
     return all(os.path.isfile(os.path.join(bike_dir, f)) for f in FILES)
-
-
-def keypoints_doc(keypoints, parts):
-    return {"frame": "canonical", "units": "m",
-            "keypoints": {k: [float(c) for c in v] for k, v in keypoints.items()},
-            "parts": {k: list(v) for k, v in parts.items()}}
 
 
 def save_bike(out_dir, spec, keypoints, parts, meta):
@@ -37,7 +29,7 @@ def save_bike(out_dir, spec, keypoints, parts, meta):
         finally:
             if os.path.exists(tmp + "1"):
                 os.remove(tmp + "1")
-    write_json(os.path.join(out_dir, "keypoints.json"), keypoints_doc(keypoints, parts))
+    write_json(os.path.join(out_dir, "keypoints.json"), bike_folder.keypoints_doc(keypoints, parts))
     write_json(os.path.join(out_dir, "meta.json"), meta)
 
 
@@ -65,13 +57,7 @@ def blend_file_version(path):
 
 
 def _read_json(path):
-    try:
-        with open(path) as f:
-            return json.load(f)
-    except FileNotFoundError:
-        raise UserError(f"{path}: missing (not a bike folder written by make_bikes/curate?)") from None
-    except (OSError, ValueError) as e:
-        raise UserError(f"{path}: unreadable JSON ({e})") from None
+    return bike_folder.read_json(path, missing=f"{path}: missing (not a bike folder written by make_bikes/curate?)")
 
 
 def open_bike(bike_dir):

@@ -1,10 +1,9 @@
 """The render_views stage: a bike folder -> views/<part>/ for each part and the whole bike."""
-import json
 import os
 from dataclasses import replace
 
 from . import render
-from .contract import UserError
+from .contract import UserError, bike_folder
 
 ALL_PARTS = ("frame", "steering", "crank", render.WHOLE)
 
@@ -62,8 +61,8 @@ def render_bike(bike_dir, parts="all", views=None, samples=None, denoise=None, s
     render.configure_cycles(scene, settings)
     render.setup_lighting(scene)
     kp = bike["keypoints"]
-    with open(os.path.join(bike_dir, "keypoints.json")) as f:
-        kp_parts = json.load(f).get("parts", {})  # which keypoints each part carries
+    # which keypoints each part carries (open_bike has read this file already: it is valid JSON)
+    kp_parts = bike_folder.read_json(os.path.join(bike_dir, "keypoints.json")).get("parts", {})
     results = {}
     for part in chosen:
         if part == render.WHOLE:

@@ -9,13 +9,13 @@ it) stand-ins are built that keep the whole pipeline runnable:
   vertex colours (an "untrained" avatar that follows LBS exactly like the mesh).
 Both are deterministic (fixed seed), so datasets built on them are reproducible.
 """
-import json
 import math
 import os
 
 import numpy as np
 import torch
 
+from cyclist_formats import bike_folder
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians
 from splatting.gaussians.sh import rgb_to_sh0
@@ -117,10 +117,8 @@ def load_bike(d, synthetic="auto", n_per_part=2000, log=None):
     if synthetic == "never":
         raise UserError(f"{d} has no trained Gaussians (gaussians/frame.ply, steering.ply); "
                         f"train them with `python -m splatting train` or allow synthetic bikes")
-    with open(os.path.join(d, "keypoints.json")) as f:
-        kdoc = json.load(f)
-    with open(os.path.join(d, "meta.json")) as f:
-        meta = json.load(f)
+    kdoc = bike_folder.read_json(os.path.join(d, "keypoints.json"), "keypoints.json")
+    meta = bike_folder.read_meta(d)
     parts = synthetic_bike_parts(kdoc["keypoints"], meta, n_per_part)
     if not meta.get("has_crank", True):
         parts.pop("crank", None)

@@ -18,6 +18,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 
+from cyclist_formats import bike_folder
 from cyclist_formats.errors import UserError
 from splatting.library import manifest
 
@@ -39,9 +40,8 @@ class Task:
 def bike_parts(bike_dir):
     """The trainable parts of a bike (crankless rideables have no crank)."""
     try:
-        with open(os.path.join(bike_dir, "meta.json")) as f:
-            has_crank = bool(json.load(f).get("has_crank", True))
-    except (OSError, ValueError):
+        has_crank = bool(bike_folder.read_meta(bike_dir).get("has_crank", True))
+    except UserError:
         raise UserError(f"{bike_dir}: no readable meta.json (not a generated bike folder)") from None
     return [p for p in PARTS if p != "crank" or has_crank]
 
