@@ -54,32 +54,34 @@ def add_arguments(p):
 
 
 def config_from_args(args):
-    cfg = TrainConfig(progress=not args.quiet)
-    for path, f in _cli_fields():
-        v = getattr(args, "_".join(path))
-        if isinstance(_default(path), tuple):
-            v = _int_list(v)
-        elif isinstance(v, (int, float)) and not v > 0 and f.name not in ("seed", "sh_degree"):
-            raise UserError(f"--{f.name.replace('_', '-')} must be > 0, got {v}")
-        obj = cfg
-        for p in path[:-1]:
-            obj = getattr(obj, p)
-        setattr(obj, path[-1], v)
-    if args.no_early_stop:
-        cfg.patience = 10 ** 9
-    return cfg
-
-
-def check_args(args):
-    """Impossible values and unusable paths, refused before any work (cyclist_formats.checks)."""
+    """The TrainConfig of the command line; impossible numbers are refused here, one line each
+    (cyclist_formats.checks), for the command and for library callers alike."""
     from cyclist_formats import checks
     checks.count("iterations", args.iterations)
     checks.positive("time_budget_s", args.time_budget_s)
     checks.gaussians("max_gaussians", args.densify_max_gaussians)
     checks.threads("threads", args.threads)
     checks.integer("seed", args.seed, 0)
-    if any(i < 0 for i in _int_list(args.holdout)):
+    cfg = TrainConfig(progress=not args.quiet)
+    for path, _ in _cli_fields():
+        v = getattr(args, "_".join(path))
+        if isinstance(_default(path), tuple):
+            v = _int_list(v)
+        obj = cfg
+        for p in path[:-1]:
+            obj = getattr(obj, p)
+        setattr(obj, path[-1], v)
+    if any(i < 0 for i in cfg.holdout):
         raise UserError(f"--holdout view indices must be >= 0, got {args.holdout!r}")
+    if args.no_early_stop:
+        cfg.patience = 10 ** 9
+    return cfg
+
+
+def check_args(args):
+    """Impossible values and unusable paths, refused before any work."""
+    from cyclist_formats import checks
+    config_from_args(args)
     checks.views_folder(args.views)
     checks.output_file("out", args.out if args.out else default_out(args.views), (".ply",))
 
