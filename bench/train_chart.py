@@ -5,7 +5,6 @@ budget and draws both curves from the trainer's PSNR history (held-out views, ob
 one PNG; the raw histories go to a JSON beside it. Run alone:
 `python -m bench.train_chart --bikes out/bench/bikes --budgets 5000,15000,40000`.
 """
-import argparse
 import os
 import sys
 

@@ -1,6 +1,5 @@
 """The 8-DoF bike pose against hand-written reference math (pure Python Rodrigues / Euler /
 quaternions, independent of bike_pose.py and roma), on a synthetic bike folder."""
-import json
 import math
 import os
 import random
@@ -11,10 +10,10 @@ import torch
 from splatting.bike.model import BikeModel
 from splatting.bike.pose import check_poses, parse_pose_string, poses_from_json, transform_gaussians
 from cyclist_formats.errors import UserError
-from splatting.gaussians.container import Gaussians, read_ply, write_ply
+from splatting.gaussians.container import read_ply
 from splatting.gaussians.sh import sh_basis
 
-from helpers import (ANCHORS, KP, KP_PARTS, make_bike, mat_mul, mat_vec, quat_to_R, random_gaussians,  # noqa: F401
+from helpers import (ANCHORS, KP, KP_PARTS, make_bike, mat_mul, mat_vec, quat_to_R,  # noqa: F401
                      random_pose, ref_global, ref_global_R, ref_part_point, ref_part_R, rodrigues, rotate_about,
                      steer_axis)
 

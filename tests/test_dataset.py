@@ -1,6 +1,5 @@
 """`python -m splatting dataset`: COCO output that pycocotools loads and self-evaluates to 1.0,
 kill-and-resume gives identical bytes, config errors name the field."""
-import json
 import os
 import signal
 import subprocess
@@ -10,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from helpers import RIDER, small_config, write_test_bike, write_yaml  # noqa: F401
+from helpers import small_config, write_test_bike, write_yaml
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 def cli(*argv):

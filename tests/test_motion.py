@@ -126,7 +126,7 @@ def test_cliff_formats_agree(riders, tmp_path):
     aa[:, 0] = [math.pi, 0.0, 0.0]  # upright person seen by an OpenCV camera (y down)
     t = np.array([[0.1, 0.2, 5.0], [0.0, 0.0, 4.0]])
     m1 = load_cliff(_save(tmp_path / "c1.npz", pose=aa.reshape(n, 72), shape=np.zeros((n, 10)), global_t=t))
-    from splatting.rider.kinematics import axis_angle_to_rotmat
+    from splatting.rotations import axis_angle_to_rotmat
     R = axis_angle_to_rotmat(torch.from_numpy(aa)).numpy()
     m2 = load_motion(_save(tmp_path / "c2.npz", pose=R, shape=np.zeros((n, 10)), global_t=t))
     np.testing.assert_allclose(m1.local_rotmats.numpy(), m2.local_rotmats.numpy(), atol=1e-9)

@@ -126,7 +126,7 @@ def test_bad_input_from_a_real_process(bike, tmp_path):
 
 
 def test_help_field_names_match_the_pose_fields():
-    from splatting.bike.pose import POSE_FIELDS
+    from cyclist_formats.pose import POSE_FIELDS
     from splatting.bike.command import FIELDS_HELP
 
     assert FIELDS_HELP == ", ".join(POSE_FIELDS) and list(POSE_FIELDS) == FIELDS

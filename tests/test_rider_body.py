@@ -111,7 +111,7 @@ def test_weights(rider):
 
 def test_lbs_identity_and_rigid(rider):
     from splatting.rider.body import pose_vertices
-    from splatting.rider.kinematics import axis_angle_to_rotmat
+    from splatting.rotations import axis_angle_to_rotmat
     eye = torch.eye(3, dtype=torch.float64).repeat(2, 24, 1, 1)
     v = pose_vertices(rider, eye, torch.zeros(2, 3, dtype=torch.float64))
     np.testing.assert_allclose(v[1].numpy(), rider.vertices.double().numpy(), atol=1e-6)

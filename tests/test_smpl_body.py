@@ -13,7 +13,8 @@ import torch
 smplx = pytest.importorskip("smplx")
 
 from cyclist_formats.errors import UserError  # noqa: E402
-from splatting.rider.kinematics import JOINT_INDEX, PARENTS, axis_angle_to_rotmat  # noqa: E402
+from splatting.rider.kinematics import JOINT_INDEX, PARENTS  # noqa: E402
+from splatting.rotations import axis_angle_to_rotmat  # noqa: E402
 
 J = JOINT_INDEX
 # SMPL frame (Y up, facing +Z, left at +X), origin ~1.15 m above the soles like SMPL's template.

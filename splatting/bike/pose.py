@@ -20,7 +20,7 @@ import torch
 
 from cyclist_formats import pose as formats_pose
 from cyclist_formats.errors import UserError
-from cyclist_formats.pose import N_ANGLES, POSE_FIELDS  # noqa: F401  (re-exported: the pose maths' field order)
+from cyclist_formats.pose import N_ANGLES
 from splatting.gaussians.container import Gaussians
 from splatting.gaussians.sh_rotation import rotate_sh
 from splatting.rotations import quat_left_matrix, rotmat_to_quat_wxyz  # noqa: F401

@@ -142,7 +142,7 @@ def take_fit(res, idx):
 
 def frame_record(frame, index, extra=None):
     """The docs/contract.md per-frame JSON object."""
-    from splatting.bike.pose import POSE_FIELDS
+    from cyclist_formats.pose import POSE_FIELDS
     rec = {"frame": int(index), "pose": [float(x) for x in frame.pose], "pose_fields": list(POSE_FIELDS),
            "units": {"angles": "deg", "lengths": "m"}, "coordinate_frame": "world (canonical axes)",
            "bike_keypoints": {k: [float(x) for x in v] for k, v in frame.bike_keypoints.items()}}

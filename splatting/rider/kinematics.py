@@ -4,7 +4,6 @@ Shapes: rest_joints (24, 3) metres; local_rotmats (B, 24, 3, 3) (joint 0 = root 
 root_trans (B, 3). Returns joints (B, 24, 3) and world transforms (B, 24, 4, 4) that map a
 rest-pose point attached to joint j to its posed position (the LBS bone transforms).
 """
-from splatting.rotations import axis_angle_to_rotmat  # noqa: F401  (re-exported: motion and body use it)
 import torch
 
 JOINT_NAMES = ("pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2",

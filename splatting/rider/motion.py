@@ -15,7 +15,8 @@ import numpy as np
 import torch
 
 from cyclist_formats.errors import UserError
-from splatting.rider.kinematics import JOINT_INDEX, PARENTS, axis_angle_to_rotmat, forward_kinematics
+from splatting.rider.kinematics import JOINT_INDEX, PARENTS, forward_kinematics
+from splatting.rotations import axis_angle_to_rotmat
 
 C_SMPL = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
 _RX_PI = np.diag([1.0, -1.0, -1.0])  # OpenCV camera (y down, z ahead) -> Y up
