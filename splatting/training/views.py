@@ -21,7 +21,6 @@ from cyclist_formats import bike_folder, ply
 from cyclist_formats import ring as formats_ring
 from cyclist_formats.errors import UserError
 
-FRAME = bike_folder.FRAME  # the single time step of a static part
 
 
 @dataclass
@@ -79,11 +78,10 @@ def _load_rgba(folder, name, file_path=None):
             if os.path.exists(c):
                 return _open_image(c, "RGBA")
         raise UserError(f"missing image {cands[0]} (named in transforms.json)")
-    rgba = os.path.join(folder, "rgba", name, FRAME + ".png")
+    paths = bike_folder.view_paths(folder, name)
+    rgba, img, mask = paths["rgba"], paths["img"], paths["mask"]
     if os.path.exists(rgba):
         return _open_image(rgba, "RGBA")
-    img = os.path.join(folder, "img", name, FRAME + ".jpg")
-    mask = os.path.join(folder, "mask", name, FRAME + ".png")
     if not os.path.exists(img):
         raise UserError(f"missing image for {name}: neither {rgba} nor {img} exists")
     rgb = _open_image(img, "RGB")
