@@ -10,6 +10,8 @@ import os
 import torch
 
 from splatting.gaussians.container import Gaussians, write_ply
+from splatting.gaussians.sh import rgb_to_sh0
+from splatting.raster.camera import Camera
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCRIPTS = os.path.join(ROOT, "blender_scripts")
@@ -172,3 +174,74 @@ def write_yaml(path, cfg):
     with open(path, "w") as f:
         yaml.safe_dump(cfg, f)
     return path
+
+
+# ------------------------------------------------------------- street scenes
+
+def street_config(root, **kw):
+    cfg = small_config(root, mode="street", count=2, camera={"preset": "kitti", "scale": 0.5},
+                       street={"cyclists": [2, 3], "parked_bikes": [0, 1], "distance_m": [5, 15]})
+    cfg.pop("image_size")
+    for k, v in kw.items():
+        cfg[k] = dict(cfg.get(k, {}), **v) if isinstance(v, dict) and isinstance(cfg.get(k), dict) else v
+    return cfg
+
+
+def fixed_scene(monkeypatch, instances, kind="solid"):
+    """Make every sample the given instances [(rider or None, theta_y, x, z)]: the scene under test."""
+    from splatting.dataset import generate
+    inst = [{"kind": "cyclist" if r else "parked", "bike": "city_t", "rider": r,
+             "pose": [30.0, 0.0, 0.0, yaw, 0.0, x, 0.0, z]} for r, yaw, x, z in instances]
+    monkeypatch.setattr(generate, "draw", lambda cfg, index: {
+        "instances": inst, "dropped": 0, "camera": {"preset": cfg["camera"]["preset"]},
+        "background": {"kind": kind, "seed": 1}})
+
+
+# ------------------------------------------------------------- rasterizer scenes and cameras
+
+def look_at_camera(eye, target=(0.0, 0.0, 0.0), width=24, height=20, focal=28.0, cx=None, cy=None,
+                   dtype=torch.float64):
+    """OpenCV camera at `eye` looking at `target`, world +Y roughly image-up."""
+    eye, target = torch.tensor(eye, dtype=dtype), torch.tensor(target, dtype=dtype)
+    z = target - eye
+    z = z / z.norm()
+    x = torch.linalg.cross(z, torch.tensor([0.0, 1.0, 0.0], dtype=dtype))  # image-right
+    x = x / x.norm()
+    y = torch.linalg.cross(z, x)  # image-down
+    R = torch.stack([x, y, z])
+    T = -R @ eye
+    K = torch.tensor([[focal, 0.0, width / 2 if cx is None else cx],
+                      [0.0, focal * 1.1, height / 2 if cy is None else cy], [0.0, 0.0, 1.0]], dtype=dtype)
+    return Camera(R, T, K, width, height)
+
+
+def random_scene(gen, n, sh_degree, dtype=torch.float64, spread=1.0):
+    means = (torch.rand(n, 3, generator=gen, dtype=dtype) * 2 - 1) * spread
+    quats = torch.randn(n, 4, generator=gen, dtype=dtype) * 2  # unnormalised on purpose
+    scales = torch.exp(torch.rand(n, 3, generator=gen, dtype=dtype) * 3 - 4.5)  # 0.011 .. 0.22
+    opac = torch.rand(n, generator=gen, dtype=dtype) * 0.98 + 0.01
+    sh = torch.randn(n, (sh_degree + 1) ** 2, 3, generator=gen, dtype=dtype) * 0.4
+    return means, quats, scales, opac, sh
+
+
+def random_camera(gen, **kw):
+    d = torch.randn(3, generator=gen, dtype=torch.float64)
+    eye = (d / d.norm() * 3.0).tolist()
+    off = (torch.rand(2, generator=gen, dtype=torch.float64) - 0.5) * 4  # principal point off centre
+    return look_at_camera(eye, cx=12 + off[0].item(), cy=10 + off[1].item(), **kw)
+
+
+def single_gaussian(mean, scale=1e-3, opacity=0.99, rgb=(1.0, 1.0, 1.0), dtype=torch.float64):
+    means = torch.tensor([mean], dtype=dtype)
+    quats = torch.tensor([[1.0, 0.0, 0.0, 0.0]], dtype=dtype)
+    scales = torch.full((1, 3), scale, dtype=dtype)
+    opac = torch.tensor([opacity], dtype=dtype)
+    sh = rgb_to_sh0(torch.tensor(rgb, dtype=dtype)).reshape(1, 1, 3)
+    return means, quats, scales, opac, sh
+
+
+def dense_opaque_scene(seed, n=60, sh_degree=1):
+    gen = torch.Generator().manual_seed(seed)
+    means, quats, scales, opac, sh = random_scene(gen, n, sh_degree, spread=0.3)
+    opac = 0.5 + 0.49 * torch.rand(n, generator=gen, dtype=torch.float64)
+    return means, quats, scales * 2, opac, sh

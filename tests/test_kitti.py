@@ -6,8 +6,7 @@ import os
 import numpy as np
 import pytest
 
-from tests.test_dataset import RIDER, small_config, write_test_bike
-from tests.test_street import fixed_scene, street_config
+from helpers import RIDER, fixed_scene, small_config, street_config, write_test_bike
 
 # training/label_2/000000.txt of the KITTI object benchmark (devkit readme fields, 15 per line)
 KITTI_LINE = "Pedestrian 0.00 0 -0.20 712.40 143.00 810.73 307.92 1.89 0.48 1.20 1.84 1.47 8.41 0.01\n"

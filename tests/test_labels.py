@@ -7,8 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from tests.test_dataset import RIDER, write_test_bike
-from tests.test_street import street_config
+from helpers import RIDER, street_config, write_test_bike
 
 COCO_NAMES = ["nose", "left_eye", "right_eye", "left_ear", "right_ear", "left_shoulder", "right_shoulder",
               "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hip", "right_hip",

@@ -11,7 +11,7 @@ import time
 import pytest
 
 from cyclist_formats.errors import UserError
-from tests.test_dataset import ROOT, small_config, write_test_bike
+from helpers import ROOT, small_config, write_test_bike
 
 
 def _record(root, task_id, metrics, files=None):
@@ -95,7 +95,7 @@ def test_datasets_use_trained_usable_assets_only(tmp_path):
 
 
 def test_dataset_command_names_the_build_command(tmp_path):
-    from tests.test_dataset import write_yaml
+    from helpers import write_yaml
     write_test_bike(str(tmp_path / "bikes"), "city_a")
     cfg = small_config(str(tmp_path / "bikes"), bikes=["city_a"], mode="bike-only", synthetic_assets="auto")
     path = write_yaml(str(tmp_path / "c.yaml"), cfg)

@@ -6,43 +6,12 @@ import math
 import pytest
 import torch
 
-from splatting.raster.camera import Camera, ring_camera
+from splatting.raster.camera import ring_camera
 from splatting.gaussians.container import Gaussians
 from splatting.raster.sparse import rasterize, render_gaussians
 from splatting.raster.reference import render_reference
-from splatting.gaussians.sh import rgb_to_sh0
 
-
-def look_at_camera(eye, target=(0.0, 0.0, 0.0), width=24, height=20, focal=28.0, cx=None, cy=None,
-                   dtype=torch.float64):
-    """OpenCV camera at `eye` looking at `target`, world +Y roughly image-up."""
-    eye, target = torch.tensor(eye, dtype=dtype), torch.tensor(target, dtype=dtype)
-    z = target - eye
-    z = z / z.norm()
-    x = torch.linalg.cross(z, torch.tensor([0.0, 1.0, 0.0], dtype=dtype))  # image-right
-    x = x / x.norm()
-    y = torch.linalg.cross(z, x)  # image-down
-    R = torch.stack([x, y, z])
-    T = -R @ eye
-    K = torch.tensor([[focal, 0.0, width / 2 if cx is None else cx],
-                      [0.0, focal * 1.1, height / 2 if cy is None else cy], [0.0, 0.0, 1.0]], dtype=dtype)
-    return Camera(R, T, K, width, height)
-
-
-def random_scene(gen, n, sh_degree, dtype=torch.float64, spread=1.0):
-    means = (torch.rand(n, 3, generator=gen, dtype=dtype) * 2 - 1) * spread
-    quats = torch.randn(n, 4, generator=gen, dtype=dtype) * 2  # unnormalised on purpose
-    scales = torch.exp(torch.rand(n, 3, generator=gen, dtype=dtype) * 3 - 4.5)  # 0.011 .. 0.22
-    opac = torch.rand(n, generator=gen, dtype=dtype) * 0.98 + 0.01
-    sh = torch.randn(n, (sh_degree + 1) ** 2, 3, generator=gen, dtype=dtype) * 0.4
-    return means, quats, scales, opac, sh
-
-
-def random_camera(gen, **kw):
-    d = torch.randn(3, generator=gen, dtype=torch.float64)
-    eye = (d / d.norm() * 3.0).tolist()
-    off = (torch.rand(2, generator=gen, dtype=torch.float64) - 0.5) * 4  # principal point off centre
-    return look_at_camera(eye, cx=12 + off[0].item(), cy=10 + off[1].item(), **kw)
+from helpers import dense_opaque_scene, look_at_camera, random_camera, random_scene, single_gaussian  # noqa: F401
 
 
 @pytest.fixture(params=["tiles", "torch"])
@@ -169,21 +138,12 @@ def test_gradients_nonzero_and_means2d_retained(backend):
 
 # ---------------------------------------------------------------- conventions
 
-def _single(mean, scale=1e-3, opacity=0.99, rgb=(1.0, 1.0, 1.0), dtype=torch.float64):
-    means = torch.tensor([mean], dtype=dtype)
-    quats = torch.tensor([[1.0, 0.0, 0.0, 0.0]], dtype=dtype)
-    scales = torch.full((1, 3), scale, dtype=dtype)
-    opac = torch.tensor([opacity], dtype=dtype)
-    sh = rgb_to_sh0(torch.tensor(rgb, dtype=dtype)).reshape(1, 1, 3)
-    return means, quats, scales, opac, sh
-
-
 def test_small_gaussian_lands_where_K_predicts():
     cam = look_at_camera((0.5, -0.2, -3.0), width=31, height=23, focal=25.0, cx=14.3, cy=12.9)
     X = torch.tensor([0.21, 0.13, 0.37], dtype=torch.float64)
     xc = cam.R @ X + cam.T
     u_px, v_px = (cam.K @ (xc / xc[2]))[:2].tolist()
-    out = rasterize(*_single(X.tolist()), cam)
+    out = rasterize(*single_gaussian(X.tolist()), cam)
     a = out["alpha"]
     v, u = divmod(int(a.argmax()), cam.width)
     # the brightest pixel is the one whose centre (u + 0.5, v + 0.5) is nearest to K x / z
@@ -197,8 +157,8 @@ def test_small_gaussian_lands_where_K_predicts():
 def test_ring_view0_plus_x_left_plus_y_up():
     cam = ring_camera(0, size=64, focal=200.0, dtype=torch.float64)
     c = cam.width / 2
-    out_x = rasterize(*_single([0.5, 0.0, 0.0], scale=0.02), cam)
-    out_y = rasterize(*_single([0.0, 0.5, 0.0], scale=0.02), cam)
+    out_x = rasterize(*single_gaussian([0.5, 0.0, 0.0], scale=0.02), cam)
+    out_y = rasterize(*single_gaussian([0.0, 0.5, 0.0], scale=0.02), cam)
     vx, ux = divmod(int(out_x["alpha"].argmax()), cam.width)
     vy, uy = divmod(int(out_y["alpha"].argmax()), cam.width)
     assert ux < c - 5 and abs(vx + 0.5 - c) <= 1  # +X world on the image's left
@@ -210,7 +170,7 @@ def test_depth_is_camera_z_for_opaque_gaussian(backend):
     X = torch.tensor([0.05, -0.02, 0.1], dtype=torch.float64)
     z = (cam.R @ X + cam.T)[2].item()
     # many opaque copies at the same place: T reaches ~0, so sum w_i z_i = z
-    scene = [t.repeat(10, *([1] * (t.dim() - 1))) for t in _single(X.tolist(), scale=0.3, opacity=1.0)]
+    scene = [t.repeat(10, *([1] * (t.dim() - 1))) for t in single_gaussian(X.tolist(), scale=0.3, opacity=1.0)]
     out = rasterize(*scene, cam, backend=backend)
     v, u = divmod(int(out["alpha"].argmax()), cam.width)
     assert out["alpha"][v, u] > 0.999
@@ -224,7 +184,7 @@ def test_empty_and_all_culled(backend):
     empty = (torch.zeros(0, 3, dtype=torch.float64), torch.zeros(0, 4, dtype=torch.float64),
              torch.zeros(0, 3, dtype=torch.float64), torch.zeros(0, dtype=torch.float64),
              torch.zeros(0, 1, 3, dtype=torch.float64))
-    behind = _single([0.0, 0.0, -5.0], scale=0.5)
+    behind = single_gaussian([0.0, 0.0, -5.0], scale=0.5)
     for scene in (empty, behind):
         scene = [t.clone().requires_grad_(True) for t in scene]
         out = rasterize(*scene, cam, background=bg, backend=backend)
@@ -256,15 +216,8 @@ def tiny_chunks(monkeypatch):
     monkeypatch.setattr(R, "CHUNK_PAIRS", 64)
 
 
-def _dense_opaque_scene(seed, n=60, sh_degree=1):
-    gen = torch.Generator().manual_seed(seed)
-    means, quats, scales, opac, sh = random_scene(gen, n, sh_degree, spread=0.3)
-    opac = 0.5 + 0.49 * torch.rand(n, generator=gen, dtype=torch.float64)
-    return means, quats, scales * 2, opac, sh
-
-
 def test_chunked_matches_reference(tiny_chunks):
-    scene = _dense_opaque_scene(21)
+    scene = dense_opaque_scene(21)
     cam = look_at_camera((0.2, 0.1, -3.0))
     out, ref = assert_matches_reference(scene, cam, background=torch.tensor([0.4, 0.4, 0.1], dtype=torch.float64),
                                         backend="torch")
@@ -283,7 +236,7 @@ def test_chunked_gradcheck(tiny_chunks):
 def test_chunks_drop_pairs_behind_the_cutoff(monkeypatch):
     import splatting.raster.sparse as R
 
-    means, quats, scales, opac, sh = _dense_opaque_scene(21)
+    means, quats, scales, opac, sh = dense_opaque_scene(21)
     cam = look_at_camera((0.2, 0.1, -3.0))
     m2, cn, z, radii, boxes = R.project(means, quats, scales, cam)
     n_all = len(R.intersect(m2, cn, opac, z, boxes, radii, cam.width, cam.height, chunk_pairs=1 << 30)[0])
@@ -320,7 +273,7 @@ def test_antialiased_keeps_a_subpixel_footprint(backend):
     (a fraction 1 / (255 o') of it, o' the compensated peak); the 0.3 px^2 dilation alone
     inflates it ~4x."""
     cam = look_at_camera((0.0, 0.0, -3.0), width=32, height=32, focal=30.0, cx=16.3, cy=15.8)
-    scene = _single([0.0, 0.0, 0.0], scale=0.03, opacity=0.5)
+    scene = single_gaussian([0.0, 0.0, 0.0], scale=0.03, opacity=0.5)
     sx, sy = 30.0 * 0.03 / 3.0, 33.0 * 0.03 / 3.0  # fx s / z, fy s / z (look_at_camera: fy = 1.1 fx)
     det_s = sx * sx * sy * sy
     o_aa = 0.5 * math.sqrt(det_s / ((sx * sx + 0.3) * (sy * sy + 0.3)))

@@ -6,7 +6,7 @@ import torch
 
 from splatting.raster.sparse import rasterize
 from splatting.raster.reference import render_reference
-from tests.test_rasterize import _dense_opaque_scene, _single, look_at_camera, random_camera, random_scene
+from helpers import dense_opaque_scene, look_at_camera, random_camera, random_scene, single_gaussian
 
 F64 = torch.float64
 
@@ -37,12 +37,12 @@ def _scenes():
     out.append(("cutoff_stack", (means, torch.randn(n, 4, generator=gen, dtype=F64), torch.full((n, 3), 0.3, dtype=F64),
                                  opac, torch.randn(n, 4, 3, generator=gen, dtype=F64)),
                 look_at_camera((0.0, 0.0, -3.0)), torch.ones(3, dtype=F64)))
-    out.append(("dense_opaque", _dense_opaque_scene(21), look_at_camera((0.2, 0.1, -3.0)),
+    out.append(("dense_opaque", dense_opaque_scene(21), look_at_camera((0.2, 0.1, -3.0)),
                 torch.tensor([0.4, 0.4, 0.1], dtype=F64)))
     # equal depths: ten copies of one Gaussian (the tie order decides how gradients are shared)
-    out.append(("equal_depths", [t.repeat(10, *([1] * (t.dim() - 1))) for t in _single([0.05, -0.02, 0.1], scale=0.3, opacity=0.7)],
+    out.append(("equal_depths", [t.repeat(10, *([1] * (t.dim() - 1))) for t in single_gaussian([0.05, -0.02, 0.1], scale=0.3, opacity=0.7)],
                 look_at_camera((0.3, 0.2, -4.0)), None))
-    out.append(("behind_only", _single([0.0, 0.0, -5.0], scale=0.5), look_at_camera((0.0, 0.0, -3.0)),
+    out.append(("behind_only", single_gaussian([0.0, 0.0, -5.0], scale=0.5), look_at_camera((0.0, 0.0, -3.0)),
                 torch.tensor([0.1, 0.2, 0.3], dtype=F64)))
     out.append(("empty", (torch.zeros(0, 3, dtype=F64), torch.zeros(0, 4, dtype=F64), torch.zeros(0, 3, dtype=F64),
                           torch.zeros(0, dtype=F64), torch.zeros(0, 1, 3, dtype=F64)),
@@ -158,7 +158,7 @@ def test_threads_do_not_change_a_bit():
 
 
 def test_backend_choice_is_explicit_and_reported():
-    scene = _single([0.0, 0.0, 0.0], scale=0.2)
+    scene = single_gaussian([0.0, 0.0, 0.0], scale=0.2)
     cam = look_at_camera((0.0, 0.0, -3.0))
     assert rasterize(*scene, cam)["backend"] == "tiles"  # the default for CPU tensors
     assert rasterize(*scene, cam, backend="torch")["backend"] == "torch"

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from tests.test_dataset import ROOT, small_config, write_test_bike, write_yaml
+from helpers import ROOT, small_config, write_test_bike, write_yaml
 
 ray = pytest.importorskip("ray")
 

@@ -15,7 +15,7 @@ from splatting.raster.camera import ring_camera
 from splatting.relight.bike import RelightableBike
 from splatting.relight.render import composite_features, prepare, render_relit
 from splatting.relight.shading import Light, lambert_reference, shade, shade_linear, srgb_encode
-from tests.helpers import make_bike, mat_vec, random_pose, ref_part_R
+from helpers import make_bike, mat_vec, random_pose, ref_part_R
 
 
 def test_lambert_by_hand():

@@ -7,28 +7,9 @@ import os
 import numpy as np
 import pytest
 
-from tests.test_dataset import RIDER, small_config, write_test_bike
+from helpers import RIDER, fixed_scene, street_config, write_test_bike  # noqa: F401
 
 KITTI_K = (721.5377, 609.5593, 172.854)
-
-
-def street_config(root, **kw):
-    cfg = small_config(root, mode="street", count=2, camera={"preset": "kitti", "scale": 0.5},
-                       street={"cyclists": [2, 3], "parked_bikes": [0, 1], "distance_m": [5, 15]})
-    cfg.pop("image_size")
-    for k, v in kw.items():
-        cfg[k] = dict(cfg.get(k, {}), **v) if isinstance(v, dict) and isinstance(cfg.get(k), dict) else v
-    return cfg
-
-
-def fixed_scene(monkeypatch, instances, kind="solid"):
-    """Make every sample the given instances [(rider or None, theta_y, x, z)]: the scene under test."""
-    from splatting.dataset import generate
-    inst = [{"kind": "cyclist" if r else "parked", "bike": "city_t", "rider": r,
-             "pose": [30.0, 0.0, 0.0, yaw, 0.0, x, 0.0, z]} for r, yaw, x, z in instances]
-    monkeypatch.setattr(generate, "draw", lambda cfg, index: {
-        "instances": inst, "dropped": 0, "camera": {"preset": cfg["camera"]["preset"]},
-        "background": {"kind": kind, "seed": 1}})
 
 
 def sample(cfg, assets=None):
