@@ -67,25 +67,50 @@ inline bool any(I m) { return bits(m) != 0; }
 template <typename I>
 inline int count(I m) { return __builtin_popcount(bits(m)); }
 
+// a * b + c, fused where the CPU has FMA. Explicit, so -ffp-contract=off elsewhere still keeps
+// the compiler from fusing the forward's and the backward's copies of an expression differently;
+// these fuse in both alike.
+inline VT<float>::V vfma(VT<float>::V a, VT<float>::V b, VT<float>::V c) {
+#ifdef __FMA__
+  return (VT<float>::V)_mm256_fmadd_ps((__m256)a, (__m256)b, (__m256)c);
+#else
+  return a * b + c;
+#endif
+}
+inline VT<double>::V vfma(VT<double>::V a, VT<double>::V b, VT<double>::V c) {
+#ifdef __FMA__
+  return (VT<double>::V)_mm256_fmadd_pd((__m256d)a, (__m256d)b, (__m256d)c);
+#else
+  return a * b + c;
+#endif
+}
+
 // exp for float lanes: Cephes expf (range reduction by ln 2, degree-5 polynomial, |rel err| <
 // 2e-7 on the range used here: -sigma in [-88, 0]). Vectorises where the libm call would not.
 inline VT<float>::V vexp(VT<float>::V x) {
   typedef VT<float>::V V;
   typedef VT<float>::I I;
+  const V one = (V){} + 1.0f;
   x = x < (V){} - 87.0f ? (V){} - 87.0f : x;
   x = x > (V){} + 88.0f ? (V){} + 88.0f : x;
+#ifdef __AVX__
+  const V fn = (V)_mm256_floor_ps((__m256)(x * 1.44269504088896341f + 0.5f));
+  const I n = __builtin_convertvector(fn, I);
+#else
   V fx = x * 1.44269504088896341f + 0.5f;
   I n = __builtin_convertvector(fx, I);
   V fn = __builtin_convertvector(n, V);
   n = fn > fx ? n - 1 : n;  // floor
   fn = __builtin_convertvector(n, V);
-  V r = x - fn * 0.693359375f + fn * 2.12194440e-4f;
-  V y = 1.9875691500e-4f * r + 1.3981999507e-3f;
-  y = y * r + 8.3334519073e-3f;
-  y = y * r + 4.1665795894e-2f;
-  y = y * r + 1.6666665459e-1f;
-  y = y * r + 5.0000001201e-1f;
-  y = y * (r * r) + r + 1.0f;
+#endif
+  V r = vfma(fn, (V){} - 0.693359375f, x);
+  r = vfma(fn, (V){} + 2.12194440e-4f, r);
+  V y = vfma((V){} + 1.9875691500e-4f, r, (V){} + 1.3981999507e-3f);
+  y = vfma(y, r, (V){} + 8.3334519073e-3f);
+  y = vfma(y, r, (V){} + 4.1665795894e-2f);
+  y = vfma(y, r, (V){} + 1.6666665459e-1f);
+  y = vfma(y, r, (V){} + 5.0000001201e-1f);
+  y = vfma(y, r * r, r + one);
   I e = (n + 127) << 23;
   V scale;
   __builtin_memcpy(&scale, &e, sizeof(V));
@@ -108,6 +133,68 @@ struct alignas(64) Rec {  // one visible Gaussian; one cache line (float) for th
 // sigma <= tau is only a cheap pre-test (skips the exp and whole tiles); the decision is the
 // alpha test itself, so tau is padded to stay clear of rounding.
 constexpr double TAU_PAD = 1e-3;
+
+// dst[b] = the sum of v[b]'s lanes, b < n (v padded with zero vectors to a multiple of 8). For
+// 8 float vectors at a time: a transpose-and-add with hadd/permute instead of 56 scalar adds.
+inline void hsum(const VT<float>::V* v, int n, float* dst) {
+  for (int b = 0; b < n; b += 8) {
+#ifdef __AVX__
+    const __m256* x = (const __m256*)(v + b);
+    const __m256 ab = _mm256_hadd_ps(_mm256_hadd_ps(x[0], x[1]), _mm256_hadd_ps(x[2], x[3]));
+    const __m256 cd = _mm256_hadd_ps(_mm256_hadd_ps(x[4], x[5]), _mm256_hadd_ps(x[6], x[7]));
+    alignas(32) float r[8];
+    _mm256_store_ps(r, _mm256_add_ps(_mm256_permute2f128_ps(ab, cd, 0x20), _mm256_permute2f128_ps(ab, cd, 0x31)));
+    for (int i = 0; i < 8 && b + i < n; ++i) dst[b + i] = r[i];
+#else
+    for (int i = 0; i < 8 && b + i < n; ++i) {
+      float h = 0;
+      for (int l = 0; l < 8; ++l) h += v[b + i][l];
+      dst[b + i] = h;
+    }
+#endif
+  }
+}
+inline void hsum(const VT<double>::V* v, int n, double* dst) {
+  for (int b = 0; b < n; ++b) dst[b] = (v[b][0] + v[b][1]) + (v[b][2] + v[b][3]);
+}
+
+// One (tile, Gaussian) entry as both passes see it: its pixel rows and 8-lane chunks inside the
+// tile, the per-lane dx and in-box masks (set up once per entry, not per chunk), and
+// sigma = (a/2 dx + b dy) dx + c/2 dy^2 with two FMAs per chunk. The forward and the backward
+// evaluate sigma and alpha_raw = o exp(-sigma) through this one code path, so they take
+// bit-identical alpha decisions.
+template <typename S>
+struct Entry {
+  typedef typename VT<S>::V V;
+  typedef typename VT<S>::I I;
+  static constexpr int L = VT<S>::L, NJ = TILE / L;
+  V ha, dx[NJ];
+  I box[NJ];
+  int y0, y1, j0, j1;
+  // lane_xc[j]: lane l of chunk j holds j * L + l + 0.5 (a pixel centre's offset in the tile)
+  Entry(const Rec<S>& g, int ox, int oy, int ex, int ey, const V* lane_xc) {
+    y0 = std::max(oy, g.v0);
+    y1 = std::min(ey, g.v1);
+    const int xa = std::max(ox, g.u0), xb = std::min(ex, g.u1);
+    j0 = (xa - ox) / L;
+    j1 = (xb - ox) / L;
+    ha = (V){} + (S)0.5 * g.a;
+    for (int j = j0; j <= j1; ++j) {
+      const V xc = lane_xc[j] + (S)ox;  // exact: small integers + 0.5
+      dx[j] = xc - g.mx;
+      box[j] = (xc > (S)xa) & (xc < (S)(xb + 1));
+    }
+  }
+  // per row: dy, and the row's terms b dy, c/2 dy^2 (broadcast)
+  static inline S row(const Rec<S>& g, int y, V& by, V& cyy) {
+    const S dy = (S)y + (S)0.5 - g.my;
+    by = (V){} + g.b * dy;
+    cyy = (V){} + (S)0.5 * g.c * dy * dy;
+    return dy;
+  }
+  inline V sigma(int j, V by, V cyy) const { return vfma(vfma(ha, dx[j], by), dx[j], cyy); }
+  static inline V alpha_raw(const Rec<S>& g, V sigma) { return g.o * vexp(-sigma); }
+};
 
 inline int64_t clampi(double x, int64_t lo, int64_t hi) {
   if (!(x >= (double)lo)) return lo;  // also NaN
@@ -296,11 +383,11 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
     typedef typename VT<S>::I I;
     typedef typename std::remove_reference<decltype(I{}[0])>::type IS;
     constexpr int L = VT<S>::L, NV = TPIX / L, NJ = TILE / L;
-    std::vector<V> T(NV), lane_x(NJ);
+    std::vector<V> T(NV), lane_xc(NJ);
     std::vector<I> done(NV), lst(NV);
     std::vector<V> acc((size_t)NV * Cf);
     for (int j = 0; j < NJ; ++j)
-      for (int l = 0; l < L; ++l) lane_x[j][l] = (S)(j * L + l);
+      for (int l = 0; l < L; ++l) lane_xc[j][l] = (S)(j * L + l) + (S)0.5;
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < NT; ++t) {
       const int ox = (t % TX) * TILE, oy = (t / TX) * TILE;
@@ -325,21 +412,20 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
         }
         const int32_t sp = list[t0 + k];
         const Rec<S>& g = recs[sp];
-        const int y0 = std::max(oy, g.v0), y1 = std::min(ey, g.v1);
-        const int xa = std::max(ox, g.u0), xb = std::min(ex, g.u1);
-        const int j0 = (xa - ox) / L, j1 = (xb - ox) / L;
+        const Entry<S> en(g, ox, oy, ex, ey, lane_xc.data());
         const S* f = feats + (int64_t)sp * Cf;
         const I kk = (I){} + (IS)(k + 1);
-        for (int y = y0; y <= y1; ++y) {
-          const S dy = (S)y + (S)0.5 - g.my;
-          for (int j = j0; j <= j1; ++j) {
+        for (int y = en.y0; y <= en.y1; ++y) {
+          V by, cyy;
+          Entry<S>::row(g, y, by, cyy);
+          for (int j = en.j0; j <= en.j1; ++j) {
             const int v = (y - oy) * NJ + j;
-            const V xs = lane_x[j] + (S)ox;
-            const V dx = xs + (S)0.5 - g.mx;
-            const V sigma = (S)0.5 * (g.a * dx * dx + g.c * dy * dy) + g.b * dx * dy;
-            const I pre = (xs >= (S)xa) & (xs <= (S)xb) & ~done[v] & (sigma <= g.tau);
+            const I live = en.box[j] & ~done[v];
+            if (!any(live)) continue;  // finished pixels: no sigma, no exp
+            const V sigma = en.sigma(j, by, cyy);
+            const I pre = live & (sigma <= g.tau);
             if (!any(pre)) continue;
-            const V ar = g.o * vexp(-sigma);
+            const V ar = Entry<S>::alpha_raw(g, sigma);
             const I m = pre & (ar >= (S)ALPHA_MIN);
             if (!any(m)) continue;
             const V al = ar < (S)ALPHA_MAX ? ar : (V){} + (S)ALPHA_MAX;
@@ -352,7 +438,7 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
             const I ok = m & ~term;
             const V w = ok ? al * T[v] : (V){};
             V* a = acc.data() + (size_t)v * Cf;
-            for (int c = 0; c < Cf; ++c) a[c] += w * f[c];
+            for (int c = 0; c < Cf; ++c) a[c] = vfma(w, (V){} + f[c], a[c]);
             T[v] = ok ? test_T : T[v];
             lst[v] = ok ? kk : lst[v];
           }
@@ -401,10 +487,10 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
     typedef typename VT<S>::I I;
     typedef typename std::remove_reference<decltype(I{}[0])>::type IS;
     constexpr int L = VT<S>::L, NV = TPIX / L, NJ = TILE / L;
-    std::vector<V> T(NV), accum(NV), G((size_t)NV * Cf), lane_x(NJ), sums(NB);
+    std::vector<V> T(NV), accum(NV), G((size_t)NV * Cf), lane_xc(NJ), sums((NB + 7) / 8 * 8);
     std::vector<I> lst(NV);
     for (int j = 0; j < NJ; ++j)
-      for (int l = 0; l < L; ++l) lane_x[j][l] = (S)(j * L + l);
+      for (int l = 0; l < L; ++l) lane_xc[j][l] = (S)(j * L + l) + (S)0.5;
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < NT; ++t) {
       const int ox = (t % TX) * TILE, oy = (t / TX) * TILE;
@@ -436,20 +522,21 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
         const Rec<S>& g = recs[sp];
         const S* f = feats + (int64_t)sp * Cf;
         std::fill(sums.begin(), sums.end(), (V){});
-        const int y0 = std::max(oy, g.v0), y1 = std::min(ey, g.v1);
-        const int xa = std::max(ox, g.u0), xb = std::min(ex, g.u1);
-        const int j0 = (xa - ox) / L, j1 = (xb - ox) / L;
+        const Entry<S> en(g, ox, oy, ex, ey, lane_xc.data());
         const I kk = (I){} + (IS)k;
-        for (int y = y0; y <= y1; ++y) {
-          const S dy = (S)y + (S)0.5 - g.my;
-          for (int j = j0; j <= j1; ++j) {
+        for (int y = en.y0; y <= en.y1; ++y) {
+          V by, cyy;
+          const S dy = Entry<S>::row(g, y, by, cyy);
+          // sums over the row of q, q dx, q dx^2; the dy factors are applied once per row
+          V rq = (V){}, rqx = (V){}, rqxx = (V){};
+          for (int j = en.j0; j <= en.j1; ++j) {
             const int v = (y - oy) * NJ + j;
-            const V xs = lane_x[j] + (S)ox;
-            const V dx = xs + (S)0.5 - g.mx;
-            const V sigma = (S)0.5 * (g.a * dx * dx + g.c * dy * dy) + g.b * dx * dy;
-            const I pre = (xs >= (S)xa) & (xs <= (S)xb) & (kk < lst[v]) & (sigma <= g.tau);
+            const I live = en.box[j] & (kk < lst[v]);
+            if (!any(live)) continue;
+            const V sigma = en.sigma(j, by, cyy);
+            const I pre = live & (sigma <= g.tau);
             if (!any(pre)) continue;
-            const V ar = g.o * vexp(-sigma);
+            const V ar = Entry<S>::alpha_raw(g, sigma);
             const I m = pre & (ar >= (S)ALPHA_MIN);
             if (!any(m)) continue;
             const V al = ar < (S)ALPHA_MAX ? ar : (V){} + (S)ALPHA_MAX;
@@ -460,28 +547,26 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
             const V* gp = G.data() + (size_t)v * Cf;
             V vv = (V){};
             for (int c = 0; c < Cf; ++c) {
-              vv += gp[c] * f[c];
-              sums[6 + c] += w * gp[c];
+              vv = vfma(gp[c], (V){} + f[c], vv);
+              sums[6 + c] = vfma(w, gp[c], sums[6 + c]);
             }
             const V g_alpha = Tk * vv - accum[v] * rom;
-            accum[v] += w * vv;
+            accum[v] = vfma(w, vv, accum[v]);
             // no gradient through the 0.99 clamp; q = -dL/dsigma
             const V q = (m & (ar < (S)ALPHA_MAX)) ? g_alpha * ar : (V){};
-            const V qx = q * dx, qy = q * dy;
-            sums[0] += q;
-            sums[1] += qx;
-            sums[2] += qy;
-            sums[3] += qx * dx;
-            sums[4] += qx * dy;
-            sums[5] += qy * dy;
+            const V qx = q * en.dx[j];
+            rq += q;
+            rqx += qx;
+            rqxx = vfma(qx, en.dx[j], rqxx);
           }
+          sums[0] += rq;
+          sums[1] += rqx;
+          sums[2] = vfma(rq, (V){} + dy, sums[2]);
+          sums[3] += rqxx;
+          sums[4] = vfma(rqx, (V){} + dy, sums[4]);
+          sums[5] = vfma(rq, (V){} + dy * dy, sums[5]);
         }
-        S* e = gbuf + (size_t)slot[t0 + k] * NB;
-        for (int b = 0; b < NB; ++b) {
-          S h = 0;
-          for (int l = 0; l < L; ++l) h += sums[b][l];
-          e[b] = h;
-        }
+        hsum(sums.data(), NB, gbuf + (size_t)slot[t0 + k] * NB);
       }
       // entries past every pixel's last contributor got nothing: zero them
       const int64_t n = tile_off[t + 1] - t0;
