@@ -392,6 +392,15 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
     for (int t = 0; t < NT; ++t) {
       const int ox = (t % TX) * TILE, oy = (t / TX) * TILE;
       const int ex = std::min(ox + TILE, W) - 1, ey = std::min(oy + TILE, H) - 1;
+      if (tile_off[t + 1] == tile_off[t]) {  // empty (most tiles of a bike image): nothing to blend
+        for (int y = oy; y <= ey; ++y) {
+          const int64_t p = (int64_t)y * W + ox, nx = ex - ox + 1;
+          std::fill_n(T_final + p, nx, (S)1);
+          std::fill_n(last + p, nx, 0);
+          for (int c = 0; c < Cf; ++c) std::fill_n(out + c * HW + p, nx, (S)0);
+        }
+        continue;
+      }
       int active = 0;
       for (int v = 0; v < NV; ++v) {
         T[v] = (V){} + (S)1;
@@ -496,6 +505,7 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
       const int ox = (t % TX) * TILE, oy = (t / TX) * TILE;
       const int ex = std::min(ox + TILE, W) - 1, ey = std::min(oy + TILE, H) - 1;
       const int64_t t0 = tile_off[t];
+      if (tile_off[t + 1] == t0) continue;  // most tiles of a bike image are empty
       int kmax = 0;
       std::fill(T.begin(), T.end(), (V){} + (S)1);
       std::fill(accum.begin(), accum.end(), (V){});
@@ -510,7 +520,11 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
             lst[v][l] = last[p + l];
             kmax = std::max(kmax, (int)last[p + l]);
             accum[v][l] = T_final[p + l] * g_T[p + l];  // what lies behind: S_k + T_final dL/dT_final
-            for (int c = 0; c < Cf; ++c) G[(size_t)v * Cf + c][l] = g_out[c * HW + p + l];
+          }
+          for (int c = 0; c < Cf; ++c) {  // one channel plane at a time: contiguous reads
+            V& gv = G[(size_t)v * Cf + c];
+            if (nl == L) __builtin_memcpy(&gv, g_out + c * HW + p, sizeof(V));
+            else for (int l = 0; l < nl; ++l) gv[l] = g_out[c * HW + p + l];
           }
         }
       for (int k = kmax - 1; k >= 0; --k) {
@@ -572,17 +586,18 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
       const int64_t n = tile_off[t + 1] - t0;
       for (int64_t k = kmax; k < n; ++k) std::fill_n(gbuf + (size_t)slot[t0 + k] * NB, NB, (S)0);
     }
+    std::vector<S> accv(NB);
 #pragma omp for schedule(static)
     for (int64_t s = 0; s < nv; ++s) {
-      S acc[6] = {0, 0, 0, 0, 0, 0};
-      const int64_t gi = order[s];
-      S* gf = g_feats + gi * Cf;
-      for (int c = 0; c < Cf; ++c) gf[c] = 0;
+      // summed locally, written once (read-modify-write of the output stalled on store forwarding)
+      S* acc = accv.data();
+      std::fill_n(acc, NB, (S)0);
       for (int64_t k = goff[s]; k < goff[s + 1]; ++k) {  // this Gaussian's entries: contiguous
         const S* e = gbuf + (size_t)k * NB;
-        for (int j = 0; j < 6; ++j) acc[j] += e[j];
-        for (int c = 0; c < Cf; ++c) gf[c] += e[6 + c];
+        for (int j = 0; j < NB; ++j) acc[j] += e[j];
       }
+      const int64_t gi = order[s];
+      std::copy_n(acc + 6, Cf, g_feats + gi * Cf);
       const Rec<S>& g = recs[s];
       g_means2d[2 * gi] = g.a * acc[1] + g.b * acc[2];
       g_means2d[2 * gi + 1] = g.b * acc[1] + g.c * acc[2];
