@@ -351,14 +351,13 @@ inline void store_lanes(T* dst, const V& v, int n) {
 // Phase 2: fill the tile lists with depth-order positions (depth order kept: each thread writes
 // its depth-ordered chunk after the chunks in front of it), gather the Cf channels into depth
 // order (feats), then blend every tile front to back.
-// out (Cf x H x W, channel-major), T_final (H x W), last (H x W): per pixel 1 + the tile-list
+// out (H x W x Cf, pixel-major), T_final (H x W), last (H x W): per pixel 1 + the tile-list
 // position of its last contributor (0: none).
 template <typename S>
 void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W, int H, int nt,
              const Rec<S>* recs, int64_t* cursor, const int64_t* tile_off, const int64_t* goff,
              int32_t* list, int64_t* slot, S* feats, S* out, S* T_final, int32_t* last) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
-  const int64_t HW = (int64_t)H * W;
 #pragma omp parallel num_threads(nt)
   {
     const int th = omp_get_thread_num();
@@ -397,7 +396,7 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
           const int64_t p = (int64_t)y * W + ox, nx = ex - ox + 1;
           std::fill_n(T_final + p, nx, (S)1);
           std::fill_n(last + p, nx, 0);
-          for (int c = 0; c < Cf; ++c) std::fill_n(out + c * HW + p, nx, (S)0);
+          std::fill_n(out + p * Cf, nx * Cf, (S)0);
         }
         continue;
       }
@@ -464,7 +463,8 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
             for (int l = 0; l < nl; ++l) last[p + l] = (int32_t)lst[v][l];
           }
           const V* a = acc.data() + (size_t)v * Cf;
-          for (int c = 0; c < Cf; ++c) store_lanes(out + c * HW + p, a[c], nl);
+          for (int l = 0; l < nl; ++l)  // pixel-major (H, W, Cf): what the caller slices into images
+            for (int c = 0; c < Cf; ++c) out[(p + l) * Cf + c] = a[c][l];
         }
     }
   }
@@ -474,7 +474,7 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
 // dividing by (1 - alpha_k) (alpha <= 0.99). Per (tile, Gaussian) entry the sums over the tile's
 // pixels go to gbuf, at the entry's slot in Gaussian-major order (slot, from the fill); then per
 // Gaussian its contiguous slots are summed in a fixed order (deterministic, no atomics) and turned into gradients of means2d, conics, opacity and the Cf channels.
-// g_out (Cf x H x W): dL/d out; g_T (H x W): dL/d T_final. Gradient arrays are indexed like the
+// g_out (H x W x Cf): dL/d out; g_T (H x W): dL/d T_final; either may be null (no gradient). Gradient arrays are indexed like the
 // inputs; entries of Gaussians that are not visible are left untouched (the caller zeroes them).
 template <typename S>
 void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, const Rec<S>* recs,
@@ -482,7 +482,6 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
               const S* feats, const S* T_final, const int32_t* last, const S* g_out, const S* g_T,
               S* g_means2d, S* g_conics, S* g_opac, S* g_feats) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
-  const int64_t HW = (int64_t)H * W;
   const int NB = 6 + Cf;  // q, q dx, q dy, q dx dx, q dx dy, q dy dy, w g_c
   const int64_t total = tile_off[NT];
   // reused across calls (no page faults per frame); used through a plain pointer (thread_local
@@ -519,13 +518,10 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
             T[v][l] = T_final[p + l];
             lst[v][l] = last[p + l];
             kmax = std::max(kmax, (int)last[p + l]);
-            accum[v][l] = T_final[p + l] * g_T[p + l];  // what lies behind: S_k + T_final dL/dT_final
+            accum[v][l] = g_T ? T_final[p + l] * g_T[p + l] : (S)0;  // behind: S_k + T_final dL/dT_final
           }
-          for (int c = 0; c < Cf; ++c) {  // one channel plane at a time: contiguous reads
-            V& gv = G[(size_t)v * Cf + c];
-            if (nl == L) __builtin_memcpy(&gv, g_out + c * HW + p, sizeof(V));
-            else for (int l = 0; l < nl; ++l) gv[l] = g_out[c * HW + p + l];
-          }
+          for (int l = 0; l < nl; ++l)
+            for (int c = 0; c < Cf; ++c) G[(size_t)v * Cf + c][l] = g_out ? g_out[(p + l) * Cf + c] : (S)0;
         }
       for (int k = kmax - 1; k >= 0; --k) {
         if (k >= 8) {
