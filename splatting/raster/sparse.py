@@ -161,8 +161,9 @@ def intersect(means2d, conics, opacities, depths, boxes, radii, W, H, margin=1e-
         if c > 0:
             done = logT < log_tmin
             torch.cumsum(done, 0, dtype=torch.int32, out=n_done[1:])
-            p0 = prow.index_select(0, items).long()
             nc = ncol.index_select(0, items)
+            # an empty span's start pixel can lie anywhere (the row missed the ellipse): use 0 there
+            p0 = prow.index_select(0, items).long() * (nc > 0)
             items = items[(n_done.index_select(0, p0 + nc) - n_done.index_select(0, p0)) < nc]  # whole span done
         if len(items) == 0:
             continue
