@@ -338,6 +338,18 @@ void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* d
   sizes[1] = pos;
 }
 
+// Tiles by decreasing list length (ties in index order): handed out in that order by the dynamic
+// schedule, the longest tiles start first and the short ones fill in at the end, so no thread is
+// left finishing one long tile while the other waits (longest-processing-time-first).
+inline std::vector<int> busiest_first(const int64_t* tile_off, int NT) {
+  std::vector<int> order(NT);
+  for (int t = 0; t < NT; ++t) order[t] = t;
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return tile_off[a + 1] - tile_off[a] > tile_off[b + 1] - tile_off[b];
+  });
+  return order;
+}
+
 // Copy L lanes of a vector to dst[0..n) (n < L at the image's right edge).
 template <typename V, typename T>
 inline void store_lanes(T* dst, const V& v, int n) {
@@ -358,6 +370,7 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
              const Rec<S>* recs, int64_t* cursor, const int64_t* tile_off, const int64_t* goff,
              int32_t* list, int64_t* slot, S* feats, S* out, S* T_final, int32_t* last) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
+  const std::vector<int> torder = busiest_first(tile_off, NT);
 #pragma omp parallel num_threads(nt)
   {
     const int th = omp_get_thread_num();
@@ -388,7 +401,8 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
     for (int j = 0; j < NJ; ++j)
       for (int l = 0; l < L; ++l) lane_xc[j][l] = (S)(j * L + l) + (S)0.5;
 #pragma omp for schedule(dynamic, 1)
-    for (int t = 0; t < NT; ++t) {
+    for (int it = 0; it < NT; ++it) {
+      const int t = torder[it];
       const int ox = (t % TX) * TILE, oy = (t / TX) * TILE;
       const int ex = std::min(ox + TILE, W) - 1, ey = std::min(oy + TILE, H) - 1;
       if (tile_off[t + 1] == tile_off[t]) {  // empty (most tiles of a bike image): nothing to blend
@@ -482,6 +496,7 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
               const S* feats, const S* T_final, const int32_t* last, const S* g_out, const S* g_T,
               S* g_means2d, S* g_conics, S* g_opac, S* g_feats) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
+  const std::vector<int> torder = busiest_first(tile_off, NT);
   const int NB = 6 + Cf;  // q, q dx, q dy, q dx dx, q dx dy, q dy dy, w g_c
   const int64_t total = tile_off[NT];
   // reused across calls (no page faults per frame); used through a plain pointer (thread_local
@@ -500,7 +515,8 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
     for (int j = 0; j < NJ; ++j)
       for (int l = 0; l < L; ++l) lane_xc[j][l] = (S)(j * L + l) + (S)0.5;
 #pragma omp for schedule(dynamic, 1)
-    for (int t = 0; t < NT; ++t) {
+    for (int it = 0; it < NT; ++it) {
+      const int t = torder[it];
       const int ox = (t % TX) * TILE, oy = (t / TX) * TILE;
       const int ex = std::min(ox + TILE, W) - 1, ey = std::min(oy + TILE, H) - 1;
       const int64_t t0 = tile_off[t];
