@@ -210,6 +210,12 @@ void preprocess_bwd(int64_t N, const Cam& cam, const S* means, const S* quats, c
     std::fill_n(g_scales + 3 * n, 3, (S)0);
     std::fill_n(g_sh + n * K * 3, K * 3, (S)0);
     if (radii[n] <= 0) continue;  // never composited: nothing flows back
+    // hidden behind other Gaussians' cut-off or too faint everywhere: every incoming gradient is
+    // zero, and so is every outgoing one (about half of a dense bike part's Gaussians)
+    bool any_grad = g_depths[n] != (S)0;
+    for (int i = 0; i < 2; ++i) any_grad |= g_means2d[2 * n + i] != (S)0;
+    for (int i = 0; i < 3; ++i) any_grad |= (g_conics[3 * n + i] != (S)0) | (g_colors[3 * n + i] != (S)0);
+    if (!any_grad) continue;
     // ---- colour: rgb = max(0, sum_k Y_k sh_k + 0.5)
     S d[3], dn, Y[16], dY[16][3];
     direction(cam, means + 3 * n, d, dn);
