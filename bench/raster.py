@@ -7,6 +7,11 @@ Keys (medians, 512^2, `threads` OpenMP threads, 2 by default as on the target ma
                         measured interleaved (one of each per round), so machine load hits both
   raster_thread_scaling {"1_thread_s", "2_threads_s", "speedup", "speedup_of_fastest"}: fwd+bwd at
                         50k, 1 vs 2 threads, interleaved (medians; and the fastest round of each)
+  raster_stages_cpu_ms  at 50k, ONE thread, CPU time (time.process_time: the least sensitive to
+                        other processes on a shared machine), medians: each C++ stage of the tiled
+                        back end (preprocess, bin, blend, blend_bwd, preprocess_bwd) and the torch /
+                        Python glue around them (fwd_glue, bwd_glue: total minus the stages; the
+                        loss and its backward count as glue), fwd_total, bwd_total
 A synthetic bike-like part (two wheels, tubes, a few mm-to-cm Gaussians) about 1.7 m long around
 the origin, seen by ring view 3 (12 m away, focal 2085, 512^2): it spans ~300 px like the real
 parts. Run alone: `python -m bench.raster [--threads N] [--sizes 10k,50k]`.
@@ -117,6 +122,63 @@ def interleaved(n, variants, rounds=7, warmup=1):
     return {k: statistics.median(v) for k, v in times.items()}, {k: min(v) for k, v in times.items()}
 
 
+class _StageClock:
+    """Stands in for the tiled back end's ctypes library and times each C call (CPU time)."""
+
+    NAMES = {"gs_preprocess_fwd": "preprocess", "gs_bin": "bin", "gs_forward": "blend",
+             "gs_backward": "blend_bwd", "gs_preprocess_bwd": "preprocess_bwd"}
+
+    def __init__(self, lib):
+        self._lib, self.times = lib, {}
+
+    def __getattr__(self, name):
+        f = getattr(self._lib, name)
+        stage = self.NAMES.get(name.rsplit("_", 1)[0])
+        if stage is None:
+            return f
+
+        def timed(*args):
+            t0 = time.process_time()
+            r = f(*args)
+            self.times[stage] = self.times.get(stage, 0.0) + time.process_time() - t0
+            return r
+        return timed
+
+
+def stage_cpu_ms(n, iters=9, warmup=2):
+    """One thread, CPU ms per stage of a fwd + bwd (L1 loss) and the glue between them; medians."""
+    from splatting.raster import build
+    from splatting.raster.sparse import rasterize
+
+    cam, params = _camera_and_params(n)
+    old, lib = torch.get_num_threads(), build.load()
+    rows = []
+    torch.set_num_threads(1)
+    try:
+        for i in range(warmup + iters):
+            build._lib = clock = _StageClock(lib)
+            t0 = time.process_time()
+            out = rasterize(*params, cam, backend="tiles")
+            loss = out["rgb"].abs().mean()
+            t1 = time.process_time()
+            loss.backward()
+            t2 = time.process_time()
+            for p in params:
+                p.grad = None
+            st = clock.times
+            if i >= warmup:
+                fwd, bwd = 1e3 * (t1 - t0), 1e3 * (t2 - t1)
+                row = {k: 1e3 * v for k, v in st.items()}
+                row["fwd_glue"] = fwd - row["preprocess"] - row["bin"] - row["blend"]
+                row["bwd_glue"] = bwd - row["blend_bwd"] - row["preprocess_bwd"]
+                row["fwd_total"], row["bwd_total"] = fwd, bwd
+                rows.append(row)
+    finally:
+        build._lib = lib
+        torch.set_num_threads(old)
+    return {k: round(statistics.median(r[k] for r in rows), 2) for k in rows[0]}
+
+
 def _load():
     return f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY', 'unset')}, load avg {os.getloadavg()[0]:.1f}"
 
@@ -143,6 +205,10 @@ def run(results, threads=2, sizes=None):
                                         "speedup": round(m["torch"] / m["tiles"], 2)}
     print(f"raster fwd+bwd 50k interleaved, {threads} threads: torch {m['torch']:.3f} s, tiles {m['tiles']:.3f} s, "
           f"{m['torch'] / m['tiles']:.1f}x ({_load()})", flush=True)
+    st = stage_cpu_ms(SIZES["50k"])
+    results["raster_stages_cpu_ms"] = st
+    print("raster stages 50k, 1 thread, CPU ms: " + ", ".join(f"{k} {v:.1f}" for k, v in st.items())
+          + f" ({_load()})", flush=True)
     # min as well as median: on a shared machine the fastest round is the one least disturbed
     m, lo = interleaved(SIZES["50k"], {"1": ("tiles", 1), "2": ("tiles", 2)}, rounds=9)
     results["raster_thread_scaling"] = {"1_thread_s": round(m["1"], 4), "2_threads_s": round(m["2"], 4),

@@ -1,7 +1,7 @@
 """Tiled multi-threaded CPU compositing (csrc/tiles.cpp) as a torch autograd Function.
 
-composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, W) -> (out (H, W, Cf),
-T_final (H, W)): out = sum_k w_k feats_k over the Gaussians at each pixel front to back,
+composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, W) -> (out (H, W, Cf)
+contiguous, T_final (H, W)): out = sum_k w_k feats_k over the Gaussians at each pixel front to back,
 w_k = alpha_k T_k, T_final the transmittance left (alpha = 1 - T_final). Differentiable in
 means2d, conics, opacities and feats (any number Cf of channels: colour, extra features, depth
 ride along together). Same image formation as splatting/raster/sparse.py's torch path; see
@@ -26,8 +26,14 @@ def _ptr(t):
     return t.data_ptr()
 
 
+def _nptr(t):
+    return None if t is None else t.data_ptr()
+
+
 class _TileComposite(torch.autograd.Function):
-    """out (Cf, H, W) channel-major (what the C++ writes with vector stores), T_final (H, W)."""
+    """out (H, W, Cf) pixel-major, T_final (H, W). A gradient that autograd hands over as None
+    (an output nobody used, e.g. alpha under an RGB loss) goes to the C++ as a null pointer
+    rather than as a zero image."""
 
     @staticmethod
     def forward(ctx, means2d, conics, opacities, feats, depths, radii, boxes, H, W):
@@ -60,7 +66,7 @@ class _TileComposite(torch.autograd.Function):
         lst = torch.empty(max(total, 1), dtype=torch.int32)
         slot = torch.empty(max(total, 1), dtype=torch.int64)
         fs = torch.empty(max(nv, 1), cf, dtype=dt)
-        out = torch.empty(cf, H, W, dtype=dt)
+        out = torch.empty(H, W, cf, dtype=dt)
         T_final = torch.empty(H, W, dtype=dt)
         last = torch.empty(H, W, dtype=torch.int32)
         getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), _ptr(fe), cf, W, H, nt, _ptr(recs), _ptr(cursor),
@@ -77,8 +83,8 @@ class _TileComposite(torch.autograd.Function):
         (T_final,) = ctx.saved_tensors
         dt = T_final.dtype
         sfx = _SUFFIX[dt]
-        g_out = torch.zeros(cf, H, W, dtype=dt) if g_out is None else g_out.to(dt).contiguous()
-        g_T = torch.zeros(H, W, dtype=dt) if g_T is None else g_T.to(dt).contiguous()
+        g_out = None if g_out is None else g_out.to(dt).contiguous()
+        g_T = None if g_T is None else g_T.to(dt).contiguous()
         g_m2 = torch.zeros(n, 2, dtype=dt)
         g_cn = torch.zeros(n, 3, dtype=dt)
         g_op = torch.zeros(n, dtype=dt)
@@ -86,7 +92,7 @@ class _TileComposite(torch.autograd.Function):
         lib = build.load()
         getattr(lib, f"gs_backward_{sfx}")(nv, _ptr(order), cf, W, H, max(1, torch.get_num_threads()), _ptr(recs),
                                            _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(slot), _ptr(fs),
-                                           _ptr(T_final), _ptr(last), _ptr(g_out), _ptr(g_T),
+                                           _ptr(T_final), _ptr(last), _nptr(g_out), _nptr(g_T),
                                            _ptr(g_m2), _ptr(g_cn), _ptr(g_op), _ptr(g_fe))
         dc, do, df = ctx.dtypes
         return g_m2, g_cn.to(dc), g_op.to(do), g_fe.to(df), None, None, None, None, None
@@ -97,5 +103,4 @@ def composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, 
     if means2d.device.type != "cpu":
         raise ValueError("the tiled rasterizer runs on CPU tensors; use backend='torch' for "
                          f"{means2d.device.type} tensors")
-    out, T_final = _TileComposite.apply(means2d, conics, opacities, feats, depths, radii, boxes, H, W)
-    return out.permute(1, 2, 0), T_final
+    return _TileComposite.apply(means2d, conics, opacities, feats, depths, radii, boxes, H, W)

@@ -161,8 +161,9 @@ def intersect(means2d, conics, opacities, depths, boxes, radii, W, H, margin=1e-
         if c > 0:
             done = logT < log_tmin
             torch.cumsum(done, 0, dtype=torch.int32, out=n_done[1:])
-            p0 = prow.index_select(0, items).long()
             nc = ncol.index_select(0, items)
+            # an empty span's start pixel can lie anywhere (the row missed the ellipse): use 0 there
+            p0 = prow.index_select(0, items).long() * (nc > 0)
             items = items[(n_done.index_select(0, p0 + nc) - n_done.index_select(0, p0)) < nc]  # whole span done
         if len(items) == 0:
             continue
@@ -306,18 +307,19 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
     if antialiased:
         opacities = opacities * aa_compensation(conics, eps2d)
     nf = 0 if features is None else features.shape[1]
-    if nf:
-        colors = torch.cat([colors, features.to(colors)], 1)
     if backend == "tiles":
-        rgb, alpha, depth = _composite_tiles(means2d, conics, opacities, colors, depths, radii, boxes,
-                                             background, H, W)
+        rgb, alpha, depth, feats = _composite_tiles(means2d, conics, opacities, colors, features, depths, radii,
+                                                    boxes, background, H, W)
     else:
+        if nf:
+            colors = torch.cat([colors, features.to(colors)], 1)
         pairs = intersect(means2d.detach(), conics.detach(), opacities.detach(), depths.detach(), boxes, radii, W, H)
-        rgb, alpha, depth = composite(means2d, conics, opacities, colors, depths, background, pairs, H, W)
-    out = {"rgb": rgb[..., :3], "alpha": alpha, "depth": depth, "means2d": means2d, "radii": radii,
+        col, alpha, depth = composite(means2d, conics, opacities, colors, depths, background, pairs, H, W)
+        rgb, feats = col[..., :3], col[..., 3:]
+    out = {"rgb": rgb, "alpha": alpha, "depth": depth, "means2d": means2d, "radii": radii,
            "visible": radii > 0, "backend": backend}
     if nf:
-        out["features"] = rgb[..., 3:]
+        out["features"] = feats
     return out
 
 
@@ -346,18 +348,21 @@ def resolve_backend(backend, means):
     return backend
 
 
-def _composite_tiles(means2d, conics, opacities, colors, depths, radii, boxes, background, H, W):
-    """The tiled C++ compositor with the torch path's outputs: colour (H,W,Cc) with the background
-    under the first three channels, alpha, depth (camera z composited as the last channel)."""
+def _composite_tiles(means2d, conics, opacities, colors, features, depths, radii, boxes, background, H, W):
+    """The tiled C++ compositor with the torch path's outputs: rgb (H,W,3) over the background,
+    alpha, depth (camera z composited as the last channel), features (H,W,F) or None. Colour,
+    features and depth ride in one (N, 3 + F + 1) table; each output is one slice of the
+    compositor's (H, W, 3 + F + 1) image (one slice, so one small backward per output)."""
     from splatting.raster.cpu_tiles import composite_tiles
 
-    feats = torch.cat([colors, depths[:, None]], 1)
-    out, T_final = composite_tiles(means2d, conics, opacities, feats, depths.detach(), radii, boxes, H, W)
-    col = out[..., :-1]
+    parts = [colors] + ([] if features is None else [features.to(colors)]) + [depths[:, None]]
+    out, T_final = composite_tiles(means2d, conics, opacities, torch.cat(parts, 1), depths.detach(), radii, boxes,
+                                   H, W)
+    rgb = out[..., :3]
     if background is not None:
-        bg = background.to(col)
-        col = torch.cat([col[..., :3] + T_final[..., None] * bg, col[..., 3:]], -1)
-    return col, 1.0 - T_final, out[..., -1]
+        rgb = rgb + T_final[..., None] * background.to(rgb)
+    feats = None if features is None else out[..., 3:-1]
+    return rgb, 1.0 - T_final, out[..., -1], feats
 
 
 def render_gaussians(g, camera, **kw):

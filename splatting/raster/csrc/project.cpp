@@ -107,7 +107,7 @@ struct Geo {
 };
 
 template <typename S>
-inline void geometry(const Cam& cam, const S* mean, const S* quat, const S* scale, Geo<S>& g) {
+__attribute__((always_inline)) inline void geometry(const Cam& cam, const S* mean, const S* quat, const S* scale, Geo<S>& g) {
   S R[9], T[3];
   for (int i = 0; i < 9; ++i) R[i] = (S)cam.R[i];
   for (int i = 0; i < 3; ++i) T[i] = (S)cam.T[i];
@@ -154,9 +154,10 @@ inline void direction(const Cam& cam, const S* mean, S* d, S& n) {
   for (int i = 0; i < 3; ++i) d[i] /= n;
 }
 
-template <typename S>
+// nb (the number of SH coefficients used) is a template constant: the SH loops unroll.
+template <typename S, int nb>
 void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, const S* scales, const S* sh,
-                    int K, int nb, int nt, S* means2d, S* conics, S* depths, S* colors, int64_t* radii,
+                    int K, int nt, S* means2d, S* conics, S* depths, S* colors, int64_t* radii,
                     int64_t* boxes) {
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (int64_t n = 0; n < N; ++n) {
@@ -196,9 +197,10 @@ void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, c
   }
 }
 
-template <typename S>
+// nb (the number of SH coefficients used) is a template constant: the SH loops unroll.
+template <typename S, int nb>
 void preprocess_bwd(int64_t N, const Cam& cam, const S* means, const S* quats, const S* scales, const S* sh,
-                    int K, int nb, int nt, const int64_t* radii, const S* g_means2d, const S* g_conics,
+                    int K, int nt, const int64_t* radii, const S* g_means2d, const S* g_conics,
                     const S* g_depths, const S* g_colors, S* g_means, S* g_quats, S* g_scales, S* g_sh) {
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (int64_t n = 0; n < N; ++n) {
@@ -208,6 +210,12 @@ void preprocess_bwd(int64_t N, const Cam& cam, const S* means, const S* quats, c
     std::fill_n(g_scales + 3 * n, 3, (S)0);
     std::fill_n(g_sh + n * K * 3, K * 3, (S)0);
     if (radii[n] <= 0) continue;  // never composited: nothing flows back
+    // hidden behind other Gaussians' cut-off or too faint everywhere: every incoming gradient is
+    // zero, and so is every outgoing one (about half of a dense bike part's Gaussians)
+    bool any_grad = g_depths[n] != (S)0;
+    for (int i = 0; i < 2; ++i) any_grad |= g_means2d[2 * n + i] != (S)0;
+    for (int i = 0; i < 3; ++i) any_grad |= (g_conics[3 * n + i] != (S)0) | (g_colors[3 * n + i] != (S)0);
+    if (!any_grad) continue;
     // ---- colour: rgb = max(0, sum_k Y_k sh_k + 0.5)
     S d[3], dn, Y[16], dY[16][3];
     direction(cam, means + 3 * n, d, dn);
@@ -307,6 +315,15 @@ Cam make_cam(const double* R, const double* T, const double* intr, int W, int H)
 
 }  // namespace
 
+// nb in {1, 4, 9, 16} (checked by the caller, splatting/raster/cpu_project.py)
+#define SH_DISPATCH(nb, F, S, ...)         \
+  switch (nb) {                            \
+    case 1: F<S, 1>(__VA_ARGS__); break;   \
+    case 4: F<S, 4>(__VA_ARGS__); break;   \
+    case 9: F<S, 9>(__VA_ARGS__); break;   \
+    default: F<S, 16>(__VA_ARGS__); break; \
+  }
+
 extern "C" {
 
 // cam_R (9, row-major), cam_T (3), intr = (fx, fy, cx, cy, near, eps2d), all float64.
@@ -316,8 +333,9 @@ extern "C" {
                                   int W, int H, const S* means, const S* quats, const S* scales,    \
                                   const S* sh, int K, int nb, int nt, S* means2d, S* conics,        \
                                   S* depths, S* colors, int64_t* radii, int64_t* boxes) {           \
-    preprocess_fwd<S>(N, make_cam(R, T, intr, W, H), means, quats, scales, sh, K, nb, nt, means2d,  \
-                      conics, depths, colors, radii, boxes);                                        \
+    const Cam cam = make_cam(R, T, intr, W, H);                                                     \
+    SH_DISPATCH(nb, preprocess_fwd, S, N, cam, means, quats, scales, sh, K, nt, means2d, conics,      \
+                depths, colors, radii, boxes);                                                      \
   }                                                                                                 \
   void gs_preprocess_bwd_##SUFFIX(int64_t N, const double* R, const double* T, const double* intr, \
                                   int W, int H, const S* means, const S* quats, const S* scales,    \
@@ -325,8 +343,9 @@ extern "C" {
                                   const S* g_means2d, const S* g_conics, const S* g_depths,         \
                                   const S* g_colors, S* g_means, S* g_quats, S* g_scales,           \
                                   S* g_sh) {                                                        \
-    preprocess_bwd<S>(N, make_cam(R, T, intr, W, H), means, quats, scales, sh, K, nb, nt, radii,    \
-                      g_means2d, g_conics, g_depths, g_colors, g_means, g_quats, g_scales, g_sh);   \
+    const Cam cam = make_cam(R, T, intr, W, H);                                                     \
+    SH_DISPATCH(nb, preprocess_bwd, S, N, cam, means, quats, scales, sh, K, nt, radii, g_means2d,    \
+                g_conics, g_depths, g_colors, g_means, g_quats, g_scales, g_sh);                    \
   }
 
 GS_PRE_EXPORT(f32, float)

@@ -33,7 +33,9 @@ constexpr int TPIX = TILE * TILE;
 constexpr double ALPHA_MIN = 1.0 / 255.0;
 constexpr double ALPHA_MAX = 0.99;
 constexpr double T_MIN = 1e-4;
-constexpr double MARGIN = 1e-3;  // px: the ellipse's bounding box is widened by this against rounding
+constexpr double MARGIN = 1e-3;
+// Tile-list entries the record / feature prefetch runs ahead (8, 24 and 48 measured alike).
+constexpr int PF = 8;  // px: the ellipse's bounding box is widened by this against rounding
 
 // SIMD over the pixels of a tile row with GCC vector extensions (AVX2 with -march=native: 8
 // floats or 4 doubles; SSE or NEON pairs elsewhere). Lanes never mix, so a pixel's result is
@@ -67,25 +69,50 @@ inline bool any(I m) { return bits(m) != 0; }
 template <typename I>
 inline int count(I m) { return __builtin_popcount(bits(m)); }
 
+// a * b + c, fused where the CPU has FMA. Explicit, so -ffp-contract=off elsewhere still keeps
+// the compiler from fusing the forward's and the backward's copies of an expression differently;
+// these fuse in both alike.
+inline VT<float>::V vfma(VT<float>::V a, VT<float>::V b, VT<float>::V c) {
+#ifdef __FMA__
+  return (VT<float>::V)_mm256_fmadd_ps((__m256)a, (__m256)b, (__m256)c);
+#else
+  return a * b + c;
+#endif
+}
+inline VT<double>::V vfma(VT<double>::V a, VT<double>::V b, VT<double>::V c) {
+#ifdef __FMA__
+  return (VT<double>::V)_mm256_fmadd_pd((__m256d)a, (__m256d)b, (__m256d)c);
+#else
+  return a * b + c;
+#endif
+}
+
 // exp for float lanes: Cephes expf (range reduction by ln 2, degree-5 polynomial, |rel err| <
 // 2e-7 on the range used here: -sigma in [-88, 0]). Vectorises where the libm call would not.
 inline VT<float>::V vexp(VT<float>::V x) {
   typedef VT<float>::V V;
   typedef VT<float>::I I;
+  const V one = (V){} + 1.0f;
   x = x < (V){} - 87.0f ? (V){} - 87.0f : x;
   x = x > (V){} + 88.0f ? (V){} + 88.0f : x;
+#ifdef __AVX__
+  const V fn = (V)_mm256_floor_ps((__m256)(x * 1.44269504088896341f + 0.5f));
+  const I n = __builtin_convertvector(fn, I);
+#else
   V fx = x * 1.44269504088896341f + 0.5f;
   I n = __builtin_convertvector(fx, I);
   V fn = __builtin_convertvector(n, V);
   n = fn > fx ? n - 1 : n;  // floor
   fn = __builtin_convertvector(n, V);
-  V r = x - fn * 0.693359375f + fn * 2.12194440e-4f;
-  V y = 1.9875691500e-4f * r + 1.3981999507e-3f;
-  y = y * r + 8.3334519073e-3f;
-  y = y * r + 4.1665795894e-2f;
-  y = y * r + 1.6666665459e-1f;
-  y = y * r + 5.0000001201e-1f;
-  y = y * (r * r) + r + 1.0f;
+#endif
+  V r = vfma(fn, (V){} - 0.693359375f, x);
+  r = vfma(fn, (V){} + 2.12194440e-4f, r);
+  V y = vfma((V){} + 1.9875691500e-4f, r, (V){} + 1.3981999507e-3f);
+  y = vfma(y, r, (V){} + 8.3334519073e-3f);
+  y = vfma(y, r, (V){} + 4.1665795894e-2f);
+  y = vfma(y, r, (V){} + 1.6666665459e-1f);
+  y = vfma(y, r, (V){} + 5.0000001201e-1f);
+  y = vfma(y, r * r, r + one);
   I e = (n + 127) << 23;
   V scale;
   __builtin_memcpy(&scale, &e, sizeof(V));
@@ -108,6 +135,68 @@ struct alignas(64) Rec {  // one visible Gaussian; one cache line (float) for th
 // sigma <= tau is only a cheap pre-test (skips the exp and whole tiles); the decision is the
 // alpha test itself, so tau is padded to stay clear of rounding.
 constexpr double TAU_PAD = 1e-3;
+
+// dst[b] = the sum of v[b]'s lanes, b < n (v padded with zero vectors to a multiple of 8). For
+// 8 float vectors at a time: a transpose-and-add with hadd/permute instead of 56 scalar adds.
+inline void hsum(const VT<float>::V* v, int n, float* dst) {
+  for (int b = 0; b < n; b += 8) {
+#ifdef __AVX__
+    const __m256* x = (const __m256*)(v + b);
+    const __m256 ab = _mm256_hadd_ps(_mm256_hadd_ps(x[0], x[1]), _mm256_hadd_ps(x[2], x[3]));
+    const __m256 cd = _mm256_hadd_ps(_mm256_hadd_ps(x[4], x[5]), _mm256_hadd_ps(x[6], x[7]));
+    alignas(32) float r[8];
+    _mm256_store_ps(r, _mm256_add_ps(_mm256_permute2f128_ps(ab, cd, 0x20), _mm256_permute2f128_ps(ab, cd, 0x31)));
+    for (int i = 0; i < 8 && b + i < n; ++i) dst[b + i] = r[i];
+#else
+    for (int i = 0; i < 8 && b + i < n; ++i) {
+      float h = 0;
+      for (int l = 0; l < 8; ++l) h += v[b + i][l];
+      dst[b + i] = h;
+    }
+#endif
+  }
+}
+inline void hsum(const VT<double>::V* v, int n, double* dst) {
+  for (int b = 0; b < n; ++b) dst[b] = (v[b][0] + v[b][1]) + (v[b][2] + v[b][3]);
+}
+
+// One (tile, Gaussian) entry as both passes see it: its pixel rows and 8-lane chunks inside the
+// tile, the per-lane dx and in-box masks (set up once per entry, not per chunk), and
+// sigma = (a/2 dx + b dy) dx + c/2 dy^2 with two FMAs per chunk. The forward and the backward
+// evaluate sigma and alpha_raw = o exp(-sigma) through this one code path, so they take
+// bit-identical alpha decisions.
+template <typename S>
+struct Entry {
+  typedef typename VT<S>::V V;
+  typedef typename VT<S>::I I;
+  static constexpr int L = VT<S>::L, NJ = TILE / L;
+  V ha, dx[NJ];
+  I box[NJ];
+  int y0, y1, j0, j1;
+  // lane_xc[j]: lane l of chunk j holds j * L + l + 0.5 (a pixel centre's offset in the tile)
+  Entry(const Rec<S>& g, int ox, int oy, int ex, int ey, const V* lane_xc) {
+    y0 = std::max(oy, g.v0);
+    y1 = std::min(ey, g.v1);
+    const int xa = std::max(ox, g.u0), xb = std::min(ex, g.u1);
+    j0 = (xa - ox) / L;
+    j1 = (xb - ox) / L;
+    ha = (V){} + (S)0.5 * g.a;
+    for (int j = j0; j <= j1; ++j) {
+      const V xc = lane_xc[j] + (S)ox;  // exact: small integers + 0.5
+      dx[j] = xc - g.mx;
+      box[j] = (xc > (S)xa) & (xc < (S)(xb + 1));
+    }
+  }
+  // per row: dy, and the row's terms b dy, c/2 dy^2 (broadcast)
+  static inline S row(const Rec<S>& g, int y, V& by, V& cyy) {
+    const S dy = (S)y + (S)0.5 - g.my;
+    by = (V){} + g.b * dy;
+    cyy = (V){} + (S)0.5 * g.c * dy * dy;
+    return dy;
+  }
+  inline V sigma(int j, V by, V cyy) const { return vfma(vfma(ha, dx[j], by), dx[j], cyy); }
+  static inline V alpha_raw(const Rec<S>& g, V sigma) { return g.o * vexp(-sigma); }
+};
 
 inline int64_t clampi(double x, int64_t lo, int64_t hi) {
   if (!(x >= (double)lo)) return lo;  // also NaN
@@ -251,6 +340,18 @@ void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* d
   sizes[1] = pos;
 }
 
+// Tiles by decreasing list length (ties in index order): handed out in that order by the dynamic
+// schedule, the longest tiles start first and the short ones fill in at the end, so no thread is
+// left finishing one long tile while the other waits (longest-processing-time-first).
+inline std::vector<int> busiest_first(const int64_t* tile_off, int NT) {
+  std::vector<int> order(NT);
+  for (int t = 0; t < NT; ++t) order[t] = t;
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return tile_off[a + 1] - tile_off[a] > tile_off[b + 1] - tile_off[b];
+  });
+  return order;
+}
+
 // Copy L lanes of a vector to dst[0..n) (n < L at the image's right edge).
 template <typename V, typename T>
 inline void store_lanes(T* dst, const V& v, int n) {
@@ -264,14 +365,14 @@ inline void store_lanes(T* dst, const V& v, int n) {
 // Phase 2: fill the tile lists with depth-order positions (depth order kept: each thread writes
 // its depth-ordered chunk after the chunks in front of it), gather the Cf channels into depth
 // order (feats), then blend every tile front to back.
-// out (Cf x H x W, channel-major), T_final (H x W), last (H x W): per pixel 1 + the tile-list
+// out (H x W x Cf, pixel-major), T_final (H x W), last (H x W): per pixel 1 + the tile-list
 // position of its last contributor (0: none).
 template <typename S>
 void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W, int H, int nt,
              const Rec<S>* recs, int64_t* cursor, const int64_t* tile_off, const int64_t* goff,
              int32_t* list, int64_t* slot, S* feats, S* out, S* T_final, int32_t* last) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
-  const int64_t HW = (int64_t)H * W;
+  const std::vector<int> torder = busiest_first(tile_off, NT);
 #pragma omp parallel num_threads(nt)
   {
     const int th = omp_get_thread_num();
@@ -296,15 +397,25 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
     typedef typename VT<S>::I I;
     typedef typename std::remove_reference<decltype(I{}[0])>::type IS;
     constexpr int L = VT<S>::L, NV = TPIX / L, NJ = TILE / L;
-    std::vector<V> T(NV), lane_x(NJ);
+    std::vector<V> T(NV), lane_xc(NJ);
     std::vector<I> done(NV), lst(NV);
     std::vector<V> acc((size_t)NV * Cf);
     for (int j = 0; j < NJ; ++j)
-      for (int l = 0; l < L; ++l) lane_x[j][l] = (S)(j * L + l);
+      for (int l = 0; l < L; ++l) lane_xc[j][l] = (S)(j * L + l) + (S)0.5;
 #pragma omp for schedule(dynamic, 1)
-    for (int t = 0; t < NT; ++t) {
+    for (int it = 0; it < NT; ++it) {
+      const int t = torder[it];
       const int ox = (t % TX) * TILE, oy = (t / TX) * TILE;
       const int ex = std::min(ox + TILE, W) - 1, ey = std::min(oy + TILE, H) - 1;
+      if (tile_off[t + 1] == tile_off[t]) {  // empty (most tiles of a bike image): nothing to blend
+        for (int y = oy; y <= ey; ++y) {
+          const int64_t p = (int64_t)y * W + ox, nx = ex - ox + 1;
+          std::fill_n(T_final + p, nx, (S)1);
+          std::fill_n(last + p, nx, 0);
+          std::fill_n(out + p * Cf, nx * Cf, (S)0);
+        }
+        continue;
+      }
       int active = 0;
       for (int v = 0; v < NV; ++v) {
         T[v] = (V){} + (S)1;
@@ -319,27 +430,26 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
       std::fill(acc.begin(), acc.end(), (V){});
       const int64_t t0 = tile_off[t], n = tile_off[t + 1] - t0;
       for (int64_t k = 0; k < n && active > 0; ++k) {
-        if (k + 8 < n) {
-          __builtin_prefetch(recs + list[t0 + k + 8]);
-          __builtin_prefetch(feats + (int64_t)list[t0 + k + 8] * Cf);
+        if (k + PF < n) {
+          __builtin_prefetch(recs + list[t0 + k + PF]);
+          __builtin_prefetch(feats + (int64_t)list[t0 + k + PF] * Cf);
         }
         const int32_t sp = list[t0 + k];
         const Rec<S>& g = recs[sp];
-        const int y0 = std::max(oy, g.v0), y1 = std::min(ey, g.v1);
-        const int xa = std::max(ox, g.u0), xb = std::min(ex, g.u1);
-        const int j0 = (xa - ox) / L, j1 = (xb - ox) / L;
+        const Entry<S> en(g, ox, oy, ex, ey, lane_xc.data());
         const S* f = feats + (int64_t)sp * Cf;
         const I kk = (I){} + (IS)(k + 1);
-        for (int y = y0; y <= y1; ++y) {
-          const S dy = (S)y + (S)0.5 - g.my;
-          for (int j = j0; j <= j1; ++j) {
+        for (int y = en.y0; y <= en.y1; ++y) {
+          V by, cyy;
+          Entry<S>::row(g, y, by, cyy);
+          for (int j = en.j0; j <= en.j1; ++j) {
             const int v = (y - oy) * NJ + j;
-            const V xs = lane_x[j] + (S)ox;
-            const V dx = xs + (S)0.5 - g.mx;
-            const V sigma = (S)0.5 * (g.a * dx * dx + g.c * dy * dy) + g.b * dx * dy;
-            const I pre = (xs >= (S)xa) & (xs <= (S)xb) & ~done[v] & (sigma <= g.tau);
+            const I live = en.box[j] & ~done[v];
+            if (!any(live)) continue;  // finished pixels: no sigma, no exp
+            const V sigma = en.sigma(j, by, cyy);
+            const I pre = live & (sigma <= g.tau);
             if (!any(pre)) continue;
-            const V ar = g.o * vexp(-sigma);
+            const V ar = Entry<S>::alpha_raw(g, sigma);
             const I m = pre & (ar >= (S)ALPHA_MIN);
             if (!any(m)) continue;
             const V al = ar < (S)ALPHA_MAX ? ar : (V){} + (S)ALPHA_MAX;
@@ -352,7 +462,7 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
             const I ok = m & ~term;
             const V w = ok ? al * T[v] : (V){};
             V* a = acc.data() + (size_t)v * Cf;
-            for (int c = 0; c < Cf; ++c) a[c] += w * f[c];
+            for (int c = 0; c < Cf; ++c) a[c] = vfma(w, (V){} + f[c], a[c]);
             T[v] = ok ? test_T : T[v];
             lst[v] = ok ? kk : lst[v];
           }
@@ -369,7 +479,8 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
             for (int l = 0; l < nl; ++l) last[p + l] = (int32_t)lst[v][l];
           }
           const V* a = acc.data() + (size_t)v * Cf;
-          for (int c = 0; c < Cf; ++c) store_lanes(out + c * HW + p, a[c], nl);
+          for (int l = 0; l < nl; ++l)  // pixel-major (H, W, Cf): what the caller slices into images
+            for (int c = 0; c < Cf; ++c) out[(p + l) * Cf + c] = a[c][l];
         }
     }
   }
@@ -379,7 +490,7 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
 // dividing by (1 - alpha_k) (alpha <= 0.99). Per (tile, Gaussian) entry the sums over the tile's
 // pixels go to gbuf, at the entry's slot in Gaussian-major order (slot, from the fill); then per
 // Gaussian its contiguous slots are summed in a fixed order (deterministic, no atomics) and turned into gradients of means2d, conics, opacity and the Cf channels.
-// g_out (Cf x H x W): dL/d out; g_T (H x W): dL/d T_final. Gradient arrays are indexed like the
+// g_out (H x W x Cf): dL/d out; g_T (H x W): dL/d T_final; either may be null (no gradient). Gradient arrays are indexed like the
 // inputs; entries of Gaussians that are not visible are left untouched (the caller zeroes them).
 template <typename S>
 void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, const Rec<S>* recs,
@@ -387,7 +498,7 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
               const S* feats, const S* T_final, const int32_t* last, const S* g_out, const S* g_T,
               S* g_means2d, S* g_conics, S* g_opac, S* g_feats) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
-  const int64_t HW = (int64_t)H * W;
+  const std::vector<int> torder = busiest_first(tile_off, NT);
   const int NB = 6 + Cf;  // q, q dx, q dy, q dx dx, q dx dy, q dy dy, w g_c
   const int64_t total = tile_off[NT];
   // reused across calls (no page faults per frame); used through a plain pointer (thread_local
@@ -401,15 +512,17 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
     typedef typename VT<S>::I I;
     typedef typename std::remove_reference<decltype(I{}[0])>::type IS;
     constexpr int L = VT<S>::L, NV = TPIX / L, NJ = TILE / L;
-    std::vector<V> T(NV), accum(NV), G((size_t)NV * Cf), lane_x(NJ), sums(NB);
+    std::vector<V> T(NV), accum(NV), G((size_t)NV * Cf), lane_xc(NJ), sums((NB + 7) / 8 * 8);
     std::vector<I> lst(NV);
     for (int j = 0; j < NJ; ++j)
-      for (int l = 0; l < L; ++l) lane_x[j][l] = (S)(j * L + l);
+      for (int l = 0; l < L; ++l) lane_xc[j][l] = (S)(j * L + l) + (S)0.5;
 #pragma omp for schedule(dynamic, 1)
-    for (int t = 0; t < NT; ++t) {
+    for (int it = 0; it < NT; ++it) {
+      const int t = torder[it];
       const int ox = (t % TX) * TILE, oy = (t / TX) * TILE;
       const int ex = std::min(ox + TILE, W) - 1, ey = std::min(oy + TILE, H) - 1;
       const int64_t t0 = tile_off[t];
+      if (tile_off[t + 1] == t0) continue;  // most tiles of a bike image are empty
       int kmax = 0;
       std::fill(T.begin(), T.end(), (V){} + (S)1);
       std::fill(accum.begin(), accum.end(), (V){});
@@ -423,33 +536,35 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
             T[v][l] = T_final[p + l];
             lst[v][l] = last[p + l];
             kmax = std::max(kmax, (int)last[p + l]);
-            accum[v][l] = T_final[p + l] * g_T[p + l];  // what lies behind: S_k + T_final dL/dT_final
-            for (int c = 0; c < Cf; ++c) G[(size_t)v * Cf + c][l] = g_out[c * HW + p + l];
+            accum[v][l] = g_T ? T_final[p + l] * g_T[p + l] : (S)0;  // behind: S_k + T_final dL/dT_final
           }
+          for (int l = 0; l < nl; ++l)
+            for (int c = 0; c < Cf; ++c) G[(size_t)v * Cf + c][l] = g_out ? g_out[(p + l) * Cf + c] : (S)0;
         }
       for (int k = kmax - 1; k >= 0; --k) {
-        if (k >= 8) {
-          __builtin_prefetch(recs + list[t0 + k - 8]);
-          __builtin_prefetch(feats + (int64_t)list[t0 + k - 8] * Cf);
+        if (k >= PF) {
+          __builtin_prefetch(recs + list[t0 + k - PF]);
+          __builtin_prefetch(feats + (int64_t)list[t0 + k - PF] * Cf);
         }
         const int32_t sp = list[t0 + k];
         const Rec<S>& g = recs[sp];
         const S* f = feats + (int64_t)sp * Cf;
         std::fill(sums.begin(), sums.end(), (V){});
-        const int y0 = std::max(oy, g.v0), y1 = std::min(ey, g.v1);
-        const int xa = std::max(ox, g.u0), xb = std::min(ex, g.u1);
-        const int j0 = (xa - ox) / L, j1 = (xb - ox) / L;
+        const Entry<S> en(g, ox, oy, ex, ey, lane_xc.data());
         const I kk = (I){} + (IS)k;
-        for (int y = y0; y <= y1; ++y) {
-          const S dy = (S)y + (S)0.5 - g.my;
-          for (int j = j0; j <= j1; ++j) {
+        for (int y = en.y0; y <= en.y1; ++y) {
+          V by, cyy;
+          const S dy = Entry<S>::row(g, y, by, cyy);
+          // sums over the row of q, q dx, q dx^2; the dy factors are applied once per row
+          V rq = (V){}, rqx = (V){}, rqxx = (V){};
+          for (int j = en.j0; j <= en.j1; ++j) {
             const int v = (y - oy) * NJ + j;
-            const V xs = lane_x[j] + (S)ox;
-            const V dx = xs + (S)0.5 - g.mx;
-            const V sigma = (S)0.5 * (g.a * dx * dx + g.c * dy * dy) + g.b * dx * dy;
-            const I pre = (xs >= (S)xa) & (xs <= (S)xb) & (kk < lst[v]) & (sigma <= g.tau);
+            const I live = en.box[j] & (kk < lst[v]);
+            if (!any(live)) continue;
+            const V sigma = en.sigma(j, by, cyy);
+            const I pre = live & (sigma <= g.tau);
             if (!any(pre)) continue;
-            const V ar = g.o * vexp(-sigma);
+            const V ar = Entry<S>::alpha_raw(g, sigma);
             const I m = pre & (ar >= (S)ALPHA_MIN);
             if (!any(m)) continue;
             const V al = ar < (S)ALPHA_MAX ? ar : (V){} + (S)ALPHA_MAX;
@@ -460,44 +575,45 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
             const V* gp = G.data() + (size_t)v * Cf;
             V vv = (V){};
             for (int c = 0; c < Cf; ++c) {
-              vv += gp[c] * f[c];
-              sums[6 + c] += w * gp[c];
+              vv = vfma(gp[c], (V){} + f[c], vv);
+              sums[6 + c] = vfma(w, gp[c], sums[6 + c]);
             }
             const V g_alpha = Tk * vv - accum[v] * rom;
-            accum[v] += w * vv;
+            accum[v] = vfma(w, vv, accum[v]);
             // no gradient through the 0.99 clamp; q = -dL/dsigma
             const V q = (m & (ar < (S)ALPHA_MAX)) ? g_alpha * ar : (V){};
-            const V qx = q * dx, qy = q * dy;
-            sums[0] += q;
-            sums[1] += qx;
-            sums[2] += qy;
-            sums[3] += qx * dx;
-            sums[4] += qx * dy;
-            sums[5] += qy * dy;
+            const V qx = q * en.dx[j];
+            rq += q;
+            rqx += qx;
+            rqxx = vfma(qx, en.dx[j], rqxx);
           }
+          sums[0] += rq;
+          sums[1] += rqx;
+          sums[2] = vfma(rq, (V){} + dy, sums[2]);
+          sums[3] += rqxx;
+          sums[4] = vfma(rqx, (V){} + dy, sums[4]);
+          sums[5] = vfma(rq, (V){} + dy * dy, sums[5]);
         }
-        S* e = gbuf + (size_t)slot[t0 + k] * NB;
-        for (int b = 0; b < NB; ++b) {
-          S h = 0;
-          for (int l = 0; l < L; ++l) h += sums[b][l];
-          e[b] = h;
-        }
+        hsum(sums.data(), NB, gbuf + (size_t)slot[t0 + k] * NB);
       }
       // entries past every pixel's last contributor got nothing: zero them
       const int64_t n = tile_off[t + 1] - t0;
       for (int64_t k = kmax; k < n; ++k) std::fill_n(gbuf + (size_t)slot[t0 + k] * NB, NB, (S)0);
     }
+    std::vector<S> accv(NB);
 #pragma omp for schedule(static)
     for (int64_t s = 0; s < nv; ++s) {
-      S acc[6] = {0, 0, 0, 0, 0, 0};
-      const int64_t gi = order[s];
-      S* gf = g_feats + gi * Cf;
-      for (int c = 0; c < Cf; ++c) gf[c] = 0;
-      for (int64_t k = goff[s]; k < goff[s + 1]; ++k) {  // this Gaussian's entries: contiguous
-        const S* e = gbuf + (size_t)k * NB;
-        for (int j = 0; j < 6; ++j) acc[j] += e[j];
-        for (int c = 0; c < Cf; ++c) gf[c] += e[6 + c];
+      // summed locally, written once (read-modify-write of the output stalled on store forwarding)
+      S* acc = accv.data();
+      const S* e0 = gbuf + (size_t)goff[s] * NB;
+      const int64_t ne = goff[s + 1] - goff[s];  // this Gaussian's entries: contiguous
+      for (int j = 0; j < NB; ++j) {  // a register sum per quantity (no store-to-load round trips)
+        S h = 0;
+        for (int64_t k = 0; k < ne; ++k) h += e0[k * NB + j];
+        acc[j] = h;
       }
+      const int64_t gi = order[s];
+      std::copy_n(acc + 6, Cf, g_feats + gi * Cf);
       const Rec<S>& g = recs[s];
       g_means2d[2 * gi] = g.a * acc[1] + g.b * acc[2];
       g_means2d[2 * gi + 1] = g.b * acc[1] + g.c * acc[2];
