@@ -16,12 +16,12 @@ from cyclist_formats.instances import RIDER_ID
 from splatting.bike.model import KEYPOINTS as BIKE_KEYPOINTS
 from splatting.cyclist.assets import bike_dir, load_avatar, load_bike
 from splatting.cyclist.compose import Cyclist
-from splatting.cyclist.render import keypoint_visibility, orbit_camera, over, project_points
-from splatting.cyclist.scene_render import MASK_ALPHA, full_frame, render_scene
+from splatting.cyclist.render import keypoint_visibility, orbit_camera, over, project_points, to_uint8
+from splatting.cyclist.scene_render import MASK_ALPHA, render_scene, union
 from splatting.dataset import camera_presets, kitti
 from splatting.dataset.backgrounds import contact_shadows, generated, load_scene, photo
 from splatting.dataset.config import POSE_KEYS
-from splatting.dataset.labels import annotation, vehicle_class
+from splatting.dataset.labels import BoxMask, annotation, vehicle_class
 from splatting.dataset.person_keypoints import COCO17_TOLERANCE_M, PersonKeypoints, RecordingAvatar
 from splatting.dataset.street import draw_street
 from splatting.gaussians.container import Gaussians
@@ -127,9 +127,37 @@ def projected_extent(points, cam):
     return [float(uv[:, 0].min()), float(uv[:, 1].min()), float(uv[:, 0].max()), float(uv[:, 1].max())]
 
 
-def _bbox_xyxy(mask):
-    ys, xs = np.nonzero(mask)
-    return [float(xs.min()), float(ys.min()), float(xs.max() + 1), float(ys.max() + 1)]
+def box_mask(label, box, slot):
+    """BoxMask of the pixels labelled slot inside box (u0, v0, w, h): a slot's pixels lie in its box."""
+    u0, v0, w, h = box
+    return BoxMask(label[v0:v0 + h, u0:u0 + w] == slot, u0, v0)
+
+
+def amodal_mask(entry, box, visible):
+    """BoxMask in box of a render_scene amodal entry ((alpha crop, (u0, v0)) inside box, or None)
+    thresholded at MASK_ALPHA, united with the visible mask (same box)."""
+    m = visible.crop.copy()
+    if entry is not None:
+        a, (au, av) = entry
+        u, v = au - box[0], av - box[1]
+        m[v:v + a.shape[0], u:u + a.shape[1]] |= a > MASK_ALPHA
+    return BoxMask(m, visible.u0, visible.v0)
+
+
+def mask_or(a, b):
+    """Union of two BoxMasks of the same box."""
+    return BoxMask(a.crop | b.crop, a.u0, a.v0)
+
+
+def over_in_box(layers, background, box):
+    """over() where the render has pixels (box; outside it alpha is 0, so the background shows
+    unchanged: the same bytes as over() on the whole image, for 1/10 of the work)."""
+    out = to_uint8(background)
+    if box is not None:
+        u0, v0, w, h = box
+        sl = np.s_[v0:v0 + h, u0:u0 + w]
+        out[sl] = over({"rgb": layers["rgb"][sl], "alpha": layers["alpha"][sl]}, background[sl])
+    return out
 
 
 def make_sample(cfg, index, assets):
@@ -190,7 +218,8 @@ def make_sample(cfg, index, assets):
         L = render_scene(Gaussians.cat(parts), torch.cat(slots), n_slots, cam, range(1, n_slots), cfg["amodal_max_px"])
     else:
         L = {"rgb": np.zeros((H, W, 3), np.float32), "alpha": np.zeros((H, W), np.float32),
-             "depth": np.zeros((H, W), np.float32), "label": np.full((H, W), -1, np.int16), "amodal": {}}
+             "depth": np.zeros((H, W), np.float32), "label": np.full((H, W), -1, np.int16), "amodal": {},
+             "boxes": []}
     bg_rec = dict(d["background"])
     if bg_kind == "images":
         bg, rec = photo(b["image_files"], d["background"]["seed"], W, H)
@@ -199,7 +228,7 @@ def make_sample(cfg, index, assets):
         bg = np.zeros((H, W, 3), np.float32)
     else:
         bg = generated(bg_kind, d["background"]["seed"], W, H)
-    rgb = over(L, bg)
+    rgb = over_in_box(L, bg, union(L.get("boxes", [])))
 
     K, R, T = cam.K.double().numpy(), cam.R.double().numpy(), cam.T.double().numpy()
     # the depth test compares with the surface seen through the keypoint's whole pixel, whose
@@ -208,9 +237,10 @@ def make_sample(cfg, index, assets):
     anns, kitti_objs = [], []
     for k, (inst, frame, person) in enumerate(frames):
         sb, sr = 2 * k + 1, 2 * k + 2
-        vis_b, vis_r = L["label"] == sb, L["label"] == sr
-        am_b = (full_frame(L["amodal"].get(sb), W, H) > MASK_ALPHA) | vis_b
-        am_r = (full_frame(L["amodal"].get(sr), W, H) > MASK_ALPHA) | vis_r
+        box = union([L["boxes"][sb], L["boxes"][sr]]) or (0, 0, 1, 1)
+        vis_b, vis_r = box_mask(L["label"], box, sb), box_mask(L["label"], box, sr)
+        am_b = amodal_mask(L["amodal"].get(sb), box, vis_b)
+        am_r = amodal_mask(L["amodal"].get(sr), box, vis_r)
         g = frame.gaussians
         dense = (g.opacities >= 0.1).numpy()
         is_r = (frame.ids == RIDER_ID).numpy()
@@ -240,14 +270,14 @@ def make_sample(cfg, index, assets):
             inst_anns.append(annotation("rider", vis_r, am_r, ext_r, W, H, np.column_stack([uvr, visr]), extra))
             ext_c = [min(ext_b[0], ext_r[0]), min(ext_b[1], ext_r[1]), max(ext_b[2], ext_r[2]), max(ext_b[3], ext_r[3])]
             combined = lab["combined"][vclass]
-            a_c = annotation(combined, vis_b | vis_r, am_b | am_r, ext_c, W, H, None, extra)
+            a_c = annotation(combined, mask_or(vis_b, vis_r), mask_or(am_b, am_r), ext_c, W, H, None, extra)
             inst_anns.append(a_c)
-            main, main_am, ktype = a_c, am_b | am_r, kitti.KITTI_TYPES[combined]
+            main, main_am, ktype = a_c, mask_or(am_b, am_r), kitti.KITTI_TYPES[combined]
         else:
             main, main_am, ktype = a_b, am_b, kitti.KITTI_TYPES["parked"]
         anns += [a for a in inst_anns if a is not None]
         if main is not None:
-            x0, y0, x1, y1 = _bbox_xyxy(main_am)
+            x0, y0, x1, y1 = main_am.bbox_xyxy()
             kitti_objs.append({"type": ktype, "truncated": main["truncation"], "occluded": main["occlusion"],
                                "alpha": alpha, "x1": x0, "y1": y0, "x2": x1, "y2": y1,
                                "h": bx["h"], "w": bx["w"], "l": bx["l"], "x": loc[0], "y": loc[1], "z": loc[2],
