@@ -80,8 +80,9 @@ def _decoded(path, width, height):
 
 
 def photo(files, seed, width, height):
-    """(height, width, 3) float32: one of the files, scaled to cover and cropped (from the seed);
-    also returns {"file", "crop"} for the image record."""
+    """(height, width, 3) uint8 (the photo's own bytes: no float round trip for the pixels no
+    cyclist covers): one of the files, scaled to cover and cropped (from the seed); also returns
+    {"file", "crop"} for the image record."""
     from PIL import Image
     rng = np.random.default_rng(seed)
     path = files[int(rng.integers(len(files)))]
@@ -97,7 +98,7 @@ def photo(files, seed, width, height):
     out = im.resize((int(width), int(height)), Image.BILINEAR, box=(x0, y0, x0 + cw, y0 + ch))
     rec = {"file": os.path.basename(path), "crop_xywh_source": [round(x0 * w0 / w, 2), round(y0 * h0 / h, 2),
                                                                 round(cw * w0 / w, 2), round(ch * h0 / h, 2)]}
-    return np.asarray(out, dtype=np.float32) / 255.0, rec
+    return np.asarray(out, dtype=np.uint8), rec
 
 
 def euler_matrix(rotation_deg):

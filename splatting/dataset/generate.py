@@ -151,12 +151,15 @@ def mask_or(a, b):
 
 def over_in_box(layers, background, box):
     """over() where the render has pixels (box; outside it alpha is 0, so the background shows
-    unchanged: the same bytes as over() on the whole image, for 1/10 of the work)."""
-    out = to_uint8(background)
+    unchanged: the same bytes as over() on the whole image, for 1/10 of the work).  background:
+    float in [0, 1] or uint8 (a photo: read as x / 255)."""
+    photo_bytes = background.dtype == np.uint8
+    out = background.copy() if photo_bytes else to_uint8(background)
     if box is not None:
         u0, v0, w, h = box
         sl = np.s_[v0:v0 + h, u0:u0 + w]
-        out[sl] = over({"rgb": layers["rgb"][sl], "alpha": layers["alpha"][sl]}, background[sl])
+        bg = background[sl].astype(np.float32) / 255.0 if photo_bytes else background[sl]
+        out[sl] = over({"rgb": layers["rgb"][sl], "alpha": layers["alpha"][sl]}, bg)
     return out
 
 
