@@ -21,6 +21,7 @@ PERSON_KEYPOINTS = ("coco17", "smpl24")
 LABEL_FORMATS = ("coco", "kitti")
 from cyclist_formats.pose import POSE_FIELDS as POSE_KEYS  # config keys are the contract's field names
 from splatting.dataset.camera_presets import DEFAULTS as CAMERA_DEFAULTS
+from splatting.cyclist.lod import DEFAULT_COMPENSATE as LOD_COMPENSATE, DEFAULT_LEVELS as LOD_LEVELS
 from splatting.dataset.labels import DEFAULT_COMBINED, DEFAULT_NAMES, VEHICLES
 
 DEFAULTS = {
@@ -56,6 +57,9 @@ DEFAULTS = {
     "depth_maps": False,
     "amodal_max_px": None,               # amodal masks of larger parts at reduced resolution (speed)
     "png_compress_level": 4,
+    # level of detail (splatting/cyclist/lod.py): instances shorter than a level's below_px on
+    # screen are rendered with `keep` of their Gaussians; off by default, on in the street preset
+    "lod": {"enabled": False, "levels": copy.deepcopy(LOD_LEVELS), "compensate": LOD_COMPENSATE},
 }
 
 
@@ -224,6 +228,27 @@ def _validate_street(cfg):
         raise _err("amodal_max_px", f"expected null or an integer >= 32, got {a!r}")
     if not isinstance(cfg["depth_maps"], bool):
         raise _err("depth_maps", f"expected true or false, got {cfg['depth_maps']!r}")
+    _validate_lod(cfg["lod"])
+
+
+def _validate_lod(lod):
+    if not isinstance(lod["enabled"], bool):
+        raise _err("lod.enabled", f"expected true or false, got {lod['enabled']!r}")
+    if not (_num(lod["compensate"]) and 0 <= lod["compensate"] <= 2):
+        raise _err("lod.compensate", f"expected a number within [0, 2], got {lod['compensate']!r}")
+    lv = lod["levels"]
+    if not isinstance(lv, list):
+        raise _err("lod.levels", f"expected a list of {{below_px, keep}}, got {lv!r}")
+    for i, x in enumerate(lv):
+        if not (isinstance(x, dict) and set(x) == {"below_px", "keep"}):
+            raise _err(f"lod.levels[{i}]", f"expected {{below_px: PIXELS, keep: SHARE}}, got {x!r}")
+        if not (_num(x["below_px"]) and x["below_px"] > 0):
+            raise _err(f"lod.levels[{i}].below_px", f"expected a positive number, got {x['below_px']!r}")
+        if not (_num(x["keep"]) and 0 < x["keep"] <= 1):
+            raise _err(f"lod.levels[{i}].keep", f"expected a share within (0, 1], got {x['keep']!r}")
+    by_h = sorted(lv, key=lambda x: -x["below_px"])
+    if any(b["keep"] > a["keep"] for a, b in zip(by_h, by_h[1:])):
+        raise _err("lod.levels", "a level for shorter instances must not keep more Gaussians")
 
 
 def resolve_assets(cfg):

@@ -14,6 +14,7 @@ import torch
 from cyclist_formats.atomic import atomic_path, write_json
 from cyclist_formats.instances import RIDER_ID
 from splatting.bike.model import KEYPOINTS as BIKE_KEYPOINTS
+from splatting.cyclist import lod
 from splatting.cyclist.assets import bike_dir, load_avatar, load_bike
 from splatting.cyclist.compose import Cyclist
 from splatting.cyclist.render import keypoint_visibility, orbit_camera, over, project_points, to_uint8
@@ -34,6 +35,7 @@ class Assets:
         self.cfg, self.log = cfg, log
         self.bikes, self.avatars, self.cyclists, self.persons = {}, {}, {}, {}
         self._scene = None
+        self.lod_orders = {}
 
     def cyclist(self, bike, rider):
         key = (bike, rider)
@@ -54,6 +56,14 @@ class Assets:
                 av = self.avatars[rider]
             self.cyclists[key] = Cyclist(self.bikes[bike], av, c["ik_iterations"])
         return self.cyclists[key]
+
+    def lod_order(self, bike, rider, g, ids):
+        """The level-of-detail ranking of a (bike, rider)'s posed Gaussians (pose does not change
+        opacities or scales, so it is computed once)."""
+        key = (bike, rider)
+        if key not in self.lod_orders:
+            self.lod_orders[key] = lod.ranking(g, ids)
+        return self.lod_orders[key]
 
     def meta(self, bike):
         return getattr(self.bikes[bike], "meta", None) or {}
@@ -125,6 +135,12 @@ def projected_extent(points, cam):
         return [0.0, 0.0, 0.0, 0.0]
     uv = uv[ok]
     return [float(uv[:, 0].min()), float(uv[:, 1].min()), float(uv[:, 0].max()), float(uv[:, 1].max())]
+
+
+def _height_px(box, cam):
+    """Screen height of an extent_box (its bottom centre's camera depth; upright instances)."""
+    z = float((cam.R.double() @ torch.tensor(box["bottom_centre"], dtype=torch.float64) + cam.T.double())[2])
+    return lod.height_px(box["h"], z, cam.K[1, 1]) if z > 1e-3 else float("inf")
 
 
 def box_mask(label, box, slot):
@@ -200,12 +216,20 @@ def make_sample(cfg, index, assets):
     H, W = cam.height, cam.width
     bg_kind = d["background"]["kind"]
 
-    parts, slots, boxes = [], [], []
+    parts, slots, boxes, keeps = [], [], [], []
+    lod_cfg = cfg["lod"]
     for k, (inst, frame, _) in enumerate(frames):
         g = frame.gaussians
+        slot = torch.where(frame.ids == RIDER_ID, 2 * k + 2, 2 * k + 1).long()
+        boxes.append(extent_box(g, inst["pose"]))  # labels come from the full model, LOD or not
+        if lod_cfg["enabled"]:
+            keeps.append(lod.level_keep(_height_px(boxes[-1], cam), lod_cfg["levels"]))
+            if keeps[-1] < 1.0:
+                g, idx = lod.reduce(g, assets.lod_order(inst["bike"], inst["rider"], g, frame.ids), keeps[-1],
+                                    lod_cfg["compensate"], frame.ids)
+                slot = slot.index_select(0, idx)
         parts.append(g)
-        slots.append(torch.where(frame.ids == RIDER_ID, 2 * k + 2, 2 * k + 1).long())
-        boxes.append(extent_box(g, inst["pose"]))
+        slots.append(slot)
     b = cfg["backgrounds"]
     if b["shadow"] and bg_kind in ("images", "scene") and frames:
         sh = contact_shadows([(inst["pose"][5], inst["pose"][7], inst["pose"][3], bx["l"], bx["w"])
@@ -295,6 +319,9 @@ def make_sample(cfg, index, assets):
              "pose_fields": list(POSE_KEYS), "camera": cam_rec, "background": bg_rec}
     if street:
         image["dropped_placements"] = d["dropped"]
+    if keeps:  # the level each instance was rendered at (share of its Gaussians)
+        for rec, keep in zip(image["instances"], keeps):
+            rec["lod_keep"] = keep
     else:
         inst, frame, _ = frames[0]
         image.update(bike=inst["bike"], rider=inst["rider"], pose=inst["pose"])
