@@ -80,7 +80,7 @@ def quality_table(cfg, bike, rider, compensate=None, heights=HEIGHTS_PX, keeps=K
     cyc = assets.cyclist(bike, rider)
     spec = camera_presets.resolve(dict(cfg["camera"], preset="nuscenes", scale=1.0))
     cam = camera_presets.street_camera(spec)
-    base = [90.0, 5.0, 0.0, -90.0, 0.0, 0.0, 0.0, 10.0]  # crossing the road, left to right
+    base = [90.0, 5.0, 0.0, 180.0, 0.0, 0.0, 0.0, 10.0]  # side-on: crossing the road towards image-right
     f0 = cyc.pose(torch.tensor(base, dtype=torch.float64))[0]
     h_m = extent_box(f0.gaussians, base)["h"]
     order = lod.ranking(f0.gaussians, f0.ids)

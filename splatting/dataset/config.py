@@ -21,6 +21,7 @@ PERSON_KEYPOINTS = ("coco17", "smpl24")
 LABEL_FORMATS = ("coco", "kitti")
 from cyclist_formats.pose import POSE_FIELDS as POSE_KEYS  # config keys are the contract's field names
 from splatting.dataset.camera_presets import DEFAULTS as CAMERA_DEFAULTS
+from splatting.cyclist.appearance import RECOLOUR
 from splatting.cyclist.lod import DEFAULT_COMPENSATE as LOD_COMPENSATE, DEFAULT_LEVELS as LOD_LEVELS
 from splatting.dataset.labels import DEFAULT_COMBINED, DEFAULT_NAMES, VEHICLES
 
@@ -60,6 +61,11 @@ DEFAULTS = {
     # level of detail (splatting/cyclist/lod.py): instances shorter than a level's below_px on
     # screen are rendered with `keep` of their Gaussians; off by default, on in the street preset
     "lod": {"enabled": False, "levels": copy.deepcopy(LOD_LEVELS), "compensate": LOD_COMPENSATE},
+    # appearance variety (splatting/cyclist/appearance.py): per instance, new colours for the listed
+    # regions (HSV: any hue, saturation and value in the ranges; each region kept as trained with
+    # keep_share) and a gain: brightness x white balance (+-white_balance per channel)
+    "appearance": {"enabled": False, "regions": list(RECOLOUR), "keep_share": 0.25, "saturation": [0.15, 0.9],
+                   "value": [0.12, 0.95], "brightness": [0.75, 1.25], "white_balance": 0.08},
 }
 
 
@@ -229,6 +235,22 @@ def _validate_street(cfg):
     if not isinstance(cfg["depth_maps"], bool):
         raise _err("depth_maps", f"expected true or false, got {cfg['depth_maps']!r}")
     _validate_lod(cfg["lod"])
+    _validate_appearance(cfg["appearance"])
+
+
+def _validate_appearance(a):
+    if not isinstance(a["enabled"], bool):
+        raise _err("appearance.enabled", f"expected true or false, got {a['enabled']!r}")
+    r = a["regions"]
+    if not (isinstance(r, list) and all(x in RECOLOUR for x in r)):
+        raise _err("appearance.regions", f"expected a list of {', '.join(RECOLOUR)}, got {r!r}")
+    for f, lo, hi in (("keep_share", 0, 1), ("white_balance", 0, 0.5)):
+        if not (_num(a[f]) and lo <= a[f] <= hi):
+            raise _err(f"appearance.{f}", f"expected a number within [{lo}, {hi}], got {a[f]!r}")
+    cfg = {"appearance": a}
+    _range(cfg, "appearance.saturation", 0, 1)
+    _range(cfg, "appearance.value", 0, 1)
+    _range(cfg, "appearance.brightness", 0.05, 4)
 
 
 def _validate_lod(lod):

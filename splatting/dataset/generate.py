@@ -14,7 +14,7 @@ import torch
 from cyclist_formats.atomic import atomic_path, write_json
 from cyclist_formats.instances import RIDER_ID
 from splatting.bike.model import KEYPOINTS as BIKE_KEYPOINTS
-from splatting.cyclist import lod
+from splatting.cyclist import appearance, lod
 from splatting.cyclist.assets import bike_dir, load_avatar, load_bike
 from splatting.cyclist.compose import Cyclist
 from splatting.cyclist.render import keypoint_visibility, orbit_camera, over, project_points, to_uint8
@@ -35,7 +35,7 @@ class Assets:
         self.cfg, self.log = cfg, log
         self.bikes, self.avatars, self.cyclists, self.persons = {}, {}, {}, {}
         self._scene = None
-        self.lod_orders = {}
+        self.lod_orders, self.bodies, self.looks = {}, {}, {}
 
     def cyclist(self, bike, rider):
         key = (bike, rider)
@@ -49,6 +49,7 @@ class Assets:
                 if rider not in self.avatars:
                     avatar, body = load_avatar(rider, c["riders_root"], c["synthetic_assets"],
                                                c["rider_gaussians"], log=self.log)
+                    self.bodies[rider] = body
                     # the recorder hands the IK's pose to the COCO-17 mesh keypoints
                     self.avatars[rider] = RecordingAvatar(avatar)
                     if c["keypoints"]["person"] == "coco17":
@@ -64,6 +65,25 @@ class Assets:
         if key not in self.lod_orders:
             self.lod_orders[key] = lod.ranking(g, ids)
         return self.lod_orders[key]
+
+    def look_inputs(self, bike, rider, frame):
+        """What appearance.apply_look needs of a (bike, rider), computed once: the rider Gaussians'
+        clothing regions and colours, the bike's paint Gaussians and reference colour."""
+        key = (bike, rider)
+        if key not in self.looks:
+            out = {}
+            if rider is not None:
+                body = self.bodies[rider]
+                out.update(rider_reg=appearance.rider_regions(self.avatars[rider].gaussians.means, body),
+                           rider_colors=body.spec["colors"])
+            paint = (self.meta(bike).get("spec") or {}).get("frame_colour")
+            if paint is not None:
+                m = appearance.paint_mask(frame.gaussians.sh, frame.ids, paint)
+                if bool(m.any()):
+                    ref = appearance.dc_rgb(frame.gaussians.sh[m]).median(0).values
+                    out.update(paint=m, paint_rgb=ref.numpy())
+            self.looks[key] = out
+        return self.looks[key]
 
     def meta(self, bike):
         return getattr(self.bikes[bike], "meta", None) or {}
@@ -218,10 +238,16 @@ def make_sample(cfg, index, assets):
 
     parts, slots, boxes, keeps = [], [], [], []
     lod_cfg = cfg["lod"]
+    looks = []
     for k, (inst, frame, _) in enumerate(frames):
         g = frame.gaussians
         slot = torch.where(frame.ids == RIDER_ID, 2 * k + 2, 2 * k + 1).long()
         boxes.append(extent_box(g, inst["pose"]))  # labels come from the full model, LOD or not
+        if cfg["appearance"]["enabled"]:
+            look, gain = appearance.draw_look(cfg, cfg["seed"], index, k)
+            g = appearance.apply_look(g, frame.ids, look, gain, **assets.look_inputs(inst["bike"], inst["rider"], frame))
+            looks.append({"colours": {r: None if c is None else [round(float(x), 4) for x in c] for r, c in look.items()},
+                          "gain": [round(float(x), 4) for x in gain]})
         if lod_cfg["enabled"]:
             keeps.append(lod.level_keep(_height_px(boxes[-1], cam), lod_cfg["levels"]))
             if keeps[-1] < 1.0:
@@ -319,6 +345,8 @@ def make_sample(cfg, index, assets):
              "pose_fields": list(POSE_KEYS), "camera": cam_rec, "background": bg_rec}
     if street:
         image["dropped_placements"] = d["dropped"]
+    for rec, look in zip(image["instances"], looks):  # the sampled look: None = kept
+        rec["appearance"] = look
     if keeps:  # the level each instance was rendered at (share of its Gaussians)
         for rec, keep in zip(image["instances"], keeps):
             rec["lod_keep"] = keep
