@@ -2,12 +2,12 @@
 
 A cyclist 40 m away is ~30 px tall; its ~20-70k Gaussians then share a few hundred pixels and most
 of them change nothing a detector could see.  Each asset's Gaussians are ranked once by an
-importance, opacity x the area of the two largest axes (what a Gaussian covers on screen, seen
-side-on), ties broken by a fixed random permutation (so equal-sized Gaussians, e.g. a mesh
+importance, opacity x the largest scale (measured against opacity alone, x area and x volume),
+ties broken by a fixed random permutation (so equal-sized Gaussians, e.g. a mesh
 avatar's, thin out evenly over the body instead of by index), each part on its own (see ranking).  Level `keep` = the top
 ceil(keep N) of the ranking, so a smaller level is a subset of a larger one; the kept Gaussians'
-scales grow by sqrt(total importance / kept importance) ** compensate, so the covered area stays
-about the same (compensate = 0: plain top-k).  Which level an instance gets follows its height on
+scales grow by (total importance / kept importance) ** (compensate / 2), per part, so the level
+covers about what the full part covers (compensate = 0: plain top-k; 1 measured best).  Which level an instance gets follows its height on
 screen: the level with the smallest `below_px` above the instance's pixel height (config
 `lod.levels`; bench/lod.py measures box PSNR and mask IoU per level and height and chose the
 defaults).
@@ -18,14 +18,14 @@ from dataclasses import replace
 import torch
 
 # measured by bench/lod.py (docs/street_scenes.md): each level costs <= 0.5 dB box PSNR below its height
-DEFAULT_LEVELS = [{"below_px": 45, "keep": 0.5}, {"below_px": 20, "keep": 0.25}]
+DEFAULT_LEVELS = [{"below_px": 55, "keep": 0.7}, {"below_px": 45, "keep": 0.5}]
 DEFAULT_COMPENSATE = 1.0
 
 
 def importance(g):
-    """(N,) opacity x product of the two largest scales."""
-    s = g.log_scales.sort(1, descending=True).values
-    return torch.sigmoid(g.opacity_logits) * torch.exp(s[:, 0] + s[:, 1])
+    """(N,) opacity x the largest scale (bench/lod.py: on a trained bike this keeps thin tubes and
+    spokes far better than opacity x area or x volume, which favour the big, blurry Gaussians)."""
+    return torch.sigmoid(g.opacity_logits) * torch.exp(g.log_scales.max(1).values)
 
 
 def ranking(g, groups=None, seed=0):
