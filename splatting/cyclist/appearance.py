@@ -78,20 +78,22 @@ def paint_mask(sh, ids, paint_rgb, part_ids=(1, 2)):
     return on_part & (sat >= PAINT_MIN_SAT) & (dh.abs() <= PAINT_HUE_DEG)
 
 
-def recolour(sh, mask, reference_rgb, target_rgb):
+def recolour(sh, mask, reference_rgb, target_rgb, out=None):
     """SH (N, K, 3) with the Gaussians of mask turned from the reference colour to the target,
-    shading kept (module docstring).  Returns a new tensor; unmasked rows are untouched."""
-    out = sh.clone()
+    shading kept (module docstring).  Writes into out (a copy of sh when None) and returns it;
+    unmasked rows are untouched."""
+    out = sh.clone() if out is None else out
     if not bool(mask.any()):
         return out
     ref = torch.as_tensor(np.asarray(reference_rgb, float), dtype=sh.dtype)
     tgt = torch.as_tensor(np.asarray(target_rgb, float), dtype=sh.dtype)
     lref = float(_lum(ref)) + 1e-3
-    shade = (_lum(dc_rgb(sh[mask]).clamp_min(0)).to(sh.dtype) / lref).clamp(0.0, 2.0)
-    new = shade[:, None] * tgt[None]
-    out[mask, 0] = (new - 0.5) / C0
+    rows = sh[mask]
+    shade = (_lum(dc_rgb(rows).clamp_min(0)).to(sh.dtype) / lref).clamp(0.0, 2.0)
+    rows[:, 0] = (shade[:, None] * tgt[None] - 0.5) / C0
     if sh.shape[1] > 1:
-        out[mask, 1:] = sh[mask, 1:] * ((float(_lum(tgt)) + 1e-3) / lref)
+        rows[:, 1:] *= (float(_lum(tgt)) + 1e-3) / lref
+    out[mask] = rows
     return out
 
 
@@ -125,7 +127,7 @@ def apply_look(g, ids, look, gain, rider_reg=None, rider_colors=None, paint=None
     from dataclasses import replace
 
     from cyclist_formats.instances import RIDER_ID
-    sh = g.sh
+    sh = g.sh * 1.0  # one copy, recoloured in place (regions do not overlap)
     if rider_reg is not None:
         from splatting.rider.body import REGIONS
         is_r = torch.as_tensor(ids).long() == RIDER_ID
@@ -133,7 +135,7 @@ def apply_look(g, ids, look, gain, rider_reg=None, rider_colors=None, paint=None
         full_reg[is_r] = rider_reg
         for region in ("top", "bottom", "shoes", "helmet"):
             if look.get(region) is not None:
-                sh = recolour(sh, full_reg == REGIONS.index(region), _hex_rgb(rider_colors[region]), look[region])
+                recolour(g.sh, full_reg == REGIONS.index(region), _hex_rgb(rider_colors[region]), look[region], sh)
     if paint is not None and look.get("paint") is not None:
-        sh = recolour(sh, paint, paint_rgb, look["paint"])
+        recolour(g.sh, paint, paint_rgb, look["paint"], sh)
     return replace(g, sh=apply_gain(sh, gain))

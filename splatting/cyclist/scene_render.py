@@ -41,15 +41,16 @@ def slot_boxes(means, scales, slots, n_slots, camera, near=0.01):
     projected mean (J the EWA Jacobian), plus the low-pass margin; the rasterizer culls means at
     z <= near, so they are left out here too."""
     H, W = camera.height, camera.width
-    p = means.double() @ camera.R.double().T + camera.T.double()
+    p = means.float() @ camera.R.float().T + camera.T.float()
     z = p[:, 2]
     ok = z > near
     zs = torch.where(ok, z, torch.ones_like(z))
     K = camera.K.double()
     x, y = p[:, 0] / zs, p[:, 1] / zs
-    u, v = K[0, 0] * x + K[0, 2], K[1, 1] * y + K[1, 2]
-    r = 3.0 * scales.max(1).values.double() / zs * torch.sqrt(1 + x * x + y * y)
-    ru, rv = K[0, 0] * r + BOX_MARGIN_PX, K[1, 1] * r + BOX_MARGIN_PX
+    u, v = float(K[0, 0]) * x + float(K[0, 2]), float(K[1, 1]) * y + float(K[1, 2])
+    r = 3.0 * scales.max(1).values.float() / zs * torch.sqrt(1 + x * x + y * y)
+    # + 0.5 px for float32 rounding of pixel coordinates up to ~1e4
+    ru, rv = float(K[0, 0]) * r + BOX_MARGIN_PX + 0.5, float(K[1, 1]) * r + BOX_MARGIN_PX + 0.5
     inf = torch.full_like(u, math.inf)
     idx = slots.long()
     lo = lambda a: torch.full((n_slots,), math.inf, dtype=a.dtype).scatter_reduce(0, idx, a, "amin")  # noqa: E731

@@ -136,15 +136,15 @@ def extent_box(g, pose, min_opacity=0.1):
     the masks, whose threshold is alpha 0.5."""
     o = g.opacities
     keep = o >= min_opacity
-    m = g.means[keep].double().numpy()
-    oo = o[keep].double().clamp_max(0.99).numpy()
-    r = (g.scales[keep].max(1).values.double().numpy() * np.sqrt(np.maximum(2 * np.log(2 * oo), 0.0)))[:, None]
-    t = np.asarray(pose[5:8], float)
+    m = g.means[keep].double()
+    oo = o[keep].double().clamp_max(0.99)
+    r = (g.scales[keep].max(1).values.double() * torch.sqrt(torch.clamp_min(2 * torch.log(2 * oo), 0.0)))[:, None]
+    t = torch.tensor(pose[5:8], dtype=torch.float64)
     R = _ry(pose[3])
-    local = (m - t) @ R  # R^T (p - t) for row vectors
-    lo, hi = (local - r).min(0), (local + r).max(0)
+    local = (m - t) @ torch.from_numpy(R)  # R^T (p - t) for row vectors
+    lo, hi = (local - r).min(0).values.numpy(), (local + r).max(0).values.numpy()
     bottom = np.array([(lo[0] + hi[0]) / 2, lo[1], (lo[2] + hi[2]) / 2])
-    return {"bottom_centre": (R @ bottom + t).tolist(), "heading_deg": float(pose[3]),
+    return {"bottom_centre": (R @ bottom + np.asarray(pose[5:8], float)).tolist(), "heading_deg": float(pose[3]),
             "h": float(hi[1] - lo[1]), "w": float(hi[2] - lo[2]), "l": float(hi[0] - lo[0])}
 
 
