@@ -14,9 +14,9 @@ pixels (what an anti-aliased camera would see of the model).
 Thresholds: a level is allowed below the largest measured height up to which its drop stays
 <= 0.5 dB at every measured height; `chosen_levels` are those, `lod_psnr_drop_db` the largest drop
 at the thresholds in force (splatting.cyclist.lod.DEFAULT_LEVELS unless --levels-from-table).
-Speed: `lod_speedup` = median seconds per street image (the street bench's config: nuScenes,
-1-6 cyclists, photo backgrounds, annotations) with LOD off / with the default LOD, the same
-images interleaved, one thread.  Chart: docs/img/lod_chart.png with --chart.
+Speed: `lod_speedup` = median CPU seconds per street image (the street bench's config: nuScenes,
+1-6 cyclists, photo backgrounds, annotations; make_sample, no file writing) with LOD off / with
+the default LOD, the same images interleaved, one thread.  Chart: docs/img/lod_chart.png with --chart.
 Run alone: `python -m bench.lod [--out DIR] [--images N] [--chart PNG]`.
 """
 import argparse
@@ -142,7 +142,7 @@ def drop_at(rows, levels):
 
 
 def speed(cfg, n, log=print):
-    """Median seconds per street image with LOD off and on (the same images, interleaved)."""
+    """Median CPU seconds per street image with LOD off and on (the same images, interleaved)."""
     import torch
     from splatting.dataset.config import resolve_assets, validate
     from splatting.dataset.generate import Assets, make_sample
@@ -155,9 +155,9 @@ def speed(cfg, n, log=print):
     t_on, t_off = [], []
     for i in range(n):
         for c, a, ts in ((off, a_off, t_off), (on, a_on, t_on)):
-            t = time.perf_counter()
+            t = time.process_time()  # CPU seconds (one thread): the shared machine's load stays out
             make_sample(c, i, a)
-            ts.append(time.perf_counter() - t)
+            ts.append(time.process_time() - t)
         log(f"lod: image {i}: off {t_off[-1]:.2f} s, on {t_on[-1]:.2f} s")
     return statistics.median(t_off), statistics.median(t_on)
 
@@ -193,7 +193,7 @@ def chart(rows, levels, png, times=None):
         a.legend(fontsize=7)
     if times:
         fig.suptitle(f"street image (nuScenes 1600x900, 1-6 cyclists): {times[0]:.2f} s without LOD, "
-                     f"{times[1]:.2f} s with the default levels (median, shared cores)", fontsize=9)
+                     f"{times[1]:.2f} s with the default levels (median CPU s per image)", fontsize=9)
     fig.tight_layout()
     os.makedirs(os.path.dirname(os.path.abspath(png)), exist_ok=True)
     with atomic_path(png) as tmp:
