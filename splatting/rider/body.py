@@ -25,7 +25,7 @@ import torch
 
 from cyclist_formats.errors import UserError
 from splatting import paths
-from splatting.rider.kinematics import JOINT_INDEX, JOINT_NAMES, PARENTS, forward_kinematics
+from splatting.rider.kinematics import JOINT_INDEX, JOINT_NAMES, forward_kinematics
 
 CACHE_DIR = paths.DATA / "anny_cache"
 ROOT = paths.ROOT
