@@ -30,6 +30,7 @@ STAGES = {
     "rider": ("bench.rider", lambda m, r, out: m.run(r, out)),
     "dataset": ("bench.dataset", lambda m, r, out: m.run(r, out)),
     "street": ("bench.street", lambda m, r, out: m.run(r, out)),
+    "lod": ("bench.lod", lambda m, r, out: m.run(r, out, chart_png=os.path.join(out, "lod_chart.png"))),
     "bike_relit": ("bench.relight", lambda m, r, out: m.run(r, out)),
     "library": ("bench.library", lambda m, r, out: m.run(r, out)),  # library_build_s, dataset_ray_overhead
 }
@@ -55,6 +56,7 @@ TARGETS = {
     "rider_gt": "IoU ≥ 0.9, PSNR ≥ 24 dB (means)",
     "dataset_images_per_hour": "≥ 60000 (issue 14)",
     "street_images_per_hour": "≥ 3000 (nuScenes 1600x900, 1-6 cyclists, photo backgrounds)",
+    "lod_psnr_drop_db": "≤ 0.5 dB",
     "bike_relit": "box PSNR ≥ 30 dB, IoU ≥ 0.97 (means)",
     "relight_render_overhead": "≤ 0.2",
     "dataset_ray_overhead": "< 0.1",

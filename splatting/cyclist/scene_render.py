@@ -6,27 +6,23 @@ per instance: bike then rider).  The image is rasterized once for all slots with
 one-hot as feature channels, so nearer Gaussians hide farther ones whatever instance they belong
 to, and each feature channel is that slot's summed compositing weight w = alpha T per pixel.  The
 label of a pixel is the slot with the largest weight, -1 where alpha <= 0.5.  Amodal alphas:
-each slot's Gaussians rasterized alone through a camera cropped to that slot's screen box (from
-one projection of the whole scene), so their total work is about one more render.
+each slot's Gaussians rasterized alone (opacity only: no colour) through a camera cropped to that
+slot's screen box, so their total work is about one more render of the instances' pixels.
+
+Screen boxes come from slot_boxes(): each Gaussian's projected mean with a bound on its 3-sigma
+radius (conservative, a few multiply-adds per Gaussian) instead of a second EWA projection of
+every Gaussian in torch (the rasterizer's C++ projects them anyway).
 """
+import math
+
 import numpy as np
 import torch
 
 from splatting.raster.camera import Camera
-from splatting.raster.sparse import project, rasterize
+from splatting.raster.sparse import rasterize
 
 MASK_ALPHA = 0.5
-
-
-def _crop(radii, boxes, idx):
-    """Screen box (u0, v0, w, h) of the on-screen Gaussians among idx, and those Gaussians."""
-    on = idx[radii.index_select(0, idx) > 0]
-    if len(on) == 0:
-        return None, on
-    b = boxes.index_select(0, on)
-    u0, u1 = int(b[:, 0].min()), int(b[:, 1].max())
-    v0, v1 = int(b[:, 2].min()), int(b[:, 3].max())
-    return (u0, v0, u1 - u0 + 1, v1 - v0 + 1), on
+BOX_MARGIN_PX = 2.0  # >= 3 sqrt(eps2d = 0.3) = 1.64 px: the screen-space low-pass widens every splat
 
 
 def cropped_camera(camera, crop):
@@ -38,35 +34,67 @@ def cropped_camera(camera, crop):
     return Camera(camera.R, camera.T, K, int(w), int(h), camera.name)
 
 
-def _render(g, idx, camera, features=None, eps2d=0.3):
-    """Rasterize the Gaussians idx of g through camera (tiled back end) -> the rasterize() dict."""
-    sub = g[idx]
-    return rasterize(sub.means.float(), sub.quats.float(), sub.scales.float(), sub.opacities.float(),
-                     sub.sh.float(), camera, eps2d=eps2d, features=None if features is None else features[idx])
+def slot_boxes(means, scales, slots, n_slots, camera, near=0.01):
+    """Conservative screen box (u0, v0, w, h) of every slot's Gaussians, clipped to the image; None
+    where the slot has no Gaussian in front of the near plane or is off screen.  Each Gaussian
+    reaches at most 3 sigma_max |J| <= 3 sigma_max f / z sqrt(1 + (x/z)^2 + (y/z)^2) pixels from its
+    projected mean (J the EWA Jacobian), plus the low-pass margin; the rasterizer culls means at
+    z <= near, so they are left out here too."""
+    H, W = camera.height, camera.width
+    p = means.float() @ camera.R.float().T + camera.T.float()
+    z = p[:, 2]
+    ok = z > near
+    zs = torch.where(ok, z, torch.ones_like(z))
+    K = camera.K.double()
+    x, y = p[:, 0] / zs, p[:, 1] / zs
+    u, v = float(K[0, 0]) * x + float(K[0, 2]), float(K[1, 1]) * y + float(K[1, 2])
+    r = 3.0 * scales.max(1).values.float() / zs * torch.sqrt(1 + x * x + y * y)
+    # + 0.5 px for float32 rounding of pixel coordinates up to ~1e4
+    ru, rv = float(K[0, 0]) * r + BOX_MARGIN_PX + 0.5, float(K[1, 1]) * r + BOX_MARGIN_PX + 0.5
+    inf = torch.full_like(u, math.inf)
+    idx = slots.long()
+    lo = lambda a: torch.full((n_slots,), math.inf, dtype=a.dtype).scatter_reduce(0, idx, a, "amin")  # noqa: E731
+    lu, lv = lo(torch.where(ok, u - ru, inf)), lo(torch.where(ok, v - rv, inf))
+    hu, hv = -lo(torch.where(ok, -(u + ru), inf)), -lo(torch.where(ok, -(v + rv), inf))
+    out = []
+    for s in range(n_slots):
+        if not math.isfinite(float(lu[s])):
+            out.append(None)
+            continue
+        # pixel i is touched when its centre i + 0.5 lies inside [min, max]
+        u0, u1 = max(0, math.ceil(float(lu[s]) - 0.5)), min(W - 1, math.floor(float(hu[s]) - 0.5))
+        v0, v1 = max(0, math.ceil(float(lv[s]) - 0.5)), min(H - 1, math.floor(float(hv[s]) - 0.5))
+        out.append((u0, v0, u1 - u0 + 1, v1 - v0 + 1) if u1 >= u0 and v1 >= v0 else None)
+    return out
 
 
-def _subset_alpha(g, idx, camera, radii, boxes, max_px=None):
-    """Alpha of the Gaussians idx alone, as (alpha crop (h, w) numpy, (u0, v0)) or None if off screen.
-    max_px: when the subset's screen box is larger, it is rendered at max_px / size of the
-    resolution and resampled bilinearly at the full-size pixel centres, so its mask edge is exact
-    to about 1 / scale pixels; None = full resolution."""
-    crop, on = _crop(radii, boxes, idx)
-    if crop is None:
+def union(boxes):
+    boxes = [b for b in boxes if b is not None]
+    if not boxes:
         return None
+    u0, v0 = min(b[0] for b in boxes), min(b[1] for b in boxes)
+    u1, v1 = max(b[0] + b[2] for b in boxes), max(b[1] + b[3] for b in boxes)
+    return u0, v0, u1 - u0, v1 - v0
+
+
+def _subset_alpha(t, idx, camera, crop, max_px=None):
+    """Alpha of the Gaussians idx of the tensors t alone inside crop, as (alpha (h, w) numpy,
+    (u0, v0)).  max_px: when the crop is larger, it is rendered at max_px / size of the resolution
+    (the full-size 0.3 px^2 low-pass in small pixels: the same alpha field, sampled coarser) and
+    resampled bilinearly at the full-size pixel centres, so its mask edge is exact to about
+    1 / scale pixels; None = full resolution."""
+    means, quats, scales, opac = (x.index_select(0, idx) for x in t)
+    dc = torch.zeros(len(idx), 1, 3)  # colour is not needed: alpha only
     u0, v0, w, h = crop
+    cam = cropped_camera(camera, crop)
     if max_px is None or max(w, h) <= max_px:
-        return _render(g, on, cropped_camera(camera, crop))["alpha"].numpy(), (u0, v0)
+        return rasterize(means, quats, scales, opac, dc, cam, sh_degree=0)["alpha"].numpy(), (u0, v0)
     f = max_px / max(w, h)
-    cam = camera.scaled(f)
-    # the full-size image's 0.3 px^2 dilation, in small pixels: the same alpha field, sampled coarser
-    pm2, pc, pz, pr, pb = project(g.means[on].float(), g.quats[on].float(), g.scales[on].float(), cam, eps2d=0.3 * f * f)
-    lcrop, lon = _crop(pr, pb, torch.arange(len(on)))
-    if lcrop is None:
-        return None
-    lu, lv, lw, lh = lcrop
-    a = _render(g, on[lon], cropped_camera(cam, lcrop), eps2d=0.3 * f * f)["alpha"]
-    xs = f * (torch.arange(u0, u0 + w, dtype=torch.float32) + 0.5) - 0.5 - lu  # low-res pixel-centre coords
-    ys = f * (torch.arange(v0, v0 + h, dtype=torch.float32) + 0.5) - 0.5 - lv
+    small = cam.scaled(f)
+    a = rasterize(means, quats, scales, opac, dc, small, sh_degree=0, eps2d=0.3 * f * f)["alpha"]
+    lw, lh = small.width, small.height
+    xs = f * (torch.arange(w, dtype=torch.float32) + 0.5) - 0.5  # full-size pixel centres, small-pixel coords
+    ys = f * (torch.arange(h, dtype=torch.float32) + 0.5) - 0.5
     gx = xs / max(lw - 1, 1) * 2 - 1
     gy = ys / max(lh - 1, 1) * 2 - 1
     grid = torch.stack(torch.meshgrid(gy, gx, indexing="ij")[::-1], -1)[None]
@@ -84,31 +112,43 @@ def full_frame(crop, W, H):
     return out
 
 
+def _argmax_channels(feat):
+    """(C, h, w) contiguous -> (h, w) index of the largest channel (first on ties, like argmax)."""
+    best, arg = feat[0].clone(), torch.zeros(feat.shape[1:], dtype=torch.int16)
+    for c in range(1, feat.shape[0]):
+        more = feat[c] > best
+        best = torch.where(more, feat[c], best)
+        arg.masked_fill_(more, c)
+    return arg
+
+
 @torch.no_grad()
 def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None):
     """Gaussians g (N), slots (N,) long in 0..n_slots-1, camera -> dict:
     rgb (H, W, 3) premultiplied, alpha (H, W), depth (H, W) expected camera z (0 where alpha is 0),
     label (H, W) int16 (-1 where alpha <= 0.5), amodal {slot: (alpha crop, (u0, v0)) or None}
-    (amodal_max_px: see _subset_alpha)."""
+    (amodal_max_px: see _subset_alpha), boxes [slot box (u0, v0, w, h) or None] (slot_boxes)."""
     H, W = camera.height, camera.width
-    _, _, _, radii, boxes = project(g.means.float(), g.quats.float(), g.scales.float(), camera)
+    t = (g.means.float(), g.quats.float(), g.scales.float(), g.opacities.float())
+    boxes = slot_boxes(t[0], t[2], slots, n_slots, camera)
     rgb, alpha, depth = torch.zeros(H, W, 3), torch.zeros(H, W), torch.zeros(H, W)
     label = torch.full((H, W), -1, dtype=torch.int16)
-    crop, on = _crop(radii, boxes, torch.arange(len(g)))
+    crop = union(boxes)
     if crop is not None:
         u0, v0, w, h = crop
         onehot = torch.zeros(len(g), n_slots)
         onehot[torch.arange(len(g)), slots.long()] = 1.0
-        out = _render(g, on, cropped_camera(camera, crop), features=onehot)
+        out = rasterize(*t, g.sh.float(), cropped_camera(camera, crop), features=onehot)
         a_c = out["alpha"]
         rgb[v0:v0 + h, u0:u0 + w], alpha[v0:v0 + h, u0:u0 + w], depth[v0:v0 + h, u0:u0 + w] = out["rgb"], a_c, out["depth"]
-        lab = out["features"].argmax(-1).to(torch.int16)
+        # the back end's channels are (H, W, C) views of channel-major memory: reduce over C there
+        lab = _argmax_channels(out["features"].permute(2, 0, 1).contiguous())
         lab[a_c <= MASK_ALPHA] = -1
         label[v0:v0 + h, u0:u0 + w] = lab
     d = torch.where(alpha > 1e-4, depth / alpha.clamp_min(1e-4), torch.zeros_like(depth))
     amodal = {}
     for s in amodal_slots:
         idx = torch.nonzero(slots == s).squeeze(1)
-        amodal[s] = _subset_alpha(g, idx, camera, radii, boxes, amodal_max_px) if len(idx) else None
+        amodal[s] = _subset_alpha(t, idx, camera, boxes[s], amodal_max_px) if len(idx) and boxes[s] else None
     return {"rgb": rgb.numpy(), "alpha": alpha.numpy(), "depth": d.numpy(), "label": label.numpy(),
-            "amodal": amodal}
+            "amodal": amodal, "boxes": boxes}

@@ -14,6 +14,7 @@ the soft contact shadows that keep cyclists from floating over photos and scenes
 - Contact shadows: a few flat, dark Gaussians on the road under each instance, elongated along its
   heading, composited with everything else (slot 0: they never enter an instance's mask).
 """
+import functools
 import math
 import os
 
@@ -65,30 +66,39 @@ def list_images(folder, field="backgrounds.images_dir"):
     return [os.path.join(folder, f) for f in files]
 
 
+@functools.lru_cache(maxsize=8)
+def _decoded(path, width, height):
+    """The file decoded to RGB, by JPEG draft at 1/2..1/8 scale when that still covers width x
+    height (the same pixels every time); cached per process: a folder of a few photos is decoded
+    once per worker instead of once per sample.  -> (PIL image, source size)."""
+    from PIL import Image
+    with Image.open(path) as im:
+        w0, h0 = im.size
+        s = max(width / w0, height / h0)
+        im.draft("RGB", (max(int(w0 * s), width), max(int(h0 * s), height)))
+        return im.convert("RGB"), (w0, h0)
+
+
 def photo(files, seed, width, height):
-    """(height, width, 3) float32: one of the files, scaled to cover and cropped (from the seed);
-    also returns {"file", "crop"} for the image record."""
+    """(height, width, 3) uint8 (the photo's own bytes: no float round trip for the pixels no
+    cyclist covers): one of the files, scaled to cover and cropped (from the seed); also returns
+    {"file", "crop"} for the image record."""
     from PIL import Image
     rng = np.random.default_rng(seed)
     path = files[int(rng.integers(len(files)))]
     fx, fy = float(rng.uniform()), float(rng.uniform())
     try:
-        with Image.open(path) as im:
-            # JPEG draft decodes at 1/2..1/8 scale when that still covers the target: same bytes every time
-            w0, h0 = im.size
-            s = max(width / w0, height / h0)
-            im.draft("RGB", (max(int(w0 * s), width), max(int(h0 * s), height)))
-            im = im.convert("RGB")
-            w, h = im.size
-            s = max(width / w, height / h)
-            cw, ch = width / s, height / s
-            x0, y0 = fx * (w - cw), fy * (h - ch)
-            out = im.resize((int(width), int(height)), Image.BILINEAR, box=(x0, y0, x0 + cw, y0 + ch))
+        im, (w0, h0) = _decoded(path, int(width), int(height))
     except OSError as e:
         raise UserError(f"background image {path} cannot be read: {e}") from None
+    w, h = im.size
+    s = max(width / w, height / h)
+    cw, ch = width / s, height / s
+    x0, y0 = fx * (w - cw), fy * (h - ch)
+    out = im.resize((int(width), int(height)), Image.BILINEAR, box=(x0, y0, x0 + cw, y0 + ch))
     rec = {"file": os.path.basename(path), "crop_xywh_source": [round(x0 * w0 / w, 2), round(y0 * h0 / h, 2),
                                                                 round(cw * w0 / w, 2), round(ch * h0 / h, 2)]}
-    return np.asarray(out, dtype=np.float32) / 255.0, rec
+    return np.asarray(out, dtype=np.uint8), rec
 
 
 def euler_matrix(rotation_deg):

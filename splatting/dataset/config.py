@@ -21,6 +21,8 @@ PERSON_KEYPOINTS = ("coco17", "smpl24")
 LABEL_FORMATS = ("coco", "kitti")
 from cyclist_formats.pose import POSE_FIELDS as POSE_KEYS  # config keys are the contract's field names
 from splatting.dataset.camera_presets import DEFAULTS as CAMERA_DEFAULTS
+from splatting.cyclist.appearance import RECOLOUR
+from splatting.cyclist.lod import DEFAULT_COMPENSATE as LOD_COMPENSATE, DEFAULT_LEVELS as LOD_LEVELS
 from splatting.dataset.labels import DEFAULT_COMBINED, DEFAULT_NAMES, VEHICLES
 
 DEFAULTS = {
@@ -56,6 +58,14 @@ DEFAULTS = {
     "depth_maps": False,
     "amodal_max_px": None,               # amodal masks of larger parts at reduced resolution (speed)
     "png_compress_level": 4,
+    # level of detail (splatting/cyclist/lod.py): instances shorter than a level's below_px on
+    # screen are rendered with `keep` of their Gaussians; off by default, on in the street preset
+    "lod": {"enabled": False, "levels": copy.deepcopy(LOD_LEVELS), "compensate": LOD_COMPENSATE},
+    # appearance variety (splatting/cyclist/appearance.py): per instance, new colours for the listed
+    # regions (HSV: any hue, saturation and value in the ranges; each region kept as trained with
+    # keep_share) and a gain: brightness x white balance (+-white_balance per channel)
+    "appearance": {"enabled": False, "regions": list(RECOLOUR), "keep_share": 0.25, "saturation": [0.15, 0.9],
+                   "value": [0.12, 0.95], "brightness": [0.75, 1.25], "white_balance": 0.08},
 }
 
 
@@ -224,6 +234,43 @@ def _validate_street(cfg):
         raise _err("amodal_max_px", f"expected null or an integer >= 32, got {a!r}")
     if not isinstance(cfg["depth_maps"], bool):
         raise _err("depth_maps", f"expected true or false, got {cfg['depth_maps']!r}")
+    _validate_lod(cfg["lod"])
+    _validate_appearance(cfg["appearance"])
+
+
+def _validate_appearance(a):
+    if not isinstance(a["enabled"], bool):
+        raise _err("appearance.enabled", f"expected true or false, got {a['enabled']!r}")
+    r = a["regions"]
+    if not (isinstance(r, list) and all(x in RECOLOUR for x in r)):
+        raise _err("appearance.regions", f"expected a list of {', '.join(RECOLOUR)}, got {r!r}")
+    for f, lo, hi in (("keep_share", 0, 1), ("white_balance", 0, 0.5)):
+        if not (_num(a[f]) and lo <= a[f] <= hi):
+            raise _err(f"appearance.{f}", f"expected a number within [{lo}, {hi}], got {a[f]!r}")
+    cfg = {"appearance": a}
+    _range(cfg, "appearance.saturation", 0, 1)
+    _range(cfg, "appearance.value", 0, 1)
+    _range(cfg, "appearance.brightness", 0.05, 4)
+
+
+def _validate_lod(lod):
+    if not isinstance(lod["enabled"], bool):
+        raise _err("lod.enabled", f"expected true or false, got {lod['enabled']!r}")
+    if not (_num(lod["compensate"]) and 0 <= lod["compensate"] <= 2):
+        raise _err("lod.compensate", f"expected a number within [0, 2], got {lod['compensate']!r}")
+    lv = lod["levels"]
+    if not isinstance(lv, list):
+        raise _err("lod.levels", f"expected a list of {{below_px, keep}}, got {lv!r}")
+    for i, x in enumerate(lv):
+        if not (isinstance(x, dict) and set(x) == {"below_px", "keep"}):
+            raise _err(f"lod.levels[{i}]", f"expected {{below_px: PIXELS, keep: SHARE}}, got {x!r}")
+        if not (_num(x["below_px"]) and x["below_px"] > 0):
+            raise _err(f"lod.levels[{i}].below_px", f"expected a positive number, got {x['below_px']!r}")
+        if not (_num(x["keep"]) and 0 < x["keep"] <= 1):
+            raise _err(f"lod.levels[{i}].keep", f"expected a share within (0, 1], got {x['keep']!r}")
+    by_h = sorted(lv, key=lambda x: -x["below_px"])
+    if any(b["keep"] > a["keep"] for a, b in zip(by_h, by_h[1:])):
+        raise _err("lod.levels", "a level for shorter instances must not keep more Gaussians")
 
 
 def resolve_assets(cfg):

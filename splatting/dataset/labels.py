@@ -13,6 +13,8 @@ A bike's vehicle class: meta.json "category" (bicycle | motorcycle | scooter) wh
 bicycle when it has a crank and scooter when it has none.  A rider + vehicle is `cyclist` for a
 bicycle or scooter and `motorcyclist` for a motorcycle (`labels.combined` changes that).
 """
+from typing import NamedTuple
+
 import numpy as np
 
 from splatting.bike.model import KEYPOINTS as BIKE_KEYPOINTS
@@ -86,9 +88,57 @@ def vehicle_class(meta, override=None):
     return "bicycle" if (meta or {}).get("has_crank", True) else "scooter"
 
 
-def rle(mask):
+class BoxMask(NamedTuple):
+    """A mask of a width x height image that is False outside one box: the box's pixels (h, w)
+    bool and the box's corner.  Street instances cover a small part of a 1600 x 900 image, so
+    their masks are built, combined and encoded inside their boxes."""
+    crop: np.ndarray
+    u0: int
+    v0: int
+
+    def full(self, width, height):
+        out = np.zeros((height, width), bool)
+        h, w = self.crop.shape
+        out[self.v0:self.v0 + h, self.u0:self.u0 + w] = self.crop
+        return out
+
+    def bbox_xyxy(self):
+        """[x0, y0, x1, y1] of the True pixels (pixel edges); None when there is none."""
+        cols, rows = np.flatnonzero(self.crop.any(0)), np.flatnonzero(self.crop.any(1))
+        if not len(cols):
+            return None
+        return [float(self.u0 + cols[0]), float(self.v0 + rows[0]), float(self.u0 + cols[-1] + 1),
+                float(self.v0 + rows[-1] + 1)]
+
+
+def rle(mask, width=None, height=None):
+    """COCO compressed RLE of a (H, W) bool mask or a BoxMask (with the image's width, height) ->
+    (pycocotools RLE, JSON-ready dict).  Column-major runs are counted over the box's columns
+    only (full height): the columns left and right of them are one zero run each."""
     from pycocotools import mask as mask_utils
-    r = mask_utils.encode(np.asfortranarray(mask.astype(np.uint8)))
+    if not isinstance(mask, BoxMask):
+        height, width = mask.shape
+        mask = BoxMask(np.asarray(mask, bool), 0, 0)
+    crop = mask.crop
+    cols = np.flatnonzero(crop.any(0))
+    if len(cols):
+        c0, c1 = int(cols[0]), int(cols[-1]) + 1
+        strip = np.zeros((c1 - c0, height), bool)  # the columns, transposed: column-major order
+        strip[:, mask.v0:mask.v0 + crop.shape[0]] = crop[:, c0:c1].T
+        flat = strip.reshape(-1)
+        edges = np.flatnonzero(flat[1:] != flat[:-1]) + 1
+        runs = np.diff(np.concatenate([[0], edges, [len(flat)]])).tolist()
+        if flat[0]:
+            runs.insert(0, 0)  # runs alternate zeros, ones, ... starting with zeros
+        runs[0] += (mask.u0 + c0) * height
+        tail = (width - mask.u0 - c1) * height
+        if len(runs) % 2:
+            runs[-1] += tail
+        elif tail:
+            runs.append(tail)
+    else:
+        runs = [width * height]
+    r = mask_utils.frPyObjects({"counts": runs, "size": [height, width]}, height, width)
     return r, {"size": [int(x) for x in r["size"]], "counts": r["counts"].decode("ascii")}
 
 
@@ -111,13 +161,13 @@ def truncation(box, width, height):
 
 def annotation(key, visible, amodal, extent_box, width, height, keypoints=None, extra=None):
     """One COCO annotation (without id / image_id) or None when no pixel is visible.
-    visible, amodal: (H, W) bool; extent_box: the unclipped projected extent [x0, y0, x1, y1];
+    visible, amodal: (H, W) bool or BoxMask; extent_box: the unclipped projected extent [x0, y0, x1, y1];
     keypoints (n, 3) [x, y, v] or None (the category has none)."""
     from pycocotools import mask as mask_utils
-    if not visible.any():
+    if not (visible.crop if isinstance(visible, BoxMask) else visible).any():
         return None
-    r, seg = rle(visible)
-    ra, seg_a = rle(amodal)
+    r, seg = rle(visible, width, height)
+    ra, seg_a = rle(amodal, width, height)
     area, area_a = float(mask_utils.area(r)), float(mask_utils.area(ra))
     vis = area / area_a if area_a > 0 else 1.0
     ann = {"category_id": CATEGORY_IDS[key], "iscrowd": 0, "segmentation": seg, "area": area,

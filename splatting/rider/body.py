@@ -25,7 +25,7 @@ import torch
 
 from cyclist_formats.errors import UserError
 from splatting import paths
-from splatting.rider.kinematics import JOINT_INDEX, JOINT_NAMES, PARENTS, forward_kinematics
+from splatting.rider.kinematics import JOINT_INDEX, JOINT_NAMES, forward_kinematics
 
 CACHE_DIR = paths.DATA / "anny_cache"
 ROOT = paths.ROOT
@@ -81,6 +81,7 @@ class Rider:
     colors: torch.Tensor  # (V, 3) float32 in [0, 1]
     height_m: float
     spec: dict
+    regions: torch.Tensor = None  # (V,) int64 clothing region per vertex (REGIONS), None if unknown
 
 
 def _cache_dir():
@@ -169,12 +170,16 @@ def _hex_rgb(h):
     return np.array([int(h[i:i + 2], 16) for i in (0, 2, 4)], float) / 255.0
 
 
-def _region_colors(verts, weights, joints, eye_y, colors):
-    """Per-vertex colours: shoes on feet, bottom on hips/thighs/knees and the lower pelvis, top on
-    the torso and upper arms, helmet on the head above the brow, skin elsewhere."""
+# clothing regions of a rider (index = the region id each vertex and avatar Gaussian carries)
+REGIONS = ("skin", "top", "bottom", "shoes", "helmet")
+
+
+def region_ids(verts, weights, joints, eye_y):
+    """(V,) int64 region per vertex (REGIONS): shoes on feet, bottom on hips/thighs/knees and the
+    lower pelvis, top on the torso and upper arms, helmet on the head above the brow, skin elsewhere."""
     J = JOINT_INDEX
     dom = weights.argmax(1)
-    out = np.tile(_hex_rgb(colors["skin"]), (len(verts), 1))
+    out = np.zeros(len(verts), np.int64)
     y = verts[:, 1]
     waist_y = joints[J["pelvis"], 1] + 0.6 * (joints[J["spine1"], 1] - joints[J["pelvis"], 1])
     shoes = np.isin(dom, [J["left_ankle"], J["right_ankle"], J["left_foot"], J["right_foot"]])
@@ -189,11 +194,15 @@ def _region_colors(verts, weights, joints, eye_y, colors):
     elbow_z = abs(joints[J["left_elbow"], 2])
     torso &= np.abs(verts[:, 2]) < shoulder_z + 0.5 * (elbow_z - shoulder_z)
     head_top = (dom == J["head"]) & (y > eye_y + 0.025)
-    out[shoes] = _hex_rgb(colors["shoes"])
-    out[bottom] = _hex_rgb(colors["bottom"])
-    out[torso] = _hex_rgb(colors["top"])
-    out[head_top] = _hex_rgb(colors["helmet"])
+    for name, m in (("shoes", shoes), ("bottom", bottom), ("top", torso), ("helmet", head_top)):
+        out[m] = REGIONS.index(name)
     return out
+
+
+def _region_colors(verts, weights, joints, eye_y, colors):
+    """Per-vertex colours of the regions (region_ids) from the rider's '#rrggbb' colours."""
+    palette = np.stack([_hex_rgb(colors[r]) for r in REGIONS])
+    return palette[region_ids(verts, weights, joints, eye_y)]
 
 
 def build_rider(spec):
@@ -219,7 +228,8 @@ def build_rider(spec):
     f32 = lambda a: torch.from_numpy(np.ascontiguousarray(a)).float()
     return Rider(id=spec["id"], vertices=f32(verts), faces=model.faces.long().clone(),
                  joints=f32(joints), weights=f32(weights), colors=f32(colors),
-                 height_m=float(verts[:, 1].max() - verts[:, 1].min()), spec=dict(spec))
+                 height_m=float(verts[:, 1].max() - verts[:, 1].min()), spec=dict(spec),
+                 regions=torch.from_numpy(region_ids(verts, weights, joints, eye_y)))
 
 
 def pose_vertices(rider, local_rotmats, root_trans=None):

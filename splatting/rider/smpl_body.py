@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from cyclist_formats.errors import UserError
-from splatting.rider.body import ROOT, Rider, _region_colors
+from splatting.rider.body import ROOT, Rider, _region_colors, region_ids
 from splatting.rider.kinematics import JOINT_INDEX, PARENTS
 from splatting.rider.motion import C_SMPL
 
@@ -170,7 +170,8 @@ def load_smpl_rider(model_path, betas=None, gender="neutral", rider_id=None, col
         raise UserError(f"{path}: SMPL model gives non-finite vertices or weights not summing to 1")
     cols = dict(DEFAULT_COLORS, **(colors or {}))
     try:
-        rgb = _region_colors(verts, weights, joints, _eye_height(verts, joints), cols)
+        eye_y = _eye_height(verts, joints)
+        rgb = _region_colors(verts, weights, joints, eye_y, cols)
     except (ValueError, AttributeError) as e:
         raise UserError(f"SMPL rider colours must be '#rrggbb' strings: {e}") from None
     rid = rider_id or f"smpl_{gender}"
@@ -179,7 +180,8 @@ def load_smpl_rider(model_path, betas=None, gender="neutral", rider_id=None, col
     f32 = lambda a: torch.from_numpy(np.ascontiguousarray(a)).float()
     return Rider(id=rid, vertices=f32(verts), faces=model.faces_tensor.long().clone(),
                  joints=f32(joints), weights=f32(weights), colors=f32(rgb),
-                 height_m=float(verts[:, 1].max() - verts[:, 1].min()), spec=spec)
+                 height_m=float(verts[:, 1].max() - verts[:, 1].min()), spec=spec,
+                 regions=torch.from_numpy(region_ids(verts, weights, joints, eye_y)))
 
 
 def rider_from_spec(spec):

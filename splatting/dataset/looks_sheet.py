@@ -1,0 +1,95 @@
+"""Contact sheet of appearance variety: one cyclist (bike + rider, one pose) in N sampled looks
+(appearance.draw_look for sample indices 0..N-1), rendered side-on in a grid.
+
+    python -m splatting.dataset.looks_sheet --out docs/img/rider_looks.png [--bike DIR] [--rider ID]
+
+Without --bike a stand-in bike is built from the procedural generator's spec (keypoints only);
+the rider is a trained avatar from --riders-root when one exists, else the mesh avatar.
+"""
+import argparse
+import os
+import sys
+import tempfile
+
+import numpy as np
+
+from cyclist_formats.errors import UserError
+
+
+def render_sheet(cfg, bike, rider, n=12, cols=4, log=print):
+    """(H, W, 3) uint8 grid of n looks of one cyclist."""
+    import torch
+    from cyclist_formats.instances import RIDER_ID
+    from splatting.cyclist import appearance
+    from splatting.cyclist.render import over
+    from splatting.cyclist.scene_render import render_scene, slot_boxes, union
+    from splatting.dataset import camera_presets
+    from splatting.dataset.generate import Assets
+    torch.set_num_threads(1)
+    assets = Assets(cfg)
+    cyc = assets.cyclist(bike, rider)
+    pose = [60.0, 4.0, 0.0, 180.0, 0.0, 0.0, 0.0, 5.0]  # side-on, riding towards image-right, 5 m ahead
+    frame = cyc.pose(torch.tensor(pose, dtype=torch.float64))[0]
+    spec = camera_presets.resolve({"preset": "nuscenes", "pitch_deg": 0.0, "roll_deg": 0.0, "scale": 1.0})
+    cam = camera_presets.street_camera(spec)
+    slots = torch.where(frame.ids == RIDER_ID, 2, 1).long()
+    g0 = frame.gaussians
+    u0, v0, w, h = union(slot_boxes(g0.means, g0.scales, slots, 3, cam))
+    inputs = assets.look_inputs(bike, rider, frame)
+    tiles = []
+    for i in range(n):
+        look, gain = appearance.draw_look(cfg, cfg["seed"], i, 0)
+        g = appearance.apply_look(g0, frame.ids, look, gain, **inputs)
+        L = render_scene(g, slots, 3, cam)
+        sl = np.s_[v0:v0 + h, u0:u0 + w]
+        tiles.append(over({"rgb": L["rgb"][sl], "alpha": L["alpha"][sl]}, np.full((h, w, 3), 0.82, np.float32)))
+        log(f"look {i + 1}/{n}")
+    rows = -(-n // cols)
+    pad = 6
+    sheet = np.full((rows * (h + pad) + pad, cols * (w + pad) + pad, 3), 255, np.uint8)
+    for i, t in enumerate(tiles):
+        r, c = divmod(i, cols)
+        sheet[pad + r * (h + pad):pad + r * (h + pad) + h, pad + c * (w + pad):pad + c * (w + pad) + w] = t
+    return sheet
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m splatting.dataset.looks_sheet", description=__doc__.splitlines()[0])
+    ap.add_argument("--out", required=True, help="PNG to write")
+    ap.add_argument("--bike", help="bike folder (default: a stand-in from the procedural spec)")
+    ap.add_argument("--rider", default="m_adult_average_185", help="roster rider id")
+    ap.add_argument("--riders-root", default="data/riders")
+    ap.add_argument("--count", type=int, default=12)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    if args.count < 1:
+        ap.error("--count must be >= 1")
+    if not args.out.lower().endswith(".png"):
+        ap.error("--out must be a .png file")
+    from cyclist_formats.atomic import atomic_path
+    from splatting.dataset.config import resolve_assets, validate
+    try:
+        with tempfile.TemporaryDirectory() as scratch:
+            if args.bike:
+                root, bike = os.path.dirname(os.path.abspath(args.bike)), os.path.basename(os.path.abspath(args.bike))
+            else:
+                from bench.dataset import _write_spec_bike
+                root, bike = scratch, _write_spec_bike(scratch)
+            cfg = resolve_assets(validate({"mode": "street", "camera": {"preset": "nuscenes"}, "seed": args.seed,
+                                           "bikes": [bike], "bikes_root": root, "riders": [args.rider],
+                                           "riders_root": args.riders_root, "appearance": {"enabled": True,
+                                                                                           "keep_share": 0.0}}))
+            sheet = render_sheet(cfg, bike, args.rider, args.count, log=lambda m: print(m, file=sys.stderr))
+    except UserError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    from PIL import Image
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    with atomic_path(args.out) as tmp:
+        Image.fromarray(sheet).save(tmp, format="PNG")
+    print(args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

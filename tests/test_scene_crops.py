@@ -1,0 +1,89 @@
+"""The street renderer's shortcuts give what the long way gives: conservative slot screen boxes,
+the COCO RLE of a box mask, the background composited only inside the render's box."""
+import numpy as np
+import pytest
+import torch
+
+from helpers import look_at_camera
+
+
+def _scene(seed, n=300):
+    from splatting.gaussians.container import Gaussians
+    g = torch.Generator().manual_seed(seed)
+    means = torch.randn(n, 3, generator=g) * torch.tensor([1.5, 0.8, 1.0])
+    return Gaussians(means=means, quats=torch.randn(n, 4, generator=g),
+                     log_scales=torch.log(torch.rand(n, 3, generator=g) * 0.15 + 0.01),
+                     opacity_logits=torch.randn(n, generator=g) + 2.0,
+                     sh=torch.rand(n, 1, 3, generator=g))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_slot_boxes_hold_every_pixel_the_slot_renders(seed):
+    """Every pixel a slot's Gaussians reach (alpha > 1e-6 when rendered alone, whole image) lies in
+    its box, and the box is not much larger than those pixels' extent (it is a useful crop)."""
+    torch.set_num_threads(1)
+    from splatting.cyclist.scene_render import slot_boxes
+    from splatting.raster.sparse import render_gaussians
+    g = _scene(seed)
+    slots = torch.arange(len(g)) % 3
+    cam = look_at_camera((0.5, 1.0, 7.0), width=160, height=96, focal=90.0, cx=70.0, cy=40.0)
+    boxes = slot_boxes(g.means, g.scales, slots, 3, cam)
+    for s in range(3):
+        a = render_gaussians(g[slots == s], cam)["alpha"].numpy()
+        ys, xs = np.nonzero(a > 1e-6)
+        u0, v0, w, h = boxes[s]
+        assert xs.min() >= u0 and xs.max() < u0 + w and ys.min() >= v0 and ys.max() < v0 + h
+        assert w * h <= 2.5 * (xs.ptp() + 1) * (ys.ptp() + 1) or (w, h) == (160, 96)
+
+
+def test_slot_boxes_none_behind_camera_and_off_screen():
+    from splatting.cyclist.scene_render import slot_boxes
+    g = _scene(3, n=20)
+    cam = look_at_camera((0.0, 0.0, 10.0), width=64, height=48, focal=60.0)
+    means = g.means.clone()
+    means[10:] += torch.tensor([0.0, 0.0, 30.0])  # slot 1 behind the camera (it looks along -Z)
+    slots = torch.tensor([0] * 10 + [1] * 10)
+    boxes = slot_boxes(means, g.scales, slots, 3, cam)
+    assert boxes[0] is not None and boxes[1] is None and boxes[2] is None  # slot 2: empty
+    far_right = g.means + torch.tensor([100.0, 0.0, 0.0])
+    assert slot_boxes(far_right, g.scales, torch.zeros(20, dtype=torch.long), 1, cam) == [None]
+
+
+def test_box_mask_rle_equals_pycocotools_on_the_full_mask():
+    from pycocotools import mask as mu
+    from splatting.dataset.labels import BoxMask, rle
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        H, W = (int(x) for x in rng.integers(1, 25, 2))
+        h, w = int(rng.integers(1, H + 1)), int(rng.integers(1, W + 1))
+        v0, u0 = int(rng.integers(0, H - h + 1)), int(rng.integers(0, W - w + 1))
+        crop = rng.random((h, w)) < rng.random()
+        full = BoxMask(crop, u0, v0).full(W, H)
+        ref = mu.encode(np.asfortranarray(full.astype(np.uint8)))
+        r, seg = rle(BoxMask(crop, u0, v0), W, H)
+        assert r["counts"] == ref["counts"] and seg["size"] == [H, W]
+        assert rle(full)[0]["counts"] == ref["counts"]
+        assert (mu.decode(r).astype(bool) == full).all()
+        bb = BoxMask(crop, u0, v0).bbox_xyxy()
+        if full.any():
+            ys, xs = np.nonzero(full)
+            assert bb == [xs.min(), ys.min(), xs.max() + 1, ys.max() + 1]
+        else:
+            assert bb is None
+
+
+@pytest.mark.parametrize("photo_bytes", [False, True])
+def test_over_in_box_equals_over_on_the_whole_image(photo_bytes):
+    from splatting.cyclist.render import over
+    from splatting.dataset.generate import over_in_box
+    rng = np.random.default_rng(1)
+    H, W = 30, 50
+    alpha = np.zeros((H, W), np.float32)
+    rgb = np.zeros((H, W, 3), np.float32)
+    alpha[5:20, 10:30] = rng.random((15, 20))
+    rgb[5:20, 10:30] = rng.random((15, 20, 3)) * alpha[5:20, 10:30, None]
+    bg8 = rng.integers(0, 256, (H, W, 3)).astype(np.uint8)
+    bgf = bg8.astype(np.float32) / 255.0
+    want = over({"rgb": rgb, "alpha": alpha}, bgf)
+    got = over_in_box({"rgb": rgb, "alpha": alpha}, bg8 if photo_bytes else bgf, (10, 5, 20, 15))
+    assert got.dtype == np.uint8 and (got == want).all()
