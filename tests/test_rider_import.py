@@ -182,3 +182,315 @@ def export(path):
     else:
         bpy.ops.export_scene.fbx(filepath=str(path), add_leaf_bones=False, path_mode="COPY", embed_textures=True)
     assert os.path.isfile(path)
+
+
+def export_mesh_only(rider, path):
+    """An unrigged person: the same mesh, no armature."""
+    from addon.core.frames import to_blender
+    me = bpy.data.meshes.new("statue")
+    me.from_pydata(to_blender(rider.vertices.double().numpy()).tolist(), [], rider.faces.numpy().tolist())
+    me.update()
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new("statue", me))
+    export(path)
+
+
+def export_chain(path):
+    """A non-humanoid rig: a 3-bone chain (a tail, a crane arm) skinning a column of boxes."""
+    from mathutils import Vector
+    arm = bpy.data.objects.new("chain", bpy.data.armatures.new("chain"))
+    bpy.context.scene.collection.objects.link(arm)
+    bpy.context.view_layer.objects.active = arm
+    bpy.ops.object.mode_set(mode="EDIT")
+    prev = None
+    for k in range(3):
+        b = arm.data.edit_bones.new(f"Bone.{k:03d}")
+        b.head, b.tail = Vector((0, 0, 0.5 * k)), Vector((0, 0, 0.5 * (k + 1)))
+        b.parent = prev
+        prev = b
+    bpy.ops.object.mode_set(mode="OBJECT")
+    verts = [(x, y, z) for z in np.linspace(0, 1.5, 7) for x in (-0.1, 0.1) for y in (-0.1, 0.1)]
+    faces = [(4 * i + a, 4 * i + b, 4 * i + 4 + b, 4 * i + 4 + a) for i in range(6) for a, b in ((0, 1), (1, 3), (3, 2), (2, 0))]
+    me = bpy.data.meshes.new("column")
+    me.from_pydata(verts, [], faces)
+    obj = bpy.data.objects.new("column", me)
+    bpy.context.scene.collection.objects.link(obj)
+    for k in range(3):
+        obj.vertex_groups.new(name=f"Bone.{k:03d}").add([i for i, v in enumerate(verts) if 0.5 * k <= v[2] <= 0.5 * (k + 1)], 1.0, "REPLACE")
+    obj.modifiers.new("Armature", "ARMATURE").object = arm
+    obj.parent = arm
+    export(path)
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory, source):
+    """The rigged humans (and the refused files), made once: name -> path."""
+    from addon.core.scene import reset_scene
+    d = tmp_path_factory.mktemp("models")
+    out = {}
+    for name, scheme, a_pose in (("mixamo.glb", "mixamo", 0), ("mixamo.fbx", "mixamo", 0),
+                                 ("rigify.glb", "rigify", 0), ("mixamo_apose.fbx", "mixamo", 40.0)):
+        reset_scene()
+        img = write_texture(d / "ramp.png")
+        build_rigged_human(source, scheme, img, a_pose)
+        export(d / name)
+        out[name] = d / name
+    reset_scene()
+    (d / "gone").mkdir()
+    img = write_texture(d / "gone" / "skin.png")
+    build_rigged_human(source, "mixamo", img)
+    bpy.ops.export_scene.fbx(filepath=str(d / "missing_texture.fbx"), add_leaf_bones=False, path_mode="ABSOLUTE")
+    os.remove(d / "gone" / "skin.png")
+    out["missing_texture.fbx"] = d / "missing_texture.fbx"
+    reset_scene()
+    export_mesh_only(source, d / "unrigged.glb")
+    out["unrigged.glb"] = d / "unrigged.glb"
+    reset_scene()
+    export_chain(d / "chain.glb")
+    out["chain.glb"] = d / "chain.glb"
+    reset_scene()
+    return out
+
+
+def import_here(path, rider_id="here"):
+    """The Blender half in this process (the bpy module): (arrays, meta)."""
+    from addon.core import rider_rig
+    from addon.core.curation.importers import import_model
+    from addon.core.scene import reset_scene
+    reset_scene()
+    return rider_rig.rider_from_objects(import_model(str(path)), rider_id, os.path.basename(path))
+
+
+def nearest(a, b):
+    """Distance to, and index of, the nearest row of b for every row of a."""
+    a, b = torch.as_tensor(np.asarray(a, np.float64)), torch.as_tensor(np.asarray(b, np.float64))
+    res = [torch.cdist(c, b).min(1) for c in a.split(2048)]
+    return torch.cat([r.values for r in res]).numpy(), torch.cat([r.indices for r in res]).numpy()
+
+
+def cli(*args, **kw):
+    return subprocess.run([sys.executable, "-m", "splatting", *map(str, args)], capture_output=True, text=True,
+                          cwd=ROOT, env=dict(os.environ, PYTHONPATH=ROOT, OMP_WAIT_POLICY="PASSIVE"), **kw)
+
+
+@pytest.fixture(scope="module")
+def imported(models, tmp_path_factory):
+    """`rider import` run as a command on the Mixamo .glb: (rider file, its folder of imported riders)."""
+    d = tmp_path_factory.mktemp("imported")
+    out = d / "my_glb_rider" / "rider.npz"
+    r = cli("rider", "import", "--model", models["mixamo.glb"], "--id", "my_glb_rider", "--out", out)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "rider my_glb_rider imported" in r.stdout and "mixamo rig" in r.stdout
+    return out, d
+
+
+# ---------------------------------------------------------------- the joint map and the carried-over body
+
+@pytest.mark.parametrize("name,names", [("mixamo.fbx", MIXAMO), ("rigify.glb", RIGIFY)])
+def test_bones_map_to_the_smpl_joints(models, name, names):
+    _, meta = import_here(models[name])
+    assert meta["bone_map"] == names
+    assert meta["scheme"] == ("rigify" if names is RIGIFY else "mixamo")
+
+
+def check_same_body(a, meta, source, exact_weights):
+    """The imported rider is the source rider: positions, joints, colours from the texture, weights."""
+    V = source.vertices.double().numpy()
+    d, i = nearest(a["vertices"], V)
+    assert len(a["vertices"]) == len(V) and d.max() < 2e-5, d.max()
+    assert np.abs(a["joints"] - source.joints.numpy()).max() < 2e-5
+    assert np.abs(a["colors"] - expected_colors(V)[i]).max() < 0.004  # 8-bit texels of a linear ramp
+    w_src = source.weights.double().numpy()[i]
+    if exact_weights:  # FBX keeps every influence: the unmapped bones' halves are folded back exactly
+        assert np.abs(a["weights"] - w_src).max() < 1e-5
+    else:  # glTF keeps the 4 largest influences per vertex
+        assert (a["weights"].argmax(1) == w_src.argmax(1)).all()
+        assert np.abs(a["weights"] - w_src).max() < 0.2
+    assert meta["rest_pose"] == "T" and max(meta["swings_deg"].values()) < 0.01
+
+
+def test_command_imports_a_mixamo_glb(imported, source):
+    a, meta = rider_file.read_rider_file(imported[0])
+    check_same_body(a, meta, source, exact_weights=False)
+    assert meta["id"] == "my_glb_rider" and len(meta["textures"]) == 1
+
+
+@pytest.mark.parametrize("name", ["mixamo.fbx", "rigify.glb"])
+def test_fbx_and_rigify_carry_the_body_over(models, source, name):
+    a, meta = import_here(models[name])
+    check_same_body(a, meta, source, exact_weights=name.endswith(".fbx"))
+
+
+# ---------------------------------------------------------------- skinning: Blender is the ground truth
+
+def blender_posed(model, meta, world_transforms):
+    """The model re-imported in Blender, its armature posed with the rider's joint transforms
+    (canonical, (24,4,4)), its evaluated mesh in the canonical frame."""
+    from addon.core import rider_rig
+    from addon.core.curation.importers import import_model
+    from addon.core.scene import reset_scene
+    reset_scene()
+    arm, skinned, bone_of, _ = rider_rig.find_rig(import_model(str(model)), "model")
+    rider_rig.pose_rig(arm, bone_of, meta, world_transforms)
+    dg = bpy.context.evaluated_depsgraph_get()
+    out = []
+    for obj in skinned:
+        ev = obj.evaluated_get(dg)
+        me = ev.to_mesh()
+        co = np.empty(len(me.vertices) * 3)
+        me.vertices.foreach_get("co", co)
+        Mw = np.array(ev.matrix_world)
+        ev.to_mesh_clear()
+        out.append(co.reshape(-1, 3) @ Mw[:3, :3].T + Mw[:3, 3])
+    F = np.asarray(meta["canonical_from_world"])
+    return np.concatenate(out) @ F[:3, :3].T + F[:3, 3]
+
+
+def lbs_and_blender(model, npz, theta_p_deg, theta_s_deg):
+    from splatting.rider.body import pose_vertices
+    from splatting.rider.imported import load_imported_rider
+    from splatting.rider.kinematics import forward_kinematics
+    from splatting.rider.motion import pedal_pose
+    rider = load_imported_rider(npz)
+    _, meta = rider_file.read_rider_file(npz)
+    rot, root, _ = pedal_pose(rider.joints.double(), math.radians(theta_p_deg), math.radians(theta_s_deg))
+    ours = pose_vertices(rider, rot, root)[0].numpy()
+    T = forward_kinematics(rider.joints.double(), rot, root)[1][0].numpy()
+    theirs = blender_posed(model, meta, T)
+    moved = np.linalg.norm(ours - rider.vertices.double().numpy(), axis=1)
+    return np.linalg.norm(ours - theirs, axis=1), moved
+
+
+def write_here(path, tmp_path):
+    a, meta = import_here(path)
+    return rider_file.write_rider_file(tmp_path / "rider.npz", meta=meta, **a)
+
+
+@pytest.mark.parametrize("name,theta_p,theta_s", [("mixamo.glb", 70.0, 15.0), ("mixamo.fbx", 250.0, -20.0),
+                                                   ("rigify.glb", 160.0, 5.0)])
+def test_lbs_at_a_cycling_pose_matches_blender(models, tmp_path, name, theta_p, theta_s):
+    npz = write_here(models[name], tmp_path)
+    err, moved = lbs_and_blender(models[name], npz, theta_p, theta_s)
+    assert moved.max() > 0.5  # a real cycling pose: leaning trunk, bent legs
+    assert err.max() < 2e-5, err.max()
+
+
+def test_a_pose_is_turned_into_the_t_pose(models, source, tmp_path):
+    """Arms 40 deg down at rest: swung up to the T-pose by Blender's own skinning; LBS from that rest
+    equals Blender's posing of the A-posed rig where one bone dominates, and differs by at most ~1 cm where
+    weights blend across the shoulder (the documented approximation)."""
+    npz = write_here(models["mixamo_apose.fbx"], tmp_path)
+    a, meta = rider_file.read_rider_file(npz)
+    assert meta["rest_pose"] == "A"
+    assert abs(meta["swings_deg"]["left_shoulder"] - 40) < 0.01 and abs(meta["swings_deg"]["right_shoulder"] - 40) < 0.01
+    assert max(meta["swings_deg"][k] for k in ("left_elbow", "left_hip", "left_knee")) < 0.01
+    assert np.abs(a["joints"] - source.joints.numpy()).max() < 1e-4  # the elbows and wrists back on the T line
+    d, _ = nearest(a["vertices"], source.vertices.double().numpy())
+    assert np.median(d) < 1e-5 and d.max() < 0.015, (np.median(d), d.max())
+    err, _ = lbs_and_blender(models["mixamo_apose.fbx"], npz, 100.0, 10.0)
+    assert np.median(err) < 1e-5 and np.percentile(err, 99) < 0.01 and err.max() < 0.02, (np.percentile(err, 99), err.max())
+
+
+# ---------------------------------------------------------------- roster, IK, avatar mesh
+
+def test_imported_rider_is_a_roster_rider_and_rides_a_bike(imported, monkeypatch, source):
+    from addon.core.procedural import layout, spec as bike_spec
+    from splatting.rider import ik, imported as imported_mod, roster
+    from splatting.rider.kinematics import JOINT_INDEX
+    monkeypatch.setattr(imported_mod, "IMPORTED_DIR", imported[1])
+    roster.load_rider.cache_clear()
+    try:
+        ids = [r["id"] for r in roster.all_riders()]
+        assert ids[-1] == "my_glb_rider" and SOURCE_RIDER in ids
+        assert roster.describe(roster.get_spec("my_glb_rider")).startswith("my_glb_rider  imported 1.50 m")
+        rider = roster.load_rider("my_glb_rider")
+    finally:
+        roster.load_rider.cache_clear()
+    assert rider.spec["body"] == "imported" and abs(rider.height_m - source.height_m) < 1e-4
+    kp = layout.keypoints(bike_spec.sample_spec("kids", 0, 0))  # sized for the 1.50 m source rider
+    poses = torch.tensor([[p, s, 0, 0, 0, 0, 0, 0] for p, s in ((0, -10), (90, 0), (180, 10), (270, 20))],
+                         dtype=torch.float64)
+    targets = ik.posed_bike_keypoints(kp, poses)
+    res = ik.solve(rider.joints, targets, saddle_fit=True, saddle_shared=True)
+    for joint, target in ik.DEFAULT_PAIRS:  # distances recomputed from the posed joints
+        tgt = torch.as_tensor(targets[target], dtype=torch.float64).reshape(-1, 3)
+        if target == "seat":
+            tgt = res.seat.double() + torch.tensor([0.0, ik.PELVIS_ABOVE_SEAT_M, 0.0], dtype=torch.float64)
+        dist = torch.linalg.vector_norm(res.joints[:, JOINT_INDEX[joint]].double() - tgt, dim=-1)
+        assert (dist < 0.015).all(), (joint, dist)
+
+
+def test_rider_command_lists_and_exports_the_imported_rider(imported, tmp_path):
+    env_data = tmp_path / "data"
+    (env_data / "imported_riders").mkdir(parents=True)
+    os.symlink(imported[0].parent, env_data / "imported_riders" / "my_glb_rider")
+    env = dict(os.environ, PYTHONPATH=ROOT, OMP_WAIT_POLICY="PASSIVE", ARTICCYCLISTS_DATA=str(env_data))
+    r = subprocess.run([sys.executable, "-m", "splatting", "rider", "--list"], capture_output=True, text=True, env=env, cwd=ROOT)
+    assert r.returncode == 0 and r.stdout.strip().splitlines()[-1].startswith("my_glb_rider  imported"), r.stderr
+    out = tmp_path / "posed.ply"
+    r = subprocess.run([sys.executable, "-m", "splatting", "rider", "--id", "my_glb_rider", "--out", str(out),
+                        "--theta-p-deg", "30"], capture_output=True, text=True, env=env, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    from cyclist_formats import ply
+    v, f, c = ply.read_colored_mesh(str(out))
+    assert len(v) == 13718 and v[:, 1].max() < 1.45  # seated, not standing
+    assert np.abs(c[:, 2] - 0.25).max() < 0.01  # the texture's blue channel carried into the avatar's mesh
+
+
+# ---------------------------------------------------------------- refusals: one line, exit 2, nothing written
+
+@pytest.mark.parametrize("name,words", [("unrigged.glb", "unrigged mesh (no armature)"),
+                                        ("chain.glb", "not a humanoid rig"),
+                                        ("missing_texture.fbx", "missing texture")])
+def test_refused_models_give_one_line(models, tmp_path, name, words):
+    out = tmp_path / "x" / "rider.npz"
+    r = cli("rider", "import", "--model", models[name], "--id", "x", "--out", out)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and words in lines[0], r.stderr[-1500:]
+    assert lines[0].startswith("splatting rider import: error: ")
+    assert not out.exists() and not any(p.name.endswith(".npz") for p in tmp_path.rglob("*"))
+
+
+def test_bad_arguments_are_refused_before_blender(models, imported, tmp_path):
+    cases = [(["--model", tmp_path / "none.glb", "--id", "a"], "file not found"),
+             (["--model", models["chain.glb"], "--id", "a/b"], "--id must be"),
+             (["--model", models["chain.glb"], "--id", "a", "--height-m", "9"], "--height-m"),
+             (["--model", models["chain.glb"], "--id", "a", "--out", tmp_path / "r.ply"], ".npz"),
+             (["--model", models["chain.glb"], "--id", SOURCE_RIDER], "built-in roster rider"),
+             (["--model", models["mixamo.glb"], "--id", "my_glb_rider", "--out", imported[0]], "--force")]
+    for args, words in cases:
+        r = cli("rider", "import", *args, timeout=60)
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1 and words in lines[0], (args, r.stderr[-800:])
+        assert "reading" not in r.stdout  # refused before Blender started
+    assert cli("rider", "import", "--help").returncode == 0
+
+
+def test_rider_file_checks(tmp_path, imported):
+    a, meta = rider_file.read_rider_file(imported[0])
+    bad = dict(a, weights=a["weights"] * 2)
+    with pytest.raises(UserError, match="sum to 1"):
+        rider_file.write_rider_file(tmp_path / "r.npz", meta=meta, **bad)
+    assert not (tmp_path / "r.npz").exists()
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(UserError, match="not a rider file"):
+        rider_file.read_rider_file(tmp_path / "junk.npz")
+    np.savez(tmp_path / "partial.npz", vertices=a["vertices"])
+    with pytest.raises(UserError, match="missing faces"):
+        rider_file.read_rider_file(tmp_path / "partial.npz")
+
+
+@pytest.mark.blender_binary
+def test_debian_blender_34_imports_the_same_rider(models, imported, tmp_path):
+    """`--blender /usr/bin/blender` (3.4.1, system numpy): the same file as the bpy 5.0 import."""
+    import shutil
+    blender = shutil.which("blender")
+    if blender is None:
+        pytest.skip("Debian blender binary not installed")
+    out = tmp_path / "r34.npz"
+    r = cli("rider", "import", "--model", models["mixamo.glb"], "--id", "my_glb_rider", "--out", out, "--blender", blender)
+    assert r.returncode == 0, r.stderr[-1500:]
+    a34, m34 = rider_file.read_rider_file(out)
+    a50, m50 = rider_file.read_rider_file(imported[0])
+    assert m34["blender"].startswith("3.4") and m50["blender"].startswith("5.")
+    for k in rider_file.ARRAYS:
+        assert np.abs(a34[k].astype(np.float64) - a50[k]).max() < 1e-5, k
