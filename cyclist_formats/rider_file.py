@@ -19,6 +19,7 @@ face indices in range, colours in [0, 1]; anything else is one UserError line na
 """
 import json
 import os
+import re
 
 import numpy as np
 
@@ -30,6 +31,15 @@ FORMAT = "articcyclists-rider"
 VERSION = 1
 FILE_NAME = "rider.npz"
 ARRAYS = ("vertices", "faces", "joints", "weights", "colors")
+_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+
+
+def check_rider_id(rider_id, flag="--id"):
+    """A rider id usable as a folder name and in YAML configs; UserError otherwise."""
+    if not isinstance(rider_id, str) or not _ID.match(rider_id):
+        raise UserError(f"{flag} must be 1-64 letters, digits, '_', '.' or '-' (starting with a letter or "
+                        f"digit), got {rider_id!r}")
+    return rider_id
 
 
 def _check(path, a, meta):

@@ -494,3 +494,40 @@ def test_debian_blender_34_imports_the_same_rider(models, imported, tmp_path):
     assert m34["blender"].startswith("3.4") and m50["blender"].startswith("5.")
     for k in rider_file.ARRAYS:
         assert np.abs(a34[k].astype(np.float64) - a50[k]).max() < 1e-5, k
+
+
+# ---------------------------------------------------------------- the add-on's button: the same import
+
+def test_panel_button_saves_the_open_rig_and_a_model_file(models, source, tmp_path):
+    """articcyc.import_rider on the armature open in the scene (no file), then on the .fbx, then refusing
+    an unrigged file with the same words as the command."""
+    import addon
+    from addon.core.scene import reset_scene
+    reset_scene()
+    if not hasattr(bpy.types.Scene, "articcyc_rider_id"):
+        addon.register()
+    sc = bpy.context.scene
+    img = write_texture(tmp_path / "ramp.png")
+    arm, _ = build_rigged_human(source, "rigify", img)
+    sc.articcyc_rider_dir, sc.articcyc_rider_id, sc.articcyc_rider_model = str(tmp_path / "riders"), "open_rig", ""
+    assert bpy.ops.articcyc.import_rider() == {"FINISHED"}
+    a, meta = rider_file.read_rider_file(tmp_path / "riders" / "open_rig" / "rider.npz")
+    check_same_body(a, meta, source, exact_weights=True)  # no exporter between: every influence kept
+    assert meta["bone_map"] == RIGIFY
+    with pytest.raises(RuntimeError, match="exists"):  # no silent overwrite
+        bpy.ops.articcyc.import_rider()
+    reset_scene()
+    sc = bpy.context.scene
+    sc.articcyc_rider_dir, sc.articcyc_rider_id = str(tmp_path / "riders"), "from_fbx"
+    sc.articcyc_rider_model = str(models["mixamo.fbx"])
+    assert bpy.ops.articcyc.import_rider() == {"FINISHED"}
+    a, meta = rider_file.read_rider_file(tmp_path / "riders" / "from_fbx" / "rider.npz")
+    check_same_body(a, meta, source, exact_weights=True)
+    reset_scene()
+    sc = bpy.context.scene
+    sc.articcyc_rider_dir, sc.articcyc_rider_id = str(tmp_path / "riders"), "statue"
+    sc.articcyc_rider_model = str(models["unrigged.glb"])
+    with pytest.raises(RuntimeError, match="unrigged mesh"):
+        bpy.ops.articcyc.import_rider()
+    assert not (tmp_path / "riders" / "statue").exists()
+    reset_scene()

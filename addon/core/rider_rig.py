@@ -498,3 +498,21 @@ def pose_rig(arm, bone_of, meta, world_transforms):
         pb = arm.pose.bones[bone_of[name]]
         pb.matrix = A_inv @ _np2m(world) @ A @ pb.bone.matrix_local
         bpy.context.view_layer.update()
+
+
+def save_rider(objects, rider_id, folder, what, height_m=None, overwrite=False):
+    """The add-on's "Save as rider": rider_from_objects, written to <folder>/<rider_id>/rider.npz (where
+    `python -m splatting` finds imported riders when folder is the project's data/imported_riders).
+    Returns (path, meta)."""
+    import os
+
+    from .contract import rider_file
+    rider_file.check_rider_id(rider_id, "rider id")
+    if not folder:
+        raise UserError("no riders folder given (the project's data/imported_riders)")
+    path = os.path.join(folder, rider_id, rider_file.FILE_NAME)
+    if os.path.exists(path) and not overwrite:
+        raise UserError(f"{path} exists: rider {rider_id!r} was imported before (tick Overwrite to replace it)")
+    arrays, meta = rider_from_objects(objects, rider_id, what, height_m)
+    rider_file.write_rider_file(path, meta=meta, **arrays)
+    return path, meta

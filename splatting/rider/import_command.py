@@ -6,7 +6,6 @@ Runs blender_scripts/import_rider.py (the bpy module of this Python, or a Blende
 """
 import json
 import os
-import re
 import subprocess
 import sys
 
@@ -15,7 +14,6 @@ from splatting import paths
 
 SCRIPT = paths.blender_script("import_rider.py")
 MODEL_EXTENSIONS = (".glb", ".gltf", ".fbx", ".blend")
-_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 
 
 def add_arguments(p):
@@ -37,9 +35,8 @@ def check_args(args):
     checks.input_file("model", args.model)
     if not args.model.lower().endswith(MODEL_EXTENSIONS):
         raise UserError(f"--model must be one of {', '.join(MODEL_EXTENSIONS)}, got {args.model}")
-    if not _ID.match(args.id):
-        raise UserError(f"--id must be 1-64 letters, digits, '_', '.' or '-' (starting with a letter or "
-                        f"digit), got {args.id!r}")
+    from cyclist_formats.rider_file import check_rider_id
+    check_rider_id(args.id)
     checks.number("height_m", args.height_m, 0.5, 2.6)
     checks.output_file("out", args.out, (".npz",))
     if args.blender is not None:
