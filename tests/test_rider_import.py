@@ -329,7 +329,12 @@ def blender_posed(model, meta, world_transforms):
     from addon.core.curation.importers import import_model
     from addon.core.scene import reset_scene
     reset_scene()
-    arm, skinned, bone_of, _ = rider_rig.find_rig(import_model(str(model)), "model")
+    return posed_in_scene(rider_rig.find_rig(import_model(str(model)), "model"), meta, world_transforms)
+
+
+def posed_in_scene(rig, meta, world_transforms):
+    from addon.core import rider_rig
+    arm, skinned, bone_of, _ = rig
     rider_rig.pose_rig(arm, bone_of, meta, world_transforms)
     dg = bpy.context.evaluated_depsgraph_get()
     out = []
@@ -388,6 +393,35 @@ def test_a_pose_is_turned_into_the_t_pose(models, source, tmp_path):
     assert np.median(d) < 1e-5 and d.max() < 0.015, (np.median(d), d.max())
     err, _ = lbs_and_blender(models["mixamo_apose.fbx"], npz, 100.0, 10.0)
     assert np.median(err) < 1e-5 and np.percentile(err, 99) < 0.01 and err.max() < 0.02, (np.percentile(err, 99), err.max())
+
+
+def test_turned_and_scaled_rig_gives_the_same_rider(source, tmp_path):
+    """The rig object turned 90 deg about the vertical (facing another way) and scaled x2 (a 3 m giant):
+    refused without --height-m, the same rider with it, and LBS still equal to Blender's posing."""
+    from mathutils import Matrix
+
+    from addon.core import rider_rig
+    from addon.core.scene import reset_scene
+    from splatting.rider.body import pose_vertices
+    from splatting.rider.imported import load_imported_rider
+    from splatting.rider.kinematics import forward_kinematics
+    from splatting.rider.motion import pedal_pose
+    reset_scene()
+    arm, _ = build_rigged_human(source, "mixamo", write_texture(tmp_path / "ramp.png"))
+    arm.matrix_world = Matrix.Rotation(math.radians(90), 4, "Z") @ Matrix.Diagonal((2, 2, 2, 1)) @ Matrix.Translation((3, 1, 0))
+    bpy.context.view_layer.update()
+    with pytest.raises(UserError, match="give --height-m"):
+        rider_rig.rider_from_objects(bpy.context.scene.objects, "giant", "scene")
+    a, meta = rider_rig.rider_from_objects(bpy.context.scene.objects, "giant", "scene", height_m=source.height_m)
+    check_same_body(a, meta, source, exact_weights=True)
+    npz = rider_file.write_rider_file(tmp_path / "rider.npz", meta=meta, **a)
+    rider = load_imported_rider(npz)
+    rot, root, _ = pedal_pose(rider.joints.double(), math.radians(200), math.radians(-12))
+    ours = pose_vertices(rider, rot, root)[0].numpy()
+    T = forward_kinematics(rider.joints.double(), rot, root)[1][0].numpy()
+    theirs = posed_in_scene(rider_rig.find_rig(bpy.context.scene.objects, "scene"), meta, T)
+    assert np.abs(ours - theirs).max() < 2e-5
+    reset_scene()
 
 
 # ---------------------------------------------------------------- roster, IK, avatar mesh
