@@ -13,6 +13,11 @@ Y = 0, pelvis joint at X = Z = 0, exactly like the body-model riders:
 | weights | (V,24) float32 | skinning weights over the 24 joints, rows sum to 1 |
 | colors | (V,3) float32 | sRGB in [0, 1], the textures / material colours sampled per vertex |
 | meta | () str | JSON: format, version, id, source, scheme, bone_map, rest_pose, swings_deg, ... |
+| uv | (F,3,2) float32, optional | each triangle corner's texture coordinate (v up, Blender's convention) |
+| face_texture | (F,) int16, optional | texture_K drawn on the face, -1 = its vertex colours |
+| texture_K | (H,W,3) uint8, optional | the K-th texture, sRGB, row 0 at the bottom (v = 0) |
+
+The optional arrays keep texture detail finer than the vertices for the avatar's training renders.
 
 Checks on read: every key present, shapes agreeing, finite values, weights >= 0 summing to 1 (1e-3),
 face indices in range, colours in [0, 1]; anything else is one UserError line naming the file.
@@ -75,16 +80,44 @@ def _check(path, a, meta):
         bad("meta.id must be a non-empty string")
 
 
-def write_rider_file(path, vertices, faces, joints, weights, colors, meta):
-    """Write `path` (.npz) atomically after the same checks the reader makes; returns path."""
+def _check_textures(path, a, n_faces):
+    def bad(msg):
+        raise UserError(f"{path}: not a usable rider file: {msg}")
+
+    if "uv" not in a and "face_texture" not in a:
+        return 0
+    uv, ft = a.get("uv"), a.get("face_texture")
+    if uv is None or ft is None:
+        bad("uv and face_texture come together")
+    if uv.shape != (n_faces, 3, 2) or not np.isfinite(uv).all():
+        bad(f"uv must be finite ({n_faces},3,2), got {uv.shape}")
+    n_tex = len([k for k in a if k.startswith("texture_")])
+    if ft.shape != (n_faces,) or not np.issubdtype(ft.dtype, np.integer) or ft.min() < -1 or ft.max() >= n_tex:
+        bad(f"face_texture must be ({n_faces},) indices in [-1, {n_tex})")
+    for k in range(n_tex):
+        t = a.get(f"texture_{k}")
+        if t is None or t.ndim != 3 or t.shape[2] != 3 or t.dtype != np.uint8 or min(t.shape[:2]) < 1:
+            bad(f"texture_{k} must be (H,W,3) uint8 and textures numbered from 0")
+    return n_tex
+
+
+def write_rider_file(path, vertices, faces, joints, weights, colors, meta, uv=None, face_texture=None,
+                     textures=()):
+    """Write `path` (.npz) atomically after the same checks the reader makes; returns path.
+    uv (F,3,2) + face_texture (F,) + textures [(H,W,3) uint8] are the optional texture layer."""
     path = os.fspath(path)
     if not path.endswith(".npz"):
         raise UserError(f"rider file must end in .npz, got {path}")
     a = {"vertices": np.asarray(vertices, np.float32), "faces": np.asarray(faces, np.int32),
          "joints": np.asarray(joints, np.float32), "weights": np.asarray(weights, np.float32),
          "colors": np.asarray(colors, np.float32)}
+    if uv is not None or face_texture is not None:
+        a["uv"] = None if uv is None else np.asarray(uv, np.float32)
+        a["face_texture"] = None if face_texture is None else np.asarray(face_texture, np.int16)
+        a.update({f"texture_{k}": np.asarray(t, np.uint8) for k, t in enumerate(textures)})
     meta = dict(meta, format=FORMAT, version=VERSION)
     _check(path, a, meta)
+    _check_textures(path, a, len(a["faces"]))
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:  # a file object: np.savez would append '.npz' to the temp name
             np.savez_compressed(fh, meta=np.array(json.dumps(meta)), **a)
@@ -103,18 +136,24 @@ def read_meta(path):
 
 
 def read_rider_file(path):
-    """(arrays dict with ARRAYS keys, meta dict); UserError on a missing or malformed file."""
+    """(arrays dict: ARRAYS and any texture layer, meta dict); UserError on a missing or malformed file."""
     path = os.fspath(path)
     try:
         with np.load(path, allow_pickle=False) as z:
             missing = [k for k in ARRAYS + ("meta",) if k not in z.files]
             if missing:
                 raise UserError(f"{path}: not a rider file, missing {', '.join(missing)}")
-            a = {k: z[k] for k in ARRAYS}
+            a = {k: z[k] for k in z.files if k != "meta"}
             meta = json.loads(str(z["meta"]))
     except FileNotFoundError:
         raise UserError(f"rider file not found: {path}") from None
     except (OSError, ValueError, EOFError) as e:
         raise UserError(f"{path}: not a rider file ({type(e).__name__}: {e})") from None
     _check(path, a, meta)
+    _check_textures(path, a, len(a["faces"]))
     return a, meta
+
+
+def textures_of(a):
+    """The texture arrays of a read rider file, in order (empty when it has no texture layer)."""
+    return [a[f"texture_{k}"] for k in range(len([k for k in a if k.startswith("texture_")]))]

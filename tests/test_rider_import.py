@@ -565,3 +565,30 @@ def test_panel_button_saves_the_open_rig_and_a_model_file(models, source, tmp_pa
         bpy.ops.articcyc.import_rider()
     assert not (tmp_path / "riders" / "statue").exists()
     reset_scene()
+
+
+# ---------------------------------------------------------------- textures in the training renders
+
+def test_texture_layer_reaches_the_training_renders(imported, tmp_path):
+    """The rider file keeps the texture and the corner UVs; render_rider.py (the avatar's training views)
+    draws the texture itself: a black-and-white checker of 16x16 squares put in the file's texture layer shows on
+    the body although the file's vertex colours are the (colourful, mid-grey) ramp."""
+    from PIL import Image
+    a, meta = rider_file.read_rider_file(imported[0])
+    (tex,) = rider_file.textures_of(a)
+    ramp = np.round(np.stack(np.meshgrid(np.arange(TEX), np.arange(TEX))[::-1][::-1], -1) / (TEX - 1) * 255)
+    assert np.abs(tex[..., :2].astype(int) - ramp).max() <= 1 and np.abs(tex[..., 2].astype(int) - 64).max() <= 1
+    assert np.abs(a["uv"] - expected_uv(a["vertices"])[a["faces"]]).max() < 1e-4
+    assert (a["face_texture"] == 0).all()
+    checker = ((np.add.outer(np.arange(256) // 16, np.arange(256) // 16) % 2) * 255).astype(np.uint8)[..., None].repeat(3, -1)
+    arrays = {k: a[k] for k in rider_file.ARRAYS}
+    npz = rider_file.write_rider_file(tmp_path / "checker.npz", meta=meta, uv=a["uv"], face_texture=a["face_texture"],
+                                      textures=[checker], **arrays)
+    r = subprocess.run([sys.executable, os.path.join(ROOT, "blender_scripts", "render_rider.py"), "--mesh", str(npz),
+                        "--out", str(tmp_path / "views"), "--views", "9", "--samples", "2"],
+                       capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-1500:]
+    img = np.asarray(Image.open(tmp_path / "views" / "rgba" / "camera0009" / "0000.png")).astype(float)
+    body = img[..., 3] > 250
+    lum = img[body, :3].mean(1)
+    assert body.sum() > 2000 and np.percentile(lum, 10) < 40 and np.percentile(lum, 90) > 120, np.percentile(lum, [10, 50, 90])

@@ -23,7 +23,8 @@ weights over those joints and per-vertex colours.  Steps:
    weighted vertex's weights.
 5. Colours: per material, the image texture feeding the Base Color (sampled bilinearly at each corner's
    UV, averaged per vertex), a colour attribute, or the flat base colour.  A texture whose image is
-   missing or unreadable is an error (not a silent grey).
+   missing or unreadable is an error (not a silent grey).  Textured faces also keep their corner UVs
+   and the texture itself (the rider file's texture layer), which the avatar's training renders draw.
 """
 import math
 
@@ -344,6 +345,8 @@ def _sample_bilinear(rgb, uv):
 
 
 def _object_colors(obj, what, images):
+    """Per-vertex sRGB colours, and per loop the texture coordinate and the index into `images` (an
+    ordered {name: sRGB array}) of the texture drawn there (-1: none)."""
     me = obj.data
     nv, nl = len(me.vertices), len(me.loops)
     loop_vert = np.empty(nl, np.int64)
@@ -354,6 +357,8 @@ def _object_colors(obj, what, images):
     me.polygons.foreach_get("material_index", mats)
     loop_mat = np.repeat(mats, totals)
     loop_rgb = np.empty((nl, 3))
+    loop_uv = np.zeros((nl, 2))
+    loop_tex = np.full(nl, -1, np.int64)
     for mi in np.unique(loop_mat):
         sel = loop_mat == mi
         mat = obj.material_slots[mi].material if mi < len(obj.material_slots) else None
@@ -368,6 +373,8 @@ def _object_colors(obj, what, images):
             if img.name not in images:
                 images[img.name] = _image_array(img)
             loop_rgb[sel] = _sample_bilinear(images[img.name], uv.reshape(-1, 2)[sel])
+            loop_uv[sel] = uv.reshape(-1, 2)[sel]
+            loop_tex[sel] = list(images).index(img.name)
         elif src[0] == "attribute":
             loop_rgb[sel] = _attribute_colors(me, src[1], loop_vert)[sel]
         else:
@@ -378,7 +385,7 @@ def _object_colors(obj, what, images):
     np.add.at(cnt, loop_vert, 1)
     out[cnt == 0] = srgb_from_linear(DEFAULT_LINEAR)
     cnt[cnt == 0] = 1
-    return out / cnt[:, None]
+    return out / cnt[:, None], loop_uv, loop_tex
 
 
 def _attribute_colors(me, name, loop_vert):
@@ -396,10 +403,13 @@ def _attribute_colors(me, name, loop_vert):
 # ---------------------------------------------------------------- the whole import
 
 def _triangles(me):
+    """Triangles as vertex indices (T,3) and as loop indices (T,3)."""
     me.calc_loop_triangles()
     t = np.empty(len(me.loop_triangles) * 3, np.int64)
     me.loop_triangles.foreach_get("vertices", t)
-    return t.reshape(-1, 3)
+    lo = np.empty(len(me.loop_triangles) * 3, np.int64)
+    me.loop_triangles.foreach_get("loops", lo)
+    return t.reshape(-1, 3), lo.reshape(-1, 3)
 
 
 def rider_from_objects(objects, rider_id, what, height_m=None, restore=True):
@@ -427,7 +437,7 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True):
             pb = arm.pose.bones[bone_of[j]]
             rest_deform[j] = _m2np(A @ pb.matrix @ pb.bone.matrix_local.inverted() @ A_inv).tolist()
         heads_t = _posed_heads(arm, bone_of)
-        V, F, W, C, n_filled = [], [], [], [], 0
+        V, F, W, C, UV, FT, n_filled = [], [], [], [], [], [], 0
         images, base = {}, 0
         for obj in skinned:
             v = _evaluated_world_vertices(obj)
@@ -436,10 +446,14 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True):
                 raise UserError(f"{what}: unrigged mesh: object '{obj.name}' has bone weights on only "
                                 f"{int((w.sum(1) > 0).sum())} of {len(w)} vertices")
             n_filled += _fill_unweighted(w, v)
+            tri, tri_loops = _triangles(obj.data)
+            col, loop_uv, loop_tex = _object_colors(obj, what, images)
             V.append(v)
-            F.append(_triangles(obj.data) + base)
+            F.append(tri + base)
             W.append(w)
-            C.append(_object_colors(obj, what, images))
+            C.append(col)
+            UV.append(loop_uv[tri_loops])
+            FT.append(loop_tex[tri_loops[:, 0]])  # a triangle lies in one polygon: one material
             base += len(v)
     finally:
         if restore:
@@ -474,6 +488,9 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True):
         "blender": bpy.app.version_string,
     }
     arrays = {"vertices": Vc, "faces": F, "joints": Jc, "weights": W, "colors": C}
+    if images:  # the texture layer: the training renders draw the textures themselves, not vertex colours
+        arrays.update(uv=np.concatenate(UV), face_texture=np.concatenate(FT),
+                      textures=[np.round(t * 255).astype(np.uint8) for t in images.values()])
     return arrays, meta
 
 
