@@ -1,4 +1,4 @@
-"""Keypoint IK (splatting/rider/ik.py) on the template skeleton and real procedural bike keypoints."""
+"""Keypoint IK (splatting/rider/ik/) on the template skeleton and real procedural bike keypoints."""
 
 import numpy as np
 import pytest
@@ -7,8 +7,9 @@ import torch
 from addon.core.procedural import layout, spec as bike_spec
 from cyclist_formats.errors import UserError
 from splatting.rider import ik
-from splatting.rider.kinematics import JOINT_INDEX, forward_kinematics
+from splatting.rider.kinematics import JOINT_INDEX, JOINT_NAMES, forward_kinematics
 from splatting.rider.skeleton_template import template_rest_joints
+from splatting.rotations import rodrigues
 
 PAIRS = dict(ik.DEFAULT_PAIRS)  # joint -> target
 
@@ -61,7 +62,7 @@ def known_pose(rest, B=4, seed=0):
     for name, a in axes.items():  # pure hinge rotations, 0.3..1.5 rad of flexion
         aa[:, JOINT_INDEX[name]] = (0.3 + 1.2 * torch.rand(B, 1, generator=g, dtype=torch.float64)) * a
     trans = torch.tensor([0.1, -0.3, 0.05], dtype=torch.float64) + 0.05 * torch.randn(B, 3, generator=g, dtype=torch.float64)
-    joints, _ = forward_kinematics(torch.as_tensor(rest), ik.rodrigues(aa), trans)
+    joints, _ = forward_kinematics(torch.as_tensor(rest), rodrigues(aa), trans)
     lift = torch.tensor([0.0, ik.PELVIS_ABOVE_SEAT_M, 0.0], dtype=torch.float64)
     targets = {t: joints[:, JOINT_INDEX[j]] - (lift if t == "seat" else 0.0) for j, t in ik.DEFAULT_PAIRS}
     return aa, targets
@@ -103,7 +104,7 @@ def test_on_real_bike_pedal_stroke_reaches_targets():
     worst = max(float(r.max()) for r in residuals_from_joints(res, targets).values())
     assert worst < 0.01, worst
     signs = hinge_signs(res.joints, forward_kinematics(torch.as_tensor(rest, dtype=torch.float32),
-                                                       ik.rodrigues(res.local_aa), res.root_trans)[1], rest)
+                                                       rodrigues(res.local_aa), res.root_trans)[1], rest)
     for name, s in signs.items():
         assert (s > -1e-6).all(), (name, s)
 
@@ -138,7 +139,7 @@ def test_mirrored_inputs_keep_left_and_right():
         assert (r < 0.01).all(), (k, r)
         assert torch.allclose(r, a.residuals[swap_side(k)], atol=2e-3)
     # the solution is the mirror image: joint j of b = mirror of the other side's joint of a
-    for j, name in enumerate(ik.JOINT_NAMES):
+    for j, name in enumerate(JOINT_NAMES):
         assert torch.allclose(b.joints[:, j], mirror(a.joints[:, JOINT_INDEX[swap_side(name)]]), atol=0.01), name
     # and left really is left: b's left wrist sits at the mirrored right handle's side (-Z here)
     assert torch.allclose(b.joints[:, JOINT_INDEX["left_wrist"]].double(), mirrored["handle_left"], atol=0.01)
@@ -158,7 +159,7 @@ def test_knees_and_elbows_never_bend_backwards():
     for k, name in enumerate(("left_elbow", "right_elbow", "left_knee", "right_knee")):
         init[1, JOINT_INDEX[name]] = -0.6 * axes[k]
     res = ik.solve(rest, targets, init_local_aa=init, lr=0.2, iterations=60)
-    _, T = forward_kinematics(torch.as_tensor(rest, dtype=torch.float32), ik.rodrigues(res.local_aa), res.root_trans)
+    _, T = forward_kinematics(torch.as_tensor(rest, dtype=torch.float32), rodrigues(res.local_aa), res.root_trans)
     for name, s in hinge_signs(res.joints, T, rest).items():
         assert (s > -1e-6).all(), (name, s)
     theta = (res.local_aa[:, [JOINT_INDEX[n] for n in ("left_elbow", "right_elbow", "left_knee", "right_knee")]]
@@ -243,11 +244,11 @@ def test_reduced_chain_matches_full_forward_kinematics():
     g = torch.Generator().manual_seed(3)
     aa = 0.6 * torch.randn(5, 24, 3, generator=g, dtype=torch.float64)
     trans = torch.randn(5, 3, generator=g, dtype=torch.float64)
-    R = ik.rodrigues(aa)
+    R = rodrigues(aa)
     joints, _ = forward_kinematics(rest, R, trans)
     names = ["left_wrist", "pelvis", "right_ankle", "head", "left_foot", "right_hand"]
-    chain = ik._Chain(rest, R, names)
+    chain = ik.ReducedChain(rest, R, names)
     slots = [JOINT_INDEX[n] for n in ik.SLOT_JOINTS]
     eff = chain(R[:, slots].float(), trans.float())
     assert torch.allclose(eff.double(), joints[:, [JOINT_INDEX[n] for n in names]], atol=1e-5)
-    assert torch.allclose(ik.rodrigues(aa), torch.as_tensor(__import__("roma").rotvec_to_rotmat(aa)), atol=1e-10)
+    assert torch.allclose(rodrigues(aa), torch.as_tensor(__import__("roma").rotvec_to_rotmat(aa)), atol=1e-10)

@@ -14,7 +14,7 @@ smplx = pytest.importorskip("smplx")
 
 from cyclist_formats.errors import UserError  # noqa: E402
 from splatting.rider.kinematics import JOINT_INDEX, PARENTS  # noqa: E402
-from splatting.rotations import axis_angle_to_rotmat  # noqa: E402
+from splatting.rotations import axis_angle_to_rotmat, rodrigues  # noqa: E402
 
 J = JOINT_INDEX
 # SMPL frame (Y up, facing +Z, left at +X), origin ~1.15 m above the soles like SMPL's template.
@@ -157,7 +157,7 @@ def test_works_with_ik_and_avatar(model):
     aa = torch.as_tensor(ik.cycling_init_pose(rider.joints), dtype=torch.float64)[None].clone()
     for name in ik.IK_JOINTS:
         aa[:, J[name]] += 0.15 * torch.randn(1, 3, generator=g, dtype=torch.float64)
-    joints, _ = forward_kinematics(rider.joints.double(), ik.rodrigues(aa), torch.tensor([[0.1, -0.3, 0.0]]).double())
+    joints, _ = forward_kinematics(rider.joints.double(), rodrigues(aa), torch.tensor([[0.1, -0.3, 0.0]]).double())
     lift = torch.tensor([0.0, ik.PELVIS_ABOVE_SEAT_M, 0.0], dtype=torch.float64)
     targets = {t: joints[:, J[j]] - (lift if t == "seat" else 0.0) for j, t in ik.DEFAULT_PAIRS}
     res = ik.solve(rider.joints, targets)
@@ -170,7 +170,7 @@ def test_works_with_ik_and_avatar(model):
     gs = Gaussians(rider.vertices[idx].clone(), torch.tensor([1.0, 0, 0, 0]).repeat(n, 1),
                    torch.full((n, 3), -5.0), torch.zeros(n), torch.rand(n, 1, 3))
     avatar = RiderAvatar.from_rider(gs, rider)
-    R = ik.rodrigues(aa).float()
+    R = rodrigues(aa).float()
     means = avatar.pose_tensors(R)["means"][0]
     assert (means - pose_vertices(rider, R)[0, idx]).abs().max() < 1e-4
 

@@ -50,10 +50,11 @@ def fit_sequence(cyc, poses, motion_aa=None):
     """IK for all frames at once with one seat post.  With a motion: a second solve starts from the
     first one's solution with the motion's rotations on the joints the IK does not move."""
     from splatting.rider import ik
+    from splatting.rider.kinematics import JOINT_INDEX
     res = cyc.fit_rider(poses, saddle_shared=True)
     if motion_aa is None:
         return res
-    keep = [i for i, n in enumerate(ik.JOINT_INDEX) if n not in ik.SLOT_JOINTS]
+    keep = [i for i, n in enumerate(JOINT_INDEX) if n not in ik.SLOT_JOINTS]
     init = res.local_aa.clone()
     init[:, keep] = motion_aa[:, keep]
     p = poses.clone()

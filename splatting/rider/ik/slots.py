@@ -1,0 +1,47 @@
+"""The IK's parameter layout and the rider's hinge joints: which joints are free, in which slot
+order, which bend like hinges and about which axis, and the default keypoint pairs."""
+import math
+
+import torch
+
+from cyclist_formats.errors import UserError
+from splatting.rider.kinematics import JOINT_INDEX, PARENTS
+
+IK_JOINTS = ("spine1", "left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_hip",
+             "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle")
+DEFAULT_PAIRS = (("left_wrist", "handle_left"), ("right_wrist", "handle_right"), ("pelvis", "seat"),
+                 ("left_ankle", "pedal_left"), ("right_ankle", "pedal_right"))
+# hinge joint -> direction (canonical frame) its child segment swings toward when it flexes
+HINGE_FLEX_DIRECTION = {"left_knee": (-1.0, 0.0, 0.0), "right_knee": (-1.0, 0.0, 0.0),
+                        "left_elbow": (1.0, 0.0, 0.0), "right_elbow": (1.0, 0.0, 0.0)}
+HINGE_MAX_RAD = math.radians(150.0)
+PELVIS_ABOVE_SEAT_M = 0.09  # the SMPL pelvis joint sits ~9 cm above the saddle top when seated
+SEAT_RANGE_M = (-0.15, 0.05)  # saddle auto-fit: seat-post travel along the seat tube
+FLAG_THRESHOLD_M = 0.03
+OBJECTIVES = ("pairs", "chamfer")
+
+# parameter slots: root orientation, then the 11 joints with the four hinges last (one slice)
+SLOT_JOINTS = ("pelvis", "spine1", "left_shoulder", "right_shoulder", "left_hip", "right_hip",
+                "left_ankle", "right_ankle", "left_elbow", "right_elbow", "left_knee", "right_knee")
+HINGE_SLOTS = slice(8, 12)
+N_ROT = len(SLOT_JOINTS) * 3  # 36 rotation columns, then 3 translation, then 1 seat offset
+
+
+def pair_name(joint, target):
+    return f"{joint}->{target}"
+
+
+def hinge_axes(rest_joints):
+    """Unit flexion axes (4, 3) of the hinge slots (knees, elbows) in the rest frame: positive
+    rotation about it swings the child segment toward HINGE_FLEX_DIRECTION."""
+    rest = torch.as_tensor(rest_joints, dtype=torch.float64)
+    axes = []
+    for name in SLOT_JOINTS[HINGE_SLOTS]:
+        j = JOINT_INDEX[name]
+        u = rest[j] - rest[PARENTS[j]]  # the parent segment (thigh, upper arm) in the rest pose
+        a = torch.linalg.cross(u, torch.tensor(HINGE_FLEX_DIRECTION[name], dtype=torch.float64))
+        n = torch.linalg.vector_norm(a)
+        if not n > 1e-6:
+            raise UserError(f"rest skeleton: {name}'s parent segment is parallel to its flexion direction")
+        axes.append(a / n)
+    return torch.stack(axes)
