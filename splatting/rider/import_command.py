@@ -74,8 +74,11 @@ def import_rider(model, rider_id, out=None, height_m=None, blender=None, force=F
 
 
 def run(args):
+    from splatting.rider.imported import rider_path
     res = import_rider(args.model, args.id, args.out, args.height_m, args.blender, args.force)
+    where = "" if os.path.abspath(res["rider"]) == os.path.abspath(rider_path(args.id)) else \
+        f"; not in the roster: move it to {rider_path(args.id)}"
     print(f"{res['rider']}: rider {args.id} imported ({res.get('vertices', '?')} vertices, "
           f"{res.get('scheme', '?')} rig, {res.get('rest_pose', '?')}-pose rest, {res.get('height_m', '?')} m, "
-          f"{res.get('textures', 0)} texture(s))")
+          f"{res.get('textures', 0)} texture(s)){where}")
     return 0
