@@ -501,7 +501,7 @@ def test_bad_arguments_are_refused_before_blender(models, imported, tmp_path):
 
 def test_rider_file_checks(tmp_path, imported):
     a, meta = rider_file.read_rider_file(imported[0])
-    bad = dict(a, weights=a["weights"] * 2)
+    bad = dict({k: a[k] for k in rider_file.ARRAYS}, weights=a["weights"] * 2)
     with pytest.raises(UserError, match="sum to 1"):
         rider_file.write_rider_file(tmp_path / "r.npz", meta=meta, **bad)
     assert not (tmp_path / "r.npz").exists()
@@ -511,6 +511,10 @@ def test_rider_file_checks(tmp_path, imported):
     np.savez(tmp_path / "partial.npz", vertices=a["vertices"])
     with pytest.raises(UserError, match="missing faces"):
         rider_file.read_rider_file(tmp_path / "partial.npz")
+    with pytest.raises(UserError, match="face_texture must be"):  # a face drawing a texture the file lacks
+        rider_file.write_rider_file(tmp_path / "r.npz", meta=meta, uv=a["uv"], face_texture=a["face_texture"] + 1,
+                                    textures=rider_file.textures_of(a), **{k: a[k] for k in rider_file.ARRAYS})
+    assert not (tmp_path / "r.npz").exists()
 
 
 @pytest.mark.blender_binary
