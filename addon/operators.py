@@ -275,6 +275,33 @@ class ARTICCYC_OT_render_views(_Op, bpy.types.Operator):
         return f"rendered {', '.join(res)}"
 
 
+class ARTICCYC_OT_import_rider(_Op, bpy.types.Operator):
+    """Save a rigged human as a rider for the generator (bones -> 24 SMPL joints, T-pose, weights, texture
+    colours): the model file when one is given (imported into this scene), else the scene's armature"""
+    bl_idname = "articcyc.import_rider"
+    bl_label = "Save as rider"
+    overwrite: BoolProperty(name="Overwrite", default=False, description="replace an earlier rider with this id")
+
+    def run(self, context):
+        from .core import rider_rig
+        sc = context.scene
+        if context.mode != "OBJECT":
+            bpy.ops.object.mode_set(mode="OBJECT")
+        model = bpy.path.abspath(sc.articcyc_rider_model) if sc.articcyc_rider_model else ""
+        if model:
+            from .core.curation import importers
+            objects, what = importers.import_model(model), model
+        else:  # the open scene: the selected armature's rig when one is selected, else every object
+            sel = [o for o in context.selected_objects if o.type == "ARMATURE"]
+            objects = list(sc.objects) if not sel else [sel[0]] + [o for o in sc.objects if o.type == "MESH"]
+            what = bpy.data.filepath or "this scene"
+        folder = bpy.path.abspath(sc.articcyc_rider_dir).rstrip("/\\")
+        path, meta = rider_rig.save_rider(objects, sc.articcyc_rider_id, folder, what,
+                                          sc.articcyc_rider_height or None, self.overwrite)
+        return (f"rider {meta['id']}: {meta['scheme']} rig, {meta['rest_pose']}-pose rest, {meta['height_m']} m "
+                f"-> {path}")
+
+
 def _store_problems(scene, probs):
     scene.articcyc_problems.clear()
     for p in probs:
@@ -305,7 +332,8 @@ class ARTICCYC_Problem(bpy.types.PropertyGroup):
 CLASSES = (ARTICCYC_Problem, ARTICCYC_OT_import_model, ARTICCYC_OT_auto_curate, ARTICCYC_OT_place_wheels,
            ARTICCYC_OT_curate_from_wheels, ARTICCYC_OT_resume, ARTICCYC_OT_load_keypoints,
            ARTICCYC_OT_snap_keypoints, ARTICCYC_OT_validate, ARTICCYC_OT_edit_parts, ARTICCYC_OT_paint_part,
-           ARTICCYC_OT_split_parts, ARTICCYC_OT_build_rig, ARTICCYC_OT_save_bike, ARTICCYC_OT_render_views)
+           ARTICCYC_OT_split_parts, ARTICCYC_OT_build_rig, ARTICCYC_OT_save_bike, ARTICCYC_OT_render_views,
+           ARTICCYC_OT_import_rider)
 
 SCENE_PROPS = {
     "articcyc_model_path": lambda: StringProperty(name="Model", subtype="FILE_PATH", default=""),
@@ -318,6 +346,13 @@ SCENE_PROPS = {
                                                   update=preview_update),
     "articcyc_problems": lambda: bpy.props.CollectionProperty(type=ARTICCYC_Problem),
     "articcyc_validated": lambda: BoolProperty(default=False),
+    "articcyc_rider_model": lambda: StringProperty(name="Rigged human", subtype="FILE_PATH", default="",
+                                                   description=".glb/.fbx/.blend; empty = the armature in this scene"),
+    "articcyc_rider_id": lambda: StringProperty(name="Rider id", default="my_rider"),
+    "articcyc_rider_dir": lambda: StringProperty(name="Riders folder", subtype="DIR_PATH", default="",
+                                                 description="the project's data/imported_riders"),
+    "articcyc_rider_height": lambda: FloatProperty(name="Height (m)", default=0.0, min=0.0, max=2.6,
+                                                   description="scale to this height; 0 = the model's own size"),
 }
 
 

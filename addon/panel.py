@@ -1,4 +1,4 @@
-"""The annotator's sidebar tab (3D viewport, N panel): Curate, Keypoints, Parts, Render.
+"""The annotator's sidebar tab (3D viewport, N panel): Curate, Keypoints, Parts, Render, Rider.
 
 Every button is an operator from operators.py; nothing here changes data by itself.
 """
@@ -102,7 +102,22 @@ class ARTICCYC_PT_render(_Panel, bpy.types.Panel):
         col.operator("articcyc.render_views", icon="RENDER_STILL")
 
 
-CLASSES = (ARTICCYC_PT_requirements, ARTICCYC_PT_curate, ARTICCYC_PT_keypoints, ARTICCYC_PT_parts, ARTICCYC_PT_render)
+class ARTICCYC_PT_rider(_Panel, bpy.types.Panel):
+    """A user's rigged human -> a rider for the generator (the same import as `python -m splatting rider import`)."""
+    bl_label = "Rider"
+    bl_idname = "ARTICCYC_PT_rider"
+
+    def draw(self, context):
+        sc, col = context.scene, self.layout.column(align=True)
+        col.prop(sc, "articcyc_rider_model", text="")
+        col.prop(sc, "articcyc_rider_id")
+        col.prop(sc, "articcyc_rider_height")
+        col.prop(sc, "articcyc_rider_dir", text="")
+        col.operator("articcyc.import_rider", icon="ARMATURE_DATA")
+
+
+CLASSES = (ARTICCYC_PT_requirements, ARTICCYC_PT_curate, ARTICCYC_PT_keypoints, ARTICCYC_PT_parts, ARTICCYC_PT_render,
+           ARTICCYC_PT_rider)
 
 
 def register():

@@ -21,7 +21,7 @@ from addon.core.script import UserError, run_main  # noqa: E402
 
 def parse(argv):
     p = argparse.ArgumentParser(prog="render_rider.py", description=__doc__.splitlines()[0])
-    p.add_argument("--mesh", help="rider .ply (canonical frame, vertex colours)")
+    p.add_argument("--mesh", help="rider .ply (canonical frame, vertex colours) or an imported rider.npz (with its textures)")
     p.add_argument("--out", help="views folder (ring mode) or output .png (with --camera)")
     p.add_argument("--camera", help="cameras.json:cameraNNNN, or a JSON file with one K/R/T: render one still")
     p.add_argument("--batch", help="JSON list of stills {mesh, camera, out, light_yaw_deg}")

@@ -22,6 +22,8 @@ COMMANDS = {
     "dataset": ("splatting.dataset.command", "COCO training images + annotations from a YAML config or preset"),
     "relight-fit": ("splatting.relight.fit", "fit per-Gaussian albedo and normal of trained Gaussians to the render passes"),
     # two-word commands: `python -m splatting dataset merge ...`
+    "rider import": ("splatting.rider.import_command", "a rigged human (.glb/.fbx, Mixamo/Rigify bones) becomes a "
+                                                        "roster rider (bones -> 24 SMPL joints, weights, textures)"),
     "dataset merge": ("splatting.dataset.merge", "merge a dataset's per-sample shards into annotations.json (idempotent)"),
     "library build": ("splatting.library.command", "build every bike's views + part Gaussians + ground-truth check "
                                                    "and every rider's avatar, resumable, into library.json"),

@@ -159,7 +159,8 @@ def test_cli_list_and_errors(capsys, tmp_path):
     from splatting.cli import main
     assert main(["rider", "--list"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert [l.split()[0] for l in lines] == [r["id"] for r in load_roster()]
+    from splatting.rider.roster import all_riders  # the file's riders, then any imported ones
+    assert [l.split()[0] for l in lines] == [r["id"] for r in all_riders()]
     assert main(["rider", "--id", "nobody", "--out", str(tmp_path / "x.ply")]) == 2
     assert "unknown rider id" in capsys.readouterr().err
     assert not (tmp_path / "x.ply").exists()

@@ -13,17 +13,54 @@ import bpy
 import numpy as np
 
 from . import frames, render
-from .contract import UserError, instances, ply
+from .contract import UserError, instances, ply, rider_file
 
 RIDER_PASS_INDEX = instances.RIDER_ID  # docs/contract.md: rider 4 when rendered together with a bike
 COLOR_ATTRIBUTE = "Col"
 
 def read_colored_ply(path):
-    """Triangle .ply -> vertices (V,3) canonical, faces (F,3), colours (V,3) sRGB in [0, 1]
-    (white when the file has none)."""
+    """Triangle .ply (or an imported rider's rider.npz) -> vertices (V,3) canonical, faces (F,3),
+    colours (V,3) sRGB in [0, 1] (white when the file has none)."""
     if not os.path.isfile(path):
         raise UserError(f"no rider mesh: {path}")
+    if path.endswith(".npz"):
+        a, _ = rider_file.read_rider_file(path)
+        return a["vertices"].astype(np.float64), a["faces"].astype(np.int64), a["colors"].astype(np.float64)
     return ply.read_colored_mesh(path)
+
+
+def _texture_material(name, pixels):
+    """Image Texture (the face's UVs) -> Diffuse BSDF, for an imported rider's texture (H,W,3) uint8 sRGB."""
+    h, w = pixels.shape[:2]
+    img = bpy.data.images.new(name, w, h)  # a byte image: its sRGB values are stored as given
+    rgba = np.concatenate([pixels.astype(np.float32) / 255.0, np.ones((h, w, 1), np.float32)], -1)
+    img.pixels.foreach_set(rgba.ravel())
+    img.pack()  # generated pixels survive a save of the scene
+    mat = _vertex_color_material(name)
+    nt = mat.node_tree
+    col = next(n for n in nt.nodes if n.type == "VERTEX_COLOR")
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    tex.interpolation = "Linear"
+    bsdf = next(n for n in nt.nodes if n.type == "BSDF_DIFFUSE")
+    nt.nodes.remove(col)
+    nt.links.new(tex.outputs["Color"], bsdf.inputs["Color"])
+    return mat
+
+
+def _add_texture_layer(mesh, path, name):
+    """An imported rider's texture layer (rider_file uv / face_texture / texture_K): a UV map and one
+    material per texture; faces without a texture keep the vertex colours (material 0)."""
+    a, _ = rider_file.read_rider_file(path)
+    textures = rider_file.textures_of(a)
+    if not textures:
+        return 0
+    layer = mesh.uv_layers.new(name="UVMap")
+    layer.data.foreach_set("uv", a["uv"].astype(np.float32).ravel())  # from_pydata: loop 3i+k = corner k of face i
+    for k, t in enumerate(textures):
+        mesh.materials.append(_texture_material(f"{name}_texture_{k}", t))
+    mesh.polygons.foreach_set("material_index", a["face_texture"].astype(np.int32) + 1)
+    return len(textures)
 
 
 def srgb_to_linear(c):
@@ -50,7 +87,8 @@ def _vertex_color_material(name):
 
 
 def import_rider(path, name="rider", scene=None):
-    """Import a vertex-coloured rider .ply (canonical frame) as one mesh object `name`, pass index 4."""
+    """Import a vertex-coloured rider .ply (canonical frame) as one mesh object `name`, pass index 4;
+    an imported rider's rider.npz also brings its textures (drawn instead of the vertex colours)."""
     scene = scene or bpy.context.scene
     v, f, c = read_colored_ply(path)
     mesh = bpy.data.meshes.new(name)
@@ -59,8 +97,10 @@ def import_rider(path, name="rider", scene=None):
     rgba = np.concatenate([srgb_to_linear(c), np.ones((len(v), 1))], 1)  # FLOAT_COLOR is scene linear
     attr.data.foreach_set("color", rgba.astype(np.float32).ravel())
     mesh.polygons.foreach_set("use_smooth", np.ones(len(mesh.polygons), dtype=bool))
-    mesh.update()
     mesh.materials.append(_vertex_color_material(name + "_vertex_colors"))
+    if path.endswith(".npz"):
+        _add_texture_layer(mesh, path, name)
+    mesh.update()
     obj = bpy.data.objects.new(name, mesh)
     obj.pass_index = RIDER_PASS_INDEX
     scene.collection.objects.link(obj)

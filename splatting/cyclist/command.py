@@ -133,8 +133,8 @@ def run(args):
             raise UserError("--rider and --bike are required (or --all-combinations)")
         run_one(args, args.rider, args.bike, args.out, log)
         return 0
-    from splatting.rider.roster import load_roster
-    riders = [args.rider] if args.rider else [r["id"] for r in load_roster()]
+    from splatting.rider.roster import all_riders
+    riders = [args.rider] if args.rider else [r["id"] for r in all_riders()]
     if args.bike:
         bikes = [args.bike]
     else:

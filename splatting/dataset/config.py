@@ -275,10 +275,10 @@ def _validate_lod(lod):
 
 def resolve_assets(cfg):
     """Expand 'all' and check that every rider and bike exists (config field named on failure)."""
-    from splatting.rider.roster import load_roster
+    from splatting.rider.roster import all_riders
     cfg = copy.deepcopy(cfg)
     if cfg["mode"] in ("cyclist", "street"):
-        known = [r["id"] for r in load_roster()]
+        known = [r["id"] for r in all_riders()]
         riders = known if cfg["riders"] == "all" else cfg["riders"]
         bad = [r for r in riders if r not in known]
         if bad:

@@ -78,8 +78,8 @@ def select(args):
         bikes = list(args.bikes)
     riders = []
     if args.riders:
-        from splatting.rider.roster import load_roster
-        known = [r["id"] for r in load_roster()]
+        from splatting.rider.roster import all_riders
+        known = [r["id"] for r in all_riders()]
         riders = known if args.riders == ["all"] else list(args.riders)
         bad = [r for r in riders if r not in known]
         if bad:

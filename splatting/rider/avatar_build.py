@@ -65,7 +65,9 @@ def build_avatar(rider_id, out_dir, iterations=None, time_budget_s=None, max_gau
         log(f"rider-avatar: {name} done in {steps[name]} s")
 
     step("mesh", os.path.isfile(mesh), lambda: export_rider(rider, mesh))
-    step("views", views_complete(views), lambda: render_views(mesh, views, samples, log=log))
+    # an imported rider's own file carries its textures: the training views draw them (docs/rider_import.md)
+    views_mesh = rider.spec["rider_file"] if rider.spec.get("body") == "imported" else mesh
+    step("views", views_complete(views), lambda: render_views(views_mesh, views, samples, log=log))
 
     def do_train():
         cfg = TrainConfig(threads=threads)

@@ -7,7 +7,7 @@ from cyclist_formats.errors import UserError
 
 
 def add_arguments(p):
-    p.add_argument("--list", action="store_true", help="print the roster, one rider a line, id first")
+    p.add_argument("--list", action="store_true", help="print the roster (with the imported riders), one rider a line, id first")
     p.add_argument("--id", help="rider id (see --list)")
     p.add_argument("--out", help="mesh file to write (.ply or .obj, vertex colours, canonical frame)")
     p.add_argument("--theta-p-deg", type=float, help="pose with the built-in pedalling motion at this crank angle")
@@ -27,9 +27,9 @@ def check_args(args):
 
 
 def run(args):
-    from splatting.rider.roster import describe, load_roster
+    from splatting.rider.roster import all_riders, describe
     if args.list:
-        for r in load_roster():
+        for r in all_riders():
             print(describe(r))
         return 0
     if not args.id or not args.out:

@@ -38,6 +38,10 @@ def load_roster(path=ROSTER_PATH):
             if not isinstance(r.get("model_path"), str) or not r["model_path"]:
                 raise UserError(f"{path}: rider {rid}: body: smpl needs a 'model_path' string")
             continue
+        if r.get("body") == "imported":  # a user's rigged human (imported.py): its file holds the body
+            if not isinstance(r.get("rider_file"), str) or not r["rider_file"]:
+                raise UserError(f"{path}: rider {rid}: body: imported needs a 'rider_file' string")
+            continue
         ph = r.get("phenotype") or {}
         for k in PHENOTYPE_KEYS:
             v = ph.get(k)
@@ -52,11 +56,25 @@ def load_roster(path=ROSTER_PATH):
     return riders
 
 
+def all_riders(path=ROSTER_PATH, imported_dir=None):
+    """The roster file's riders, then the imported ones (data/imported_riders/, `rider import`);
+    an imported id that the file already has is an error rather than a silent shadow."""
+    from splatting.rider.imported import imported_entries
+    riders = load_roster(path)
+    ids = {r["id"] for r in riders}
+    for e in imported_entries(imported_dir):
+        if e["id"] in ids:
+            raise UserError(f"imported rider {e['id']!r} ({e['rider_file']}) has the id of a roster rider in {path}")
+        riders.append(e)
+    return riders
+
+
 def get_spec(rider_id, path=ROSTER_PATH):
-    for r in load_roster(path):
+    riders = all_riders(path)
+    for r in riders:
         if r["id"] == rider_id:
             return r
-    ids = ", ".join(r["id"] for r in load_roster(path))
+    ids = ", ".join(r["id"] for r in riders)
     raise UserError(f"unknown rider id {rider_id!r} (known: {ids})")
 
 
@@ -64,6 +82,9 @@ def describe(r):
     """One line, id first."""
     if r.get("body") == "smpl":
         return f"{r['id']}  SMPL model {r['model_path']} ({r.get('gender', 'neutral')})"
+    if r.get("body") == "imported":
+        h = f"{r['height_m']:.2f} m  " if isinstance(r.get("height_m"), (int, float)) else ""
+        return f"{r['id']}  imported {h}from {r.get('source', r['rider_file'])} ({r.get('scheme', '?')} rig)"
     return (f"{r['id']}  {r['sex']:<6} {r['age_years']:>2} y  {r['height_m']:.2f} m  "
             f"{r['build']:<8} top {r['colors']['top']} bottom {r['colors']['bottom']} "
             f"helmet {r['colors']['helmet']}")
@@ -72,9 +93,12 @@ def describe(r):
 @functools.lru_cache(maxsize=16)
 def load_rider(rider_id):
     """The roster's rider `rider_id` (UserError if unknown), built by its body model: anny
-    (splatting.rider.body) or the user's own SMPL file via smplx (splatting.rider.smpl_body).
-    Cached per process."""
+    (splatting.rider.body), the user's own SMPL file via smplx (splatting.rider.smpl_body) or the
+    user's rigged human imported by `rider import` (splatting.rider.imported).  Cached per process."""
     spec = get_spec(rider_id)
+    if spec.get("body") == "imported":
+        from splatting.rider.imported import rider_from_spec
+        return rider_from_spec(spec)
     if spec.get("body", "anny") == "smpl":
         from splatting.rider.smpl_body import rider_from_spec
         return rider_from_spec(spec)

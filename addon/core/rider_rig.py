@@ -1,0 +1,535 @@
+"""A user's rigged human (glTF / FBX / the open scene) -> the arrays of an imported rider (bpy side).
+
+`rider_from_objects` reads one armature and the meshes skinned to it and returns what
+cyclist_formats.rider_file stores: the T-posed mesh in the canonical frame, the 24 SMPL joints, per-vertex
+weights over those joints and per-vertex colours.  Steps:
+
+1. The rig: the armature whose bone names map to the 24 SMPL joints (cyclist_formats.bone_map: Mixamo,
+   Rigify DEF-, ...), and the meshes deformed by it (Armature modifier + vertex groups, or parented to
+   one of its bones).  No armature or no skinned mesh -> "unrigged"; names that do not map -> the
+   bone_map error naming the joints it could not find.
+2. Body frame: up = Blender's +Z (the importers' convention) unless the spine is far from it, then
+   the spine; right = left -> right hips and shoulders (so the facing direction of the file does not
+   matter); forward = up x right.
+3. T-pose: SMPL's zero pose has the arms straight out sideways and the legs straight down; the IK and
+   the built-in motions assume it.  An A-pose (or any rest pose off by more than SWING_MIN_DEG) is
+   turned into it by posing the armature in Blender (upper arms, then forearms, thighs, then shins swung
+   onto the T directions about their heads) and taking Blender's own deformed mesh as the new rest mesh.
+   LBS from that rest then matches Blender's posing of the original rig exactly where one bone
+   dominates and approximately where weights blend across a swung joint (docs/rider_import.md).
+4. Weights: each vertex group of a deforming bone goes to its bone's joint, an unmapped bone's to its
+   nearest mapped ancestor (the joint whose transform Blender gives it when its own pose is identity),
+   normalised per vertex as Blender's Armature modifier does.  Vertices with no weight copy their nearest
+   weighted vertex's weights.
+5. Colours: per material, the image texture feeding the Base Color (sampled bilinearly at each corner's
+   UV, averaged per vertex), a colour attribute, or the flat base colour.  A texture whose image is
+   missing or unreadable is an error (not a silent grey).  Textured faces also keep their corner UVs
+   and the texture itself (the rider file's texture layer), which the avatar's training renders draw.
+"""
+import math
+
+import bpy
+import numpy as np
+from mathutils import Matrix, Vector
+
+from .contract import UserError, bone_map
+
+SWING_MIN_DEG = 1.0
+# segment (joint -> child joint) and its T-pose direction in the canonical frame (left is -Z)
+T_POSE_PASSES = (
+    {"left_shoulder": ("left_elbow", (0, 0, -1)), "right_shoulder": ("right_elbow", (0, 0, 1)),
+     "left_hip": ("left_knee", (0, -1, 0)), "right_hip": ("right_knee", (0, -1, 0))},
+    {"left_elbow": ("left_wrist", (0, 0, -1)), "right_elbow": ("right_wrist", (0, 0, 1)),
+     "left_knee": ("left_ankle", (0, -1, 0)), "right_knee": ("right_ankle", (0, -1, 0))},
+)
+UP_TOLERANCE_DEG = 30.0
+MIN_HEIGHT_M, MAX_HEIGHT_M = 0.5, 2.6
+DEFAULT_LINEAR = (0.8, 0.8, 0.8)
+
+
+def _joints():
+    return bone_map.SMPL_JOINTS
+
+
+def _m2np(m):
+    return np.array([list(r) for r in m], dtype=np.float64)
+
+
+def _np2m(a):
+    return Matrix([list(map(float, r)) for r in a])
+
+
+def srgb_from_linear(c):
+    c = np.clip(np.asarray(c, np.float64), 0.0, 1.0)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+
+
+# ---------------------------------------------------------------- 1. the rig
+
+def _deformed_by(obj, arm):
+    if obj.type != "MESH":
+        return False
+    if obj.parent == arm and obj.parent_type == "BONE" and obj.parent_bone in arm.data.bones:
+        return True
+    mods = [m for m in obj.modifiers if m.type == "ARMATURE" and m.object == arm]
+    return bool(mods) and any(g.name in arm.data.bones for g in obj.vertex_groups)
+
+
+def find_rig(objects, what):
+    """(armature, its skinned meshes, {joint: bone}, scheme) among `objects`; UserError otherwise."""
+    objects = list(objects)
+    meshes = [o for o in objects if o.type == "MESH"]
+    arms = [o for o in objects if o.type == "ARMATURE"]
+    if not meshes:
+        raise UserError(f"{what}: no mesh in it; a rider needs a rigged human mesh")
+    if not arms:
+        raise UserError(f"{what}: unrigged mesh (no armature): rig the human first (e.g. Mixamo or Rigify), "
+                        f"then import it")
+    first_error, mapped = None, []
+    for arm in sorted(arms, key=lambda a: -len(a.data.bones)):
+        try:
+            m, scheme = bone_map.map_bones([b.name for b in arm.data.bones], f"{what}: armature '{arm.name}'")
+        except UserError as e:
+            first_error = first_error or e
+            continue
+        mapped.append((arm, m, scheme))
+    if not mapped:
+        raise first_error
+    arm, m, scheme = mapped[0]
+    skinned = [o for o in objects if _deformed_by(o, arm)]
+    if not skinned:
+        raise UserError(f"{what}: unrigged mesh: no mesh is skinned to armature '{arm.name}' "
+                        f"(no Armature modifier with bone vertex groups, no bone parent)")
+    return arm, skinned, m, scheme
+
+
+# ---------------------------------------------------------------- 2./3. frame and T-pose
+
+def _posed_heads(arm, bone_of):
+    A = arm.matrix_world
+    return np.array([list(A @ arm.pose.bones[bone_of[j]].head) for j in _joints()], np.float64)
+
+
+def body_frame(heads):
+    """World -> canonical rotation (rows: forward, up, right) from world joint positions.
+
+    Up is Blender's +Z (both importers bring glTF's Y-up and FBX's axes to Z-up) when the spine
+    (pelvis -> neck) is within UP_TOLERANCE_DEG of it, so a spine leaning a little is kept as it is
+    modelled; otherwise (a file lying down) the spine itself.  Right comes from the hips and shoulders."""
+    J = {n: i for i, n in enumerate(_joints())}
+    spine = heads[J["neck"]] - heads[J["pelvis"]]
+    lr = (heads[J["right_hip"]] - heads[J["left_hip"]]) + (heads[J["right_shoulder"]] - heads[J["left_shoulder"]])
+    if np.linalg.norm(spine) < 1e-9 or np.linalg.norm(lr) < 1e-9:
+        raise UserError("the skeleton is degenerate: pelvis and neck (or left and right hips) coincide")
+    spine = spine / np.linalg.norm(spine)
+    up = np.array([0.0, 0.0, 1.0]) if spine[2] > math.cos(math.radians(UP_TOLERANCE_DEG)) else spine
+    right = lr - up * (lr @ up)
+    if np.linalg.norm(right) < 1e-6 * np.linalg.norm(lr):
+        raise UserError("the skeleton's left-right axis (hips, shoulders) is parallel to its spine")
+    right /= np.linalg.norm(right)
+    return np.stack([np.cross(up, right), up, right])
+
+
+def _check_humanoid(heads, M, what):
+    """Joint heights along the body's up axis must be ordered like a standing person's."""
+    J = {n: i for i, n in enumerate(_joints())}
+    y = heads @ M[1]
+    order = [("head", "neck"), ("neck", "pelvis"), ("pelvis", "left_knee"), ("pelvis", "right_knee"),
+             ("left_knee", "left_ankle"), ("right_knee", "right_ankle")]
+    wrong = [f"{a} below {b}" for a, b in order if not y[J[a]] > y[J[b]]]
+    if wrong:
+        raise UserError(f"{what}: the mapped bones do not stand like a person ({', '.join(wrong)}): "
+                        f"not a humanoid rest pose")
+
+
+def _swing(a, b):
+    """Smallest rotation (3,3) turning unit vector a onto unit vector b, and its angle (radians)."""
+    axis = np.cross(a, b)
+    s, c = np.linalg.norm(axis), float(a @ b)
+    if s < 1e-12:
+        return np.eye(3), 0.0 if c > 0 else math.pi
+    k = axis / s
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    ang = math.atan2(s, c)
+    return np.eye(3) + math.sin(ang) * K + (1 - math.cos(ang)) * K @ K, ang
+
+
+def to_t_pose(arm, bone_of, M):
+    """Pose the armature so the limbs lie on the T-pose directions; returns {joint: swing degrees}."""
+    J = {n: i for i, n in enumerate(_joints())}
+    A = arm.matrix_world
+    A_inv = A.inverted()
+    swings = {}
+    for targets in T_POSE_PASSES:
+        heads = _posed_heads(arm, bone_of)
+        for joint, (child, direction) in targets.items():
+            cur = heads[J[child]] - heads[J[joint]]
+            cur /= np.linalg.norm(cur)
+            want = M.T @ np.asarray(direction, float)
+            R, ang = _swing(cur, want)
+            swings[joint] = round(math.degrees(ang), 3)
+            if math.degrees(ang) < SWING_MIN_DEG:
+                continue
+            p = Vector(heads[J[joint]].tolist())
+            E = Matrix.Translation(p) @ _np2m(R).to_4x4() @ Matrix.Translation(-p)  # world turn about the head
+            pb = arm.pose.bones[bone_of[joint]]
+            pb.matrix = A_inv @ E @ A @ pb.matrix
+        bpy.context.view_layer.update()
+    return swings
+
+
+# ---------------------------------------------------------------- 4. mesh and weights
+
+def _bone_joint_index(arm, bone_of, heads_rest):
+    """Bone name -> SMPL joint index: its own joint, its nearest mapped ancestor's, else the nearest joint."""
+    J = {n: i for i, n in enumerate(_joints())}
+    of_bone = {b: J[j] for j, b in bone_of.items()}
+    out = {}
+    for bone in arm.data.bones:
+        k = bone
+        while k is not None and k.name not in of_bone:
+            k = k.parent
+        if k is not None:
+            out[bone.name] = of_bone[k.name]
+        else:
+            h = np.array(list(arm.matrix_world @ bone.head_local))
+            out[bone.name] = int(np.argmin(np.linalg.norm(heads_rest - h, axis=1)))
+    return out
+
+
+def _object_weights(obj, arm, bone_joint):
+    n = len(obj.data.vertices)
+    W = np.zeros((n, len(_joints())))
+    if obj.parent == arm and obj.parent_type == "BONE" and not any(
+            m.type == "ARMATURE" and m.object == arm for m in obj.modifiers):
+        W[:, bone_joint[obj.parent_bone]] = 1.0
+        return W
+    deform = {b.name for b in arm.data.bones if b.use_deform}
+    group_joint = {g.index: bone_joint[g.name] for g in obj.vertex_groups if g.name in deform}
+    for v in obj.data.vertices:
+        for g in v.groups:
+            j = group_joint.get(g.group)
+            if j is not None and g.weight > 0:
+                W[v.index, j] += g.weight
+    return W
+
+
+def _evaluated_world_vertices(obj):
+    """Blender's own deformed vertices (world), with the armature only (other modifiers off)."""
+    saved = [(m, m.show_viewport) for m in obj.modifiers if m.type != "ARMATURE"]
+    for m, _ in saved:
+        m.show_viewport = False
+    try:
+        bpy.context.view_layer.update()
+        dg = bpy.context.evaluated_depsgraph_get()
+        ev = obj.evaluated_get(dg)
+        me = ev.to_mesh()
+        try:
+            if len(me.vertices) != len(obj.data.vertices):
+                raise UserError(f"object '{obj.name}': its deformation changes the vertex count")
+            co = np.empty(len(me.vertices) * 3)
+            me.vertices.foreach_get("co", co)
+            Mw = _m2np(ev.matrix_world)
+        finally:
+            ev.to_mesh_clear()
+    finally:
+        for m, s in saved:
+            m.show_viewport = s
+    co = co.reshape(-1, 3)
+    return co @ Mw[:3, :3].T + Mw[:3, 3]
+
+
+def _fill_unweighted(W, V):
+    """Rows with no weight take the weights of the nearest weighted vertex; returns the count filled."""
+    s = W.sum(1)
+    empty = np.flatnonzero(s <= 0)
+    have = np.flatnonzero(s > 0)
+    for chunk in np.array_split(empty, max(1, len(empty) // 512 + 1)):
+        if len(chunk):
+            d = ((V[chunk, None, :] - V[None, have, :]) ** 2).sum(-1)
+            W[chunk] = W[have[d.argmin(1)]]
+    return len(empty)
+
+
+# ---------------------------------------------------------------- 5. colours
+
+def _upstream(node, seen=None):
+    """Nodes feeding `node`, breadth first."""
+    seen = seen if seen is not None else set()
+    out, todo = [], [node]
+    while todo:
+        n = todo.pop(0)
+        for inp in n.inputs:
+            for link in inp.links:
+                m = link.from_node
+                if m.name not in seen:
+                    seen.add(m.name)
+                    out.append(m)
+                    todo.append(m)
+    return out
+
+
+def colour_source(mat, what):
+    """('image', image, uv_map or None) | ('attribute', name) | ('flat', sRGB (3,)) for one material."""
+    if mat is None:
+        return ("flat", srgb_from_linear(DEFAULT_LINEAR))
+    nt = mat.node_tree if getattr(mat, "node_tree", None) is not None else None
+    if nt is None:
+        return ("flat", srgb_from_linear(mat.diffuse_color[:3]))
+    outs = [n for n in nt.nodes if n.type == "OUTPUT_MATERIAL"]
+    out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
+    shader = None
+    if out is not None and out.inputs["Surface"].links:
+        shader = out.inputs["Surface"].links[0].from_node
+    if shader is None:
+        return ("flat", srgb_from_linear(mat.diffuse_color[:3]))
+    sock = next((shader.inputs[k] for k in ("Base Color", "Color") if k in shader.inputs), None)
+    if sock is None:
+        sock_nodes = _upstream(shader)
+        default = mat.diffuse_color[:3]
+    else:
+        default = sock.default_value[:3]
+        sock_nodes = []
+        for link in sock.links:
+            sock_nodes.append(link.from_node)
+            sock_nodes += _upstream(link.from_node)
+    for n in sock_nodes:
+        if n.type == "TEX_IMAGE":
+            img = n.image
+            if img is None:
+                raise UserError(f"{what}: material '{mat.name}' has an image texture node with no image (missing texture)")
+            if img.size[0] == 0 or img.size[1] == 0 or not img.has_data and not _load(img):
+                src = bpy.path.abspath(img.filepath) if img.filepath else img.name
+                raise UserError(f"{what}: material '{mat.name}' uses texture '{src}', which is missing or "
+                                f"unreadable (missing texture)")
+            uv = None
+            vec = n.inputs.get("Vector")
+            if vec is not None and vec.links and vec.links[0].from_node.type == "UVMAP":
+                uv = vec.links[0].from_node.uv_map or None
+            return ("image", img, uv)
+        if n.type in ("VERTEX_COLOR", "ATTRIBUTE"):
+            name = getattr(n, "layer_name", None) or getattr(n, "attribute_name", None)
+            return ("attribute", name)
+    return ("flat", srgb_from_linear(default))
+
+
+def _load(img):
+    try:
+        img.reload()
+        return img.has_data and img.size[0] > 0
+    except RuntimeError:
+        return False
+
+
+def _image_array(img):
+    w, h = img.size
+    px = np.empty(w * h * img.channels, np.float32)
+    img.pixels.foreach_get(px)
+    px = px.reshape(h, w, img.channels)
+    rgb = px[..., :3] if img.channels >= 3 else np.repeat(px[..., :1], 3, -1)
+    if img.is_float:  # float buffers are scene linear; byte buffers hold the file's sRGB values
+        rgb = srgb_from_linear(rgb)
+    return np.clip(rgb.astype(np.float64), 0, 1)
+
+
+def _sample_bilinear(rgb, uv):
+    """Repeat-wrapped bilinear lookup; uv (N,2) with v up (Blender's convention, row 0 = bottom)."""
+    h, w = rgb.shape[:2]
+    x = np.mod(uv[:, 0], 1.0) * w - 0.5
+    y = np.mod(uv[:, 1], 1.0) * h - 0.5
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    x0, x1, y0, y1 = x0 % w, (x0 + 1) % w, y0 % h, (y0 + 1) % h
+    return ((1 - fx) * (1 - fy) * rgb[y0, x0] + fx * (1 - fy) * rgb[y0, x1]
+            + (1 - fx) * fy * rgb[y1, x0] + fx * fy * rgb[y1, x1])
+
+
+def _object_colors(obj, what, images):
+    """Per-vertex sRGB colours, and per loop the texture coordinate and the index into `images` (an
+    ordered {name: sRGB array}) of the texture drawn there (-1: none)."""
+    me = obj.data
+    nv, nl = len(me.vertices), len(me.loops)
+    loop_vert = np.empty(nl, np.int64)
+    me.loops.foreach_get("vertex_index", loop_vert)
+    starts, totals, mats = (np.empty(len(me.polygons), np.int64) for _ in range(3))
+    me.polygons.foreach_get("loop_start", starts)
+    me.polygons.foreach_get("loop_total", totals)
+    me.polygons.foreach_get("material_index", mats)
+    loop_mat = np.repeat(mats, totals)
+    loop_rgb = np.empty((nl, 3))
+    loop_uv = np.zeros((nl, 2))
+    loop_tex = np.full(nl, -1, np.int64)
+    for mi in np.unique(loop_mat):
+        sel = loop_mat == mi
+        mat = obj.material_slots[mi].material if mi < len(obj.material_slots) else None
+        src = colour_source(mat, what)
+        if src[0] == "image":
+            _, img, uv_name = src
+            layer = me.uv_layers.get(uv_name) if uv_name else me.uv_layers.active
+            if layer is None:
+                raise UserError(f"{what}: object '{obj.name}' has material '{mat.name}' textured but no UV map")
+            uv = np.empty(nl * 2)
+            layer.data.foreach_get("uv", uv)
+            if img.name not in images:
+                images[img.name] = _image_array(img)
+            loop_rgb[sel] = _sample_bilinear(images[img.name], uv.reshape(-1, 2)[sel])
+            loop_uv[sel] = uv.reshape(-1, 2)[sel]
+            loop_tex[sel] = list(images).index(img.name)
+        elif src[0] == "attribute":
+            loop_rgb[sel] = _attribute_colors(me, src[1], loop_vert)[sel]
+        else:
+            loop_rgb[sel] = src[1]
+    out = np.zeros((nv, 3))
+    cnt = np.zeros(nv)
+    np.add.at(out, loop_vert, loop_rgb)
+    np.add.at(cnt, loop_vert, 1)
+    out[cnt == 0] = srgb_from_linear(DEFAULT_LINEAR)
+    cnt[cnt == 0] = 1
+    return out / cnt[:, None], loop_uv, loop_tex
+
+
+def _attribute_colors(me, name, loop_vert):
+    """A colour attribute per loop, sRGB."""
+    attrs = getattr(me, "color_attributes", None)
+    a = (attrs.get(name) if name else attrs.active_color) if attrs is not None else None
+    if a is None:
+        return np.tile(srgb_from_linear(DEFAULT_LINEAR), (len(loop_vert), 1))
+    c = np.empty(len(a.data) * 4)
+    a.data.foreach_get("color", c)  # scene linear for both FLOAT_COLOR and BYTE_COLOR
+    c = srgb_from_linear(c.reshape(-1, 4)[:, :3])
+    return c[loop_vert] if a.domain == "POINT" else c
+
+
+# ---------------------------------------------------------------- the whole import
+
+def _triangles(me):
+    """Triangles as vertex indices (T,3) and as loop indices (T,3)."""
+    me.calc_loop_triangles()
+    t = np.empty(len(me.loop_triangles) * 3, np.int64)
+    me.loop_triangles.foreach_get("vertices", t)
+    lo = np.empty(len(me.loop_triangles) * 3, np.int64)
+    me.loop_triangles.foreach_get("loops", lo)
+    return t.reshape(-1, 3), lo.reshape(-1, 3)
+
+
+def rider_from_objects(objects, rider_id, what, height_m=None, restore=True):
+    """(arrays for rider_file.write_rider_file, meta) from the scene objects of one rigged human.
+
+    height_m rescales the body to that soles-to-crown height; otherwise its size must already be a
+    person's (MIN_HEIGHT_M..MAX_HEIGHT_M metres).  The armature's pose is reset to its rest pose for the
+    import and put back afterwards when `restore`."""
+    arm, skinned, bone_of, scheme = find_rig(objects, what)
+    saved = {pb.name: pb.matrix_basis.copy() for pb in arm.pose.bones}
+    saved_position = arm.data.pose_position
+    try:
+        arm.data.pose_position = "POSE"
+        for pb in arm.pose.bones:
+            pb.matrix_basis = Matrix.Identity(4)
+        bpy.context.view_layer.update()
+        heads_rest = _posed_heads(arm, bone_of)
+        M = body_frame(heads_rest)
+        _check_humanoid(heads_rest, M, what)
+        bone_joint = _bone_joint_index(arm, bone_of, heads_rest)
+        rest_deform = {}
+        swings = to_t_pose(arm, bone_of, M)
+        A, A_inv = arm.matrix_world, arm.matrix_world.inverted()
+        for j in _joints():  # each mapped bone's world deformation rest -> T-pose (identity for a T-posed rig)
+            pb = arm.pose.bones[bone_of[j]]
+            rest_deform[j] = _m2np(A @ pb.matrix @ pb.bone.matrix_local.inverted() @ A_inv).tolist()
+        heads_t = _posed_heads(arm, bone_of)
+        V, F, W, C, UV, FT, n_filled = [], [], [], [], [], [], 0
+        images, base = {}, 0
+        for obj in skinned:
+            v = _evaluated_world_vertices(obj)
+            w = _object_weights(obj, arm, bone_joint)
+            if (w.sum(1) > 0).sum() * 2 < len(w):
+                raise UserError(f"{what}: unrigged mesh: object '{obj.name}' has bone weights on only "
+                                f"{int((w.sum(1) > 0).sum())} of {len(w)} vertices")
+            n_filled += _fill_unweighted(w, v)
+            tri, tri_loops = _triangles(obj.data)
+            col, loop_uv, loop_tex = _object_colors(obj, what, images)
+            V.append(v)
+            F.append(tri + base)
+            W.append(w)
+            C.append(col)
+            UV.append(loop_uv[tri_loops])
+            FT.append(loop_tex[tri_loops[:, 0]])  # a triangle lies in one polygon: one material
+            base += len(v)
+    finally:
+        if restore:
+            for pb in arm.pose.bones:
+                pb.matrix_basis = saved[pb.name]
+            arm.data.pose_position = saved_position
+            bpy.context.view_layer.update()
+    V, F, W, C = np.concatenate(V), np.concatenate(F), np.concatenate(W), np.concatenate(C)
+    W /= W.sum(1, keepdims=True)
+    # world -> canonical: rotate by M, scale, soles on Y = 0, pelvis on the Y axis
+    Vc, Jc = V @ M.T, heads_t @ M.T
+    height = float(Vc[:, 1].max() - Vc[:, 1].min())
+    if height <= 0:
+        raise UserError(f"{what}: the mesh is flat along the body's up axis")
+    scale = 1.0 if height_m is None else float(height_m) / height
+    if height_m is None and not MIN_HEIGHT_M <= height <= MAX_HEIGHT_M:
+        raise UserError(f"{what}: the body is {height:.3g} m tall in the file's units (expected "
+                        f"{MIN_HEIGHT_M}-{MAX_HEIGHT_M} m): give --height-m to scale it")
+    Vc, Jc = Vc * scale, Jc * scale
+    shift = np.array([-Jc[0, 0], -Vc[:, 1].min(), -Jc[0, 2]])
+    Vc, Jc = Vc + shift, Jc + shift
+    canon = np.eye(4)
+    canon[:3, :3], canon[:3, 3] = scale * M, shift
+    meta = {
+        "id": rider_id, "source": what, "scheme": scheme, "armature": arm.name,
+        "objects": [o.name for o in skinned], "bone_map": dict(bone_of),
+        "rest_pose": "T" if max(swings.values()) < 10.0 else "A" if all(
+            abs(swings[s] - 45) < 40 for s in ("left_shoulder", "right_shoulder")) else "other",
+        "swings_deg": swings, "height_m": round(float(Vc[:, 1].max()), 4), "scale": scale,
+        "canonical_from_world": canon.tolist(), "t_pose_deform_world": rest_deform,
+        "unweighted_vertices_filled": int(n_filled), "textures": sorted(images),
+        "blender": bpy.app.version_string,
+    }
+    arrays = {"vertices": Vc, "faces": F, "joints": Jc, "weights": W, "colors": C}
+    if images:  # the texture layer: the training renders draw the textures themselves, not vertex colours
+        arrays.update(uv=np.concatenate(UV), face_texture=np.concatenate(FT),
+                      textures=[np.round(t * 255).astype(np.uint8) for t in images.values()])
+    return arrays, meta
+
+
+def pose_rig(arm, bone_of, meta, world_transforms):
+    """Pose the original armature with a rider pose: world_transforms (24,4,4) are the canonical-frame
+    LBS transforms of splatting.rider.kinematics.forward_kinematics (rest T-pose -> posed) for the
+    rider imported from this armature.  Each mapped bone gets the deformation F^-1 T_j F D_j (F:
+    canonical_from_world, D_j: the import's rest -> T-pose turn); unmapped bones keep their rest basis
+    and follow their parents, as their weights do."""
+    F = np.asarray(meta["canonical_from_world"], float)
+    F_inv = np.linalg.inv(F)
+    A, A_inv = arm.matrix_world, arm.matrix_world.inverted()
+    depth = lambda b: len(arm.data.bones[b].parent_recursive)  # noqa: E731
+    for pb in arm.pose.bones:
+        pb.matrix_basis = Matrix.Identity(4)
+    bpy.context.view_layer.update()
+    order = sorted(range(len(_joints())), key=lambda j: depth(bone_of[_joints()[j]]))
+    for j in order:
+        name = _joints()[j]
+        D = np.asarray(meta["t_pose_deform_world"][name], float)
+        world = F_inv @ np.asarray(world_transforms[j], float) @ F @ D
+        pb = arm.pose.bones[bone_of[name]]
+        pb.matrix = A_inv @ _np2m(world) @ A @ pb.bone.matrix_local
+        bpy.context.view_layer.update()
+
+
+def save_rider(objects, rider_id, folder, what, height_m=None, overwrite=False):
+    """The add-on's "Save as rider": rider_from_objects, written to <folder>/<rider_id>/rider.npz (where
+    `python -m splatting` finds imported riders when folder is the project's data/imported_riders).
+    Returns (path, meta)."""
+    import os
+
+    from .contract import rider_file
+    rider_file.check_rider_id(rider_id, "rider id")
+    if not folder:
+        raise UserError("no riders folder given (the project's data/imported_riders)")
+    path = os.path.join(folder, rider_id, rider_file.FILE_NAME)
+    if os.path.exists(path) and not overwrite:
+        raise UserError(f"{path} exists: rider {rider_id!r} was imported before (tick Overwrite to replace it)")
+    arrays, meta = rider_from_objects(objects, rider_id, what, height_m)
+    rider_file.write_rider_file(path, meta=meta, **arrays)
+    return path, meta

@@ -1,0 +1,598 @@
+"""`rider import`: a user's rigged human -> roster rider (issue 16).
+
+The rigged humans are made here: a roster (anny) rider's T-posed mesh with an armature of 24 bones at its
+joints under Mixamo (`mixamorig:`) or Rigify (`DEF-`) names, plus unmapped bones that carry part of the
+weights (a thumb, a neck segment), its weights as vertex groups and an image texture on a UV map; exported
+to .glb and .fbx with Blender's own exporters.  Ground truth for the skinning is Blender itself: the
+re-imported file's armature posed with the same joint rotations (addon.core.rider_rig.pose_rig) and its
+evaluated mesh compared vertex by vertex with the imported rider's LBS."""
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+from cyclist_formats import rider_file
+from cyclist_formats.errors import UserError
+from splatting.rider.kinematics import JOINT_NAMES, PARENTS
+
+bpy = pytest.importorskip("bpy")
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SOURCE_RIDER = "f_teen_slim_150"
+
+# The names a Mixamo / Rigify rig uses, written out here (not taken from the table under test).
+MIXAMO = {
+    "pelvis": "Hips", "left_hip": "LeftUpLeg", "right_hip": "RightUpLeg", "spine1": "Spine",
+    "left_knee": "LeftLeg", "right_knee": "RightLeg", "spine2": "Spine1", "left_ankle": "LeftFoot",
+    "right_ankle": "RightFoot", "spine3": "Spine2", "left_foot": "LeftToeBase", "right_foot": "RightToeBase",
+    "neck": "Neck", "left_collar": "LeftShoulder", "right_collar": "RightShoulder", "head": "Head",
+    "left_shoulder": "LeftArm", "right_shoulder": "RightArm", "left_elbow": "LeftForeArm",
+    "right_elbow": "RightForeArm", "left_wrist": "LeftHand", "right_wrist": "RightHand",
+    "left_hand": "LeftHandMiddle1", "right_hand": "RightHandMiddle1"}
+MIXAMO = {j: "mixamorig:" + n for j, n in MIXAMO.items()}
+RIGIFY = {
+    "pelvis": "DEF-spine", "left_hip": "DEF-thigh.L", "right_hip": "DEF-thigh.R", "spine1": "DEF-spine.001",
+    "left_knee": "DEF-shin.L", "right_knee": "DEF-shin.R", "spine2": "DEF-spine.002", "left_ankle": "DEF-foot.L",
+    "right_ankle": "DEF-foot.R", "spine3": "DEF-spine.003", "left_foot": "DEF-toe.L", "right_foot": "DEF-toe.R",
+    "neck": "DEF-spine.004", "left_collar": "DEF-shoulder.L", "right_collar": "DEF-shoulder.R",
+    "head": "DEF-spine.006", "left_shoulder": "DEF-upper_arm.L", "right_shoulder": "DEF-upper_arm.R",
+    "left_elbow": "DEF-forearm.L", "right_elbow": "DEF-forearm.R", "left_wrist": "DEF-hand.L",
+    "right_wrist": "DEF-hand.R", "left_hand": "DEF-f_middle.01.L", "right_hand": "DEF-f_middle.01.R"}
+# unmapped bones: (name, parent joint, joint whose weights it takes half of, or None)
+EXTRA = {"mixamo": [("mixamorig:LeftHandThumb1", "left_wrist", "left_wrist"),
+                    ("mixamorig:RightHandThumb1", "right_wrist", "right_wrist"),
+                    ("mixamorig:HeadTop_End", "head", None)],
+         "rigify": [("DEF-thigh.L.001", "left_hip", "left_hip"), ("DEF-thigh.R.001", "right_hip", "right_hip")]}
+TEX = 32  # texture: pixel (x, y) = (x / 31, y / 31, 0.25), a ramp bilinear sampling reproduces exactly
+
+
+@pytest.fixture(scope="module")
+def source():
+    torch.set_num_threads(1)
+    from splatting.rider.roster import load_rider
+    return load_rider(SOURCE_RIDER)
+
+
+def expected_uv(vertices):
+    """The UV the factory gives each vertex: a planar map of (Z, Y) into [0.1, 0.9]^2."""
+    v = np.asarray(vertices, np.float64)
+    lo, hi = v.min(0), v.max(0)
+    return np.stack([0.1 + 0.8 * (v[:, 2] - lo[2]) / (hi[2] - lo[2]),
+                     0.1 + 0.8 * (v[:, 1] - lo[1]) / (hi[1] - lo[1])], 1)
+
+
+def expected_colors(vertices):
+    uv = expected_uv(vertices)
+    rgb = np.empty((len(uv), 3))
+    rgb[:, :2] = (uv * TEX - 0.5) / (TEX - 1)
+    rgb[:, 2] = 0.25
+    return rgb
+
+
+def write_texture(path):
+    img = bpy.data.images.new("skin_ramp", TEX, TEX)
+    x, y = np.meshgrid(np.arange(TEX) / (TEX - 1), np.arange(TEX) / (TEX - 1))
+    px = np.stack([x, y, np.full_like(x, 0.25), np.ones_like(x)], -1).astype(np.float32)
+    img.pixels.foreach_set(px.ravel())
+    img.filepath_raw = str(path)
+    img.file_format = "PNG"
+    img.save()
+    return img
+
+
+def build_rigged_human(rider, scheme, texture=None, a_pose_deg=0.0):
+    """The rider as a skinned mesh + armature in the current (empty) scene; returns (armature, mesh)."""
+    from mathutils import Matrix, Vector
+
+    from addon.core.frames import to_blender
+    names = {"mixamo": MIXAMO, "rigify": RIGIFY}[scheme]
+    Vc = rider.vertices.double().numpy()
+    V, J = to_blender(Vc), to_blender(rider.joints.double().numpy())
+    F = rider.faces.numpy()
+    scene = bpy.context.scene
+    me = bpy.data.meshes.new("body")
+    me.from_pydata(V.tolist(), [], F.tolist())
+    me.polygons.foreach_set("use_smooth", np.ones(len(me.polygons), dtype=bool))  # as people are modelled
+    me.update()
+    body = bpy.data.objects.new("body", me)
+    scene.collection.objects.link(body)
+    arm = bpy.data.objects.new("rig", bpy.data.armatures.new("rig"))
+    scene.collection.objects.link(arm)
+    bpy.context.view_layer.objects.active = arm
+    bpy.ops.object.mode_set(mode="EDIT")
+    eb = arm.data.edit_bones
+    first_child = {0: 3, 9: 12}  # pelvis -> spine1, spine3 -> neck (the others have one child or none)
+    for j, name in enumerate(JOINT_NAMES):
+        kids = [c for c, p in enumerate(PARENTS) if p == j]
+        if kids:
+            tail = J[first_child.get(j, kids[0])]
+        else:  # a leaf: along its parent segment
+            d = J[j] - J[PARENTS[j]]
+            tail = J[j] + 0.05 * d / np.linalg.norm(d)
+        b = eb.new(names[name])
+        b.head, b.tail = Vector(J[j].tolist()), Vector(tail.tolist())
+        if PARENTS[j] >= 0:
+            b.parent = eb[names[JOINT_NAMES[PARENTS[j]]]]
+    for name, parent, _ in EXTRA[scheme]:
+        p = eb[names[parent]]
+        b = eb.new(name)
+        b.head, b.tail = p.head.copy(), p.head + (p.tail - p.head) * 0.5
+        b.parent = p
+    bpy.ops.object.mode_set(mode="OBJECT")
+    W = rider.weights.double().numpy().copy()
+    groups = {}
+    for j, name in enumerate(JOINT_NAMES):
+        groups[names[name]] = W[:, j].copy()
+    for name, _, share in EXTRA[scheme]:
+        if share:  # half of the joint's weight moves to the unmapped child bone
+            groups[name] = groups[names[share]] * 0.5
+            groups[names[share]] *= 0.5
+    for gname, w in groups.items():
+        vg = body.vertex_groups.new(name=gname)
+        for i in np.flatnonzero(w > 1e-6):
+            vg.add([int(i)], float(w[i]), "REPLACE")
+    mod = body.modifiers.new("Armature", "ARMATURE")
+    mod.object = arm
+    body.parent = arm
+    if texture is not None:
+        uv = expected_uv(Vc)
+        layer = me.uv_layers.new(name="UVMap")
+        loop_v = np.empty(len(me.loops), np.int64)
+        me.loops.foreach_get("vertex_index", loop_v)
+        layer.data.foreach_set("uv", uv[loop_v].astype(np.float32).ravel())
+        mat = bpy.data.materials.new("skin")
+        if bpy.app.version < (5, 0, 0):
+            mat.use_nodes = True
+        nt = mat.node_tree
+        bsdf = next(n for n in nt.nodes if n.type == "BSDF_PRINCIPLED")
+        tex = nt.nodes.new("ShaderNodeTexImage")
+        tex.image = texture
+        nt.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+        me.materials.append(mat)
+    if a_pose_deg:  # arms down by a_pose_deg, then made the rest pose (mesh and armature)
+        for side, sign in (("left", 1.0), ("right", -1.0)):
+            pb = arm.pose.bones[names[f"{side}_shoulder"]]
+            head = Vector(J[JOINT_NAMES.index(f"{side}_shoulder")].tolist())
+            # the left arm points along Blender +Y (canonical -Z): a negative turn about the forward
+            # axis (Blender X) swings it down; the right arm (-Y) the other way
+            R = Matrix.Rotation(math.radians(sign * -a_pose_deg), 4, "X")
+            pb.matrix = Matrix.Translation(head) @ R @ Matrix.Translation(-head) @ pb.matrix
+            bpy.context.view_layer.update()
+        dg = bpy.context.evaluated_depsgraph_get()
+        ev = body.evaluated_get(dg).to_mesh()
+        co = np.empty(len(ev.vertices) * 3)
+        ev.vertices.foreach_get("co", co)
+        body.evaluated_get(dg).to_mesh_clear()
+        me.vertices.foreach_set("co", co)
+        me.update()
+        bpy.context.view_layer.objects.active = arm
+        bpy.ops.object.mode_set(mode="POSE")
+        bpy.ops.pose.armature_apply(selected=False)
+        bpy.ops.object.mode_set(mode="OBJECT")
+    return arm, body
+
+
+def export(path):
+    if str(path).endswith(".glb"):
+        bpy.ops.export_scene.gltf(filepath=str(path), export_format="GLB")
+    else:
+        bpy.ops.export_scene.fbx(filepath=str(path), add_leaf_bones=False, path_mode="COPY", embed_textures=True)
+    assert os.path.isfile(path)
+
+
+def export_mesh_only(rider, path):
+    """An unrigged person: the same mesh, no armature."""
+    from addon.core.frames import to_blender
+    me = bpy.data.meshes.new("statue")
+    me.from_pydata(to_blender(rider.vertices.double().numpy()).tolist(), [], rider.faces.numpy().tolist())
+    me.update()
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new("statue", me))
+    export(path)
+
+
+def export_chain(path):
+    """A non-humanoid rig: a 3-bone chain (a tail, a crane arm) skinning a column of boxes."""
+    from mathutils import Vector
+    arm = bpy.data.objects.new("chain", bpy.data.armatures.new("chain"))
+    bpy.context.scene.collection.objects.link(arm)
+    bpy.context.view_layer.objects.active = arm
+    bpy.ops.object.mode_set(mode="EDIT")
+    prev = None
+    for k in range(3):
+        b = arm.data.edit_bones.new(f"Bone.{k:03d}")
+        b.head, b.tail = Vector((0, 0, 0.5 * k)), Vector((0, 0, 0.5 * (k + 1)))
+        b.parent = prev
+        prev = b
+    bpy.ops.object.mode_set(mode="OBJECT")
+    verts = [(x, y, z) for z in np.linspace(0, 1.5, 7) for x in (-0.1, 0.1) for y in (-0.1, 0.1)]
+    faces = [(4 * i + a, 4 * i + b, 4 * i + 4 + b, 4 * i + 4 + a) for i in range(6) for a, b in ((0, 1), (1, 3), (3, 2), (2, 0))]
+    me = bpy.data.meshes.new("column")
+    me.from_pydata(verts, [], faces)
+    obj = bpy.data.objects.new("column", me)
+    bpy.context.scene.collection.objects.link(obj)
+    for k in range(3):
+        obj.vertex_groups.new(name=f"Bone.{k:03d}").add([i for i, v in enumerate(verts) if 0.5 * k <= v[2] <= 0.5 * (k + 1)], 1.0, "REPLACE")
+    obj.modifiers.new("Armature", "ARMATURE").object = arm
+    obj.parent = arm
+    export(path)
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory, source):
+    """The rigged humans (and the refused files), made once: name -> path."""
+    from addon.core.scene import reset_scene
+    d = tmp_path_factory.mktemp("models")
+    out = {}
+    for name, scheme, a_pose in (("mixamo.glb", "mixamo", 0), ("mixamo.fbx", "mixamo", 0),
+                                 ("rigify.glb", "rigify", 0), ("mixamo_apose.fbx", "mixamo", 40.0)):
+        reset_scene()
+        img = write_texture(d / "ramp.png")
+        build_rigged_human(source, scheme, img, a_pose)
+        export(d / name)
+        out[name] = d / name
+    reset_scene()
+    (d / "gone").mkdir()
+    img = write_texture(d / "gone" / "skin.png")
+    build_rigged_human(source, "mixamo", img)
+    bpy.ops.export_scene.fbx(filepath=str(d / "missing_texture.fbx"), add_leaf_bones=False, path_mode="ABSOLUTE")
+    os.remove(d / "gone" / "skin.png")
+    out["missing_texture.fbx"] = d / "missing_texture.fbx"
+    reset_scene()
+    export_mesh_only(source, d / "unrigged.glb")
+    out["unrigged.glb"] = d / "unrigged.glb"
+    reset_scene()
+    export_chain(d / "chain.glb")
+    out["chain.glb"] = d / "chain.glb"
+    reset_scene()
+    return out
+
+
+def import_here(path, rider_id="here"):
+    """The Blender half in this process (the bpy module): (arrays, meta)."""
+    from addon.core import rider_rig
+    from addon.core.curation.importers import import_model
+    from addon.core.scene import reset_scene
+    reset_scene()
+    return rider_rig.rider_from_objects(import_model(str(path)), rider_id, os.path.basename(path))
+
+
+def nearest(a, b):
+    """Distance to, and index of, the nearest row of b for every row of a."""
+    a, b = torch.as_tensor(np.asarray(a, np.float64)), torch.as_tensor(np.asarray(b, np.float64))
+    res = [torch.cdist(c, b).min(1) for c in a.split(2048)]
+    return torch.cat([r.values for r in res]).numpy(), torch.cat([r.indices for r in res]).numpy()
+
+
+def cli(*args, **kw):
+    return subprocess.run([sys.executable, "-m", "splatting", *map(str, args)], capture_output=True, text=True,
+                          cwd=ROOT, env=dict(os.environ, PYTHONPATH=ROOT, OMP_WAIT_POLICY="PASSIVE"), **kw)
+
+
+@pytest.fixture(scope="module")
+def imported(models, tmp_path_factory):
+    """`rider import` run as a command on the Mixamo .glb: (rider file, its folder of imported riders)."""
+    d = tmp_path_factory.mktemp("imported")
+    out = d / "my_glb_rider" / "rider.npz"
+    r = cli("rider", "import", "--model", models["mixamo.glb"], "--id", "my_glb_rider", "--out", out)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "rider my_glb_rider imported" in r.stdout and "mixamo rig" in r.stdout
+    return out, d
+
+
+# ---------------------------------------------------------------- the joint map and the carried-over body
+
+@pytest.mark.parametrize("name,names", [("mixamo.fbx", MIXAMO), ("rigify.glb", RIGIFY)])
+def test_bones_map_to_the_smpl_joints(models, name, names):
+    _, meta = import_here(models[name])
+    assert meta["bone_map"] == names
+    assert meta["scheme"] == ("rigify" if names is RIGIFY else "mixamo")
+
+
+def check_same_body(a, meta, source, exact_weights):
+    """The imported rider is the source rider: positions, joints, colours from the texture, weights."""
+    V = source.vertices.double().numpy()
+    d, i = nearest(a["vertices"], V)
+    assert len(a["vertices"]) == len(V) and d.max() < 2e-5, d.max()
+    assert np.abs(a["joints"] - source.joints.numpy()).max() < 2e-5
+    assert np.abs(a["colors"] - expected_colors(V)[i]).max() < 0.004  # 8-bit texels of a linear ramp
+    w_src = source.weights.double().numpy()[i]
+    if exact_weights:  # FBX keeps every influence: the unmapped bones' halves are folded back exactly
+        assert np.abs(a["weights"] - w_src).max() < 1e-5
+    else:  # glTF keeps the 4 largest influences per vertex
+        assert (a["weights"].argmax(1) == w_src.argmax(1)).all()
+        assert np.abs(a["weights"] - w_src).max() < 0.2
+    assert meta["rest_pose"] == "T" and max(meta["swings_deg"].values()) < 0.01
+
+
+def test_command_imports_a_mixamo_glb(imported, source):
+    a, meta = rider_file.read_rider_file(imported[0])
+    check_same_body(a, meta, source, exact_weights=False)
+    assert meta["id"] == "my_glb_rider" and len(meta["textures"]) == 1
+
+
+@pytest.mark.parametrize("name", ["mixamo.fbx", "rigify.glb"])
+def test_fbx_and_rigify_carry_the_body_over(models, source, name):
+    a, meta = import_here(models[name])
+    check_same_body(a, meta, source, exact_weights=name.endswith(".fbx"))
+
+
+# ---------------------------------------------------------------- skinning: Blender is the ground truth
+
+def blender_posed(model, meta, world_transforms):
+    """The model re-imported in Blender, its armature posed with the rider's joint transforms
+    (canonical, (24,4,4)), its evaluated mesh in the canonical frame."""
+    from addon.core import rider_rig
+    from addon.core.curation.importers import import_model
+    from addon.core.scene import reset_scene
+    reset_scene()
+    return posed_in_scene(rider_rig.find_rig(import_model(str(model)), "model"), meta, world_transforms)
+
+
+def posed_in_scene(rig, meta, world_transforms):
+    from addon.core import rider_rig
+    arm, skinned, bone_of, _ = rig
+    rider_rig.pose_rig(arm, bone_of, meta, world_transforms)
+    dg = bpy.context.evaluated_depsgraph_get()
+    out = []
+    for obj in skinned:
+        ev = obj.evaluated_get(dg)
+        me = ev.to_mesh()
+        co = np.empty(len(me.vertices) * 3)
+        me.vertices.foreach_get("co", co)
+        Mw = np.array(ev.matrix_world)
+        ev.to_mesh_clear()
+        out.append(co.reshape(-1, 3) @ Mw[:3, :3].T + Mw[:3, 3])
+    F = np.asarray(meta["canonical_from_world"])
+    return np.concatenate(out) @ F[:3, :3].T + F[:3, 3]
+
+
+def lbs_and_blender(model, npz, theta_p_deg, theta_s_deg):
+    from splatting.rider.body import pose_vertices
+    from splatting.rider.imported import load_imported_rider
+    from splatting.rider.kinematics import forward_kinematics
+    from splatting.rider.motion import pedal_pose
+    rider = load_imported_rider(npz)
+    _, meta = rider_file.read_rider_file(npz)
+    rot, root, _ = pedal_pose(rider.joints.double(), math.radians(theta_p_deg), math.radians(theta_s_deg))
+    ours = pose_vertices(rider, rot, root)[0].numpy()
+    T = forward_kinematics(rider.joints.double(), rot, root)[1][0].numpy()
+    theirs = blender_posed(model, meta, T)
+    moved = np.linalg.norm(ours - rider.vertices.double().numpy(), axis=1)
+    return np.linalg.norm(ours - theirs, axis=1), moved
+
+
+def write_here(path, tmp_path):
+    a, meta = import_here(path)
+    return rider_file.write_rider_file(tmp_path / "rider.npz", meta=meta, **a)
+
+
+@pytest.mark.parametrize("name,theta_p,theta_s", [("mixamo.glb", 70.0, 15.0), ("mixamo.fbx", 250.0, -20.0),
+                                                   ("rigify.glb", 160.0, 5.0)])
+def test_lbs_at_a_cycling_pose_matches_blender(models, tmp_path, name, theta_p, theta_s):
+    npz = write_here(models[name], tmp_path)
+    err, moved = lbs_and_blender(models[name], npz, theta_p, theta_s)
+    assert moved.max() > 0.5  # a real cycling pose: leaning trunk, bent legs
+    assert err.max() < 2e-5, err.max()
+
+
+def test_a_pose_is_turned_into_the_t_pose(models, source, tmp_path):
+    """Arms 40 deg down at rest: swung up to the T-pose by Blender's own skinning; LBS from that rest
+    equals Blender's posing of the A-posed rig where one bone dominates, and differs by at most ~1 cm where
+    weights blend across the shoulder (the documented approximation)."""
+    npz = write_here(models["mixamo_apose.fbx"], tmp_path)
+    a, meta = rider_file.read_rider_file(npz)
+    assert meta["rest_pose"] == "A"
+    assert abs(meta["swings_deg"]["left_shoulder"] - 40) < 0.01 and abs(meta["swings_deg"]["right_shoulder"] - 40) < 0.01
+    assert max(meta["swings_deg"][k] for k in ("left_elbow", "left_hip", "left_knee")) < 0.01
+    assert np.abs(a["joints"] - source.joints.numpy()).max() < 1e-4  # the elbows and wrists back on the T line
+    d, _ = nearest(a["vertices"], source.vertices.double().numpy())
+    assert np.median(d) < 1e-5 and d.max() < 0.015, (np.median(d), d.max())
+    err, _ = lbs_and_blender(models["mixamo_apose.fbx"], npz, 100.0, 10.0)
+    assert np.median(err) < 1e-5 and np.percentile(err, 99) < 0.01 and err.max() < 0.02, (np.percentile(err, 99), err.max())
+
+
+def test_turned_and_scaled_rig_gives_the_same_rider(source, tmp_path):
+    """The rig object turned 90 deg about the vertical (facing another way) and scaled x2 (a 3 m giant):
+    refused without --height-m, the same rider with it, and LBS still equal to Blender's posing."""
+    from mathutils import Matrix
+
+    from addon.core import rider_rig
+    from addon.core.scene import reset_scene
+    from splatting.rider.body import pose_vertices
+    from splatting.rider.imported import load_imported_rider
+    from splatting.rider.kinematics import forward_kinematics
+    from splatting.rider.motion import pedal_pose
+    reset_scene()
+    arm, _ = build_rigged_human(source, "mixamo", write_texture(tmp_path / "ramp.png"))
+    arm.matrix_world = Matrix.Rotation(math.radians(90), 4, "Z") @ Matrix.Diagonal((2, 2, 2, 1)) @ Matrix.Translation((3, 1, 0))
+    bpy.context.view_layer.update()
+    with pytest.raises(UserError, match="give --height-m"):
+        rider_rig.rider_from_objects(bpy.context.scene.objects, "giant", "scene")
+    a, meta = rider_rig.rider_from_objects(bpy.context.scene.objects, "giant", "scene", height_m=source.height_m)
+    check_same_body(a, meta, source, exact_weights=True)
+    npz = rider_file.write_rider_file(tmp_path / "rider.npz", meta=meta, **a)
+    rider = load_imported_rider(npz)
+    rot, root, _ = pedal_pose(rider.joints.double(), math.radians(200), math.radians(-12))
+    ours = pose_vertices(rider, rot, root)[0].numpy()
+    T = forward_kinematics(rider.joints.double(), rot, root)[1][0].numpy()
+    theirs = posed_in_scene(rider_rig.find_rig(bpy.context.scene.objects, "scene"), meta, T)
+    assert np.abs(ours - theirs).max() < 2e-5
+    reset_scene()
+
+
+# ---------------------------------------------------------------- roster, IK, avatar mesh
+
+def test_imported_rider_is_a_roster_rider_and_rides_a_bike(imported, monkeypatch, source):
+    from addon.core.procedural import layout, spec as bike_spec
+    from splatting.rider import ik, imported as imported_mod, roster
+    from splatting.rider.kinematics import JOINT_INDEX
+    monkeypatch.setattr(imported_mod, "IMPORTED_DIR", imported[1])
+    roster.load_rider.cache_clear()
+    try:
+        ids = [r["id"] for r in roster.all_riders()]
+        assert ids[-1] == "my_glb_rider" and SOURCE_RIDER in ids
+        assert roster.describe(roster.get_spec("my_glb_rider")).startswith("my_glb_rider  imported 1.50 m")
+        rider = roster.load_rider("my_glb_rider")
+    finally:
+        roster.load_rider.cache_clear()
+    assert rider.spec["body"] == "imported" and abs(rider.height_m - source.height_m) < 1e-4
+    kp = layout.keypoints(bike_spec.sample_spec("kids", 0, 0))  # sized for the 1.50 m source rider
+    poses = torch.tensor([[p, s, 0, 0, 0, 0, 0, 0] for p, s in ((0, -10), (90, 0), (180, 10), (270, 20))],
+                         dtype=torch.float64)
+    targets = ik.posed_bike_keypoints(kp, poses)
+    res = ik.solve(rider.joints, targets, saddle_fit=True, saddle_shared=True)
+    for joint, target in ik.DEFAULT_PAIRS:  # distances recomputed from the posed joints
+        tgt = torch.as_tensor(targets[target], dtype=torch.float64).reshape(-1, 3)
+        if target == "seat":
+            tgt = res.seat.double() + torch.tensor([0.0, ik.PELVIS_ABOVE_SEAT_M, 0.0], dtype=torch.float64)
+        dist = torch.linalg.vector_norm(res.joints[:, JOINT_INDEX[joint]].double() - tgt, dim=-1)
+        assert (dist < 0.015).all(), (joint, dist)
+
+
+def test_rider_command_lists_and_exports_the_imported_rider(imported, tmp_path):
+    env_data = tmp_path / "data"
+    (env_data / "imported_riders").mkdir(parents=True)
+    os.symlink(imported[0].parent, env_data / "imported_riders" / "my_glb_rider")
+    env = dict(os.environ, PYTHONPATH=ROOT, OMP_WAIT_POLICY="PASSIVE", ARTICCYCLISTS_DATA=str(env_data))
+    r = subprocess.run([sys.executable, "-m", "splatting", "rider", "--list"], capture_output=True, text=True, env=env, cwd=ROOT)
+    assert r.returncode == 0 and r.stdout.strip().splitlines()[-1].startswith("my_glb_rider  imported"), r.stderr
+    out = tmp_path / "posed.ply"
+    r = subprocess.run([sys.executable, "-m", "splatting", "rider", "--id", "my_glb_rider", "--out", str(out),
+                        "--theta-p-deg", "30"], capture_output=True, text=True, env=env, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    from cyclist_formats import ply
+    v, f, c = ply.read_colored_mesh(str(out))
+    assert len(v) == 13718 and v[:, 1].max() < 1.45  # seated, not standing
+    assert np.abs(c[:, 2] - 0.25).max() < 0.01  # the texture's blue channel carried into the avatar's mesh
+
+
+# ---------------------------------------------------------------- refusals: one line, exit 2, nothing written
+
+@pytest.mark.parametrize("name,words", [("unrigged.glb", "unrigged mesh (no armature)"),
+                                        ("chain.glb", "not a humanoid rig"),
+                                        ("missing_texture.fbx", "missing texture")])
+def test_refused_models_give_one_line(models, tmp_path, name, words):
+    out = tmp_path / "x" / "rider.npz"
+    r = cli("rider", "import", "--model", models[name], "--id", "x", "--out", out)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and words in lines[0], r.stderr[-1500:]
+    assert lines[0].startswith("splatting rider import: error: ")
+    assert not out.exists() and not any(p.name.endswith(".npz") for p in tmp_path.rglob("*"))
+
+
+def test_bad_arguments_are_refused_before_blender(models, imported, tmp_path):
+    cases = [(["--model", tmp_path / "none.glb", "--id", "a"], "file not found"),
+             (["--model", models["chain.glb"], "--id", "a/b"], "--id must be"),
+             (["--model", models["chain.glb"], "--id", "a", "--height-m", "9"], "--height-m"),
+             (["--model", models["chain.glb"], "--id", "a", "--out", tmp_path / "r.ply"], ".npz"),
+             (["--model", models["chain.glb"], "--id", SOURCE_RIDER], "built-in roster rider"),
+             (["--model", models["mixamo.glb"], "--id", "my_glb_rider", "--out", imported[0]], "--force")]
+    for args, words in cases:
+        r = cli("rider", "import", *args, timeout=60)
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1 and words in lines[0], (args, r.stderr[-800:])
+        assert "reading" not in r.stdout  # refused before Blender started
+    assert cli("rider", "import", "--help").returncode == 0
+
+
+def test_rider_file_checks(tmp_path, imported):
+    a, meta = rider_file.read_rider_file(imported[0])
+    bad = dict({k: a[k] for k in rider_file.ARRAYS}, weights=a["weights"] * 2)
+    with pytest.raises(UserError, match="sum to 1"):
+        rider_file.write_rider_file(tmp_path / "r.npz", meta=meta, **bad)
+    assert not (tmp_path / "r.npz").exists()
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(UserError, match="not a rider file"):
+        rider_file.read_rider_file(tmp_path / "junk.npz")
+    np.savez(tmp_path / "partial.npz", vertices=a["vertices"])
+    with pytest.raises(UserError, match="missing faces"):
+        rider_file.read_rider_file(tmp_path / "partial.npz")
+    with pytest.raises(UserError, match="face_texture must be"):  # a face drawing a texture the file lacks
+        rider_file.write_rider_file(tmp_path / "r.npz", meta=meta, uv=a["uv"], face_texture=a["face_texture"] + 1,
+                                    textures=rider_file.textures_of(a), **{k: a[k] for k in rider_file.ARRAYS})
+    assert not (tmp_path / "r.npz").exists()
+
+
+@pytest.mark.blender_binary
+def test_debian_blender_34_imports_the_same_rider(models, imported, tmp_path):
+    """`--blender /usr/bin/blender` (3.4.1, system numpy): the same file as the bpy 5.0 import."""
+    import shutil
+    blender = shutil.which("blender")
+    if blender is None:
+        pytest.skip("Debian blender binary not installed")
+    out = tmp_path / "r34.npz"
+    r = cli("rider", "import", "--model", models["mixamo.glb"], "--id", "my_glb_rider", "--out", out, "--blender", blender)
+    assert r.returncode == 0, r.stderr[-1500:]
+    a34, m34 = rider_file.read_rider_file(out)
+    a50, m50 = rider_file.read_rider_file(imported[0])
+    assert m34["blender"].startswith("3.4") and m50["blender"].startswith("5.")
+    for k in rider_file.ARRAYS:
+        assert np.abs(a34[k].astype(np.float64) - a50[k]).max() < 1e-5, k
+
+
+# ---------------------------------------------------------------- the add-on's button: the same import
+
+def test_panel_button_saves_the_open_rig_and_a_model_file(models, source, tmp_path):
+    """articcyc.import_rider on the armature open in the scene (no file), then on the .fbx, then refusing
+    an unrigged file with the same words as the command."""
+    import addon
+    from addon.core.scene import reset_scene
+    reset_scene()
+    if not hasattr(bpy.types.Scene, "articcyc_rider_id"):
+        addon.register()
+    sc = bpy.context.scene
+    img = write_texture(tmp_path / "ramp.png")
+    arm, _ = build_rigged_human(source, "rigify", img)
+    sc.articcyc_rider_dir, sc.articcyc_rider_id, sc.articcyc_rider_model = str(tmp_path / "riders"), "open_rig", ""
+    assert bpy.ops.articcyc.import_rider() == {"FINISHED"}
+    a, meta = rider_file.read_rider_file(tmp_path / "riders" / "open_rig" / "rider.npz")
+    check_same_body(a, meta, source, exact_weights=True)  # no exporter between: every influence kept
+    assert meta["bone_map"] == RIGIFY
+    with pytest.raises(RuntimeError, match="exists"):  # no silent overwrite
+        bpy.ops.articcyc.import_rider()
+    reset_scene()
+    sc = bpy.context.scene
+    sc.articcyc_rider_dir, sc.articcyc_rider_id = str(tmp_path / "riders"), "from_fbx"
+    sc.articcyc_rider_model = str(models["mixamo.fbx"])
+    assert bpy.ops.articcyc.import_rider() == {"FINISHED"}
+    a, meta = rider_file.read_rider_file(tmp_path / "riders" / "from_fbx" / "rider.npz")
+    check_same_body(a, meta, source, exact_weights=True)
+    reset_scene()
+    sc = bpy.context.scene
+    sc.articcyc_rider_dir, sc.articcyc_rider_id = str(tmp_path / "riders"), "statue"
+    sc.articcyc_rider_model = str(models["unrigged.glb"])
+    with pytest.raises(RuntimeError, match="unrigged mesh"):
+        bpy.ops.articcyc.import_rider()
+    assert not (tmp_path / "riders" / "statue").exists()
+    reset_scene()
+
+
+# ---------------------------------------------------------------- textures in the training renders
+
+def test_texture_layer_reaches_the_training_renders(imported, tmp_path):
+    """The rider file keeps the texture and the corner UVs; render_rider.py (the avatar's training views)
+    draws the texture itself: a black-and-white checker of 16x16 squares put in the file's texture layer shows on
+    the body although the file's vertex colours are the (colourful, mid-grey) ramp."""
+    from PIL import Image
+    a, meta = rider_file.read_rider_file(imported[0])
+    (tex,) = rider_file.textures_of(a)
+    ramp = np.round(np.stack(np.meshgrid(np.arange(TEX), np.arange(TEX))[::-1][::-1], -1) / (TEX - 1) * 255)
+    assert np.abs(tex[..., :2].astype(int) - ramp).max() <= 1 and np.abs(tex[..., 2].astype(int) - 64).max() <= 1
+    assert np.abs(a["uv"] - expected_uv(a["vertices"])[a["faces"]]).max() < 1e-4
+    assert (a["face_texture"] == 0).all()
+    checker = ((np.add.outer(np.arange(256) // 16, np.arange(256) // 16) % 2) * 255).astype(np.uint8)[..., None].repeat(3, -1)
+    arrays = {k: a[k] for k in rider_file.ARRAYS}
+    npz = rider_file.write_rider_file(tmp_path / "checker.npz", meta=meta, uv=a["uv"], face_texture=a["face_texture"],
+                                      textures=[checker], **arrays)
+    r = subprocess.run([sys.executable, os.path.join(ROOT, "blender_scripts", "render_rider.py"), "--mesh", str(npz),
+                        "--out", str(tmp_path / "views"), "--views", "9", "--samples", "2"],
+                       capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-1500:]
+    img = np.asarray(Image.open(tmp_path / "views" / "rgba" / "camera0009" / "0000.png")).astype(float)
+    body = img[..., 3] > 250
+    lum = img[body, :3].mean(1)
+    assert body.sum() > 2000 and np.percentile(lum, 10) < 40 and np.percentile(lum, 90) > 120, np.percentile(lum, [10, 50, 90])
