@@ -185,6 +185,22 @@ def test_non_finite_input_is_refused(bad):
         ik.solve(rest, {k: v for k, v in targets.items() if k != "pedal_right"})
 
 
+def test_exact_start_skips_adam_and_changes_nothing():
+    rest = template_rest_joints(1.75)
+    targets = at_poses(bike("city", 0), [[a, 0, 0, 0, 0, 0, 0, 0] for a in (0, 30)])
+    full = ik.solve(rest, targets, exact_start_m=None)
+    assert full.history.shape[0] == 50 and (full.history.argmin(0) == 0).all()  # Adam only moved away
+    fast = ik.solve(rest, targets)
+    assert fast.history.shape[0] == 1
+    assert torch.equal(fast.local_aa, full.local_aa) and torch.equal(fast.root_trans, full.root_trans)
+    assert torch.equal(fast.loss, full.loss)
+    assert max(float(r.max()) for r in fast.residuals.values()) < 1e-3
+    # a start that misses a target (out of reach) still runs every iteration
+    far = {k: v.clone() for k, v in targets.items()}
+    far["pedal_right"] = far["pedal_right"] + torch.tensor([0.0, -0.5, 0.0], dtype=far["pedal_right"].dtype)
+    assert ik.solve(rest, far).history.shape[0] == 50
+
+
 def test_keeps_the_best_iteration():
     rest = template_rest_joints(1.75)
     targets = at_poses(bike("city", 0), [[a, 0, 0, 0, 0, 0, 0, 0] for a in range(0, 360, 45)])

@@ -18,6 +18,7 @@ HINGE_MAX_RAD = math.radians(150.0)
 PELVIS_ABOVE_SEAT_M = 0.09  # the SMPL pelvis joint sits ~9 cm above the saddle top when seated
 SEAT_RANGE_M = (-0.15, 0.05)  # saddle auto-fit: seat-post travel along the seat tube
 FLAG_THRESHOLD_M = 0.03
+EXACT_START_M = 1e-3  # a start this close to every target is returned without Adam (solver.solve)
 OBJECTIVES = ("pairs", "chamfer")
 
 # parameter slots: root orientation, then the 11 joints with the four hinges last (one slice)

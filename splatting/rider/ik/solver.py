@@ -7,7 +7,7 @@ import torch
 
 from cyclist_formats.errors import UserError
 from splatting.rider.ik.chain import ReducedChain
-from splatting.rider.ik.slots import (DEFAULT_PAIRS, FLAG_THRESHOLD_M, HINGE_MAX_RAD, HINGE_SLOTS, N_ROT,
+from splatting.rider.ik.slots import (DEFAULT_PAIRS, EXACT_START_M, FLAG_THRESHOLD_M, HINGE_MAX_RAD, HINGE_SLOTS, N_ROT,
                                       OBJECTIVES, PELVIS_ABOVE_SEAT_M, SEAT_RANGE_M, SLOT_JOINTS, hinge_axes,
                                       pair_name)
 from splatting.rider.ik.start import analytic_init_pose, cycling_init_pose, saddle_offset_for_reach
@@ -34,7 +34,7 @@ def solve(rest_joints, targets, init_local_aa=None, init_root=None, objective="p
           lr=0.05, saddle_fit=False, saddle_shared=False, pairs=DEFAULT_PAIRS,
           pelvis_above_seat_m=PELVIS_ABOVE_SEAT_M, up=(0.0, 1.0, 0.0), seat_range_m=SEAT_RANGE_M,
           flag_threshold_m=FLAG_THRESHOLD_M, w_hinge=1.0, w_off_hinge=1e-2, w_prior=1e-4, w_seat=1e-3,
-          betas=(0.9, 0.999), pair_weights=None, init="analytic"):
+          betas=(0.9, 0.999), pair_weights=None, init="analytic", exact_start_m=EXACT_START_M):
     """Batched keypoint IK for B frames.
 
     rest_joints (24, 3) metres, canonical frame; targets: name -> (B, 3) or (3,) world positions
@@ -43,6 +43,8 @@ def solve(rest_joints, targets, init_local_aa=None, init_root=None, objective="p
     its target).  `up` (3,) or (B, 3) is the bike's up direction for the pelvis-above-seat offset.
     saddle_fit slides the seat (and the pelvis target) along crank_axle -> seat within
     seat_range_m; saddle_shared uses one offset for all B frames (one seat post for a sequence).
+    exact_start_m: when the start already puts every pair within this distance (m) in every frame,
+    it is returned without Adam (history then has one row); None always runs all iterations.
     Returns IKResult.  Bad input (NaN/Inf, missing targets, wrong shapes) raises UserError.
     """
     if objective not in OBJECTIVES:
@@ -149,6 +151,16 @@ def solve(rest_joints, targets, init_local_aa=None, init_root=None, objective="p
             P[:, -1].clamp_(lo, hi)
 
     project(P0)  # a given initial pose may bend a knee backwards
+    if exact_start_m is not None:
+        # From an exact start Adam's first steps only move away (every parameter by ~lr) and the
+        # keep-best rule returns the start anyway; skipping them is ~90 % of a dataset image's IK.
+        with torch.no_grad():
+            eff = chain(rodrigues(P0[:, :N_ROT].view(B, len(SLOT_JOINTS), 3)), P0[:, N_ROT:N_ROT + 3])
+            tgt = T0 + P0[:, -1:, None] * U if saddle_fit else T0
+            if float(torch.linalg.vector_norm(eff - tgt, dim=-1).max()) <= exact_start_m:
+                loss0 = loss_fn(P0)
+                return _result(rest, init_aa, P0, loss0, loss0[None], pairs, tg, T0, U, saddle_fit,
+                               flag_threshold_m, slot_idx, seat_i, pelvis_lift)
     P = P0.clone().requires_grad_(True)
     m, v = torch.zeros_like(P0), torch.zeros_like(P0)
     best_loss = torch.full((B,), float("inf"), dtype=f32)
