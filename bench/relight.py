@@ -79,41 +79,69 @@ def prepare_bike(work, size=SIZE, progress=print):
     return bike, train_stats
 
 
+def sun_and_sky(light):
+    """A setup_lighting replacement (runs under bpy): the studio lights removed, one sun and a
+    uniform sky as `light` (light_json) says, fixed in the world."""
+    import bpy
+
+    from addon.core import frames, render
+
+    def setup(scene):
+        for o in list(scene.objects):
+            if o.type == "LIGHT":
+                bpy.data.objects.remove(o)
+        world = scene.world or bpy.data.worlds.new("sky")
+        scene.world = world
+        world.use_nodes = True
+        bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
+        bg.inputs["Color"].default_value = (*light["sky"], 1.0)
+        bg.inputs["Strength"].default_value = 1.0
+        sun = bpy.data.lights.new("relight_sun", "SUN")
+        sun.energy = light["sun_strength"]
+        sun.color = light["sun_colour"]
+        sun.angle = 0.01
+        obj = bpy.data.objects.new("relight_sun", sun)
+        scene.collection.objects.link(obj)
+        d = frames.to_blender(np.asarray(light["sun_direction"], float))
+        obj.rotation_mode = "QUATERNION"
+        obj.rotation_quaternion = render._quat_z_to(d / np.linalg.norm(d))
+    return setup
+
+
+def light_json(light):
+    """shading.Light -> the plain dict the Blender worker reads."""
+    import torch
+    return {"sun_direction": list(map(float, light.direction(torch.float64))), "sun_colour": list(light.sun_colour),
+            "sun_strength": light.sun_strength, "sky": list(light.sky)}
+
+
+def ring_camera_files(bike, cams, size, out_dir):
+    """Ring cameras `cams` (indices) of the bike's frame views, rescaled to size px (same field of
+    view) -> one {"K","R","T"} JSON file each in out_dir (what render_pose reads)."""
+    with open(os.path.join(bike, "views", "frame", "cameras.json")) as f:
+        ring_json = json.load(f)
+    files = []
+    for i, c in enumerate(cams):
+        e = ring_json[f"camera{int(c):04d}"]
+        k = size / (2 * e["K"][0][2])
+        K = [[e["K"][0][0] * k, 0.0, size / 2], [0.0, e["K"][1][1] * k, size / 2], [0.0, 0.0, 1.0]]
+        p = os.path.join(out_dir, f"camera_{i:03d}.json")
+        with open(p, "w") as f:
+            json.dump({"K": K, "R": e["R"], "T": e["T"]}, f)
+        files.append(p)
+    return files
+
+
 def blender_worker(job_path):
     """Runs under bpy: per pose, the studio lights replaced by that pose's sun and sky."""
     sys.path.insert(0, ROOT)
     from dataclasses import replace
 
-    import bpy
-
-    from addon.core import frames, render
+    from addon.core import render
     from addon.core.render_pose import render_pose
 
     with open(job_path) as f:
         job = json.load(f)
-
-    def sun_and_sky(light):
-        def setup(scene):
-            for o in list(scene.objects):
-                if o.type == "LIGHT":
-                    bpy.data.objects.remove(o)
-            world = scene.world or bpy.data.worlds.new("sky")
-            scene.world = world
-            world.use_nodes = True
-            bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
-            bg.inputs["Color"].default_value = (*light["sky"], 1.0)
-            bg.inputs["Strength"].default_value = 1.0
-            sun = bpy.data.lights.new("relight_sun", "SUN")
-            sun.energy = light["sun_strength"]
-            sun.color = light["sun_colour"]
-            sun.angle = 0.01
-            obj = bpy.data.objects.new("relight_sun", sun)
-            scene.collection.objects.link(obj)
-            d = frames.to_blender(np.asarray(light["sun_direction"], float))
-            obj.rotation_mode = "QUATERNION"
-            obj.rotation_quaternion = render._quat_z_to(d / np.linalg.norm(d))
-        return setup
-
     s = replace(render.RenderSettings(), samples=job["samples"], threads=1)
     for i, (pose, cam, light) in enumerate(zip(job["poses"], job["cameras"], job["lights"])):
         out = os.path.join(job["out"], f"gt_{i:03d}.png")

@@ -14,7 +14,7 @@ from splatting.gaussians.container import Gaussians
 from splatting.raster.camera import ring_camera
 from splatting.relight.bike import RelightableBike
 from splatting.relight.render import composite_features, prepare, render_relit
-from splatting.relight.shading import Light, lambert_reference, shade, shade_linear, srgb_encode
+from splatting.relight.shading import Light, ggx_sun, lambert_reference, shade, shade_linear, srgb_encode, view_directions
 from helpers import make_bike, mat_vec, random_pose, ref_part_R
 
 
@@ -49,6 +49,37 @@ def test_display_colour_is_srgb_of_the_straight_colour_times_coverage():
     # straight albedo 0.4, E cos / pi = 1 -> linear 0.4 -> sRGB 0.6652 -> times alpha 0.5
     np.testing.assert_allclose(out[0, 0].numpy(), [0.5 * 0.66519] * 3, atol=2e-4)
     assert float(srgb_encode(torch.tensor(0.4))) == pytest.approx(0.66519, abs=1e-4)
+
+
+def test_gloss_reflects_the_sky_and_peaks_in_the_mirror_direction():
+    light = Light(sun_direction=(1.0, 1.0, 0.0), sun_colour=(1.0, 1.0, 1.0), sun_strength=2.0, sky=(0.2, 0.3, 0.4))
+    up = torch.tensor([[[0.0, 1.0, 0.0]]])
+    gloss, zero = torch.tensor([[[0.5, 0.5, 0.5]]]), torch.zeros(1, 1, 3)
+    mirror = torch.tensor([[[-1.0, 1.0, 0.0]]]) / math.sqrt(2)   # the sun's reflection about "up"
+    # no highlight: the sky's glossy reflection is exactly colour x sky
+    flat = shade_linear(zero, up, light, gloss, mirror, highlight=0.0)[0, 0]
+    np.testing.assert_allclose(flat.numpy(), [0.1, 0.15, 0.2], rtol=1e-6)
+    # GGX by hand at the peak: n.h = 1 -> D = 1 / (pi a^2), a = r^2; n.v = cos 45
+    r = 0.4
+    peak = float(ggx_sun(up[0, 0], mirror[0, 0], light, r))
+    assert peak == pytest.approx(1 / (math.pi * r ** 4) / (4 * math.cos(math.pi / 4)), rel=1e-5)
+    # off the mirror direction it falls; below the horizon of the sun there is none
+    off = float(ggx_sun(up[0, 0], torch.tensor([0.0, 1.0, 0.0]), light, r))
+    assert 0 < off < 0.2 * peak
+    assert float(ggx_sun(-up[0, 0], torch.tensor([0.0, -1.0, 0.0]), light, r)) == 0.0
+
+
+def test_view_directions_point_at_the_camera():
+    cam = ring_camera(30.0, (0.0, 0.5, 0.0), size=64)
+    v = view_directions(cam, torch.float64)
+    # every pixel's direction, followed from the orbit plane's point it sees, reaches the camera centre:
+    # so all of them are unit and the centre pixel's is (centre - orbit point) normalised
+    assert torch.allclose(v.norm(dim=-1), torch.ones(64, 64, dtype=torch.float64))
+    c = cam.centre.double()
+    expect = (c - torch.tensor([0.0, 0.5, 0.0], dtype=torch.float64))
+    expect = expect / expect.norm()
+    mid = (v[31, 31] + v[32, 32] + v[31, 32] + v[32, 31]) / 4
+    assert torch.allclose(mid / mid.norm(), expect, atol=1e-3)
 
 
 def test_normals_turn_with_their_part(tmp_path):

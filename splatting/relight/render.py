@@ -10,7 +10,7 @@ import math
 import torch
 
 from splatting.raster.sparse import ALPHA_MAX, ALPHA_MIN, T_MIN, composite, intersect, project
-from splatting.relight.shading import Light, shade
+from splatting.relight.shading import HIGHLIGHT, ROUGHNESS, Light, shade, view_directions
 
 
 def prepare(g, camera):
@@ -63,13 +63,16 @@ def composite_forward(prep, features):
 
 
 @torch.no_grad()
-def render_relit(g, albedo, normals, camera, light: Light, gloss=None):
+def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness=ROUGHNESS, highlight=HIGHLIGHT):
     """Gaussians g with per-Gaussian linear albedo (N, 3), world-frame unit normals (N, 3) and optionally
     a linear glossy colour (N, 3) under a light -> dict rgb (H, W, 3) display colour premultiplied
-    (over black), alpha, reflectance (albedo + gloss, composited), normal.  The gloss is shaded like
-    the albedo (splatting/relight/shading.py), so the two are summed per Gaussian before compositing."""
+    (over black), alpha, albedo, gloss and normal (composited).  One compositing pass for all
+    channels; the gloss reflects the sky and shows the sun's highlight (splatting/relight/shading.py)."""
     prep = prepare(g, camera)
-    refl = albedo if gloss is None else albedo + gloss
-    out, alpha = composite_forward(prep, torch.cat([refl, normals], 1).float())
-    refl_img, nrm = out[..., :3], out[..., 3:]
-    return {"rgb": shade(refl_img, nrm, alpha, light), "alpha": alpha, "reflectance": refl_img, "normal": nrm}
+    feats = [albedo, normals] if gloss is None else [albedo, normals, gloss]
+    out, alpha = composite_forward(prep, torch.cat(feats, 1).float())
+    alb, nrm = out[..., :3], out[..., 3:6]
+    gl = out[..., 6:9] if gloss is not None else None
+    view = view_directions(camera, alb.dtype) if gloss is not None else None
+    rgb = shade(alb, nrm, alpha, light, gl, view, roughness, highlight)
+    return {"rgb": rgb, "alpha": alpha, "albedo": alb, "gloss": gl, "normal": nrm}
