@@ -171,6 +171,20 @@ def fit_missing(bike, progress=print):
     return stats
 
 
+def run_bench(results, out_dir, n_poses=6):
+    """`make bench`: bike_gt's trained bike (out/bench/bikes, 512 px views) when it has the passes,
+    compared at 256 px; otherwise the small bike built here."""
+    from bench.bike_gt import find_bike
+    from cyclist_formats import bike_folder
+
+    bike = find_bike(os.path.join(out_dir, "bikes"))
+    if bike and not all(os.path.isfile(bike_folder.pass_paths(bike_folder.views_dir(bike, p), "camera0000")["albedo"])
+                        for p in PARTS):
+        print(f"  bike_relit: {bike} has no albedo/normal passes (views rendered before them) - using a small bike")
+        bike = None
+    return run(results, out_dir, n_poses, bike=bike)
+
+
 def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None, progress=print):
     """bike: a trained bike folder (views with passes, gaussians/); None builds the small one."""
     import torch

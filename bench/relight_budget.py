@@ -13,7 +13,6 @@ perfect per-pixel passes: no Gaussian fit can beat it.
 """
 import argparse
 import json
-import math
 import os
 import subprocess
 import sys

@@ -1,7 +1,6 @@
 """Relightable Gaussians on the torch side: Lambert shading, normals posed with their part, the fit
 recovering known albedo and normals, the relight-fit command's bad input."""
 import math
-import os
 import subprocess
 import sys
 
@@ -203,3 +202,34 @@ def test_relight_fit_command_bad_input(tmp_path):
     assert r.returncode == 2 and "views folder not found" in r.stderr and r.stderr.count("\n") == 1
     r = subprocess.run([sys.executable, "-m", "splatting", "relight-fit", "--help"], capture_output=True, text=True)
     assert r.returncode == 0 and "--views" in r.stdout
+
+
+def test_cast_shadow_of_a_blob_on_a_plane():
+    from splatting.relight.shadow import sun_visibility
+
+    # a 1 m plane of flat Gaussians in two layers 2 mm apart (a surface must not shadow itself)
+    # and a 0.2 m blob 0.3 m above its centre; sun straight overhead, then from 45 degrees
+    xs = torch.linspace(-0.5, 0.5, 41)
+    X, Z = torch.meshgrid(xs, xs, indexing="ij")
+    plane = torch.stack([X.reshape(-1), torch.zeros(X.numel()), Z.reshape(-1)], 1)
+    plane = torch.cat([plane, plane - torch.tensor([0.0, 0.002, 0.0])])
+    g0 = torch.Generator().manual_seed(0)
+    blob = torch.randn(300, 3, generator=g0) * 0.04 + torch.tensor([0.0, 0.3, 0.0])
+    means = torch.cat([plane, blob])
+    n = len(means)
+    scales = torch.cat([torch.tensor([[0.02, 0.002, 0.02]]).expand(len(plane), 3), torch.full((300, 3), 0.03)])
+    g = Gaussians(means, torch.tensor([[1.0, 0.0, 0.0, 0.0]]).expand(n, 4).contiguous(), torch.log(scales),
+                  torch.full((n,), 4.0), torch.zeros(n, 1, 3))
+    for d in ((0.0, 1.0, 0.0), (1.0, 1.0, 0.0)):
+        vis = sun_visibility(g, Light(sun_direction=d))
+        l = torch.tensor(d) / torch.tensor(d).norm()
+        # where the blob's centre casts its shadow on the plane (y = 0)
+        c = torch.tensor([0.0, 0.3, 0.0]) - l * (0.3 / float(l[1]))
+        r_shadow = (plane - c).norm(dim=-1)
+        under = r_shadow < 0.05
+        far = r_shadow > 0.3
+        assert under.sum() >= 4 and far.sum() > 100
+        assert float(vis[: len(plane)][under].max()) < 0.2
+        assert float(vis[: len(plane)][far].min()) > 0.9
+        top = int((blob @ l).argmax())  # the blob's most sunward Gaussian is lit (those below its
+        assert float(vis[len(plane) + top]) > 0.9  # 3 cm footprint are, rightly, in its shadow)

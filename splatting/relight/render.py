@@ -63,16 +63,25 @@ def composite_forward(prep, features):
 
 
 @torch.no_grad()
-def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness=ROUGHNESS, highlight=HIGHLIGHT):
+def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
+                 shadows=False):
     """Gaussians g with per-Gaussian linear albedo (N, 3), world-frame unit normals (N, 3) and optionally
     a linear glossy colour (N, 3) under a light -> dict rgb (H, W, 3) display colour premultiplied
-    (over black), alpha, albedo, gloss and normal (composited).  One compositing pass for all
-    channels; the gloss reflects the sky and shows the sun's highlight (splatting/relight/shading.py)."""
-    prep = prepare(g, camera)
-    feats = [albedo, normals] if gloss is None else [albedo, normals, gloss]
-    out, alpha = composite_forward(prep, torch.cat(feats, 1).float())
+    (over black), alpha, albedo, gloss and normal (composited).  One rasterizer call composites
+    every channel (rasterize(features=...)); the gloss reflects the sky and shows the sun's
+    highlight (splatting/relight/shading.py).  shadows: the sun is blocked per Gaussian by the
+    others (splatting/relight/shadow.py: one more render, from the sun)."""
+    from splatting.raster.sparse import render_gaussians
+
+    feats = [albedo, normals] + ([] if gloss is None else [gloss])
+    if shadows:
+        from splatting.relight.shadow import sun_visibility
+        feats.append(sun_visibility(g, light)[:, None].to(albedo.dtype))
+    r = render_gaussians(g, camera, features=torch.cat(feats, 1).float().contiguous(), sh_degree=0)
+    out, alpha = r["features"], r["alpha"]
     alb, nrm = out[..., :3], out[..., 3:6]
     gl = out[..., 6:9] if gloss is not None else None
+    vis = (out[..., -1:] / alpha[..., None].clamp_min(1e-6)).clamp(0, 1) if shadows else None
     view = view_directions(camera, alb.dtype) if gloss is not None else None
-    rgb = shade(alb, nrm, alpha, light, gl, view, roughness, highlight)
-    return {"rgb": rgb, "alpha": alpha, "albedo": alb, "gloss": gl, "normal": nrm}
+    rgb = shade(alb, nrm, alpha, light, gl, view, roughness, highlight, vis)
+    return {"rgb": rgb, "alpha": alpha, "albedo": alb, "gloss": gl, "normal": nrm, "sun_visibility": vis}

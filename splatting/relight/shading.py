@@ -80,16 +80,20 @@ def ggx_sun(normal, view, light: Light, roughness=ROUGHNESS):
     return torch.where((normal @ l) > 0, D / (4.0 * nv), torch.zeros_like(D))
 
 
-def shade_linear(albedo, normal, light: Light, gloss=None, view=None, roughness=ROUGHNESS, highlight=HIGHLIGHT):
+def shade_linear(albedo, normal, light: Light, gloss=None, view=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
+                 sun_visibility=None):
     """Premultiplied linear radiance (H, W, 3) of premultiplied albedo and composited normals.
 
     gloss (premultiplied glossy colour) reflects the sky like the albedo (exact for a uniform sky)
     and the sun as a GGX highlight seen along `view` ((H, W, 3) unit, towards the camera); without
-    a view it is shaded like the albedo (the diffuse-like approximation)."""
+    a view it is shaded like the albedo (the diffuse-like approximation).  sun_visibility (H, W, 1)
+    in [0, 1] scales the sun (cast shadows, splatting/relight/shadow.py); the sky is not occluded."""
     n = normal / normal.norm(dim=-1, keepdim=True).clamp_min(1e-6)
     l = light.direction(albedo.dtype)
     cos = (n @ l).clamp_min(0.0)[..., None]
     sun = torch.as_tensor(light.sun_colour, dtype=albedo.dtype) * light.sun_strength
+    if sun_visibility is not None:
+        sun = sun * sun_visibility
     sky = torch.as_tensor(light.sky, dtype=albedo.dtype)
     out = albedo * (cos * sun / math.pi + sky)
     if gloss is not None:
@@ -109,10 +113,11 @@ def view_directions(camera, dtype=torch.float32):
     return (-d / d.norm(dim=-1, keepdim=True)).to(dtype)
 
 
-def shade(albedo, normal, alpha, light: Light, gloss=None, view=None, roughness=ROUGHNESS, highlight=HIGHLIGHT):
+def shade(albedo, normal, alpha, light: Light, gloss=None, view=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
+          sun_visibility=None):
     """Display colour premultiplied by alpha (H, W, 3) in [0, 1]: the sRGB encoding of the straight
     linear colour, times coverage (what an RGBA render composited over black shows)."""
-    lin = shade_linear(albedo, normal, light, gloss, view, roughness, highlight)
+    lin = shade_linear(albedo, normal, light, gloss, view, roughness, highlight, sun_visibility)
     a = alpha[..., None]
     straight = torch.where(a > 1e-6, lin / a.clamp_min(1e-6), torch.zeros_like(lin))
     return srgb_encode(straight) * a
