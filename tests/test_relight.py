@@ -178,22 +178,24 @@ def test_relit_render_of_a_lit_patch():
     np.testing.assert_allclose(dark["rgb"][inside].numpy(), 0.2478, atol=0.01)
 
 
-def test_fused_composite_equals_the_rasterizer_channels():
-    from splatting.relight.render import composite_forward
-
+def test_relit_channels_equal_the_pair_list_compositing():
+    # render_relit composites the reflectance through the colour channels (degree-0 SH) and the
+    # normals as features of the tiled rasterizer; the fit composites them over the torch pair
+    # list: the two must agree, or what was fitted is not what is rendered
     g = _flat_patch()
     gen = torch.Generator().manual_seed(2)
     g = g.map(lambda x: x)
     g.opacity_logits = torch.randn(len(g), generator=gen)  # semi-transparent: T and the cut-offs matter
     g.means = g.means + 0.05 * torch.randn(len(g), 3, generator=gen)
     cam = ring_camera(20, orbit_centre=(0, 1, 0), size=48, focal=2084.97 * 48 / 512 * 2)
-    f1, f2 = torch.rand(len(g), 3, generator=gen), torch.randn(len(g), 3, generator=gen)
-    prep = prepare(g, cam)
-    (a, b), alpha = composite_features(prep, [f1, f2])
-    out, alpha2 = composite_forward(prep, torch.cat([f1, f2], 1))
+    alb, gl = torch.rand(len(g), 3, generator=gen) * 0.8, torch.rand(len(g), 3, generator=gen) * 0.1
+    nrm = torch.nn.functional.normalize(torch.randn(len(g), 3, generator=gen), dim=-1)
+    out = render_relit(g, alb, nrm, cam, Light(), gl, antialiased=False)
+    (R, n), alpha = composite_features(prepare(g, cam), [alb + gl, nrm])
     assert float(alpha.max()) > 0.5
-    torch.testing.assert_close(out, torch.cat([a, b], -1), atol=1e-5, rtol=1e-4)
-    torch.testing.assert_close(alpha2, alpha, atol=1e-5, rtol=1e-4)
+    torch.testing.assert_close(out["alpha"], alpha, atol=2e-4, rtol=1e-3)
+    torch.testing.assert_close(out["reflectance"], R, atol=2e-4, rtol=1e-3)
+    torch.testing.assert_close(out["normal"], n, atol=2e-4, rtol=1e-3)
 
 
 def test_relight_fit_command_bad_input(tmp_path):

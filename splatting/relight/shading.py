@@ -102,12 +102,16 @@ def shade_linear(albedo, normal, light: Light, gloss=None, view=None, roughness=
     return out
 
 
-def view_directions(camera, dtype=torch.float32):
-    """(H, W, 3) unit vectors from each pixel's surface towards the camera (world frame)."""
+def view_directions(camera, dtype=torch.float32, pixels=None):
+    """Unit vectors from each pixel's surface towards the camera (world frame): (H, W, 3), or (P, 3)
+    for the flat pixel indices `pixels` (P,)."""
     H, W = camera.height, camera.width
     K = camera.K.to(torch.float64)
-    v, u = torch.meshgrid(torch.arange(H, dtype=torch.float64) + 0.5, torch.arange(W, dtype=torch.float64) + 0.5,
-                          indexing="ij")
+    if pixels is None:
+        v, u = torch.meshgrid(torch.arange(H, dtype=torch.float64) + 0.5, torch.arange(W, dtype=torch.float64) + 0.5,
+                              indexing="ij")
+    else:
+        v, u = (pixels // W).to(torch.float64) + 0.5, (pixels % W).to(torch.float64) + 0.5
     d = torch.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], torch.ones_like(u)], -1)
     d = d @ camera.R.to(torch.float64)  # R^T d: the ray in the world
     return (-d / d.norm(dim=-1, keepdim=True)).to(dtype)
