@@ -124,8 +124,10 @@ def run(results, out_dir, avatar_dir=None, n_poses=12, seed=0, progress=print):
     with torch.no_grad():
         for i, ((g, albedo, normals, gloss), cam, light) in enumerate(zip(ra.pose(rot.float(), root.float()), cameras,
                                                                             lights)):
-            relit = render_relit(g, albedo, normals, cam, light, gloss, roughness=RIDER_ROUGHNESS, shadows=True)
-            flat = render_relit(g, albedo, normals, cam, light, gloss, roughness=RIDER_ROUGHNESS)
+            # at its training resolution: no mip filter (it is for rendering below it; IoU 0.9707 with it)
+            kw = {"roughness": RIDER_ROUGHNESS, "antialiased": False}
+            relit = render_relit(g, albedo, normals, cam, light, gloss, shadows=True, **kw)
+            flat = render_relit(g, albedo, normals, cam, light, gloss, **kw)
             baked = render_gaussians(g, cam)
             row = {"theta_p_deg": round(float(theta_p[i]), 1), "yaw_deg": round(float(yaw[i]), 1), "camera": int(cams[i]),
                    "sun_elevation_deg": round(float(np.degrees(np.arcsin(light.direction()[1]))), 1)}

@@ -39,7 +39,7 @@ class PosedTrainConfig:
     poses: int = 4              # pedalling poses rendered
     cameras: int = 8            # ring cameras per pose (evenly spaced, offset per pose)
     iterations: int = 600
-    scale: float = 0.5          # training image scale (512 px views -> 256)
+    scale: float = 1.0          # training image scale (0.5, 256 px, softened the 512 px silhouettes: IoU 0.97 -> 0.93)
     rest_fraction: float = 0.25  # share of steps on the rest-pose views
     samples: int = None         # Cycles samples (default: the renderer's)
     seed: int = 0
@@ -225,10 +225,13 @@ def add_arguments(p):
     p.add_argument("--cameras", type=int, default=PosedTrainConfig.cameras, help="ring cameras per pose (default %(default)s)")
     p.add_argument("--iterations", type=int, default=PosedTrainConfig.iterations)
     p.add_argument("--samples", type=int, default=None, help="Cycles samples for the posed renders")
+    p.add_argument("--scale", type=float, default=PosedTrainConfig.scale, help="training image scale (default %(default)s)")
     p.add_argument("--quiet", action="store_true")
 
 
 def run(args):
+    if not 0.05 <= args.scale <= 1.0:
+        raise UserError(f"--scale must be in 0.05..1, got {args.scale}")
     for name, lo, hi in (("poses", 1, 36), ("cameras", 2, 36), ("iterations", 1, 10 ** 7)):
         v = getattr(args, name)
         if not lo <= v <= hi:
@@ -236,7 +239,7 @@ def run(args):
     if not os.path.isfile(os.path.join(args.avatar, "skinning.npz")):
         raise UserError(f"not a rider avatar folder (no skinning.npz): {args.avatar}")
     train_avatar_posed(args.avatar, PosedTrainConfig(poses=args.poses, cameras=args.cameras, iterations=args.iterations,
-                                                     samples=args.samples, progress=not args.quiet))
+                                                     samples=args.samples, scale=args.scale, progress=not args.quiet))
     return 0
 
 
