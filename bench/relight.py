@@ -22,7 +22,7 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PY = sys.executable
 PARTS = ("frame", "steering", "crank")
-SIZE = 96              # the small bike's training views (when no trained bike is given)
+SIZE = 256             # the small bike's training views (when no trained bike is given)
 GT_SIZE = 256          # the comparison
 RENDER_SAMPLES = 4      # the training views (denoise off: Debian's 3.4 has no OIDN)
 GT_SAMPLES = 16         # the ground truth

@@ -66,9 +66,8 @@ def run(results, out_dir, avatar_dir=None, n_poses=12, seed=0, progress=print):
 
     from bench.compare import side_by_side, write_table
     from bench.relight import light_json
-    from bench.rider import RIDER_ID, camera_json, posed_batch, sample_poses
+    from bench.rider import RIDER_ID, posed_batch, posed_jobs, sample_poses
     from cyclist_formats import bike_folder
-    from splatting.raster.camera import ring_camera
     from splatting.raster.sparse import render_gaussians
     from splatting.relight.avatar import RIDER_ROUGHNESS, RelightableAvatar
     from splatting.relight.fit import fit_file
@@ -76,7 +75,6 @@ def run(results, out_dir, avatar_dir=None, n_poses=12, seed=0, progress=print):
     from splatting.relight.shading import random_light
     from splatting.rider.avatar import PLY_NAME
     from splatting.rider.avatar_build import build_avatar
-    from splatting.rider.body import export_rider, pose_vertices
     from splatting.rider.roster import load_rider
 
     torch.set_num_threads(1)
@@ -99,20 +97,9 @@ def run(results, out_dir, avatar_dir=None, n_poses=12, seed=0, progress=print):
     lights = [random_light(rng) for _ in range(n_poses)]
     gt_dir = os.path.join(out_dir, "rider_relit")
     os.makedirs(gt_dir, exist_ok=True)
-    verts = pose_vertices(rider, rot, root)
-    jobs, cameras = [], []
-    for i in range(n_poses):
-        v = verts[i]
-        centre = (0.0, float((v[:, 1].min() + v[:, 1].max()) / 2), 0.0)
-        cam = ring_camera(10.0 * int(cams[i]), centre, name=f"camera{int(cams[i]):04d}")
-        cameras.append(cam)
-        mesh = os.path.join(gt_dir, f"posed_{i:03d}.ply")
-        export_rider(rider, mesh, vertices=v)
-        cj = os.path.join(gt_dir, f"camera_{i:03d}.json")
-        with open(cj, "w") as f:
-            json.dump({cam.name: camera_json(cam)}, f)
-        jobs.append({"mesh": mesh, "camera": f"{cj}:{cam.name}", "out": os.path.join(gt_dir, f"gt_{i:03d}.png"),
-                     "light": light_json(lights[i])})
+    jobs, cameras = posed_jobs(rider, rot, root, cams, gt_dir)
+    for job, light in zip(jobs, lights):
+        job["light"] = light_json(light)
     job_file = os.path.join(gt_dir, "jobs.json")
     with open(job_file, "w") as f:
         json.dump(jobs, f, indent=1)
