@@ -22,7 +22,8 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PY = sys.executable
 PARTS = ("frame", "steering", "crank")
-SIZE = 96
+SIZE = 256             # the small bike's training views (when no trained bike is given)
+GT_SIZE = 256          # the comparison
 RENDER_SAMPLES = 4      # the training views (denoise off: Debian's 3.4 has no OIDN)
 GT_SAMPLES = 16         # the ground truth
 ITERATIONS = 600
@@ -79,41 +80,69 @@ def prepare_bike(work, size=SIZE, progress=print):
     return bike, train_stats
 
 
+def sun_and_sky(light):
+    """A setup_lighting replacement (runs under bpy): the studio lights removed, one sun and a
+    uniform sky as `light` (light_json) says, fixed in the world."""
+    import bpy
+
+    from addon.core import frames, render
+
+    def setup(scene):
+        for o in list(scene.objects):
+            if o.type == "LIGHT":
+                bpy.data.objects.remove(o)
+        world = scene.world or bpy.data.worlds.new("sky")
+        scene.world = world
+        world.use_nodes = True
+        bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
+        bg.inputs["Color"].default_value = (*light["sky"], 1.0)
+        bg.inputs["Strength"].default_value = 1.0
+        sun = bpy.data.lights.new("relight_sun", "SUN")
+        sun.energy = light["sun_strength"]
+        sun.color = light["sun_colour"]
+        sun.angle = 0.01
+        obj = bpy.data.objects.new("relight_sun", sun)
+        scene.collection.objects.link(obj)
+        d = frames.to_blender(np.asarray(light["sun_direction"], float))
+        obj.rotation_mode = "QUATERNION"
+        obj.rotation_quaternion = render._quat_z_to(d / np.linalg.norm(d))
+    return setup
+
+
+def light_json(light):
+    """shading.Light -> the plain dict the Blender worker reads."""
+    import torch
+    return {"sun_direction": list(map(float, light.direction(torch.float64))), "sun_colour": list(light.sun_colour),
+            "sun_strength": light.sun_strength, "sky": list(light.sky)}
+
+
+def ring_camera_files(bike, cams, size, out_dir):
+    """Ring cameras `cams` (indices) of the bike's frame views, rescaled to size px (same field of
+    view) -> one {"K","R","T"} JSON file each in out_dir (what render_pose reads)."""
+    with open(os.path.join(bike, "views", "frame", "cameras.json")) as f:
+        ring_json = json.load(f)
+    files = []
+    for i, c in enumerate(cams):
+        e = ring_json[f"camera{int(c):04d}"]
+        k = size / (2 * e["K"][0][2])
+        K = [[e["K"][0][0] * k, 0.0, size / 2], [0.0, e["K"][1][1] * k, size / 2], [0.0, 0.0, 1.0]]
+        p = os.path.join(out_dir, f"camera_{i:03d}.json")
+        with open(p, "w") as f:
+            json.dump({"K": K, "R": e["R"], "T": e["T"]}, f)
+        files.append(p)
+    return files
+
+
 def blender_worker(job_path):
     """Runs under bpy: per pose, the studio lights replaced by that pose's sun and sky."""
     sys.path.insert(0, ROOT)
     from dataclasses import replace
 
-    import bpy
-
-    from addon.core import frames, render
+    from addon.core import render
     from addon.core.render_pose import render_pose
 
     with open(job_path) as f:
         job = json.load(f)
-
-    def sun_and_sky(light):
-        def setup(scene):
-            for o in list(scene.objects):
-                if o.type == "LIGHT":
-                    bpy.data.objects.remove(o)
-            world = scene.world or bpy.data.worlds.new("sky")
-            scene.world = world
-            world.use_nodes = True
-            bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
-            bg.inputs["Color"].default_value = (*light["sky"], 1.0)
-            bg.inputs["Strength"].default_value = 1.0
-            sun = bpy.data.lights.new("relight_sun", "SUN")
-            sun.energy = light["sun_strength"]
-            sun.color = light["sun_colour"]
-            sun.angle = 0.01
-            obj = bpy.data.objects.new("relight_sun", sun)
-            scene.collection.objects.link(obj)
-            d = frames.to_blender(np.asarray(light["sun_direction"], float))
-            obj.rotation_mode = "QUATERNION"
-            obj.rotation_quaternion = render._quat_z_to(d / np.linalg.norm(d))
-        return setup
-
     s = replace(render.RenderSettings(), samples=job["samples"], threads=1)
     for i, (pose, cam, light) in enumerate(zip(job["poses"], job["cameras"], job["lights"])):
         out = os.path.join(job["out"], f"gt_{i:03d}.png")
@@ -124,110 +153,137 @@ def blender_worker(job_path):
         print(f"  blender pose {i + 1}/{len(job['poses'])}", flush=True)
 
 
-def _box(m_a, m_b, size, pad=8):
-    ys, xs = np.nonzero(m_a | m_b)
-    if len(xs) == 0:
-        return 0, 0, size, size
-    return max(0, xs.min() - pad), max(0, ys.min() - pad), min(size, xs.max() + pad + 1), min(size, ys.max() + pad + 1)
+def fit_missing(bike, progress=print):
+    """Relight-fit the parts of a trained bike whose PART.relight.npz is missing; {part: fit metrics}."""
+    from cyclist_formats import bike_folder
+    from splatting.relight.fit import fit_file
+
+    stats = {}
+    for part in PARTS:
+        ply = bike_folder.gaussians_path(bike, part)
+        try:
+            bike_folder.read_relight(ply)
+        except bike_folder.UserError:
+            m = fit_file(bike_folder.views_dir(bike, part), ply)
+            stats[part] = {k: m.get(k) for k in ("wall_s", "heldout_albedo_psnr", "heldout_gloss_psnr",
+                                                 "heldout_normal_err_deg")}
+            progress(f"  bike_relit: {part} relight fit {stats[part]}")
+    return stats
 
 
-def run(results, out_dir, n_poses=6, seed=0, size=SIZE, repeats=5, progress=print):
+def run_bench(results, out_dir, n_poses=6):
+    """`make bench`: bike_gt's trained bike (out/bench/bikes, 512 px views) when it has the passes,
+    compared at 256 px; otherwise the small bike built here."""
+    from bench.bike_gt import find_bike
+    from cyclist_formats import bike_folder
+
+    bike = find_bike(os.path.join(out_dir, "bikes"))
+    if bike and not all(os.path.isfile(bike_folder.pass_paths(bike_folder.views_dir(bike, p), "camera0000")["albedo"])
+                        for p in PARTS):
+        print(f"  bike_relit: {bike} has no albedo/normal passes (views rendered before them) - using a small bike")
+        bike = None
+    return run(results, out_dir, n_poses, bike=bike)
+
+
+def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None, progress=print):
+    """bike: a trained bike folder (views with passes, gaussians/); None builds the small one."""
     import torch
-    from PIL import Image
 
     from bench.bike_gt import sample_poses
-    from bench.compare import mask_iou, psnr, side_by_side
+    from bench.compare import side_by_side, write_table
+    from bench.rider_relit import score
     from cyclist_formats import bike_folder
     from splatting.raster.camera import load_cameras
     from splatting.raster.sparse import render_gaussians
     from splatting.relight.bike import RelightableBike
     from splatting.relight.render import render_relit
-    from splatting.relight.shading import Light, random_light
+    from splatting.relight.shading import random_light
 
     torch.set_num_threads(1)
     work = os.path.join(out_dir, "relight")
     t0 = time.time()
-    bike, train_stats = prepare_bike(work, size, progress)
+    if bike is None:
+        bike, train_stats = prepare_bike(work, SIZE, progress)
+    else:
+        bike, train_stats = os.path.abspath(bike), fit_missing(bike, progress)
     prep_s = time.time() - t0
     poses, cams = sample_poses(n_poses, seed)
     rng = np.random.default_rng(seed + 16)
     lights = [random_light(rng) for _ in range(n_poses)]
-    ring_path = os.path.join(bike_folder.views_dir(bike, "frame"), "cameras.json")
-    with open(ring_path) as f:
-        ring_json = json.load(f)
-    gt_dir = os.path.join(work, "gt")
+    gt_dir = os.path.join(work, f"gt_{os.path.basename(bike)}_{size}")
     os.makedirs(gt_dir, exist_ok=True)
-    cam_files = []
-    for i, c in enumerate(cams):
-        p = os.path.join(gt_dir, f"camera_{i:03d}.json")
-        with open(p, "w") as f:
-            json.dump(ring_json[f"camera{int(c):04d}"], f)
-        cam_files.append(p)
-    job = {"bike": bike, "poses": poses.tolist(), "cameras": cam_files, "out": gt_dir, "samples": GT_SAMPLES,
-           "lights": [{"sun_direction": list(map(float, l.direction(torch.float64))), "sun_colour": list(l.sun_colour),
-                       "sun_strength": l.sun_strength, "sky": list(l.sky)} for l in lights]}
+    job = {"bike": bike, "poses": poses.tolist(), "cameras": ring_camera_files(bike, cams, size, gt_dir), "out": gt_dir,
+           "samples": GT_SAMPLES, "lights": [light_json(l) for l in lights]}
     job_path = os.path.join(gt_dir, "job.json")
     with open(job_path, "w") as f:
         json.dump(job, f)
     t = time.time()
     _run([__file__, "--worker", job_path], "blender ground truth")
-    progress(f"  bike_relit: {n_poses} Blender renders ({time.time() - t:.0f} s)")
+    progress(f"  bike_relit: {n_poses} Blender renders at {size} px ({time.time() - t:.0f} s)")
 
     rb = RelightableBike.load(bike)
-    ring, _ = load_cameras(ring_path)
-    rows, shots, t_baked, t_relit = [], [], [], []
+    ring, _ = load_cameras(os.path.join(bike_folder.views_dir(bike, "frame"), "cameras.json"))
+    # the mip filter is for rendering below the training resolution (at 512 px it cost IoU 0.952 -> 0.889)
+    aa = size < ring[0].width
+    rows, shots, t_baked, t_relit, t_shadow = [], [], [], [], []
     with torch.no_grad():
         for i, (pose, c, light) in enumerate(zip(poses, cams, lights)):
             cam = ring[int(c)]
+            cam = cam.scaled(size / cam.width) if cam.width != size else cam
             posed, albedo, normals, gloss = rb.pose(torch.tensor(pose, dtype=torch.float64))
             g = posed.gaussians.map(lambda x: x.contiguous())
-            tb, tr = [], []
-            for _ in range(repeats):  # interleaved, so load changes hit both alike
+            tb, tr, ts = [], [], []
+            for _ in range(repeats):  # interleaved, so load changes hit all alike
                 a = time.perf_counter()
                 baked = render_gaussians(g, cam)
                 b = time.perf_counter()
-                relit = render_relit(g, albedo, normals, cam, light, gloss)
-                tr.append(time.perf_counter() - b)
+                flat = render_relit(g, albedo, normals, cam, light, gloss, antialiased=aa)
+                c2 = time.perf_counter()
+                relit = render_relit(g, albedo, normals, cam, light, gloss, shadows=True, antialiased=aa)
+                ts.append(time.perf_counter() - c2)
+                tr.append(c2 - b)
                 tb.append(b - a)
             t_baked.append(np.median(tb))
             t_relit.append(np.median(tr))
-            gt = np.asarray(Image.open(os.path.join(gt_dir, f"gt_{i:03d}.png")).convert("RGBA")).astype(np.float64) / 255
-            gt_rgb, m_gt = gt[..., :3] * gt[..., 3:4], gt[..., 3] > 0.5
+            t_shadow.append(np.median(ts))
             row = {"pose": [round(float(v), 2) for v in pose], "camera": int(c),
                    "sun_elevation_deg": round(float(np.degrees(np.arcsin(light.direction()[1]))), 1)}
-            for key, out in (("relit", relit), ("baked", baked)):
+            for key, out in (("relit", relit), ("noshadow", flat), ("baked", baked)):
                 rgb = out["rgb"].clamp(0, 1).numpy().astype(np.float64)
-                m = out["alpha"].numpy() > 0.5
-                x0, y0, x1, y1 = _box(m, m_gt, size)
-                row[f"{key}_iou"] = mask_iou(m, m_gt)
-                row[f"{key}_box_psnr"] = psnr(rgb[y0:y1, x0:x1], gt_rgb[y0:y1, x0:x1])
+                iou, ps, gt_rgb, box = score(os.path.join(gt_dir, f"gt_{i:03d}.png"), rgb, out["alpha"].numpy())
+                row[f"{key}_iou"], row[f"{key}_box_psnr"] = iou, ps
                 if key == "relit":
-                    shots.append((gt_rgb, rgb, (x0, y0, x1, y1)))
+                    shots.append((gt_rgb, rgb, box))
             rows.append(row)
-    mean = lambda k: float(np.mean([r[k] for r in rows]))
+    mean = lambda k: float(np.mean([r[k] for r in rows]))  # noqa: E731
     worst = int(np.argmin([r["relit_box_psnr"] for r in rows]))
-    side_by_side(*shots[worst][:2], os.path.join(out_dir, "bike_relit_worst.png"), shots[worst][2], zoom=3)
+    side_by_side(*shots[worst][:2], os.path.join(out_dir, "bike_relit_worst.png"), shots[worst][2],
+                 zoom=max(1, 384 // size))
     overhead = float(np.median(np.asarray(t_relit) / np.asarray(t_baked)) - 1)
+    shadow_overhead = float(np.median(np.asarray(t_shadow) / np.asarray(t_baked)) - 1)
     results["bike_relit"] = {"poses": len(rows), "box_psnr_mean": mean("relit_box_psnr"), "iou_mean": mean("relit_iou"),
                              "baked_box_psnr_mean": mean("baked_box_psnr"), "baked_iou_mean": mean("baked_iou"),
-                             "size_px": size, "gaussians": len(rb.model), "prepare_s": round(prep_s, 1),
-                             "train": train_stats}
+                             "noshadow_box_psnr_mean": mean("noshadow_box_psnr"), "size_px": size, "bike": os.path.basename(bike), "gaussians": len(rb.model),
+                             "prepare_s": round(prep_s, 1), "train": train_stats}
     results["relight_render_overhead"] = overhead
+    results["relight_shadow_overhead"] = shadow_overhead
     results["relight_render_ms"] = {"baked_median": 1000 * float(np.median(t_baked)),
-                                    "relit_median": 1000 * float(np.median(t_relit))}
-    lines = ["| # | pose p,s,X,Y,Z | camera | sun elev ° | relit IoU | relit box PSNR | baked IoU | baked box PSNR |",
-             "|---|---|---|---|---|---|---|---|"]
+                                    "relit_median": 1000 * float(np.median(t_relit)),
+                                    "relit_shadows_median": 1000 * float(np.median(t_shadow))}
+    lines = ["| # | pose p,s,X,Y,Z | camera | sun elev ° | relit IoU | relit box PSNR | no shadows | baked IoU | baked box PSNR |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for i, r in enumerate(rows):
         lines.append(f"| {i} | {', '.join(f'{v:.0f}' for v in r['pose'][:5])} | {r['camera']} | {r['sun_elevation_deg']} "
-                     f"| {r['relit_iou']:.4f} | {r['relit_box_psnr']:.2f} | {r['baked_iou']:.4f} | {r['baked_box_psnr']:.2f} |")
-    lines.append(f"| mean | | | | {mean('relit_iou'):.4f} | {mean('relit_box_psnr'):.2f} | {mean('baked_iou'):.4f} "
-                 f"| {mean('baked_box_psnr'):.2f} |")
+                     f"| {r['relit_iou']:.4f} | {r['relit_box_psnr']:.2f} | {r['noshadow_box_psnr']:.2f} | {r['baked_iou']:.4f} "
+                     f"| {r['baked_box_psnr']:.2f} |")
+    lines.append(f"| mean | | | | {mean('relit_iou'):.4f} | {mean('relit_box_psnr'):.2f} | {mean('noshadow_box_psnr'):.2f} "
+                 f"| {mean('baked_iou'):.4f} | {mean('baked_box_psnr'):.2f} |")
+    ms = results["relight_render_ms"]
     lines.append(f"\nRender time (median per pose of {repeats} interleaved repeats, {size} px, {len(rb.model)} Gaussians): "
-                 f"baked {results['relight_render_ms']['baked_median']:.1f} ms, relit {results['relight_render_ms']['relit_median']:.1f} ms, "
-                 f"overhead {overhead:+.2f}. Worst pose (GT | relit | 4x |diff|) in bike_relit_worst.png.")
-    with open(os.path.join(out_dir, "bike_relit_table.md"), "w") as f:
-        f.write("\n".join(lines) + "\n")
-    print("\n".join(lines))
+                 f"baked {ms['baked_median']:.1f} ms, relit {ms['relit_median']:.1f} ms ({overhead:+.2f}), relit with "
+                 f"shadows {ms['relit_shadows_median']:.1f} ms ({shadow_overhead:+.2f}). Worst pose (GT | relit | 4x |diff|) "
+                 "in bike_relit_worst.png.")
+    write_table(out_dir, "bike_relit_table.md", lines)
     return rows
 
 
@@ -236,6 +292,8 @@ if __name__ == "__main__":
     ap.add_argument("--worker", metavar="JOB_JSON")
     ap.add_argument("--out", help="bench output folder (standalone run)")
     ap.add_argument("--poses", type=int, default=6)
+    ap.add_argument("--size", type=int, default=GT_SIZE, help="comparison image size in px (default %(default)s)")
+    ap.add_argument("--bike", help="a trained bike folder (views with passes + gaussians/); default: build a small one")
     a = ap.parse_args()
     if a.worker:
         blender_worker(a.worker)
@@ -243,6 +301,10 @@ if __name__ == "__main__":
         if not a.out:
             ap.error("--out is required")
         sys.path.insert(0, ROOT)
+        if a.bike and not os.path.isfile(os.path.join(a.bike, "gaussians", "frame.ply")):
+            sys.exit(f"error: {a.bike}: no trained gaussians/frame.ply")
+        if a.poses < 1 or not 16 <= a.size <= 4096:
+            sys.exit("error: --poses must be >= 1 and --size in 16..4096")
         res = {}
-        run(res, a.out, n_poses=a.poses)
+        run(res, a.out, n_poses=a.poses, size=a.size, bike=a.bike)
         print(json.dumps({k: res[k] for k in ("bike_relit", "relight_render_overhead", "relight_render_ms")}, indent=1))

@@ -58,6 +58,27 @@ def camera_json(cam):
     return {"K": cam.K.tolist(), "R": cam.R.tolist(), "T": cam.T.tolist()}
 
 
+def posed_jobs(rider, rot, root, cams, gt_dir):
+    """Per pose: the LBS-posed mesh (posed_NNN.ply) and its ring camera (camera_NNN.json, framing the
+    body) in gt_dir -> (render_rider --batch jobs {mesh, camera, out}, [Camera])."""
+    from splatting.raster.camera import ring_camera
+    from splatting.rider.body import export_rider, pose_vertices
+
+    verts = pose_vertices(rider, rot, root)
+    jobs, cameras = [], []
+    for i, v in enumerate(verts):
+        centre = (0.0, float((v[:, 1].min() + v[:, 1].max()) / 2), 0.0)
+        cam = ring_camera(10.0 * int(cams[i]), centre, name=f"camera{int(cams[i]):04d}")
+        cameras.append(cam)
+        mesh = os.path.join(gt_dir, f"posed_{i:03d}.ply")
+        export_rider(rider, mesh, vertices=v)
+        cj = os.path.join(gt_dir, f"camera_{i:03d}.json")
+        with open(cj, "w") as f:
+            json.dump({cam.name: camera_json(cam), "orbit_centre": list(centre)}, f)
+        jobs.append({"mesh": mesh, "camera": f"{cj}:{cam.name}", "out": os.path.join(gt_dir, f"gt_{i:03d}.png")})
+    return jobs, cameras
+
+
 def repose_timing(avatar, rot, root, n_bike=100_000, reps=20):
     """Median ms of avatar.pose + Gaussians.cat with a 100k-Gaussian bike, one frame at a time."""
     import torch
@@ -87,11 +108,9 @@ def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, tim
     from PIL import Image
 
     from bench.compare import mask_iou, psnr, side_by_side
-    from splatting.raster.camera import ring_camera
     from splatting.raster.sparse import render_gaussians
     from splatting.rider.avatar import RiderAvatar
     from splatting.rider.avatar_build import build_avatar
-    from splatting.rider.body import export_rider, pose_vertices
     from splatting.rider.roster import load_rider
 
     torch.set_num_threads(1)
@@ -104,20 +123,9 @@ def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, tim
     rot, root = posed_batch(rider, theta_p, theta_s, yaw)
     gt_dir = os.path.join(out_dir, "rider_gt")
     os.makedirs(gt_dir, exist_ok=True)
-    verts = pose_vertices(rider, rot, root)
-    jobs, cameras = [], []
-    for i in range(n_poses):
-        v = verts[i]
-        centre = (0.0, float((v[:, 1].min() + v[:, 1].max()) / 2), 0.0)
-        cam = ring_camera(10.0 * int(cams[i]), centre, name=f"camera{int(cams[i]):04d}")
-        cameras.append(cam)
-        mesh = os.path.join(gt_dir, f"posed_{i:03d}.ply")
-        export_rider(rider, mesh, vertices=v)
-        cj = os.path.join(gt_dir, f"camera_{i:03d}.json")
-        with open(cj, "w") as f:
-            json.dump({cam.name: camera_json(cam), "orbit_centre": list(centre)}, f)
-        jobs.append({"mesh": mesh, "camera": f"{cj}:{cam.name}", "out": os.path.join(gt_dir, f"gt_{i:03d}.png"),
-                     "light_yaw_deg": float(yaw[i])})
+    jobs, cameras = posed_jobs(rider, rot, root, cams, gt_dir)
+    for job, y in zip(jobs, yaw):
+        job["light_yaw_deg"] = float(y)
     job_file = os.path.join(gt_dir, "jobs.json")
     with open(job_file, "w") as f:
         json.dump(jobs, f, indent=1)

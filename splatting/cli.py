@@ -18,6 +18,7 @@ COMMANDS = {
     "contact-sheet": ("splatting.bike.contact_sheet", "one view of every bike in a library on one PNG"),
     "rider": ("splatting.rider.command", "list the rider roster; export a rider mesh (rest or posed)"),
     "rider-avatar": ("splatting.rider.avatar_build", "build a rider's Gaussian avatar (render, train, skin)"),
+    "rider-posed-train": ("splatting.rider.posed_train", "train an avatar's Gaussians through its skinning on posed renders"),
     "cyclist": ("splatting.cyclist.command", "pose, fit and render a rider on a bike over a sequence of frames"),
     "dataset": ("splatting.dataset.command", "COCO training images + annotations from a YAML config or preset"),
     "relight-fit": ("splatting.relight.fit", "fit per-Gaussian albedo and normal of trained Gaussians to the render passes"),

@@ -1,7 +1,6 @@
 """Relightable Gaussians on the torch side: Lambert shading, normals posed with their part, the fit
 recovering known albedo and normals, the relight-fit command's bad input."""
 import math
-import os
 import subprocess
 import sys
 
@@ -14,7 +13,7 @@ from splatting.gaussians.container import Gaussians
 from splatting.raster.camera import ring_camera
 from splatting.relight.bike import RelightableBike
 from splatting.relight.render import composite_features, prepare, render_relit
-from splatting.relight.shading import Light, lambert_reference, shade, shade_linear, srgb_encode
+from splatting.relight.shading import Light, ggx_sun, lambert_reference, shade, shade_linear, srgb_encode, view_directions
 from helpers import make_bike, mat_vec, random_pose, ref_part_R
 
 
@@ -49,6 +48,37 @@ def test_display_colour_is_srgb_of_the_straight_colour_times_coverage():
     # straight albedo 0.4, E cos / pi = 1 -> linear 0.4 -> sRGB 0.6652 -> times alpha 0.5
     np.testing.assert_allclose(out[0, 0].numpy(), [0.5 * 0.66519] * 3, atol=2e-4)
     assert float(srgb_encode(torch.tensor(0.4))) == pytest.approx(0.66519, abs=1e-4)
+
+
+def test_gloss_reflects_the_sky_and_peaks_in_the_mirror_direction():
+    light = Light(sun_direction=(1.0, 1.0, 0.0), sun_colour=(1.0, 1.0, 1.0), sun_strength=2.0, sky=(0.2, 0.3, 0.4))
+    up = torch.tensor([[[0.0, 1.0, 0.0]]])
+    gloss, zero = torch.tensor([[[0.5, 0.5, 0.5]]]), torch.zeros(1, 1, 3)
+    mirror = torch.tensor([[[-1.0, 1.0, 0.0]]]) / math.sqrt(2)   # the sun's reflection about "up"
+    # no highlight: the sky's glossy reflection is exactly colour x sky
+    flat = shade_linear(zero, up, light, gloss, mirror, highlight=0.0)[0, 0]
+    np.testing.assert_allclose(flat.numpy(), [0.1, 0.15, 0.2], rtol=1e-6)
+    # GGX by hand at the peak: n.h = 1 -> D = 1 / (pi a^2), a = r^2; n.v = cos 45
+    r = 0.4
+    peak = float(ggx_sun(up[0, 0], mirror[0, 0], light, r))
+    assert peak == pytest.approx(1 / (math.pi * r ** 4) / (4 * math.cos(math.pi / 4)), rel=1e-5)
+    # off the mirror direction it falls; below the horizon of the sun there is none
+    off = float(ggx_sun(up[0, 0], torch.tensor([0.0, 1.0, 0.0]), light, r))
+    assert 0 < off < 0.2 * peak
+    assert float(ggx_sun(-up[0, 0], torch.tensor([0.0, -1.0, 0.0]), light, r)) == 0.0
+
+
+def test_view_directions_point_at_the_camera():
+    cam = ring_camera(30.0, (0.0, 0.5, 0.0), size=64)
+    v = view_directions(cam, torch.float64)
+    # every pixel's direction, followed from the orbit plane's point it sees, reaches the camera centre:
+    # so all of them are unit and the centre pixel's is (centre - orbit point) normalised
+    assert torch.allclose(v.norm(dim=-1), torch.ones(64, 64, dtype=torch.float64))
+    c = cam.centre.double()
+    expect = (c - torch.tensor([0.0, 0.5, 0.0], dtype=torch.float64))
+    expect = expect / expect.norm()
+    mid = (v[31, 31] + v[32, 32] + v[31, 32] + v[32, 31]) / 4
+    assert torch.allclose(mid / mid.norm(), expect, atol=1e-3)
 
 
 def test_normals_turn_with_their_part(tmp_path):
@@ -148,22 +178,24 @@ def test_relit_render_of_a_lit_patch():
     np.testing.assert_allclose(dark["rgb"][inside].numpy(), 0.2478, atol=0.01)
 
 
-def test_fused_composite_equals_the_rasterizer_channels():
-    from splatting.relight.render import composite_forward
-
+def test_relit_channels_equal_the_pair_list_compositing():
+    # render_relit composites the reflectance through the colour channels (degree-0 SH) and the
+    # normals as features of the tiled rasterizer; the fit composites them over the torch pair
+    # list: the two must agree, or what was fitted is not what is rendered
     g = _flat_patch()
     gen = torch.Generator().manual_seed(2)
     g = g.map(lambda x: x)
     g.opacity_logits = torch.randn(len(g), generator=gen)  # semi-transparent: T and the cut-offs matter
     g.means = g.means + 0.05 * torch.randn(len(g), 3, generator=gen)
     cam = ring_camera(20, orbit_centre=(0, 1, 0), size=48, focal=2084.97 * 48 / 512 * 2)
-    f1, f2 = torch.rand(len(g), 3, generator=gen), torch.randn(len(g), 3, generator=gen)
-    prep = prepare(g, cam)
-    (a, b), alpha = composite_features(prep, [f1, f2])
-    out, alpha2 = composite_forward(prep, torch.cat([f1, f2], 1))
+    alb, gl = torch.rand(len(g), 3, generator=gen) * 0.8, torch.rand(len(g), 3, generator=gen) * 0.1
+    nrm = torch.nn.functional.normalize(torch.randn(len(g), 3, generator=gen), dim=-1)
+    out = render_relit(g, alb, nrm, cam, Light(), gl, antialiased=False)
+    (R, n), alpha = composite_features(prepare(g, cam), [alb + gl, nrm])
     assert float(alpha.max()) > 0.5
-    torch.testing.assert_close(out, torch.cat([a, b], -1), atol=1e-5, rtol=1e-4)
-    torch.testing.assert_close(alpha2, alpha, atol=1e-5, rtol=1e-4)
+    torch.testing.assert_close(out["alpha"], alpha, atol=2e-4, rtol=1e-3)
+    torch.testing.assert_close(out["reflectance"], R, atol=2e-4, rtol=1e-3)
+    torch.testing.assert_close(out["normal"], n, atol=2e-4, rtol=1e-3)
 
 
 def test_relight_fit_command_bad_input(tmp_path):
@@ -172,3 +204,34 @@ def test_relight_fit_command_bad_input(tmp_path):
     assert r.returncode == 2 and "views folder not found" in r.stderr and r.stderr.count("\n") == 1
     r = subprocess.run([sys.executable, "-m", "splatting", "relight-fit", "--help"], capture_output=True, text=True)
     assert r.returncode == 0 and "--views" in r.stdout
+
+
+def test_cast_shadow_of_a_blob_on_a_plane():
+    from splatting.relight.shadow import sun_visibility
+
+    # a 1 m plane of flat Gaussians in two layers 2 mm apart (a surface must not shadow itself)
+    # and a 0.2 m blob 0.3 m above its centre; sun straight overhead, then from 45 degrees
+    xs = torch.linspace(-0.5, 0.5, 41)
+    X, Z = torch.meshgrid(xs, xs, indexing="ij")
+    plane = torch.stack([X.reshape(-1), torch.zeros(X.numel()), Z.reshape(-1)], 1)
+    plane = torch.cat([plane, plane - torch.tensor([0.0, 0.002, 0.0])])
+    g0 = torch.Generator().manual_seed(0)
+    blob = torch.randn(300, 3, generator=g0) * 0.04 + torch.tensor([0.0, 0.3, 0.0])
+    means = torch.cat([plane, blob])
+    n = len(means)
+    scales = torch.cat([torch.tensor([[0.02, 0.002, 0.02]]).expand(len(plane), 3), torch.full((300, 3), 0.03)])
+    g = Gaussians(means, torch.tensor([[1.0, 0.0, 0.0, 0.0]]).expand(n, 4).contiguous(), torch.log(scales),
+                  torch.full((n,), 4.0), torch.zeros(n, 1, 3))
+    for d in ((0.0, 1.0, 0.0), (1.0, 1.0, 0.0)):
+        vis = sun_visibility(g, Light(sun_direction=d))
+        l = torch.tensor(d) / torch.tensor(d).norm()
+        # where the blob's centre casts its shadow on the plane (y = 0)
+        c = torch.tensor([0.0, 0.3, 0.0]) - l * (0.3 / float(l[1]))
+        r_shadow = (plane - c).norm(dim=-1)
+        under = r_shadow < 0.05
+        far = r_shadow > 0.3
+        assert under.sum() >= 4 and far.sum() > 100
+        assert float(vis[: len(plane)][under].max()) < 0.2
+        assert float(vis[: len(plane)][far].min()) > 0.9
+        top = int((blob @ l).argmax())  # the blob's most sunward Gaussian is lit (those below its
+        assert float(vis[len(plane) + top]) > 0.9  # 3 cm footprint are, rightly, in its shadow)

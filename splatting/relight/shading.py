@@ -57,19 +57,71 @@ def srgb_decode(y):
     return torch.where(y <= 0.04045, y / 12.92, ((y + 0.055) / 1.055) ** 2.4)
 
 
-def shade_linear(albedo, normal, light: Light):
-    """Premultiplied linear radiance (H, W, 3) of premultiplied albedo and composited normals."""
+# The gloss under the sun (docs/relighting.md "Where the error goes"): a GGX highlight of this
+# roughness, scaled by HIGHLIGHT.  Both were chosen with bench/relight_budget.py on Blender's own
+# passes (poses and suns of seed 1, not the bench's): at 256 px the sun's highlight on a tube is a
+# sub-pixel line whose place the pixel's averaged normal does not pin down, so the expected
+# highlight (half the sharp one) beats the sharp one; a per-pixel roughness gained only 0.35 dB.
+ROUGHNESS = 0.4
+HIGHLIGHT = 0.25
+
+
+def ggx_sun(normal, view, light: Light, roughness=ROUGHNESS):
+    """Sun radiance factor of a glossy surface per unit glossy colour: D_GGX(n.h) / (4 n.v) where
+    n.l > 0 (Cook-Torrance with F G folded into the Glossy Color pass, which is the lobe's
+    directional albedo).  normal, view: (..., 3) unit, view pointing to the camera."""
+    l = light.direction(normal.dtype)
+    h = view + l
+    h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-6)
+    nh = (normal * h).sum(-1).clamp(0.0, 1.0)
+    nv = (normal * view).sum(-1).clamp_min(0.05)  # grazing pixels: the lobe's 1/(n.v) would explode
+    a2 = float(roughness) ** 4
+    D = a2 / (math.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2)
+    return torch.where((normal @ l) > 0, D / (4.0 * nv), torch.zeros_like(D))
+
+
+def shade_linear(albedo, normal, light: Light, gloss=None, view=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
+                 sun_visibility=None):
+    """Premultiplied linear radiance (H, W, 3) of premultiplied albedo and composited normals.
+
+    gloss (premultiplied glossy colour) reflects the sky like the albedo (exact for a uniform sky)
+    and the sun as a GGX highlight seen along `view` ((H, W, 3) unit, towards the camera); without
+    a view it is shaded like the albedo (the diffuse-like approximation).  sun_visibility (H, W, 1)
+    in [0, 1] scales the sun (cast shadows, splatting/relight/shadow.py); the sky is not occluded."""
     n = normal / normal.norm(dim=-1, keepdim=True).clamp_min(1e-6)
     l = light.direction(albedo.dtype)
     cos = (n @ l).clamp_min(0.0)[..., None]
-    sun = torch.as_tensor(light.sun_colour, dtype=albedo.dtype) * (light.sun_strength / math.pi)
-    return albedo * (cos * sun + torch.as_tensor(light.sky, dtype=albedo.dtype))
+    sun = torch.as_tensor(light.sun_colour, dtype=albedo.dtype) * light.sun_strength
+    if sun_visibility is not None:
+        sun = sun * sun_visibility
+    sky = torch.as_tensor(light.sky, dtype=albedo.dtype)
+    out = albedo * (cos * sun / math.pi + sky)
+    if gloss is not None:
+        spec = cos * sun / math.pi if view is None else highlight * ggx_sun(n, view, light, roughness)[..., None] * sun
+        out = out + gloss * (spec + sky)
+    return out
 
 
-def shade(albedo, normal, alpha, light: Light):
+def view_directions(camera, dtype=torch.float32, pixels=None):
+    """Unit vectors from each pixel's surface towards the camera (world frame): (H, W, 3), or (P, 3)
+    for the flat pixel indices `pixels` (P,)."""
+    H, W = camera.height, camera.width
+    K = camera.K.to(torch.float64)
+    if pixels is None:
+        v, u = torch.meshgrid(torch.arange(H, dtype=torch.float64) + 0.5, torch.arange(W, dtype=torch.float64) + 0.5,
+                              indexing="ij")
+    else:
+        v, u = (pixels // W).to(torch.float64) + 0.5, (pixels % W).to(torch.float64) + 0.5
+    d = torch.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], torch.ones_like(u)], -1)
+    d = d @ camera.R.to(torch.float64)  # R^T d: the ray in the world
+    return (-d / d.norm(dim=-1, keepdim=True)).to(dtype)
+
+
+def shade(albedo, normal, alpha, light: Light, gloss=None, view=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
+          sun_visibility=None):
     """Display colour premultiplied by alpha (H, W, 3) in [0, 1]: the sRGB encoding of the straight
     linear colour, times coverage (what an RGBA render composited over black shows)."""
-    lin = shade_linear(albedo, normal, light)
+    lin = shade_linear(albedo, normal, light, gloss, view, roughness, highlight, sun_visibility)
     a = alpha[..., None]
     straight = torch.where(a > 1e-6, lin / a.clamp_min(1e-6), torch.zeros_like(lin))
     return srgb_encode(straight) * a

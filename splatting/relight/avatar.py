@@ -1,0 +1,42 @@
+"""A relightable rider: the skinned avatar plus each Gaussian's albedo, gloss and normal.
+
+The relight channels are fitted on the avatar's own rest-pose ring views (their albedo/normal/gloss
+passes, `python -m splatting relight-fit --views AVATAR/views --ply AVATAR/rider.ply`) and stored
+beside rider.ply as rider.relight.npz.  Posing turns each normal with the Gaussian's skinning
+rotation (RiderAvatar.pose_tensors' "rotations": the bone's rotation, or the polar factor of the
+blended bones), the same rotation that turns its covariance.
+"""
+import os
+
+import torch
+
+from cyclist_formats import bike_folder
+from splatting.gaussians.container import Gaussians
+from splatting.rider.avatar import PLY_NAME, RiderAvatar
+
+# the roster riders' material (addon/core/rider_import.py): a fully rough dielectric
+RIDER_ROUGHNESS = 1.0
+
+
+class RelightableAvatar:
+    def __init__(self, avatar: RiderAvatar, albedo, normals, gloss):
+        n = len(avatar)
+        if any(tuple(x.shape) != (n, 3) for x in (albedo, normals, gloss)):
+            raise ValueError(f"relight channels {tuple(albedo.shape)} / {tuple(normals.shape)} / "
+                             f"{tuple(gloss.shape)} != ({n}, 3)")
+        self.avatar = avatar
+        self.albedo, self.normals, self.gloss = albedo.float(), normals.float(), gloss.float()
+
+    @classmethod
+    def load(cls, folder):
+        av = RiderAvatar.load(folder)
+        r = bike_folder.read_relight(os.path.join(folder, PLY_NAME), n=len(av))
+        return cls(av, *(torch.from_numpy(r[k]) for k in ("albedo", "normal", "gloss")))
+
+    def pose(self, local_rotmats, root_trans=None):
+        """(B, 24, 3, 3), (B, 3) -> list of B (Gaussians, albedo, world normals, gloss)."""
+        out = self.avatar.pose_tensors(local_rotmats, root_trans)
+        g = self.avatar.gaussians
+        normals = (out["rotations"] @ self.normals[None, :, :, None]).squeeze(-1)
+        return [(Gaussians(out["means"][b], out["quats"][b], g.log_scales, g.opacity_logits, out["sh"][b]),
+                 self.albedo, normals[b], self.gloss) for b in range(local_rotmats.shape[0])]
