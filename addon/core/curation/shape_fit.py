@@ -172,7 +172,8 @@ def choose_keypoints(view, pose, X, clean=False):
     # shape-based steer_top marks the stem top: the head tube is its lower 15 cm (scaled)
     R = 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale
     return kp, [f"keypoints from the shape (piece-based ones: {why})"] + snotes, \
-        {"head_tube_radius": None, "head_span": 0.15 * R / 0.35}, has_crank
+        {"head_tube_radius": None, "head_span": sk.head_zone(X, kp["steer_bottom"], kp["steer_top"], R)
+         if "steer_top" in kp and "steer_bottom" in kp else 0.15 * R / 0.35}, has_crank
 
 
 def _agree(a, b, tol=0.1):

@@ -33,7 +33,9 @@ def _seg_dist(p, a, b):
 
 def regions(X, kp, head_radius=None, wheel_radius=None, head_span=None, with_head=False):
     """Region label (FRAME/STEERING/CRANK) per canonical point X (n, 3); with_head: also the
-    bool mask of points in the head-tube zone.  head_span: the head tube's length from
+    bool mask of points in the head-tube zone.  head_span: (start, end) of the head tube along
+    the axis from steer_bottom (or its length from steer_bottom) when steer_top marks the stem
+    top instead (shape-based keypoints); the fork region then reaches up to its start.
     steer_bottom when steer_top marks the stem top instead (shape-based keypoints)."""
     X = np.asarray(X, float)
     out = np.full(len(X), FRAME)
@@ -50,16 +52,31 @@ def regions(X, kp, head_radius=None, wheel_radius=None, head_span=None, with_hea
     span = np.linalg.norm(st - sb)
     t = (X - sb) @ a
     rho = np.linalg.norm((X - sb) - np.outer(t, a), axis=1)
-    in_head = (t >= 0) & (t <= (span if head_span is None else min(span, head_span))) & (rho < r_ht + 0.012)
+    if head_span is None:
+        h0, h1 = 0.0, span
+    elif np.ndim(head_span):
+        h0, h1 = float(head_span[0]), min(span, float(head_span[1]))
+    else:
+        h0, h1 = 0.0, min(span, float(head_span))
+    in_head = (t >= h0) & (t <= h1) & (rho < r_ht + 0.012)
+    # margins in metres for a bicycle's 0.35 m wheel radius, shrunk with smaller wheels (a kick
+    # scooter's 10 cm wheels sit a few cm from its deck and neck)
+    k = min(1.0, R / 0.35)
     steer = np.zeros(len(X), bool)
-    steer |= (np.hypot(X[:, 0] - fa[0], X[:, 1] - fa[1]) < R + 0.03) & (np.abs(X[:, 2]) < 0.15)
-    steer |= (_seg_dist(X[:, :2], fa[:2], sb[:2]) < 0.07) & (np.abs(X[:, 2]) < 0.15) & (t < 0)
+    steer |= (np.hypot(X[:, 0] - fa[0], X[:, 1] - fa[1]) < R + 0.03 * k) & (np.abs(X[:, 2]) < 0.15)
+    hb = sb + h0 * a   # the head tube's bottom: the fork reaches up to it
+    steer |= (_seg_dist(X[:, :2], fa[:2], hb[:2]) < 0.07 * k) & (np.abs(X[:, 2]) < 0.15) & (t < h0)
+    # on the axis above the head tube: steerer, spacers and stem (a scooter's stem is 80 cm long)
+    steer |= (t > h1) & (rho < max(0.04, 2 * r_ht))
     cockpit_x = kp["seat"][0] + 0.15 if "seat" in kp else ca[0] + 0.1
     cockpit = (X[:, 1] > st[1] - 0.16) & (X[:, 0] > cockpit_x)
     if head_span is not None:
         # keypoints from the shape (a real model, maybe one fused body): the cockpit is what
         # sits near the steering axis, not a motorcycle's tank behind it
-        cockpit &= rho < 0.3
+        # sits near the steering axis in the side view (a bar is wide across, a tank is behind)
+        d2 = X[:, :2] - sb[:2]
+        a2 = a[:2] / np.linalg.norm(a[:2])
+        cockpit &= np.abs(d2[:, 0] * a2[1] - d2[:, 1] * a2[0]) < 0.3
     steer |= cockpit
     steer = np.where(in_head, rho < 0.8 * r_ht, steer)
     out[steer] = STEERING
@@ -113,9 +130,21 @@ def label_triangles(view, keep_tri, kp, head_radius=None, wheel_radius=None, has
             # stem / bar in one piece (its steerer passes through the head-tube zone, which
             # alone would call it frame)
             lab[ti] = STEERING
+        elif share[STEERING] < 0.02 and _chain_guard(view.P[c.verts], kp["crank_axle"], crank_r):
+            # a flat plate on the drive side reaching back past the crank: a chain guard or the
+            # chain itself (frame), not a crank fused to the frame
+            lab[ti] = FRAME
         elif A > FUSED * total and share.max() < WHOLE and np.sort(share)[-2] > 0.02:
             lab[ti] = reg[ti]
             cut[ti] = True
         else:
             lab[ti] = FRAME
     return lab, cut
+
+
+def _chain_guard(p, ca, crank_r):
+    """A piece on one side of the bike (all of it beyond the bottom-bracket shell), thin across
+    (< 6 cm) and reaching behind the crank's circle: a chain guard or a chain loop."""
+    z = p[:, 2]
+    one_side = (z.min() > BB_HALF) or (z.max() < -BB_HALF)
+    return bool(one_side and z.max() - z.min() < 0.06 and p[:, 0].min() < ca[0] - crank_r)
