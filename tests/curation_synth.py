@@ -152,6 +152,29 @@ def fuse(V, T, lab):
     return V, T2, np.concatenate([lab, np.full(len(extra), -1)])
 
 
+def fuse_with_slivers(V, T, lab):
+    """One connected mesh that a mesh editor accepts (no repeated corner): each piece joined to
+    the nearest vertex of the pieces before it by a hair-thin triangle."""
+    s = mesh.Soup(V, T)
+    inv, _ = mesh.weld(V)
+    comp = s.comp_of_vert[inv]
+    keys = np.unique(comp)
+    V2, extra = [np.asarray(V, float)], []
+    n = len(V)
+    done = np.isin(comp, keys[:1])
+    for k in keys[1:]:
+        mine = np.nonzero(comp == k)[0]
+        other = np.nonzero(done)[0]
+        d = np.linalg.norm(V[mine][:, None] - V[other][None], axis=2)
+        i, j = np.unravel_index(np.argmin(d), d.shape)
+        a, b = mine[i], other[j]
+        V2.append([0.5 * (V[a] + V[b]) + [0, 0, 1e-5]])
+        extra.append((a, b, n))
+        n += 1
+        done |= comp == k
+    return np.concatenate(V2), np.concatenate([T, np.array(extra)]), np.concatenate([lab, np.full(len(extra), -1)])
+
+
 def transform(V, seed, scale, offset):
     rng = np.random.default_rng(seed)
     q, _ = np.linalg.qr(rng.normal(size=(3, 3)))

@@ -25,6 +25,7 @@ class Result:
     notes: list = field(default_factory=list)
     wheel_diameter: float = DEFAULT_WHEEL_DIAMETER
     record: dict = field(default_factory=dict)
+    split_args: dict = field(default_factory=dict)   # regions() parameters: where fused faces are cut
 
 
 def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, hints=None, wheel_centres=None):
@@ -99,6 +100,8 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
         h = np.asarray(hints)
         use = (h >= 0) & keep_tri
         labels[use] = h[use]
+    split_args = {"head_radius": info.get("head_tube_radius"), "wheel_radius": pose.front.radius * pose.scale,
+                  "head_span": info.get("head_span"), "has_crank": bool(has_crank)}
     record = {
         "method": "auto" if not keypoints else "auto+file",
         "wheel_diameter_m": float(wheel_diameter),
@@ -114,8 +117,10 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
         "keypoint_source": source,
         "notes": pose.notes + notes,
         "faces_cut": int(cut.sum()),
+        "split_args": {k: (v if v is None or isinstance(v, bool) else np.asarray(v, float).tolist())
+                       for k, v in split_args.items()},
     }
-    return Result(pose.M, pose.scale, kp, labels, cut, problems, pose.notes + notes, wheel_diameter, record)
+    return Result(pose.M, pose.scale, kp, labels, cut, problems, pose.notes + notes, wheel_diameter, record, split_args)
 
 
 NOISY_MEDIAN_DEG = 28.0   # median angle between neighbouring faces above which a dense mesh is noise

@@ -148,3 +148,56 @@ def _chain_guard(p, ca, crank_r):
     z = p[:, 2]
     one_side = (z.min() > BB_HALF) or (z.max() < -BB_HALF)
     return bool(one_side and z.max() - z.min() < 0.06 and p[:, 0].min() < ca[0] - crank_r)
+
+
+def _prism(centre, axis, radius, n):
+    """n planes (point, outward normal) tangent to a cylinder of `radius` about `axis` through
+    `centre`: a cut along them approximates the cylinder within radius * (1 - cos(pi / n))."""
+    axis = axis / np.linalg.norm(axis)
+    u = np.cross(axis, [1.0, 0, 0] if abs(axis[0]) < 0.9 else [0, 1.0, 0])
+    u /= np.linalg.norm(u)
+    w = np.cross(axis, u)
+    out = []
+    for k in range(n):
+        d = np.cos(2 * np.pi * k / n) * u + np.sin(2 * np.pi * k / n) * w
+        out.append((centre + radius * d, d))
+    return out
+
+
+def cut_planes(kp, head_radius=None, wheel_radius=None, head_span=None):
+    """Planes (point, unit normal), canonical metres, along the boundaries of regions(): cutting
+    a fused mesh's faces along them leaves every piece on one side of each boundary, so the
+    parts are clean rigid pieces (cylinders as prisms of 12-24 planes)."""
+    ca, fa = np.asarray(kp["crank_axle"], float), np.asarray(kp["front_axle"], float)
+    sb, st = np.asarray(kp["steer_bottom"], float), np.asarray(kp["steer_top"], float)
+    R = wheel_radius if wheel_radius is not None else fa[1]
+    r_ht = head_radius if head_radius else 0.02
+    a = (st - sb) / np.linalg.norm(st - sb)
+    span = np.linalg.norm(st - sb)
+    if head_span is None:
+        h0, h1 = 0.0, span
+    elif np.ndim(head_span):
+        h0, h1 = float(head_span[0]), min(span, float(head_span[1]))
+    else:
+        h0, h1 = 0.0, min(span, float(head_span))
+    k = min(1.0, R / 0.35)
+    z = np.array([0, 0, 1.0])
+    planes = [(sb + h0 * a, a), (sb + h1 * a, a)]                 # head tube ends
+    planes += _prism(sb, a, r_ht + 0.012, 12)                       # head tube wall
+    planes += _prism(sb, a, max(0.04, 2 * r_ht), 12)                # steerer / stem above it
+    planes += _prism(fa, z, R + 0.03 * k, 24)                       # front wheel disc
+    planes += [(np.array([0, 0, 0.15]), z), (np.array([0, 0, -0.15]), z)]
+    hb = sb + h0 * a
+    f2 = (hb - fa) / np.linalg.norm(hb - fa)
+    side = np.array([f2[1], -f2[0], 0.0])
+    planes += [(fa + 0.07 * k * side, side), (fa - 0.07 * k * side, side)]     # fork capsule
+    cockpit_x = kp["seat"][0] + 0.15 if "seat" in kp else ca[0] + 0.1
+    planes += [(np.array([0, st[1] - 0.16, 0]), np.array([0, 1.0, 0])),
+               (np.array([cockpit_x, 0, 0]), np.array([1.0, 0, 0]))]
+    a2 = np.array([a[1], -a[0], 0.0]) / np.linalg.norm(a[:2])
+    planes += [(sb + 0.3 * a2, a2), (sb - 0.3 * a2, a2)]             # cockpit near the axis
+    if all(p in kp for p in ("pedal_left", "pedal_right")):
+        rc = max(np.hypot(*(np.asarray(kp[p], float)[:2] - ca[:2])) for p in ("pedal_left", "pedal_right")) + 0.07
+        planes += _prism(np.array([ca[0], ca[1], 0.0]), z, rc, 24)  # crank disc
+        planes += [(np.array([0, 0, BB_HALF]), z), (np.array([0, 0, -BB_HALF]), z)]
+    return [(np.asarray(p, float), np.asarray(n, float) / np.linalg.norm(n)) for p, n in planes]
