@@ -25,18 +25,12 @@ FUSED = 0.05           # components above this share of the bike's area may be c
 MOSTLY = 0.6           # a piece this much in the steering regions, ahead of the saddle, steers
 
 
-def _seg_dist(p, a, b):
-    ab = b - a
-    t = np.clip(((p - a) @ ab) / (ab @ ab), 0, 1)
-    return np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
-
-
 def regions(X, kp, head_radius=None, wheel_radius=None, head_span=None, with_head=False):
     """Region label (FRAME/STEERING/CRANK) per canonical point X (n, 3); with_head: also the
     bool mask of points in the head-tube zone.  head_span: (start, end) of the head tube along
     the axis from steer_bottom (or its length from steer_bottom) when steer_top marks the stem
     top instead (shape-based keypoints); the fork region then reaches up to its start.
-    steer_bottom when steer_top marks the stem top instead (shape-based keypoints)."""
+    Cylinders are regular polygons (poly_radius), exactly the prisms cut_planes cuts along."""
     X = np.asarray(X, float)
     out = np.full(len(X), FRAME)
     ca, fa = kp["crank_axle"], kp["front_axle"]
@@ -45,13 +39,15 @@ def regions(X, kp, head_radius=None, wheel_radius=None, head_span=None, with_hea
     r_ht = head_radius if head_radius else 0.02
     # crank
     rc = max(np.hypot(*(kp[p][:2] - ca[:2])) for p in ("pedal_left", "pedal_right")) + 0.07
-    dxy = np.hypot(X[:, 0] - ca[0], X[:, 1] - ca[1])
-    crank = ((dxy < rc) & (np.abs(X[:, 2]) > BB_HALF)) | ((dxy < 0.016) & (np.abs(X[:, 2]) < rc))
+    z = np.array([0, 0, 1.0])
+    cz = np.array([ca[0], ca[1], 0.0])
+    crank = ((poly_radius(X, cz, z, 24) < rc) & (np.abs(X[:, 2]) > BB_HALF)) | \
+        ((poly_radius(X, cz, z, 12) < 0.016) & (np.abs(X[:, 2]) < rc))
     # steering
     a = (st - sb) / np.linalg.norm(st - sb)
     span = np.linalg.norm(st - sb)
     t = (X - sb) @ a
-    rho = np.linalg.norm((X - sb) - np.outer(t, a), axis=1)
+    rho = poly_radius(X, sb, a, 12)
     if head_span is None:
         h0, h1 = 0.0, span
     elif np.ndim(head_span):
@@ -63,9 +59,12 @@ def regions(X, kp, head_radius=None, wheel_radius=None, head_span=None, with_hea
     # scooter's 10 cm wheels sit a few cm from its deck and neck)
     k = min(1.0, R / 0.35)
     steer = np.zeros(len(X), bool)
-    steer |= (np.hypot(X[:, 0] - fa[0], X[:, 1] - fa[1]) < R + 0.03 * k) & (np.abs(X[:, 2]) < 0.15)
-    hb = sb + h0 * a   # the head tube's bottom: the fork reaches up to it
-    steer |= (_seg_dist(X[:, :2], fa[:2], hb[:2]) < 0.07 * k) & (np.abs(X[:, 2]) < 0.15) & (t < h0)
+    steer |= (poly_radius(X, np.array([fa[0], fa[1], 0.0]), z, 24) < R + 0.03 * k) & (np.abs(X[:, 2]) < 0.15)
+    # the fork: a slab along the line from the front axle to the head tube's bottom
+    hb = sb + h0 * a
+    f2 = (hb - fa) / np.linalg.norm(hb - fa)
+    side = np.array([f2[1], -f2[0], 0.0])
+    steer |= (np.abs((X - fa) @ side) < 0.07 * k) & ((X - fa) @ f2 > -0.07 * k) & (np.abs(X[:, 2]) < 0.15) & (t < h0)
     # on the axis above the head tube: steerer, spacers and stem (a scooter's stem is 80 cm long)
     steer |= (t > h1) & (rho < max(0.04, 2 * r_ht))
     cockpit_x = kp["seat"][0] + 0.15 if "seat" in kp else ca[0] + 0.1
@@ -150,18 +149,25 @@ def _chain_guard(p, ca, crank_r):
     return bool(one_side and z.max() - z.min() < 0.06 and p[:, 0].min() < ca[0] - crank_r)
 
 
-def _prism(centre, axis, radius, n):
-    """n planes (point, outward normal) tangent to a cylinder of `radius` about `axis` through
-    `centre`: a cut along them approximates the cylinder within radius * (1 - cos(pi / n))."""
+def _directions(axis, n):
     axis = axis / np.linalg.norm(axis)
     u = np.cross(axis, [1.0, 0, 0] if abs(axis[0]) < 0.9 else [0, 1.0, 0])
     u /= np.linalg.norm(u)
     w = np.cross(axis, u)
-    out = []
-    for k in range(n):
-        d = np.cos(2 * np.pi * k / n) * u + np.sin(2 * np.pi * k / n) * w
-        out.append((centre + radius * d, d))
-    return out
+    k = 2 * np.pi * np.arange(n) / n
+    return np.cos(k)[:, None] * u + np.sin(k)[:, None] * w
+
+
+def poly_radius(X, centre, axis, n):
+    """The 'radius' of points X about an axis measured by a regular n-gon (max over its face
+    normals of the offset): a cylinder test that a cut along n planes reproduces exactly."""
+    return ((np.asarray(X, float) - centre) @ _directions(axis, n).T).max(1)
+
+
+def _prism(centre, axis, radius, n):
+    """n planes (point, outward normal) tangent to a cylinder of `radius` about `axis` through
+    `centre`: a cut along them approximates the cylinder within radius * (1 - cos(pi / n))."""
+    return [(centre + radius * d, d) for d in _directions(axis, n)]
 
 
 def cut_planes(kp, head_radius=None, wheel_radius=None, head_span=None):
@@ -184,13 +190,14 @@ def cut_planes(kp, head_radius=None, wheel_radius=None, head_span=None):
     z = np.array([0, 0, 1.0])
     planes = [(sb + h0 * a, a), (sb + h1 * a, a)]                 # head tube ends
     planes += _prism(sb, a, r_ht + 0.012, 12)                       # head tube wall
+    planes += _prism(sb, a, 0.8 * r_ht, 12)                         # steerer inside it
     planes += _prism(sb, a, max(0.04, 2 * r_ht), 12)                # steerer / stem above it
-    planes += _prism(fa, z, R + 0.03 * k, 24)                       # front wheel disc
+    planes += _prism(np.array([fa[0], fa[1], 0.0]), z, R + 0.03 * k, 24)   # front wheel disc
     planes += [(np.array([0, 0, 0.15]), z), (np.array([0, 0, -0.15]), z)]
     hb = sb + h0 * a
     f2 = (hb - fa) / np.linalg.norm(hb - fa)
     side = np.array([f2[1], -f2[0], 0.0])
-    planes += [(fa + 0.07 * k * side, side), (fa - 0.07 * k * side, side)]     # fork capsule
+    planes += [(fa + 0.07 * k * side, side), (fa - 0.07 * k * side, side), (fa - 0.07 * k * f2, f2)]   # fork slab
     cockpit_x = kp["seat"][0] + 0.15 if "seat" in kp else ca[0] + 0.1
     planes += [(np.array([0, st[1] - 0.16, 0]), np.array([0, 1.0, 0])),
                (np.array([cockpit_x, 0, 0]), np.array([1.0, 0, 0]))]
@@ -200,4 +207,6 @@ def cut_planes(kp, head_radius=None, wheel_radius=None, head_span=None):
         rc = max(np.hypot(*(np.asarray(kp[p], float)[:2] - ca[:2])) for p in ("pedal_left", "pedal_right")) + 0.07
         planes += _prism(np.array([ca[0], ca[1], 0.0]), z, rc, 24)  # crank disc
         planes += [(np.array([0, 0, BB_HALF]), z), (np.array([0, 0, -BB_HALF]), z)]
+        planes += _prism(np.array([ca[0], ca[1], 0.0]), z, 0.016, 12)   # the axle itself
+        planes += [(np.array([0, 0, rc]), z), (np.array([0, 0, -rc]), z)]
     return [(np.asarray(p, float), np.asarray(n, float) / np.linalg.norm(n)) for p, n in planes]
