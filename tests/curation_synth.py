@@ -209,7 +209,7 @@ def synth_scooter(nseg=16, R=0.1, tyre_r=0.025):
     return V, T, lab, kp
 
 
-def synth_motorcycle(nseg=24, R=0.3, tyre_r=0.06):
+def synth_motorcycle(nseg=24, R=0.3, tyre_r=0.06, rider=False):
     """A motorcycle: fat tyres, a bulky engine/tank/seat body filling the side view between the
     wheels, a swingarm, telescopic forks, a bar, footpegs."""
     b = Builder()
@@ -238,6 +238,12 @@ def synth_motorcycle(nseg=24, R=0.3, tyre_r=0.06):
     b.tube(bar - [0, 0, 0.36], bar + [0, 0, 0.36], 0.014, STEER)          # one-piece bar
     for s in (1, -1):
         b.tube([0.0, 0.34, s * 0.14], [0.0, 0.34, s * 0.24], 0.012, FRAME)   # footpegs
+    if rider:   # a blocky person on the seat: torso, head, arms to the grips, thighs over the tank
+        b.box([-0.2, 1.25, 0], [0.15, 0.3, 0.18], RIDER)
+        b.box([-0.1, 1.7, 0], [0.12, 0.13, 0.12], RIDER)
+        for s in (1, -1):
+            b.tube([-0.05, 1.45, s * 0.2], [0.3, 1.17, s * 0.33], 0.045, RIDER)
+            b.tube([-0.3, 0.95, s * 0.12], [0.05, 0.6, s * 0.2], 0.07, RIDER)
     kp = {"front_axle": fa, "rear_axle": ra, "steer_bottom": hb, "steer_top": ht}
     V, T, lab = b.arrays()
     return V, T, lab, kp

@@ -143,3 +143,11 @@ def test_tadpole_tricycle_and_noisy_scan_are_refused():
     with pytest.raises(UserError) as e:
         pipeline.curate_arrays(transform(V, 15, 1.0, 0.0)[0], T)
     assert "\n" not in str(e.value) and "surface is noisy" in str(e.value), e.value
+
+
+def test_rider_on_a_motorcycle_is_removed_not_its_body():
+    """A person on a motorcycle: torso, head, arms and thighs go; the tank, seat and body (as
+    thick as limbs, but centred) and the bar (as high as the hands) stay."""
+    V, T, lab, kp = synth_motorcycle(rider=True)
+    res, _, right = _check(V, T, lab, kp, seed=16, wheel=0.6, min_area=0.95)
+    assert any("rider" in n for n in res.notes)
