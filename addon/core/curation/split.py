@@ -25,6 +25,16 @@ FUSED = 0.05           # components above this share of the bike's area may be c
 MOSTLY = 0.6           # a piece this much in the steering regions, ahead of the saddle, steers
 
 
+def _head_range(head_span, span):
+    """(start, end) of the head tube along the axis from steer_bottom: the whole steer_bottom ->
+    steer_top span, or head_span's (start, end), or its length from steer_bottom."""
+    if head_span is None:
+        return 0.0, span
+    if np.ndim(head_span):
+        return float(head_span[0]), min(span, float(head_span[1]))
+    return 0.0, min(span, float(head_span))
+
+
 def regions(X, kp, head_radius=None, wheel_radius=None, head_span=None, with_head=False):
     """Region label (FRAME/STEERING/CRANK) per canonical point X (n, 3); with_head: also the
     bool mask of points in the head-tube zone.  head_span: (start, end) of the head tube along
@@ -48,12 +58,7 @@ def regions(X, kp, head_radius=None, wheel_radius=None, head_span=None, with_hea
     span = np.linalg.norm(st - sb)
     t = (X - sb) @ a
     rho = poly_radius(X, sb, a, 12)
-    if head_span is None:
-        h0, h1 = 0.0, span
-    elif np.ndim(head_span):
-        h0, h1 = float(head_span[0]), min(span, float(head_span[1]))
-    else:
-        h0, h1 = 0.0, min(span, float(head_span))
+    h0, h1 = _head_range(head_span, span)
     in_head = (t >= h0) & (t <= h1) & (rho < r_ht + 0.012)
     # margins in metres for a bicycle's 0.35 m wheel radius, shrunk with smaller wheels (a kick
     # scooter's 10 cm wheels sit a few cm from its deck and neck)
@@ -180,12 +185,7 @@ def cut_planes(kp, head_radius=None, wheel_radius=None, head_span=None):
     r_ht = head_radius if head_radius else 0.02
     a = (st - sb) / np.linalg.norm(st - sb)
     span = np.linalg.norm(st - sb)
-    if head_span is None:
-        h0, h1 = 0.0, span
-    elif np.ndim(head_span):
-        h0, h1 = float(head_span[0]), min(span, float(head_span[1]))
-    else:
-        h0, h1 = 0.0, min(span, float(head_span))
+    h0, h1 = _head_range(head_span, span)
     k = min(1.0, R / 0.35)
     z = np.array([0, 0, 1.0])
     planes = [(sb + h0 * a, a), (sb + h1 * a, a)]                 # head tube ends
