@@ -9,7 +9,6 @@ import json
 import os
 import shutil
 import subprocess
-import sys
 import zipfile
 
 import pytest
@@ -120,7 +119,7 @@ def model(tmp_path_factory):
     pytest.importorskip("bpy")
     import numpy as np
     from addon.core.procedural import spec as specs
-    from test_curation_accuracy import make_messy
+    from blender_helpers import make_messy
 
     sp = specs.library_specs(3, 5, extras=False)[2]  # a city bike: swept bar, grips
     path = tmp_path_factory.mktemp("model") / "messy_city.obj"  # 3.4's glTF importer rejects 5.0's glb

@@ -120,7 +120,7 @@ def test_regions_put_steerer_on_steering_and_head_tube_wall_on_frame():
 
 @pytest.fixture
 def messy(tmp_path, fresh_scene):
-    from test_curation_accuracy import make_messy
+    from blender_helpers import make_messy
     sp = specs.library_specs(2, 4, extras=False)[1]
     path = tmp_path / "messy.glb"
     make_messy(sp, np.random.default_rng(11), path, "glb")
@@ -211,6 +211,6 @@ def test_curated_bike_renders_and_keypoints_land_on_masks(messy, tmp_path):
                          "--parts", "all", "--views", "0,9,22", "--samples", "1", "--denoise", "NONE"],
                         capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert rv.returncode == 0, rv.stderr[-2000:]
-    from test_render_views import check_keypoints_on_masks
+    from blender_helpers import check_keypoints_on_masks
     for part in ("frame", "steering", "crank", "whole"):
         check_keypoints_on_masks(out / "views" / part, [0, 9, 22])

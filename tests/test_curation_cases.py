@@ -1,9 +1,11 @@
-"""Curation of varied synthetic two-wheelers built here from primitives (numpy, no bpy, fast).
+"""Curation of varied synthetic two-wheelers built from primitives (tests/curation_synth.py; numpy,
+no bpy).
 
-Not our procedural generator's pieces: tyres of 10/16/33 segments, fat tyres, the whole bike
-fused into one connected mesh, a one-piece handlebar (no separate grips), no chainring, a
-rider-like extra shape, off-origin / rotated / cm / mm models; and the refusals (tricycle,
-penny-farthing, frame without wheels, flat icon) with the check they name.  Truth keypoints
+Not our procedural generator's pieces: tyres of 10/16/33/64 segments, fat tyres, the whole bike
+fused into one connected mesh, a one-piece handlebar (no separate grips), no chainring, a chain
+guard over the ring, a rider-like extra shape, a kick scooter, a motorcycle, off-origin /
+rotated / cm / mm models; and the refusals (tricycles with a twin rear or front wheel,
+penny-farthing, frame without wheels, flat icon, noisy scan) with the check they name.  Truth keypoints
 and part labels come from the construction, never from the code under test.
 """
 import numpy as np
@@ -12,149 +14,12 @@ import pytest
 from addon.core.curation import mesh, pipeline, split
 from addon.core.script import UserError
 
-FRAME, STEER, CRANK, RIDER = 0, 1, 2, 3
+from curation_synth import CRANK, FRAME, RIDER, STEER, fuse, noisy_scan, synth_bike, synth_motorcycle, synth_scooter, transform
 
 
-class Builder:
-    def __init__(self):
-        self.V, self.T, self.lab, self.n = [], [], [], 0
-
-    def add(self, V, T, lab):
-        self.V.append(np.asarray(V, float))
-        self.T.append(np.asarray(T) + self.n)
-        self.lab += [lab] * len(T)
-        self.n += len(V)
-
-    def torus(self, c, R, r, nseg, ntube, lab, normal_z=True):
-        a = np.linspace(0, 2 * np.pi, nseg, endpoint=False)
-        b = np.linspace(0, 2 * np.pi, ntube, endpoint=False)
-        A, B = np.meshgrid(a, b, indexing="ij")
-        rr = R - r + r * np.cos(B)
-        V = np.stack([rr * np.cos(A), rr * np.sin(A), r * np.sin(B)], -1).reshape(-1, 3) + c
-        T = []
-        for i in range(nseg):
-            for j in range(ntube):
-                p, q = i * ntube + j, ((i + 1) % nseg) * ntube + j
-                p2, q2 = i * ntube + (j + 1) % ntube, ((i + 1) % nseg) * ntube + (j + 1) % ntube
-                T += [(p, q, q2), (p, q2, p2)]
-        self.add(V, T, lab)
-
-    def tube(self, a, b, r, lab, n=8):
-        a, b = np.asarray(a, float), np.asarray(b, float)
-        d = (b - a) / np.linalg.norm(b - a)
-        u = np.cross(d, [0, 0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0, 0])
-        u /= np.linalg.norm(u)
-        w = np.cross(d, u)
-        t = np.linspace(0, 2 * np.pi, n, endpoint=False)
-        ring = r * (np.cos(t)[:, None] * u + np.sin(t)[:, None] * w)
-        V = np.concatenate([a + ring, b + ring, [a, b]])
-        T = []
-        for i in range(n):
-            j = (i + 1) % n
-            T += [(i, j, n + j), (i, n + j, n + i), (2 * n, j, i), (2 * n + 1, n + i, n + j)]
-        self.add(V, T, lab)
-
-    def box(self, c, h, lab):
-        c, h = np.asarray(c, float), np.asarray(h, float)
-        s = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
-        V = c + s * h
-        T = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1),
-             (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
-        self.add(V, T, lab)
-
-    def arrays(self):
-        return np.concatenate(self.V), np.concatenate(self.T), np.array(self.lab)
-
-
-def synth_bike(nseg=24, tyre_r=0.022, rider=False, chainring=True, third_wheel=None, front_R=0.35):
-    """A city bike from primitives in the canonical frame; (V, T, labels, truth keypoints)."""
-    b = Builder()
-    R = 0.35
-    ra, fa, ca = np.array([-0.45, R, 0.0]), np.array([0.62 + max(front_R - R, 0), front_R, 0.0]), np.array([0.0, 0.29, 0.0])
-    for c, RR, lab in ((ra, R, FRAME), (fa, front_R, STEER)):
-        b.torus(c, RR, tyre_r, nseg, 8, lab)
-        b.torus(c, RR - tyre_r * 1.8, 0.008, nseg, 6, lab)           # rim
-        for k in range(8):                                         # spokes
-            ang = k * np.pi / 4
-            b.tube(c + [0, 0, 0.02 * (-1) ** k], c + (RR - 0.05) * np.array([np.cos(ang), np.sin(ang), 0]), 0.002, lab, 4)
-        b.tube(c - [0, 0, 0.05], c + [0, 0, 0.05], 0.015, lab)        # hub
-    if third_wheel is not None:                                    # a tricycle's twin rear wheel
-        b.torus(ra + [0, 0, third_wheel], R, tyre_r, nseg, 8, FRAME)
-        b.tube(ra, ra + [0, 0, third_wheel], 0.015, FRAME)
-    u = np.array([-np.cos(np.radians(70)), np.sin(np.radians(70)), 0.0])
-    hb, ht = fa + 0.46 * u, fa + 0.62 * u
-    for z in (-0.05, 0.05):                                        # fork legs
-        b.tube(fa + [0, 0, z], fa + 0.42 * u + [0, 0, z], 0.012, STEER)
-    b.tube(fa + 0.42 * u - [0, 0, 0.05], fa + 0.42 * u + [0, 0, 0.05], 0.015, STEER)   # crown
-    b.tube(hb, ht, 0.022, FRAME)                                   # head tube
-    stem = fa + 0.74 * u
-    b.tube(ht, stem, 0.012, STEER)
-    bar = stem + [0.06, 0.0, 0.0]
-    b.tube(stem, bar, 0.012, STEER)
-    # a one-piece bar swept back, no separate grips
-    for s in (1, -1):
-        b.tube(bar, bar + [-0.02, 0.01, s * 0.2], 0.011, STEER)
-        b.tube(bar + [-0.02, 0.01, s * 0.2], bar + [-0.08, 0.02, s * 0.31], 0.013, STEER)
-    seat_top = np.array([-0.2, 0.97, 0.0])
-    st = seat_top - [0, 0.06, 0]
-    b.tube(ca, st, 0.016, FRAME)                                   # seat tube + post
-    b.box(seat_top - [0, 0.03, 0], [0.12, 0.03, 0.07], FRAME)       # saddle
-    b.tube(st - [0, 0.1, 0], ht, 0.016, FRAME)                     # top tube
-    b.tube(ca, hb, 0.02, FRAME)                                    # down tube
-    for z in (-0.045, 0.045):
-        b.tube(ca + [0, 0, z], ra + [0, 0, z], 0.01, FRAME)          # chain stays
-        b.tube(st - [0, 0.12, 0], ra + [0, 0, z], 0.01, FRAME)       # seat stays
-    b.tube(ca - [0, 0, 0.036], ca + [0, 0, 0.036], 0.02, FRAME)     # bottom bracket shell
-    ang = np.radians(30)
-    v = 0.17 * np.array([np.cos(ang), np.sin(ang), 0])
-    pr, pl = ca + v + [0, 0, 0.14], ca - v - [0, 0, 0.14]
-    b.tube(ca + [0, 0, 0.06], ca + v + [0, 0, 0.07], 0.01, CRANK)
-    b.tube(ca - [0, 0, 0.06], ca - v - [0, 0, 0.07], 0.01, CRANK)
-    b.box(pr, [0.045, 0.012, 0.05], CRANK)
-    b.box(pl, [0.045, 0.012, 0.05], CRANK)
-    if chainring:
-        b.torus(ca + [0, 0, 0.05], 0.1, 0.006, 32, 4, CRANK)
-    if rider:                                                      # a blocky person
-        b.box([-0.1, 1.35, 0], [0.12, 0.3, 0.18], RIDER)            # torso
-        b.box([-0.02, 1.8, 0], [0.1, 0.12, 0.09], RIDER)            # head
-        for s in (1, -1):
-            b.tube([-0.05, 1.55, s * 0.2], bar + [-0.08, 0.04, s * 0.27], 0.04, RIDER)   # arms
-            b.tube([-0.15, 1.08, s * 0.1], [0.1, 0.7, s * 0.12], 0.06, RIDER)             # thighs
-    kp = {"front_axle": fa, "rear_axle": ra, "crank_axle": ca, "pedal_right": pr, "pedal_left": pl,
-          "seat": seat_top - [0, 0.004, 0], "steer_bottom": hb, "steer_top": ht,
-          "handle_right": bar + [-0.06, 0.017, 0.26], "handle_left": bar + [-0.06, 0.017, -0.26]}
-    V, T, lab = b.arrays()
-    return V, T, lab, kp
-
-
-def fuse(V, T, lab):
-    """One connected mesh: each piece joined to the next by a sliver triangle (as fused scans and
-    AI-made models are), sharing vertices."""
-    s = mesh.Soup(V, T)
-    comps = s.comp_of_vert
-    extra = []
-    inv, _ = mesh.weld(V)
-    first = {}
-    for i, c in enumerate(comps[inv]):
-        first.setdefault(c, i)
-    keys = sorted(first)
-    for a, b in zip(keys[:-1], keys[1:]):
-        i, j = first[a], first[b]
-        extra.append((i, j, i))   # degenerate: zero area, but it links the pieces
-    T2 = np.concatenate([T, np.array(extra)])
-    return V, T2, np.concatenate([lab, np.full(len(extra), -1)])
-
-
-def transform(V, seed, scale, offset):
-    rng = np.random.default_rng(seed)
-    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
-    q *= np.sign(np.linalg.det(q))
-    return scale * V @ q.T + offset, q
-
-
-def _check(V, T, lab, kp, scale=1.0, offset=0.0, seed=0, tol_kp=0.04, min_area=0.9):
+def _check(V, T, lab, kp, scale=1.0, offset=0.0, seed=0, tol_kp=0.04, min_area=0.9, wheel=0.7, min_part=0.0):
     Vm, q = transform(V, seed, scale, offset)
-    res = pipeline.curate_arrays(Vm, T, 0.7)
+    res = pipeline.curate_arrays(Vm, T, wheel)
     assert res.problems == [], res.problems
     assert abs(res.scale * scale - 1) < 0.01
     Rm = res.M[:3, :3] / res.scale
@@ -176,12 +41,15 @@ def _check(V, T, lab, kp, scale=1.0, offset=0.0, seed=0, tol_kp=0.04, min_area=0
     bike = (lab >= 0) & (lab != RIDER)
     right = area[bike & (res.labels == lab)].sum() / area[bike].sum()
     assert right >= min_area, right
+    per_part = {k: area[(lab == k) & (res.labels == k)].sum() / area[lab == k].sum() for k in (FRAME, STEER, CRANK)
+                if (lab == k).any()}
+    assert min(per_part.values()) >= min_part, per_part
     if (lab == RIDER).any():
         assert np.all(res.labels[lab == RIDER] == split.JUNK)
     return res, err, right
 
 
-@pytest.mark.parametrize("nseg", [10, 16, 33])
+@pytest.mark.parametrize("nseg", [10, 16, 33, 64])
 def test_tyre_segment_counts(nseg):
     V, T, lab, kp = synth_bike(nseg=nseg)
     _check(V, T, lab, kp, seed=nseg)
@@ -242,3 +110,44 @@ def test_wheel_centres_given_by_the_annotator():
     assert res.problems == []
     for k in ("front_axle", "rear_axle", "crank_axle", "seat"):
         assert np.linalg.norm(res.keypoints[k] - kp[k]) < 0.03, k
+
+
+def test_kick_scooter_small_fat_wheels():
+    """A kick scooter: 20 cm fat wheels, a deck, a long stem to a one-piece T-bar, no crank.  The
+    stem along the steering axis goes with the steering, the neck from the deck with the frame."""
+    V, T, lab, kp = synth_scooter()
+    res, _, _ = _check(V, T, lab, kp, seed=11, wheel=0.2, min_area=0.95, min_part=0.9)
+    assert res.record["has_crank"] is False
+
+
+def test_motorcycle_bulky_body_fat_tyres():
+    """Fat tyres, a body filling the side view between the wheels, a fork 70 cm long below the
+    head tube: footpegs instead of a crank, fork legs and bar steering."""
+    V, T, lab, kp = synth_motorcycle()
+    res, _, _ = _check(V, T, lab, kp, seed=12, wheel=0.6, scale=100.0, min_area=0.9, min_part=0.85)
+    assert res.record["has_crank"] is False
+
+
+def test_chainring_inside_a_chain_guard():
+    """A chain case over the ring and the chain's top run stays on the frame; the crank is still
+    found (from the pedals) and split."""
+    V, T, lab, kp = synth_bike(nseg=20, chain_guard=True)
+    _check(V, T, lab, kp, seed=13, min_part=0.9)
+
+
+def test_tadpole_tricycle_and_noisy_scan_are_refused():
+    V, T, _, _ = synth_bike(front_twin=0.6)
+    with pytest.raises(UserError, match="side by side on the front axle"):
+        pipeline.curate_arrays(transform(V, 14, 1.0, 0.0)[0], T)
+    V, T = noisy_scan()
+    with pytest.raises(UserError) as e:
+        pipeline.curate_arrays(transform(V, 15, 1.0, 0.0)[0], T)
+    assert "\n" not in str(e.value) and "surface is noisy" in str(e.value), e.value
+
+
+def test_rider_on_a_motorcycle_is_removed_not_its_body():
+    """A person on a motorcycle: torso, head, arms and thighs go; the tank, seat and body (as
+    thick as limbs, but centred) and the bar (as high as the hands) stay."""
+    V, T, lab, kp = synth_motorcycle(rider=True)
+    res, _, right = _check(V, T, lab, kp, seed=16, wheel=0.6, min_area=0.95)
+    assert any("rider" in n for n in res.notes)

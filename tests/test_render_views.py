@@ -15,11 +15,12 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from cyclist_formats import ring
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PY = sys.executable
 SCRIPT = os.path.join(ROOT, "blender_scripts", "render_views.py")
+from blender_helpers import _mask, check_keypoints_on_masks  # noqa: E402
+
 FAST = ["--samples", "1", "--denoise", "NONE"]
 
 
@@ -44,32 +45,8 @@ def rendered(bike):
     return bike
 
 
-def _mask(views, i):
-    return np.asarray(Image.open(views / "mask" / f"camera{i:04d}" / "0000.png"))
-
-
 def _rgba(views, i):
     return np.asarray(Image.open(views / "rgba" / f"camera{i:04d}" / "0000.png").convert("RGBA"))
-
-
-def check_keypoints_on_masks(views_dir, indices, tol_px=2):
-    cams = json.loads((views_dir / "cameras.json").read_text())
-    kps = json.loads((views_dir / "keypoints.json").read_text())["keypoints"]
-    assert kps, f"{views_dir} has no keypoints"
-    names = list(kps)
-    pts = np.array([kps[n] for n in names])
-    misses = []
-    for i in indices:
-        c = cams[f"camera{i:04d}"]
-        uv = ring.project(pts, c["K"], c["R"], c["T"])
-        m = _mask(views_dir, i) > 0
-        ys, xs = np.nonzero(m)
-        for n, (u, v) in zip(names, uv):
-            # distance from the keypoint's continuous position to the nearest mask pixel centre
-            d = np.sqrt((xs + 0.5 - u) ** 2 + (ys + 0.5 - v) ** 2).min() if len(xs) else np.inf
-            if d > tol_px:
-                misses.append((i, n, round(float(d), 2)))
-    assert not misses, f"keypoints off the mask (view, name, px): {misses}"
 
 
 @pytest.mark.parametrize("part", ["frame", "steering", "crank", "whole"])

@@ -50,6 +50,8 @@ def import_model(path):
     if ext == ".blend":
         _append_blend(path)
     else:
+        if ext in (".glb", ".gltf"):
+            _numpy_bool_alias()
         op = _operator(ext)
         try:
             res = op(filepath=path)
@@ -70,6 +72,16 @@ def import_model(path):
     if not new:
         raise UserError(f"{path}: the file holds no objects (empty scene)")
     return new
+
+
+def _numpy_bool_alias():
+    """Blender 3.4's glTF importer calls numpy.bool, an alias of the builtin bool that numpy 1.24
+    removed (and 2.0 brought back as numpy.bool_); Debian's Blender 3.4 runs on the system numpy
+    1.24, where every glTF import stopped with "module 'numpy' has no attribute 'bool'".  Put the
+    old alias back for that importer; newer numpy and Blender are left as they are."""
+    import numpy as np
+    if not hasattr(np, "bool"):
+        np.bool = bool
 
 
 def _append_blend(path):

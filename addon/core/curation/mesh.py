@@ -125,3 +125,22 @@ class Soup:
     def transformed_points(self, M):
         """Welded positions under a 4x4 similarity M (row vectors)."""
         return self.P @ M[:3, :3].T + M[:3, 3]
+
+
+def dihedral_angles(soup):
+    """Angle (degrees, 0-90, orientation-free: flipped faces do not count) between the two faces
+    of every welded edge shared by exactly two faces."""
+    P, TW = soup.P, soup.TW
+    n = np.cross(P[TW[:, 1]] - P[TW[:, 0]], P[TW[:, 2]] - P[TW[:, 0]])
+    a = np.linalg.norm(n, axis=1)
+    ok = a > 0
+    n, TW = n[ok] / a[ok, None], TW[ok]
+    e = np.sort(np.concatenate([TW[:, [0, 1]], TW[:, [1, 2]], TW[:, [2, 0]]]), 1)
+    f = np.tile(np.arange(len(TW)), 3)
+    key = e[:, 0] * (len(P) + 1) + e[:, 1]
+    o = np.argsort(key, kind="stable")
+    k = key[o]
+    pair = np.nonzero(k[1:] == k[:-1])[0]
+    pair = pair[(pair + 2 >= len(k)) | (k[np.minimum(pair + 2, len(k) - 1)] != k[pair])]   # exactly two faces
+    f1, f2 = f[o][pair], f[o][pair + 1]
+    return np.degrees(np.arccos(np.clip(np.abs((n[f1] * n[f2]).sum(1)), 0, 1)))

@@ -25,6 +25,7 @@ class Result:
     notes: list = field(default_factory=list)
     wheel_diameter: float = DEFAULT_WHEEL_DIAMETER
     record: dict = field(default_factory=dict)
+    split_args: dict = field(default_factory=dict)   # regions() parameters: where fused faces are cut
 
 
 def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, hints=None, wheel_centres=None):
@@ -45,6 +46,7 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
     if not np.all(np.isfinite(V)):
         raise UserError("the model has non-finite vertex coordinates")
     soup = mesh.Soup(V, T)
+    check_not_noisy(soup)
     rings = wheels.find_rings(soup)
     pair = wheels.wheel_pair(rings) if wheel_centres is None else None
     seeds, wheel_method, front = None, "rings", None
@@ -98,6 +100,8 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
         h = np.asarray(hints)
         use = (h >= 0) & keep_tri
         labels[use] = h[use]
+    split_args = {"head_radius": info.get("head_tube_radius"), "wheel_radius": pose.front.radius * pose.scale,
+                  "head_span": info.get("head_span"), "has_crank": bool(has_crank)}
     record = {
         "method": "auto" if not keypoints else "auto+file",
         "wheel_diameter_m": float(wheel_diameter),
@@ -113,8 +117,27 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
         "keypoint_source": source,
         "notes": pose.notes + notes,
         "faces_cut": int(cut.sum()),
+        "split_args": {k: (v if v is None or isinstance(v, bool) else np.asarray(v, float).tolist())
+                       for k, v in split_args.items()},
     }
-    return Result(pose.M, pose.scale, kp, labels, cut, problems, pose.notes + notes, wheel_diameter, record)
+    return Result(pose.M, pose.scale, kp, labels, cut, problems, pose.notes + notes, wheel_diameter, record, split_args)
+
+
+NOISY_MEDIAN_DEG = 28.0   # median angle between neighbouring faces above which a dense mesh is noise
+NOISY_MIN_FACES = 5000
+
+
+def check_not_noisy(soup):
+    """UserError for a dense mesh whose neighbouring faces meet at random angles (a noisy
+    photogrammetry scan): modelled surfaces are flat or smoothly curved between their edges
+    (median angle <= 22 deg on the shared real models and the synthetic ones), a scan with noise
+    of a few mm on 1-3 cm faces is 32-44 deg."""
+    if len(soup.TW) < NOISY_MIN_FACES:
+        return
+    ang = mesh.dihedral_angles(soup)
+    if len(ang) and np.median(ang) > NOISY_MEDIAN_DEG and (ang > 30).mean() > 0.5:
+        raise UserError(f"not a clean model: the surface is noisy (median angle between neighbouring faces "
+                        f"{np.median(ang):.0f} deg > {NOISY_MEDIAN_DEG:.0f}; a photogrammetry scan?)")
 
 
 def auto_wheel_diameter(soup, pose):

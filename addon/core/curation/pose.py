@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..contract import UserError
-from .wheels import Ring, ring_of
+from .wheels import Ring
 
 
 @dataclass

@@ -66,7 +66,7 @@ def drop_rider(soup, pose):
     high (a bike alone stays below ~2, a kick scooter's stem is far taller and thin); the rider
     is the pieces lying wholly above 1.75 wheel diameters (head, torso), grown through touching
     thick pieces (arms, thighs: thicker than a tenth of a wheel, which no tube, saddle or bar
-    is) whose middle is above the wheel tops."""
+    is) whose middle is above the wheel tops and which hang to one side of the bike."""
     P = soup.transformed_points(pose.M)
     D = 2 * 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale
     out = np.zeros(len(soup.comps), bool)
@@ -78,19 +78,25 @@ def drop_rider(soup, pose):
     top = hi[:, 1].max()
     if not (2.1 * D < top < 3.5 * D):
         return out
-    high = lo[:, 1] > 1.75 * D
+    # a handlebar may sit that high (a motorcycle's): wide across and thin, unlike a person
+    bar_like = (hi[:, 2] - lo[:, 2] > 0.5 * D) & ((hi - lo).min(1) <= 0.1 * D)
+    high = (lo[:, 1] > 1.75 * D) & ~bar_like
     if not high.any() or (hi[high, 2] - lo[high, 2]).max() < 0.2 * D:
         return out
     mid = 0.5 * (lo[:, 1] + hi[:, 1])
     # limbs are thick: a bike's tubes, saddle and bar are thinner than a tenth of a wheel
     thick = (hi - lo).min(1) > 0.1 * D
+    # limbs hang on one side of the bike; a motorcycle's tank, seat and body are as thick but
+    # centred on its plane of symmetry and longer than a person is deep
+    side = np.abs(0.5 * (lo[:, 2] + hi[:, 2])) > 0.25 * (hi[:, 2] - lo[:, 2])
+    short = (hi[:, 0] - lo[:, 0]) < 0.6 * D   # a torso or hip, not a tank or seat half a wheelbase long
     grow = high.copy()
     gap = 0.08 * D
     frontier = list(np.nonzero(high)[0])
     while frontier:
         f = np.array(frontier)
         ov = np.all((lo[None] <= hi[f][:, None] + gap) & (hi[None] >= lo[f][:, None] - gap), axis=2).any(0)
-        new = np.nonzero(ov & ~grow & (mid > 1.1 * D) & thick)[0]
+        new = np.nonzero(ov & ~grow & (mid > 1.1 * D) & thick & (side | short))[0]
         grow[new] = True
         frontier = list(new)
     out[np.array(idx)[grow]] = True
@@ -172,7 +178,8 @@ def choose_keypoints(view, pose, X, clean=False):
     # shape-based steer_top marks the stem top: the head tube is its lower 15 cm (scaled)
     R = 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale
     return kp, [f"keypoints from the shape (piece-based ones: {why})"] + snotes, \
-        {"head_tube_radius": None, "head_span": 0.15 * R / 0.35}, has_crank
+        {"head_tube_radius": None, "head_span": sk.head_zone(X, kp["steer_bottom"], kp["steer_top"], R)
+         if "steer_top" in kp and "steer_bottom" in kp else 0.15 * R / 0.35}, has_crank
 
 
 def _agree(a, b, tol=0.1):

@@ -63,6 +63,28 @@ def steering_axis(X, fa, R):
     return b3 + t0 * ax, b3 + t1 * ax
 
 
+def head_zone(X, sb, st, R):
+    """(start, end) along the steering axis from steer_bottom of the head tube: where the frame's
+    tubes (or body) join the axis from behind, on the symmetry plane, above the front tyre.  A
+    bicycle's head tube starts just above the tyre, a motorcycle's 70 cm up its fork; without
+    frame joints: the 15 cm (for 35 cm wheels) above steer_bottom."""
+    a = (st - sb) / np.linalg.norm(st - sb)
+    back = np.array([-a[1], a[0], 0.0])            # perpendicular to the axis, towards the rear
+    fa_far = np.hypot(X[:, 0] - (sb[0] - 1.15 * R * a[0]), X[:, 1] - (sb[1] - 1.15 * R * a[1])) > 1.2 * R
+    d = X - sb
+    t, off = d @ a, d @ back
+    m = fa_far & (np.abs(X[:, 2]) < max(0.04, 0.1 * R)) & (off > max(0.05, 0.15 * R)) & (off < max(0.08, 0.3 * R)) \
+        & (t > -0.2 * R) & (t < np.linalg.norm(st - sb))
+    default = (0.0, 0.15 * R / 0.35)
+    if m.sum() < 10:
+        return default
+    tt = np.sort(t[m])
+    lo, hi = float(np.percentile(tt, 2)), float(np.percentile(tt, 98))
+    if hi - lo < 0.02:
+        return default
+    return max(0.0, lo - 0.02), hi + 0.02
+
+
 def handles(X, steer_top, seat_x, R):
     m = (X[:, 1] > steer_top[1] - 0.5 * R) & (X[:, 0] > seat_x + 0.3 * R) & (X[:, 0] < steer_top[0] + 1.5 * R)
     B = X[m]

@@ -9,7 +9,6 @@ Reads bike.blend (bpy) and keypoints.json of each folder; draws with a painter's
 import argparse
 import json
 import os
-import sys
 
 import numpy as np
 
