@@ -21,7 +21,7 @@ weights over those joints and per-vertex colours.  Steps:
    nearest mapped ancestor (the joint whose transform Blender gives it when its own pose is identity),
    normalised per vertex as Blender's Armature modifier does.  Vertices with no weight copy their nearest
    weighted vertex's weights.
-5. Colours: per material, the image texture feeding the Base Color (sampled bilinearly at each corner's
+5. Colours (rider_colours.py): per material, the image texture feeding the Base Color (sampled bilinearly at each corner's
    UV, averaged per vertex), a colour attribute, or the flat base colour.  A texture whose image is
    missing or unreadable is an error (not a silent grey).  Textured faces also keep their corner UVs
    and the texture itself (the rider file's texture layer), which the avatar's training renders draw.
@@ -33,6 +33,7 @@ import numpy as np
 from mathutils import Matrix, Vector
 
 from .contract import UserError, bone_map
+from .rider_colours import object_colors
 
 SWING_MIN_DEG = 1.0
 # segment (joint -> child joint) and its T-pose direction in the canonical frame (left is -Z)
@@ -44,7 +45,6 @@ T_POSE_PASSES = (
 )
 UP_TOLERANCE_DEG = 30.0
 MIN_HEIGHT_M, MAX_HEIGHT_M = 0.5, 2.6
-DEFAULT_LINEAR = (0.8, 0.8, 0.8)
 
 
 def _joints():
@@ -57,11 +57,6 @@ def _m2np(m):
 
 def _np2m(a):
     return Matrix([list(map(float, r)) for r in a])
-
-
-def srgb_from_linear(c):
-    c = np.clip(np.asarray(c, np.float64), 0.0, 1.0)
-    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
 
 
 # ---------------------------------------------------------------- 1. the rig
@@ -251,155 +246,6 @@ def _fill_unweighted(W, V):
     return len(empty)
 
 
-# ---------------------------------------------------------------- 5. colours
-
-def _upstream(node, seen=None):
-    """Nodes feeding `node`, breadth first."""
-    seen = seen if seen is not None else set()
-    out, todo = [], [node]
-    while todo:
-        n = todo.pop(0)
-        for inp in n.inputs:
-            for link in inp.links:
-                m = link.from_node
-                if m.name not in seen:
-                    seen.add(m.name)
-                    out.append(m)
-                    todo.append(m)
-    return out
-
-
-def colour_source(mat, what):
-    """('image', image, uv_map or None) | ('attribute', name) | ('flat', sRGB (3,)) for one material."""
-    if mat is None:
-        return ("flat", srgb_from_linear(DEFAULT_LINEAR))
-    nt = mat.node_tree if getattr(mat, "node_tree", None) is not None else None
-    if nt is None:
-        return ("flat", srgb_from_linear(mat.diffuse_color[:3]))
-    outs = [n for n in nt.nodes if n.type == "OUTPUT_MATERIAL"]
-    out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
-    shader = None
-    if out is not None and out.inputs["Surface"].links:
-        shader = out.inputs["Surface"].links[0].from_node
-    if shader is None:
-        return ("flat", srgb_from_linear(mat.diffuse_color[:3]))
-    sock = next((shader.inputs[k] for k in ("Base Color", "Color") if k in shader.inputs), None)
-    if sock is None:
-        sock_nodes = _upstream(shader)
-        default = mat.diffuse_color[:3]
-    else:
-        default = sock.default_value[:3]
-        sock_nodes = []
-        for link in sock.links:
-            sock_nodes.append(link.from_node)
-            sock_nodes += _upstream(link.from_node)
-    for n in sock_nodes:
-        if n.type == "TEX_IMAGE":
-            img = n.image
-            if img is None:
-                raise UserError(f"{what}: material '{mat.name}' has an image texture node with no image (missing texture)")
-            if img.size[0] == 0 or img.size[1] == 0 or not img.has_data and not _load(img):
-                src = bpy.path.abspath(img.filepath) if img.filepath else img.name
-                raise UserError(f"{what}: material '{mat.name}' uses texture '{src}', which is missing or "
-                                f"unreadable (missing texture)")
-            uv = None
-            vec = n.inputs.get("Vector")
-            if vec is not None and vec.links and vec.links[0].from_node.type == "UVMAP":
-                uv = vec.links[0].from_node.uv_map or None
-            return ("image", img, uv)
-        if n.type in ("VERTEX_COLOR", "ATTRIBUTE"):
-            name = getattr(n, "layer_name", None) or getattr(n, "attribute_name", None)
-            return ("attribute", name)
-    return ("flat", srgb_from_linear(default))
-
-
-def _load(img):
-    try:
-        img.reload()
-        return img.has_data and img.size[0] > 0
-    except RuntimeError:
-        return False
-
-
-def _image_array(img):
-    w, h = img.size
-    px = np.empty(w * h * img.channels, np.float32)
-    img.pixels.foreach_get(px)
-    px = px.reshape(h, w, img.channels)
-    rgb = px[..., :3] if img.channels >= 3 else np.repeat(px[..., :1], 3, -1)
-    if img.is_float:  # float buffers are scene linear; byte buffers hold the file's sRGB values
-        rgb = srgb_from_linear(rgb)
-    return np.clip(rgb.astype(np.float64), 0, 1)
-
-
-def _sample_bilinear(rgb, uv):
-    """Repeat-wrapped bilinear lookup; uv (N,2) with v up (Blender's convention, row 0 = bottom)."""
-    h, w = rgb.shape[:2]
-    x = np.mod(uv[:, 0], 1.0) * w - 0.5
-    y = np.mod(uv[:, 1], 1.0) * h - 0.5
-    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
-    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
-    x0, x1, y0, y1 = x0 % w, (x0 + 1) % w, y0 % h, (y0 + 1) % h
-    return ((1 - fx) * (1 - fy) * rgb[y0, x0] + fx * (1 - fy) * rgb[y0, x1]
-            + (1 - fx) * fy * rgb[y1, x0] + fx * fy * rgb[y1, x1])
-
-
-def _object_colors(obj, what, images):
-    """Per-vertex sRGB colours, and per loop the texture coordinate and the index into `images` (an
-    ordered {name: sRGB array}) of the texture drawn there (-1: none)."""
-    me = obj.data
-    nv, nl = len(me.vertices), len(me.loops)
-    loop_vert = np.empty(nl, np.int64)
-    me.loops.foreach_get("vertex_index", loop_vert)
-    starts, totals, mats = (np.empty(len(me.polygons), np.int64) for _ in range(3))
-    me.polygons.foreach_get("loop_start", starts)
-    me.polygons.foreach_get("loop_total", totals)
-    me.polygons.foreach_get("material_index", mats)
-    loop_mat = np.repeat(mats, totals)
-    loop_rgb = np.empty((nl, 3))
-    loop_uv = np.zeros((nl, 2))
-    loop_tex = np.full(nl, -1, np.int64)
-    for mi in np.unique(loop_mat):
-        sel = loop_mat == mi
-        mat = obj.material_slots[mi].material if mi < len(obj.material_slots) else None
-        src = colour_source(mat, what)
-        if src[0] == "image":
-            _, img, uv_name = src
-            layer = me.uv_layers.get(uv_name) if uv_name else me.uv_layers.active
-            if layer is None:
-                raise UserError(f"{what}: object '{obj.name}' has material '{mat.name}' textured but no UV map")
-            uv = np.empty(nl * 2)
-            layer.data.foreach_get("uv", uv)
-            if img.name not in images:
-                images[img.name] = _image_array(img)
-            loop_rgb[sel] = _sample_bilinear(images[img.name], uv.reshape(-1, 2)[sel])
-            loop_uv[sel] = uv.reshape(-1, 2)[sel]
-            loop_tex[sel] = list(images).index(img.name)
-        elif src[0] == "attribute":
-            loop_rgb[sel] = _attribute_colors(me, src[1], loop_vert)[sel]
-        else:
-            loop_rgb[sel] = src[1]
-    out = np.zeros((nv, 3))
-    cnt = np.zeros(nv)
-    np.add.at(out, loop_vert, loop_rgb)
-    np.add.at(cnt, loop_vert, 1)
-    out[cnt == 0] = srgb_from_linear(DEFAULT_LINEAR)
-    cnt[cnt == 0] = 1
-    return out / cnt[:, None], loop_uv, loop_tex
-
-
-def _attribute_colors(me, name, loop_vert):
-    """A colour attribute per loop, sRGB."""
-    attrs = getattr(me, "color_attributes", None)
-    a = (attrs.get(name) if name else attrs.active_color) if attrs is not None else None
-    if a is None:
-        return np.tile(srgb_from_linear(DEFAULT_LINEAR), (len(loop_vert), 1))
-    c = np.empty(len(a.data) * 4)
-    a.data.foreach_get("color", c)  # scene linear for both FLOAT_COLOR and BYTE_COLOR
-    c = srgb_from_linear(c.reshape(-1, 4)[:, :3])
-    return c[loop_vert] if a.domain == "POINT" else c
-
-
 # ---------------------------------------------------------------- the whole import
 
 def _triangles(me):
@@ -447,7 +293,7 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True):
                                 f"{int((w.sum(1) > 0).sum())} of {len(w)} vertices")
             n_filled += _fill_unweighted(w, v)
             tri, tri_loops = _triangles(obj.data)
-            col, loop_uv, loop_tex = _object_colors(obj, what, images)
+            col, loop_uv, loop_tex = object_colors(obj, what, images)
             V.append(v)
             F.append(tri + base)
             W.append(w)
