@@ -34,7 +34,7 @@ def parse_views(spec, n=36):
 
 
 def render_bike(bike_dir, parts="all", views=None, samples=None, denoise=None, size=None, threads=2,
-                progress=print):
+                progress=print, adaptive_threshold=None):
     from .bike_asset import open_bike  # opens bike.blend; UserError if missing/unreadable
 
     if not os.path.isdir(bike_dir):
@@ -50,6 +50,10 @@ def render_bike(bike_dir, parts="all", views=None, samples=None, denoise=None, s
         settings = replace(settings, samples=samples)
     if denoise is not None:
         settings = replace(settings, denoise=denoise)
+    if adaptive_threshold is not None:
+        if not adaptive_threshold >= 0:
+            raise UserError("--adaptive-threshold must be >= 0 (0: adaptive sampling off)")
+        settings = replace(settings, adaptive_threshold=adaptive_threshold)
     if size is not None:
         if size < 16:
             raise UserError("--size must be >= 16")
