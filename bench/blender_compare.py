@@ -1,7 +1,7 @@
 """The Gaussian path against Blender at equal fidelity (issue 14): one interleaved run.
 
 For N random 8-DoF poses of a trained bike (bike_gt's sampler: random pose, random ring camera),
-a 512-sample Cycles reference (no denoising, adaptive sampling off, its own seed) and, per pose,
+a 512-sample Cycles reference (no denoising, adaptive threshold 0.005, its own seed) and, per pose,
 every method rendered by persistent workers (bench/render_workers.py) that loaded their scene or
 model once: Cycles 1, 2, 4, 8, 16 spp with and without OpenImageDenoise, Workbench, and our part
 Gaussians. Timing modes, interleaved per pose (the method order rotates with the pose):
@@ -31,6 +31,10 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SPP = (1, 2, 4, 8, 16)
 REFERENCE_SPP = 512
+# Cycles' adaptive sampling stops a pixel once its noise estimate is below this: the reference's
+# flat, converged pixels cost far fewer than 512 samples (0.005 ~ 46 dB of per-pixel noise, far
+# below the 28-36 dB differences being measured); 0 turns it off (every pixel 512 samples)
+REFERENCE_ADAPTIVE = 0.005
 GAUSS = "gaussians"
 
 
@@ -178,10 +182,10 @@ def cameras(bike_dir, cam_ids, size):
     return out
 
 
-def render_references(workers, poses, cams, ref_dir, spp, progress):
+def render_references(workers, poses, cams, ref_dir, spp, progress, adaptive=REFERENCE_ADAPTIVE):
     """The 512-sample references, split over the Blender workers (1 thread each); reused when the
-    job file beside them matches (same bike, poses, cameras, size and spp)."""
-    method = {"engine": "cycles", "samples": spp, "denoise": "NONE", "adaptive": 0.0, "seed": 1}
+    job file beside them matches (same bike, poses, cameras, size, spp and threshold)."""
+    method = {"engine": "cycles", "samples": spp, "denoise": "NONE", "adaptive": adaptive, "seed": 1}
     todo = [i for i in range(len(poses)) if not os.path.isfile(os.path.join(ref_dir, f"ref_{i:03d}.png"))]
     for k in range(0, len(todo), len(workers)):
         batch = todo[k:k + len(workers)]
@@ -206,7 +210,7 @@ def run_compare(bike_dir, out_dir, n_poses=12, size=512, seed=0, spp=SPP, refere
     ref_dir = os.path.join(work, "reference")
     os.makedirs(ref_dir, exist_ok=True)
     job = {"bike": os.path.abspath(bike_dir), "poses": poses.tolist(), "cameras": cam_ids.tolist(), "size": size,
-           "reference_spp": reference_spp}
+           "reference_spp": reference_spp, "reference_adaptive": REFERENCE_ADAPTIVE}
     job_path = os.path.join(ref_dir, "job.json")
     if not (os.path.isfile(job_path) and json.load(open(job_path)) == job):
         for f in os.listdir(ref_dir):  # references of another job
@@ -216,9 +220,13 @@ def run_compare(bike_dir, out_dir, n_poses=12, size=512, seed=0, spp=SPP, refere
     log = open(os.path.join(work, "workers.log"), "w")
     workers = {}
     try:
-        for eng in sorted({e for e, _, _ in ms.values()}):
+        engines = {e for e, _, _ in ms.values()}
+        if not all(os.path.isfile(os.path.join(ref_dir, f"ref_{i:03d}.png")) for i in range(n_poses)):
+            engines.add("blender")
+        for eng in sorted(engines):
             workers[eng] = [Worker(eng, bike_dir, log), Worker(eng, bike_dir, log)]
-        render_references(workers["blender"], poses, cams, ref_dir, reference_spp, progress)
+        if "blender" in workers:
+            render_references(workers["blender"], poses, cams, ref_dir, reference_spp, progress)
         # warm-up: first renders load kernels, build the BVH, start GL; none of that is per image
         for name, (eng, spec, _) in ms.items():
             for w in workers[eng]:
@@ -335,7 +343,8 @@ def find_bike(bikes_dirs):
 
 
 def run(results, out_dir, bike_dir=None, n_poses=12, size=512, seed=0, spp=SPP, reference_spp=REFERENCE_SPP,
-        workbench=True, png=None, progress=print):
+        workbench=True, png=None, progress=print, tag=""):
+    """tag: a suffix for the table, per-pose JSON and chart (a Gaussians-only rerun beside a full one)."""
     bike_dir = bike_dir or find_bike([os.path.join(out_dir, "bikes"), os.path.join(ROOT, "out", "demo", "bikes")])
     if bike_dir is None:
         print("blender_compare: no trained bike (bike.blend + gaussians/frame.ply, steering.ply) under "
@@ -346,7 +355,7 @@ def run(results, out_dir, bike_dir=None, n_poses=12, size=512, seed=0, spp=SPP, 
     rows, recs = run_compare(bike_dir, out_dir, n_poses, size, seed, spp, reference_spp, workbench, progress=progress)
     ratio, match = equal_fidelity(rows)
     results["blender_compare"] = {"bike": os.path.basename(os.path.normpath(bike_dir)), "poses": n_poses, "size": size,
-                                  "reference_spp": reference_spp, "load_1min": [round(load0, 2), round(os.getloadavg()[0], 2)],
+                                  "reference_spp": reference_spp, "reference_adaptive": REFERENCE_ADAPTIVE, "load_1min": [round(load0, 2), round(os.getloadavg()[0], 2)],
                                   "rows": rows}
     if ratio is not None:
         results["gaussian_vs_blender_equal_fidelity"] = ratio
@@ -360,11 +369,11 @@ def run(results, out_dir, bike_dir=None, n_poses=12, size=512, seed=0, spp=SPP, 
                      f"{match['gaussian_images_per_hour']:.0f} images/hour; Cycles ({match['family']}) needs "
                      f"{match['spp']:.2f} spp ({match['bound']}) = {match['cycles_images_per_hour']:.0f} images/hour: "
                      f"gaussian_vs_blender_equal_fidelity = {ratio:.2f}.")
-    write_table(out_dir, "blender_compare_table.md", lines)
-    write_json(os.path.join(out_dir, "blender_compare", "per_pose.json"), recs)
+    write_table(out_dir, f"blender_compare{tag}_table.md", lines)
+    write_json(os.path.join(out_dir, "blender_compare", f"per_pose{tag}.json"), recs)
     title = (f"{os.path.basename(os.path.normpath(bike_dir))}: {n_poses} random poses, {size}², vs {reference_spp}-spp Cycles; "
              f"medians, shared 2-core machine (load {load0:.1f})")
-    chart(rows, match, ratio, png or os.path.join(out_dir, "gaussian_vs_blender.png"), title)
+    chart(rows, match, ratio, png or os.path.join(out_dir, f"gaussian_vs_blender{tag}.png"), title)
     progress(f"blender_compare: {time.time() - t:.0f} s")
     return rows
 
@@ -379,6 +388,8 @@ def main(argv=None):
     ap.add_argument("--reference-spp", type=int, default=REFERENCE_SPP)
     ap.add_argument("--spp", default=",".join(map(str, SPP)), help="Cycles sample counts to compare")
     ap.add_argument("--no-workbench", action="store_true")
+    ap.add_argument("--gaussians-only", action="store_true",
+                    help="score only our Gaussians (e.g. retrained parts) against the cached references; no key")
     ap.add_argument("--quick", action="store_true", help="3 poses at 256², 128-spp reference (a smoke run)")
     ap.add_argument("--png", help="chart path (default OUT/gaussian_vs_blender.png)")
     a = ap.parse_args(argv)
@@ -406,7 +417,10 @@ def main(argv=None):
         return 2
     os.makedirs(a.out, exist_ok=True)
     res = {}
-    if run(res, a.out, a.bike, a.poses, a.size, a.seed, spp, a.reference_spp, not a.no_workbench, a.png) is None:
+    if a.gaussians_only:
+        spp, a.no_workbench = (), True
+    if run(res, a.out, a.bike, a.poses, a.size, a.seed, spp, a.reference_spp, not a.no_workbench, a.png,
+           tag="_gaussians_only" if a.gaussians_only else "") is None:
         return 1
     print(json.dumps({k: v for k, v in res.items() if k != "blender_compare"}, indent=1))
     return 0

@@ -19,7 +19,7 @@ def parse(argv):
     p.add_argument("--bike", required=True, help="bike folder (holds bike.blend, keypoints.json)")
     p.add_argument("--parts", default="all", help="comma list of frame,steering,crank,whole or 'all'")
     p.add_argument("--views", default=None, help="comma list of ring view indices (default: all 36)")
-    p.add_argument("--samples", type=int, default=None, help="Cycles samples (default: benchmarked setting)")
+    p.add_argument("--samples", type=int, default=None, help="Cycles samples (default 128: measured in docs/training.md)")
     p.add_argument("--denoise", choices=["NONE", "FAST", "BALANCED", "HIGH"], default=None)
     p.add_argument("--adaptive-threshold", type=float, default=None,
                    help="Cycles adaptive-sampling noise threshold (default 0.05; 0: off, every pixel gets every sample)")
