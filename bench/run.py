@@ -34,6 +34,8 @@ STAGES = {
     "bike_relit": ("bench.relight", lambda m, r, out: m.run_bench(r, out)),
     "rider_relit": ("bench.rider_relit", lambda m, r, out: m.run(r, out)),
     "library": ("bench.library", lambda m, r, out: m.run(r, out)),  # library_build_s, dataset_ray_overhead
+    # gaussian_vs_blender_equal_fidelity: the trained bike vs Cycles/Workbench, interleaved (issue 14)
+    "blender_compare": ("bench.blender_compare", lambda m, r, out: m.run(r, out)),
 }
 
 PAPER = {
@@ -62,6 +64,7 @@ TARGETS = {
     "rider_relit": "box PSNR ≥ 30 dB, IoU ≥ 0.97 (means)",
     "relight_render_overhead": "≤ 0.2",
     "dataset_ray_overhead": "< 0.1",
+    "gaussian_vs_blender_equal_fidelity": "≥ 10",
 }
 
 
@@ -86,6 +89,9 @@ def report(results, out_dir, timings):
                   "| --- | --- | --- | --- | --- | --- |"]
         for r in results["train_parts"]:
             lines.append(f"| {r['bike']} | {r['part']} | {r['psnr']:.2f} | {r['ssim']:.4f} | {r['gaussians']} | {r['wall_s']:.0f} |")
+    if results.get("blender_compare") and os.path.isfile(os.path.join(out_dir, "blender_compare_table.md")):
+        with open(os.path.join(out_dir, "blender_compare_table.md")) as f:
+            lines += ["", "## Gaussians vs Blender (blender_compare)", "", f.read().rstrip()]
     lines += ["", "## Stage wall times", ""] + [f"- {k}: {v:.0f} s" for k, v in timings.items()]
     charts = sorted(f for f in os.listdir(out_dir) if f.endswith(".png"))
     if charts:

@@ -4,7 +4,18 @@ Trains one part (default: the frame of the first bike with views) once per `--ma
 budget and draws both curves from the trainer's PSNR history (held-out views, object box) into
 one PNG; the raw histories go to a JSON beside it. Run alone:
 `python -m bench.train_chart --bikes out/bench/bikes --budgets 5000,15000,40000`.
+
+Fidelity runs (`--runs RUNS.json --reference REF_VIEWS`): each run is {"label", "views" (a views
+folder of the part, e.g. rendered with other Cycles samples / denoising), and any TrainConfig
+field ("max_gaussians", "antialiased", "iterations", "time_budget_s", ...)}; every trained model is
+scored against a clean reference of the held-out cameras (a views folder of the same part where
+only those cameras were rendered, e.g. at 1024 spp without denoising): box PSNR (RGB on black in
+the union of both masks' box + 8 px) and mask IoU, as bench/blender_compare.py scores whole bikes.
+That chart (box PSNR vs training time and vs Gaussians) is what chose the training defaults
+(docs/training.md).
 """
+import dataclasses
+import json
 import os
 import sys
 
@@ -74,12 +85,151 @@ def run(results, bikes_dir="out/bikes", bike=None, part="frame", budgets=BUDGETS
     return results
 
 
+# -- fidelity against a clean reference ------------------------------------------------------------
+
+def clean_fidelity(g, reference_dir, antialiased=False):
+    """Mean box PSNR and mask IoU of Gaussians g over the cameras that have an image in
+    reference_dir (a views folder: cameras.json + rgba/cameraNNNN/0000.png), and the count."""
+    import numpy as np
+    import torch
+
+    from bench.blender_compare import load_rgba, object_box
+    from bench.compare import mask_iou, psnr
+    from splatting.raster.camera import load_cameras
+    from splatting.raster.sparse import render_gaussians
+
+    cams, _ = load_cameras(os.path.join(reference_dir, "cameras.json"))
+    ps, ious = [], []
+    for cam in cams:
+        path = os.path.join(reference_dir, "rgba", cam.name, "0000.png")
+        if not os.path.isfile(path):
+            continue
+        ref, m_ref = load_rgba(path)
+        with torch.no_grad():
+            o = render_gaussians(g, cam, antialiased=antialiased)
+        img = o["rgb"].clamp(0, 1).double().numpy()
+        m = o["alpha"].numpy() > 0.5
+        x0, y0, x1, y1 = object_box(m, m_ref)
+        ps.append(psnr(img[y0:y1, x0:x1], ref[y0:y1, x0:x1]))
+        ious.append(mask_iou(m, m_ref))
+    if not ps:
+        raise ValueError(f"train_chart: no reference images under {reference_dir}/rgba")
+    return float(np.mean(ps)), float(np.mean(ious)), len(ps)
+
+
+def config_for(spec, threads):
+    """A TrainConfig from a run spec: TrainConfig fields, or DensifyConfig fields (max_gaussians...)."""
+    from splatting.training.strategy import DensifyConfig
+    from splatting.training.trainer import TrainConfig
+
+    cfg = TrainConfig(threads=threads, progress=False)
+    dens = {f.name for f in dataclasses.fields(DensifyConfig)}
+    top = {f.name for f in dataclasses.fields(TrainConfig)}
+    for k, v in spec.items():
+        if k in ("label", "views"):
+            continue
+        if k in dens:
+            setattr(cfg.densify, k, v)
+        elif k in top:
+            setattr(cfg, k, tuple(v) if isinstance(v, list) else v)
+        else:
+            raise ValueError(f"train_chart: unknown run field {k!r} (not in TrainConfig or DensifyConfig)")
+    return cfg
+
+
+def run_fidelity(specs, reference_dir, png, threads=1, out_json=None):
+    """Train every run spec, score it against the clean reference; chart + JSON (resumable: runs
+    already in the JSON with the same spec are not trained again)."""
+    from cyclist_formats.atomic import write_json
+    from splatting.training.trainer import train_views
+    from splatting.training.views import load_views
+
+    out_json = out_json or os.path.splitext(png)[0] + ".json"
+    done = []
+    if os.path.isfile(out_json):
+        with open(out_json) as f:
+            done = json.load(f).get("runs", [])
+    runs = []
+    for spec in specs:
+        prev = next((r for r in done if r["spec"] == spec), None)
+        if prev:
+            runs.append(prev)
+            continue
+        cfg = config_for(spec, threads)
+        print(f"train_chart: {spec['label']} ...", flush=True)
+        load0 = os.getloadavg()[0]
+        g, m = train_views(load_views(spec["views"]), cfg)
+        box, iou, n = clean_fidelity(g, reference_dir, cfg.antialiased)
+        r = {"spec": spec, "label": spec["label"], "clean_box_psnr": box, "clean_iou": iou, "reference_views": n,
+             "psnr_crop": m["psnr_crop"], "gaussians": m["gaussians"], "wall_s": m["wall_s"], "iterations": m["iterations"],
+             "stopped": m["stopped"], "load_1min": [round(load0, 2), round(os.getloadavg()[0], 2)]}
+        runs.append(r)
+        print(f"train_chart: {spec['label']}: clean box PSNR {box:.2f} dB, IoU {iou:.4f}, {m['gaussians']} Gaussians, "
+              f"{m['wall_s']:.0f} s, {m['iterations']} it ({m['stopped']}); own held-out box {m['psnr_crop']:.2f} dB",
+              flush=True)
+        write_json(out_json, {"reference": os.path.abspath(reference_dir), "threads": threads, "runs": runs})
+    draw_fidelity(runs, png, f"held-out cameras vs clean reference ({os.path.basename(os.path.dirname(reference_dir))}"
+                             f"/{os.path.basename(reference_dir)}); {threads} thread, shared 2-core machine")
+    return runs
+
+
+def draw_fidelity(runs, png, title=""):
+    """Clean box PSNR of each run against its training wall time and its Gaussian count."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from cyclist_formats.atomic import atomic_path
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.4), sharey=True)
+    for i, r in enumerate(runs):
+        mk = "os^Dv<>p*h"[i % 10]
+        lab = f"{r['label']}: {r['clean_box_psnr']:.2f} dB, IoU {r['clean_iou']:.3f}"
+        line, = a.plot([r["wall_s"]], [r["clean_box_psnr"]], marker=mk, ms=8, ls="", label=lab)
+        b.plot([r["gaussians"]], [r["clean_box_psnr"]], marker=mk, ms=8, ls="", color=line.get_color())
+    a.set_xlabel("training wall time (s)")
+    a.set_ylabel("box PSNR vs clean reference (dB)")
+    b.set_xlabel("Gaussians")
+    b.set_xscale("log")
+    for ax in (a, b):
+        ax.grid(alpha=0.3)
+    a.legend(fontsize=7, loc="best")
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    os.makedirs(os.path.dirname(os.path.abspath(png)), exist_ok=True)
+    with atomic_path(png) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+
 if __name__ == "__main__":
     from bench.train_parts import training_args
     ap = training_args(__doc__)
     ap.add_argument("--part", default="frame")
     ap.add_argument("--budgets", default=",".join(map(str, BUDGETS)))
     ap.add_argument("--png", default="out/bench/train_chart.png")
+    ap.add_argument("--runs", help="JSON list of run specs (fidelity mode, see above)")
+    ap.add_argument("--reference", help="views folder with clean renders of the held-out cameras (fidelity mode)")
     a = ap.parse_args()
     sys.path.insert(0, os.getcwd())
-    run({}, a.bikes, a.bike, a.part, [int(x) for x in a.budgets.split(",")], a.threads, a.png, a.time_budget_s)
+    if bool(a.runs) != bool(a.reference):
+        sys.stderr.write("train_chart: error: --runs and --reference go together\n")
+        raise SystemExit(2)
+    if a.runs:
+        from cyclist_formats.bike_folder import read_json
+        from cyclist_formats.errors import UserError
+        try:
+            specs = read_json(a.runs, "run specs")
+            for sp in specs:
+                config_for(sp, a.threads)
+                if not os.path.isfile(os.path.join(sp["views"], "cameras.json")):
+                    raise UserError(f"run {sp.get('label')!r}: no cameras.json in {sp['views']}")
+            if not os.path.isfile(os.path.join(a.reference, "cameras.json")):
+                raise UserError(f"--reference {a.reference} has no cameras.json")
+        except (UserError, ValueError, KeyError, TypeError) as e:
+            sys.stderr.write(f"train_chart: error: {e}\n")
+            raise SystemExit(2)
+        run_fidelity(specs, a.reference, a.png, a.threads)
+    else:
+        run({}, a.bikes, a.bike, a.part, [int(x) for x in a.budgets.split(",")], a.threads, a.png, a.time_budget_s)

@@ -4,6 +4,7 @@ The options are derived from TrainConfig (and its DensifyConfig): every field wh
 "help" becomes `--field-name` with the field's default, type and choices, so the defaults have one
 source of truth.  The training itself is splatting.training.trainer.train.
 """
+import argparse
 import dataclasses
 
 from cyclist_formats.errors import UserError
@@ -42,7 +43,9 @@ def add_arguments(p):
     for path, f in _cli_fields():
         d = _default(path)
         kw = {"help": f.metadata["help"] + " (default %(default)s)"}
-        if isinstance(d, tuple):
+        if isinstance(d, bool):  # --x / --no-x (type=bool would read "False" as true)
+            kw.update(default=d, action=argparse.BooleanOptionalAction)
+        elif isinstance(d, tuple):
             kw.update(default=",".join(map(str, d)), type=str)
         else:
             kw.update(default=d, type=type(d))

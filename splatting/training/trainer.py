@@ -37,6 +37,9 @@ class TrainConfig:
     sh_degree: int = field(default=0, metadata={"help": "spherical-harmonics degree", "choices": (0, 1, 2, 3)})
     holdout: tuple = field(default=DEFAULT_HOLDOUT, metadata={"help": "held-out view indices (comma list)"})
     seed: int = field(default=0, metadata={"help": "random seed"})
+    # mip-splatting's 2D filter with opacity compensation (raster/sparse.py); a model trained with it
+    # must be rendered with it (its PART.json config says so)
+    antialiased: bool = field(default=False, metadata={"help": "antialiased splatting in training and evaluation"})
     # 1 by default: on the shared 2-core machine 2 threads ran 4-7x slower per iteration
     # (oversubscription), see docs/training.md; None leaves torch's default
     threads: int = field(default=1, metadata={"help": "torch.set_num_threads (1: measured fastest on 2 shared cores)"})
@@ -75,14 +78,14 @@ def gaussians_of(params) -> Gaussians:
                      torch.cat([params["sh0"], params["shN"]], 1))
 
 
-def _render(params, cam, background=None, sh_degree=None):
+def _render(params, cam, background=None, sh_degree=None, antialiased=False):
     return rasterize(params["means"], params["quats"], torch.exp(params["log_scales"]),
                      torch.sigmoid(params["opacity_logits"]), torch.cat([params["sh0"], params["shN"]], 1),
-                     cam, background=background, sh_degree=sh_degree)
+                     cam, background=background, sh_degree=sh_degree, antialiased=antialiased)
 
 
 @torch.no_grad()
-def evaluate(g_or_params, targets: Targets, background=(1.0, 1.0, 1.0), crop=False):
+def evaluate(g_or_params, targets: Targets, background=(1.0, 1.0, 1.0), crop=False, antialiased=False):
     """Held-out quality on RGB composited over `background` (white: the NeRF-synthetic convention).
     crop=False: whole images (the reported numbers); crop=True: the object's box only (cheaper)."""
     params = _params_from(g_or_params) if isinstance(g_or_params, Gaussians) else g_or_params
@@ -96,7 +99,7 @@ def evaluate(g_or_params, targets: Targets, background=(1.0, 1.0, 1.0), crop=Fal
             cam = crop_camera(cam, boxes[i])
             gt = gt[y0:y1, x0:x1]
         gt_rgb = gt[..., :3] + (1 - gt[..., 3:]) * bg
-        out = _render(params, cam, background=bg)
+        out = _render(params, cam, background=bg, antialiased=antialiased)
         pred = out["rgb"].clamp(0, 1)
         ps.append(psnr(pred, gt_rgb))
         ss.append(float(ssim(pred, gt_rgb)))
@@ -162,7 +165,7 @@ def train_views(views: Views, cfg: TrainConfig):
         x0, y0, x1, y1 = boxes[v]
         cam = crop_camera(cams[v], boxes[v])
         gt = img[v, :, y0:y1, x0:x1].permute(1, 2, 0)
-        out = _render(params, cam, sh_degree=cfg.sh_degree)
+        out = _render(params, cam, sh_degree=cfg.sh_degree, antialiased=cfg.antialiased)
         bg = torch.rand(3, generator=gen)  # random background: colour and alpha are both pinned down
         pred = torch.cat([out["rgb"] + (1 - out["alpha"])[..., None] * bg, out["alpha"][..., None]], -1)
         target = torch.cat([gt[..., :3] + (1 - gt[..., 3:]) * bg, gt[..., 3:]], -1)
@@ -185,7 +188,7 @@ def train_views(views: Views, cfg: TrainConfig):
         dens.post_backward(it, params, opt, out["means2d"].grad, out["radii"], cams[v].width, cams[v].height)
 
         if ho is not None and (it % cfg.eval_every == 0 or it == cfg.iterations):
-            last_psnr, _ = evaluate(params, ho, crop=True)
+            last_psnr, _ = evaluate(params, ho, crop=True, antialiased=cfg.antialiased)
             history.append([it, round(time.time() - t0, 2), round(last_psnr, 3), len(params["means"])])
             if last_psnr > best + cfg.min_delta_db:
                 best, since_best = last_psnr, 0
@@ -212,6 +215,7 @@ def train_views(views: Views, cfg: TrainConfig):
         "iterations": it,
         "stopped": stopped,
         "sh_degree": cfg.sh_degree,
+        "antialiased": cfg.antialiased,
         "max_gaussians": cfg.densify.max_gaussians,
         "extent_m": round(extent, 4),
         "threads": torch.get_num_threads(),
@@ -223,8 +227,8 @@ def train_views(views: Views, cfg: TrainConfig):
         "config": _config_dict(cfg),
     }
     if ho is not None:
-        metrics["psnr"], metrics["ssim"] = [round(x, 4) for x in evaluate(g, ho)]
-        metrics["psnr_crop"] = round(evaluate(g, ho, crop=True)[0], 4)
+        metrics["psnr"], metrics["ssim"] = [round(x, 4) for x in evaluate(g, ho, antialiased=cfg.antialiased)]
+        metrics["psnr_crop"] = round(evaluate(g, ho, crop=True, antialiased=cfg.antialiased)[0], 4)
     metrics["eval_s"] = round(time.time() - t0 - train_wall, 2)
     return g, metrics
 
