@@ -66,9 +66,8 @@ def find_bike(bikes_dir):
 
 def compare(bike_dir, poses, cams, gt_dir):
     import torch
-    from PIL import Image
 
-    from bench.compare import mask_iou, psnr
+    from bench.compare import load_rgba, mask_iou, psnr
     from splatting.bike.model import BikeModel
     from splatting.raster.camera import load_cameras
     from splatting.raster.sparse import render_gaussians
@@ -82,9 +81,8 @@ def compare(bike_dir, poses, cams, gt_dir):
             out = render_gaussians(posed.gaussians, ring[int(cam)])
             rgb = out["rgb"].clamp(0, 1).numpy()
             alpha = out["alpha"].numpy()
-            gt = np.asarray(Image.open(os.path.join(gt_dir, f"gt_{i:03d}.png")).convert("RGBA")).astype(np.float64) / 255
-            gt_rgb = gt[..., :3] * gt[..., 3:4]
-            m_gt, m = gt[..., 3] > 0.5, alpha > 0.5
+            gt_rgb, m_gt = load_rgba(os.path.join(gt_dir, f"gt_{i:03d}.png"))
+            m = alpha > 0.5
             with open(os.path.join(gt_dir, f"gt_{i:03d}_kp.json")) as f:
                 kp_gt = json.load(f)["keypoints"]
             kp_err = max(float(np.linalg.norm(posed.keypoints[k].numpy() - np.asarray(kp_gt[k]))) for k in kp_gt)

@@ -97,28 +97,12 @@ def equal_fidelity(rows):
 
 # -- metrics ---------------------------------------------------------------------------------------
 
-def load_rgba(path):
-    from PIL import Image
-
-    im = np.asarray(Image.open(path).convert("RGBA")).astype(np.float64) / 255
-    return im[..., :3] * im[..., 3:4], im[..., 3] > 0.5
-
-
-def object_box(m_a, m_b, pad=8):
-    """(x0, y0, x1, y1): the union of both masks' bounding boxes plus pad pixels, inside the image."""
-    h, w = m_a.shape
-    ys, xs = np.nonzero(m_a | m_b)
-    if len(xs) == 0:
-        return 0, 0, w, h
-    return max(0, xs.min() - pad), max(0, ys.min() - pad), min(w, xs.max() + pad + 1), min(h, ys.max() + pad + 1)
-
-
 def fidelity(ref_png, png):
-    from bench.compare import mask_iou, psnr
+    from bench.compare import load_rgba, mask_iou, psnr, union_box
 
     ref, m_ref = load_rgba(ref_png)
     img, m = load_rgba(png)
-    x0, y0, x1, y1 = object_box(m, m_ref)
+    x0, y0, x1, y1 = union_box(m, m_ref, pad=8)
     return psnr(img[y0:y1, x0:x1], ref[y0:y1, x0:x1]), mask_iou(m, m_ref)
 
 

@@ -23,11 +23,10 @@ sys.path.insert(0, ROOT)
 
 def check_bike(bike_dir, n_poses, seed, samples):
     import torch
-    from PIL import Image
 
     from bench.bike_gt import sample_poses
-    from bench.compare import mask_iou
-    from bench.splat_import import box_psnr
+    from bench.compare import load_rgba, mask_iou
+    from splatting.training.metrics import box_psnr, union_box
     from splatting.bike.model import BikeModel
     from splatting.raster.camera import load_cameras
     from splatting.raster.sparse import render_gaussians
@@ -56,15 +55,12 @@ def check_bike(bike_dir, n_poses, seed, samples):
         for i, (pose, cam) in enumerate(zip(poses, cams)):
             out = render_gaussians(model.pose(torch.tensor(pose, dtype=torch.float64)).gaussians, ring[int(cam)])
             rgb, alpha = out["rgb"].clamp(0, 1).numpy(), out["alpha"].numpy()
-            gt = np.asarray(Image.open(os.path.join(gt_dir, f"gt_{i:03d}.png")).convert("RGBA")).astype(np.float64) / 255
-            gt_rgb = gt[..., :3] * gt[..., 3:4]
-            m_gt, m = gt[..., 3] > 0.5, alpha > 0.5
+            gt_rgb, m_gt = load_rgba(os.path.join(gt_dir, f"gt_{i:03d}.png"))
+            m = alpha > 0.5
             rows.append({"iou": mask_iou(m, m_gt), "box_psnr": box_psnr(rgb, gt_rgb, m, m_gt)})
             if best is None or m_gt.sum() > best[0]:
-                ys, xs = np.nonzero(m | m_gt)
-                pad = 6
-                sl = (slice(max(ys.min() - pad, 0), ys.max() + pad + 1), slice(max(xs.min() - pad, 0), xs.max() + pad + 1))
-                best = (m_gt.sum(), gt_rgb[sl], rgb[sl])
+                x0, y0, x1, y1 = union_box(m, m_gt, pad=6)
+                best = (m_gt.sum(), gt_rgb[y0:y1, x0:x1], rgb[y0:y1, x0:x1])
     return rows, best[1:]
 
 

@@ -191,7 +191,7 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
 
     from bench.bike_gt import sample_poses
     from bench.compare import side_by_side, write_table
-    from bench.rider_relit import score
+    from bench.compare import score_png
     from cyclist_formats import bike_folder
     from splatting.raster.camera import load_cameras
     from splatting.raster.sparse import render_gaussians
@@ -250,7 +250,7 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
                    "sun_elevation_deg": round(float(np.degrees(np.arcsin(light.direction()[1]))), 1)}
             for key, out in (("relit", relit), ("noshadow", flat), ("baked", baked)):
                 rgb = out["rgb"].clamp(0, 1).numpy().astype(np.float64)
-                iou, ps, gt_rgb, box = score(os.path.join(gt_dir, f"gt_{i:03d}.png"), rgb, out["alpha"].numpy())
+                iou, ps, gt_rgb, box = score_png(os.path.join(gt_dir, f"gt_{i:03d}.png"), rgb, out["alpha"].numpy())
                 row[f"{key}_iou"], row[f"{key}_box_psnr"] = iou, ps
                 if key == "relit":
                     shots.append((gt_rgb, rgb, box))

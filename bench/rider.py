@@ -58,9 +58,10 @@ def camera_json(cam):
     return {"K": cam.K.tolist(), "R": cam.R.tolist(), "T": cam.T.tolist()}
 
 
-def posed_jobs(rider, rot, root, cams, gt_dir):
+def posed_jobs(rider, rot, root, cams, gt_dir, extras=None):
     """Per pose: the LBS-posed mesh (posed_NNN.ply) and its ring camera (camera_NNN.json, framing the
-    body) in gt_dir -> (render_rider --batch jobs {mesh, camera, out}, [Camera])."""
+    body) in gt_dir, plus gt_dir/jobs.json -> (jobs {mesh, camera, out} + that pose's `extras` dict,
+    [Camera], the jobs file)."""
     from splatting.raster.camera import ring_camera
     from splatting.rider.body import export_rider, pose_vertices
 
@@ -75,8 +76,12 @@ def posed_jobs(rider, rot, root, cams, gt_dir):
         cj = os.path.join(gt_dir, f"camera_{i:03d}.json")
         with open(cj, "w") as f:
             json.dump({cam.name: camera_json(cam), "orbit_centre": list(centre)}, f)
-        jobs.append({"mesh": mesh, "camera": f"{cj}:{cam.name}", "out": os.path.join(gt_dir, f"gt_{i:03d}.png")})
-    return jobs, cameras
+        jobs.append({"mesh": mesh, "camera": f"{cj}:{cam.name}", "out": os.path.join(gt_dir, f"gt_{i:03d}.png"),
+                     **(extras[i] if extras else {})})
+    job_file = os.path.join(gt_dir, "jobs.json")
+    with open(job_file, "w") as f:
+        json.dump(jobs, f, indent=1)
+    return jobs, cameras, job_file
 
 
 def repose_timing(avatar, rot, root, n_bike=100_000, reps=20):
@@ -105,9 +110,8 @@ def repose_timing(avatar, rot, root, n_bike=100_000, reps=20):
 
 def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, time_budget_s=480, rider_id=RIDER_ID):
     import torch
-    from PIL import Image
 
-    from bench.compare import mask_iou, psnr, side_by_side
+    from bench.compare import psnr, score_png, side_by_side
     from splatting.raster.sparse import render_gaussians
     from splatting.rider.avatar import RiderAvatar
     from splatting.rider.avatar_build import build_avatar
@@ -123,12 +127,7 @@ def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, tim
     rot, root = posed_batch(rider, theta_p, theta_s, yaw)
     gt_dir = os.path.join(out_dir, "rider_gt")
     os.makedirs(gt_dir, exist_ok=True)
-    jobs, cameras = posed_jobs(rider, rot, root, cams, gt_dir)
-    for job, y in zip(jobs, yaw):
-        job["light_yaw_deg"] = float(y)
-    job_file = os.path.join(gt_dir, "jobs.json")
-    with open(job_file, "w") as f:
-        json.dump(jobs, f, indent=1)
+    jobs, cameras, job_file = posed_jobs(rider, rot, root, cams, gt_dir, [{"light_yaw_deg": float(y)} for y in yaw])
     cmd = [sys.executable, os.path.join(ROOT, "blender_scripts", "render_rider.py"), "--batch", job_file]
     if samples:
         cmd += ["--samples", str(samples)]
@@ -142,15 +141,9 @@ def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, tim
             out = render_gaussians(g, cam)
             rgb = out["rgb"].clamp(0, 1).numpy().astype(np.float64)
             alpha = out["alpha"].numpy()
-            gt = np.asarray(Image.open(jobs[i]["out"]).convert("RGBA")).astype(np.float64) / 255
-            gt_rgb = gt[..., :3] * gt[..., 3:4]
-            m_gt, m = gt[..., 3] > 0.5, alpha > 0.5
-            ys, xs = np.nonzero(m_gt | m)
-            box = (max(0, xs.min() - 8), max(0, ys.min() - 8), min(512, xs.max() + 9), min(512, ys.max() + 9))
-            x0, y0, x1, y1 = box
+            iou, psnr_box, gt_rgb, box = score_png(jobs[i]["out"], rgb, alpha)
             rows.append({"theta_p_deg": float(theta_p[i]), "theta_s_deg": float(theta_s[i]), "yaw_deg": float(yaw[i]),
-                         "camera": int(cams[i]), "iou": mask_iou(m, m_gt), "psnr": psnr(rgb, gt_rgb),
-                         "psnr_box": psnr(rgb[y0:y1, x0:x1], gt_rgb[y0:y1, x0:x1])})
+                         "camera": int(cams[i]), "iou": iou, "psnr": psnr(rgb, gt_rgb), "psnr_box": psnr_box})
             renders.append((gt_rgb, rgb, box))
     repose_ms, n_total = repose_timing(avatar, rot, root)
 

@@ -42,29 +42,10 @@ def blender_worker(job_path):
         print(f"  blender rider pose {i + 1}/{len(jobs)}", flush=True)
 
 
-def score(gt_png, rgb, alpha, pad=8):
-    """Blender RGBA file vs a render (rgb premultiplied (H, W, 3), alpha (H, W), numpy) ->
-    (IoU, box PSNR, gt premultiplied rgb, box)."""
-    from PIL import Image
-
-    from bench.compare import mask_iou, psnr
-
-    gt = np.asarray(Image.open(gt_png).convert("RGBA")).astype(np.float64) / 255
-    gt_rgb, m_gt, m = gt[..., :3] * gt[..., 3:4], gt[..., 3] > 0.5, alpha > 0.5
-    H, W = m.shape
-    ys, xs = np.nonzero(m | m_gt)
-    if len(xs):
-        box = (max(0, xs.min() - pad), max(0, ys.min() - pad), min(W, xs.max() + pad + 1), min(H, ys.max() + pad + 1))
-    else:
-        box = (0, 0, W, H)
-    x0, y0, x1, y1 = box
-    return mask_iou(m, m_gt), psnr(rgb[y0:y1, x0:x1], gt_rgb[y0:y1, x0:x1]), gt_rgb, box
-
-
 def run(results, out_dir, avatar_dir=None, n_poses=12, seed=0, progress=print):
     import torch
 
-    from bench.compare import side_by_side, write_table
+    from bench.compare import score_png, side_by_side, write_table
     from bench.relight import light_json
     from bench.rider import RIDER_ID, posed_batch, posed_jobs, sample_poses
     from cyclist_formats import bike_folder
@@ -97,12 +78,7 @@ def run(results, out_dir, avatar_dir=None, n_poses=12, seed=0, progress=print):
     lights = [random_light(rng) for _ in range(n_poses)]
     gt_dir = os.path.join(out_dir, "rider_relit")
     os.makedirs(gt_dir, exist_ok=True)
-    jobs, cameras = posed_jobs(rider, rot, root, cams, gt_dir)
-    for job, light in zip(jobs, lights):
-        job["light"] = light_json(light)
-    job_file = os.path.join(gt_dir, "jobs.json")
-    with open(job_file, "w") as f:
-        json.dump(jobs, f, indent=1)
+    jobs, cameras, job_file = posed_jobs(rider, rot, root, cams, gt_dir, [{"light": light_json(light)} for light in lights])
     r = subprocess.run([sys.executable, os.path.abspath(__file__), "--worker", job_file], cwd=ROOT)
     if r.returncode:
         raise RuntimeError("rider_relit: the Blender worker failed")
@@ -120,7 +96,7 @@ def run(results, out_dir, avatar_dir=None, n_poses=12, seed=0, progress=print):
                    "sun_elevation_deg": round(float(np.degrees(np.arcsin(light.direction()[1]))), 1)}
             for key, out in (("relit", relit), ("noshadow", flat), ("baked", baked)):
                 rgb = out["rgb"].clamp(0, 1).numpy().astype(np.float64)
-                iou, ps, gt_rgb, box = score(jobs[i]["out"], rgb, out["alpha"].numpy())
+                iou, ps, gt_rgb, box = score_png(jobs[i]["out"], rgb, out["alpha"].numpy())
                 row[f"{key}_iou"], row[f"{key}_box_psnr"] = iou, ps
                 if key == "relit":
                     shots.append((gt_rgb, rgb, box))

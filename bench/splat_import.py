@@ -30,15 +30,6 @@ CAMERAS = (0, 9, 18, 27)
 SAMPLES = int(os.environ.get("SPLAT_BENCH_SAMPLES", "16"))
 
 
-def box_psnr(a, b, ma, mb):
-    ys, xs = np.nonzero(ma | mb)
-    if len(ys) == 0:
-        return float("nan")
-    sl = (slice(ys.min(), ys.max() + 1), slice(xs.min(), xs.max() + 1))
-    mse = float(((a[sl] - b[sl]) ** 2).mean())
-    return float(10 * np.log10(1.0 / max(mse, 1e-12)))
-
-
 def find_bike(bikes_dir):
     for b in sorted(os.listdir(bikes_dir)) if os.path.isdir(bikes_dir) else []:
         d = os.path.join(bikes_dir, b)
@@ -115,6 +106,7 @@ def run(results, out_dir, bike_dir=None, cams=CAMERAS, picture=None):
     import torch
 
     from bench.compare import mask_iou, side_by_side
+    from splatting.training.metrics import box_psnr
     from splatting.raster.camera import load_cameras
     from splatting.gaussians.container import read_ply
     from splatting.raster.sparse import render_gaussians

@@ -93,7 +93,7 @@ def clean_fidelity(g, reference_dir, antialiased=False):
     import numpy as np
     import torch
 
-    from bench.blender_compare import load_rgba, object_box
+    from bench.compare import load_rgba, union_box
     from bench.compare import mask_iou, psnr
     from splatting.raster.camera import load_cameras
     from splatting.raster.sparse import render_gaussians
@@ -109,7 +109,7 @@ def clean_fidelity(g, reference_dir, antialiased=False):
             o = render_gaussians(g, cam, antialiased=antialiased)
         img = o["rgb"].clamp(0, 1).double().numpy()
         m = o["alpha"].numpy() > 0.5
-        x0, y0, x1, y1 = object_box(m, m_ref)
+        x0, y0, x1, y1 = union_box(m, m_ref, pad=8)
         ps.append(psnr(img[y0:y1, x0:x1], ref[y0:y1, x0:x1]))
         ious.append(mask_iou(m, m_ref))
     if not ps:

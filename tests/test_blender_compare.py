@@ -99,7 +99,7 @@ def test_stage_on_a_tiny_setting(trained_bike, tmp_path):
     assert ours["s_1t"] > 0
     # the stand-in Gaussians (1 cm blobs on the mesh surface) fill the wheels, so IoU is low, but
     # their silhouette must cover the reference's: same pose, same camera on both sides
-    from bench.blender_compare import load_rgba
+    from bench.compare import load_rgba
 
     for i in range(2):
         _, m_ref = load_rgba(tmp_path / "blender_compare" / "reference" / f"ref_{i:03d}.png")

@@ -14,6 +14,7 @@ import sys
 import numpy as np
 
 from cyclist_formats.atomic import atomic_path
+from splatting.training.metrics import box_psnr, mask_iou
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -25,20 +26,6 @@ def sample_poses(n, seed=0):
                       rng.uniform(0, 360, n), rng.uniform(-15, 15, n), rng.uniform(-0.3, 0.3, n),
                       rng.uniform(-0.1, 0.1, n), rng.uniform(-0.3, 0.3, n)], 1)
     return poses, rng.integers(0, 36, n)
-
-
-def mask_iou(a, b):
-    return float((a & b).sum() / max(1, (a | b).sum()))
-
-
-def box_psnr(a, b, m1, m2):
-    """PSNR of RGB images a, b in [0, 1] over the union box of masks m1 | m2."""
-    ys, xs = np.nonzero(m1 | m2)
-    if len(ys) == 0:
-        return float("nan")
-    sl = (slice(ys.min(), ys.max() + 1), slice(xs.min(), xs.max() + 1))
-    mse = float(((a[sl] - b[sl]) ** 2).mean())
-    return float(10 * np.log10(1.0 / max(mse, 1e-12)))
 
 
 def render_blender(bike_dir, pose, cam_index, out_png, samples=None):

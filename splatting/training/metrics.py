@@ -29,3 +29,23 @@ def ssim(a, b):
 def mask_iou(a, b):
     """Intersection over union of two boolean masks (numpy); 0 when both are empty."""
     return float((a & b).sum() / max(1, (a | b).sum()))
+
+
+def union_box(m1, m2, pad=0):
+    """(x0, y0, x1, y1), end-exclusive: the bounding box of m1 | m2 ((H, W) bool numpy) grown by pad
+    pixels and clipped to the image; the whole image when both masks are empty."""
+    h, w = m1.shape
+    ys, xs = np.nonzero(m1 | m2)
+    if len(xs) == 0:
+        return 0, 0, w, h
+    return (max(0, int(xs.min()) - pad), max(0, int(ys.min()) - pad),
+            min(w, int(xs.max()) + pad + 1), min(h, int(ys.max()) + pad + 1))
+
+
+def box_psnr(a, b, m1, m2, pad=0):
+    """PSNR of images a, b (H, W, C) inside union_box(m1, m2, pad), where the object is (a whole-image
+    PSNR is dominated by the empty background); NaN when both masks are empty."""
+    if not (m1 | m2).any():
+        return float("nan")
+    x0, y0, x1, y1 = union_box(m1, m2, pad)
+    return psnr(a[y0:y1, x0:x1], b[y0:y1, x0:x1])
