@@ -30,6 +30,14 @@ namespace {
 
 constexpr int TILE = 16;
 constexpr int TPIX = TILE * TILE;
+
+// Tile t's pixels, [ox, ex] x [oy, ey] inclusive, clipped to the W x H image (TX tiles per row):
+// the forward and the backward walk the same tiles.
+struct TileRect {
+  int ox, oy, ex, ey;
+  TileRect(int t, int TX, int W, int H)
+      : ox(t % TX * TILE), oy(t / TX * TILE), ex(std::min(ox + TILE, W) - 1), ey(std::min(oy + TILE, H) - 1) {}
+};
 constexpr double ALPHA_MIN = 1.0 / 255.0;
 constexpr double ALPHA_MAX = 0.99;
 constexpr double T_MIN = 1e-4;
@@ -173,7 +181,14 @@ struct Entry {
   V ha, dx[NJ];
   I box[NJ];
   int y0, y1, j0, j1;
-  // lane_xc[j]: lane l of chunk j holds j * L + l + 0.5 (a pixel centre's offset in the tile)
+  // lane_xc[j]: lane l of chunk j holds j * L + l + 0.5 (a pixel centre's offset in the tile);
+  // built once per thread by lane_centres()
+  static std::vector<V> lane_centres() {
+    std::vector<V> xc(NJ);
+    for (int j = 0; j < NJ; ++j)
+      for (int l = 0; l < L; ++l) xc[j][l] = (S)(j * L + l) + (S)0.5;
+    return xc;
+  }
   Entry(const Rec<S>& g, int ox, int oy, int ex, int ey, const V* lane_xc) {
     y0 = std::max(oy, g.v0);
     y1 = std::min(ey, g.v1);
@@ -397,16 +412,14 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
     typedef typename VT<S>::I I;
     typedef typename std::remove_reference<decltype(I{}[0])>::type IS;
     constexpr int L = VT<S>::L, NV = TPIX / L, NJ = TILE / L;
-    std::vector<V> T(NV), lane_xc(NJ);
+    const std::vector<V> lane_xc = Entry<S>::lane_centres();
+    std::vector<V> T(NV);
     std::vector<I> done(NV), lst(NV);
     std::vector<V> acc((size_t)NV * Cf);
-    for (int j = 0; j < NJ; ++j)
-      for (int l = 0; l < L; ++l) lane_xc[j][l] = (S)(j * L + l) + (S)0.5;
 #pragma omp for schedule(dynamic, 1)
     for (int it = 0; it < NT; ++it) {
       const int t = torder[it];
-      const int ox = (t % TX) * TILE, oy = (t / TX) * TILE;
-      const int ex = std::min(ox + TILE, W) - 1, ey = std::min(oy + TILE, H) - 1;
+      const auto [ox, oy, ex, ey] = TileRect(t, TX, W, H);
       if (tile_off[t + 1] == tile_off[t]) {  // empty (most tiles of a bike image): nothing to blend
         for (int y = oy; y <= ey; ++y) {
           const int64_t p = (int64_t)y * W + ox, nx = ex - ox + 1;
@@ -512,15 +525,13 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
     typedef typename VT<S>::I I;
     typedef typename std::remove_reference<decltype(I{}[0])>::type IS;
     constexpr int L = VT<S>::L, NV = TPIX / L, NJ = TILE / L;
-    std::vector<V> T(NV), accum(NV), G((size_t)NV * Cf), lane_xc(NJ), sums((NB + 7) / 8 * 8);
+    const std::vector<V> lane_xc = Entry<S>::lane_centres();
+    std::vector<V> T(NV), accum(NV), G((size_t)NV * Cf), sums((NB + 7) / 8 * 8);
     std::vector<I> lst(NV);
-    for (int j = 0; j < NJ; ++j)
-      for (int l = 0; l < L; ++l) lane_xc[j][l] = (S)(j * L + l) + (S)0.5;
 #pragma omp for schedule(dynamic, 1)
     for (int it = 0; it < NT; ++it) {
       const int t = torder[it];
-      const int ox = (t % TX) * TILE, oy = (t / TX) * TILE;
-      const int ex = std::min(ox + TILE, W) - 1, ey = std::min(oy + TILE, H) - 1;
+      const auto [ox, oy, ex, ey] = TileRect(t, TX, W, H);
       const int64_t t0 = tile_off[t];
       if (tile_off[t + 1] == t0) continue;  // most tiles of a bike image are empty
       int kmax = 0;
