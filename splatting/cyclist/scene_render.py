@@ -123,26 +123,33 @@ def _argmax_channels(feat):
 
 
 @torch.no_grad()
-def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None):
+def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None, features=None):
     """Gaussians g (N), slots (N,) long in 0..n_slots-1, camera -> dict:
     rgb (H, W, 3) premultiplied, alpha (H, W), depth (H, W) expected camera z (0 where alpha is 0),
     label (H, W) int16 (-1 where alpha <= 0.5), amodal {slot: (alpha crop, (u0, v0)) or None}
-    (amodal_max_px: see _subset_alpha), boxes [slot box (u0, v0, w, h) or None] (slot_boxes)."""
+    (amodal_max_px: see _subset_alpha), boxes [slot box (u0, v0, w, h) or None] (slot_boxes).
+    features: optional (N, F) channels composited in the same rasterization (relit datasets:
+    splatting/relight/scene.py); then also "features" (h, w, n_slots + F): the slots' weights and
+    the features inside "crop" (u0, v0, w, h), the union of the slot boxes (None: nothing seen)."""
     H, W = camera.height, camera.width
     t = (g.means.float(), g.quats.float(), g.scales.float(), g.opacities.float())
     boxes = slot_boxes(t[0], t[2], slots, n_slots, camera)
     rgb, alpha, depth = torch.zeros(H, W, 3), torch.zeros(H, W), torch.zeros(H, W)
     label = torch.full((H, W), -1, dtype=torch.int16)
     crop = union(boxes)
+    feats = None
     if crop is not None:
         u0, v0, w, h = crop
         onehot = torch.zeros(len(g), n_slots)
         onehot[torch.arange(len(g)), slots.long()] = 1.0
+        if features is not None:
+            onehot = torch.cat([onehot, features.float()], 1)
         out = rasterize(*t, g.sh.float(), cropped_camera(camera, crop), features=onehot)
+        feats = out["features"]
         a_c = out["alpha"]
         rgb[v0:v0 + h, u0:u0 + w], alpha[v0:v0 + h, u0:u0 + w], depth[v0:v0 + h, u0:u0 + w] = out["rgb"], a_c, out["depth"]
         # the back end's channels are (H, W, C) views of channel-major memory: reduce over C there
-        lab = _argmax_channels(out["features"].permute(2, 0, 1).contiguous())
+        lab = _argmax_channels(out["features"][..., :n_slots].permute(2, 0, 1).contiguous())
         lab[a_c <= MASK_ALPHA] = -1
         label[v0:v0 + h, u0:u0 + w] = lab
     d = torch.where(alpha > 1e-4, depth / alpha.clamp_min(1e-4), torch.zeros_like(depth))
@@ -150,5 +157,8 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None)
     for s in amodal_slots:
         idx = torch.nonzero(slots == s).squeeze(1)
         amodal[s] = _subset_alpha(t, idx, camera, boxes[s], amodal_max_px) if len(idx) and boxes[s] else None
-    return {"rgb": rgb.numpy(), "alpha": alpha.numpy(), "depth": d.numpy(), "label": label.numpy(),
-            "amodal": amodal, "boxes": boxes}
+    L = {"rgb": rgb.numpy(), "alpha": alpha.numpy(), "depth": d.numpy(), "label": label.numpy(),
+         "amodal": amodal, "boxes": boxes}
+    if features is not None:
+        L.update(features=feats, crop=crop)
+    return L

@@ -125,25 +125,54 @@ def load_scene(path, transform):
     return transform_gaussians(g, H)
 
 
-def contact_shadows(footprints, opacity, n=5):
-    """Flat dark Gaussians on the road: footprints = [(x, z, heading_deg, length_m, width_m)]."""
+def contact_shadows(footprints, opacity, n=5, sun=None, heights=None):
+    """Flat dark Gaussians on the road: footprints = [(x, z, heading_deg, length_m, width_m)].
+
+    sun (a relight Light; relit datasets, splatting/dataset/lighting.py) with heights [m] per
+    footprint: the shadow is cast away from the sun -- the footprint's blobs repeated along the
+    ground track of the instance's silhouette, from its wheels (height 0) to its top (height h
+    shifted by h / tan(elevation), at most 4 h) -- and its darkness is the sun's share of the
+    ground's light, E sin(el) / pi against the sky's L (what a shadow takes away), times opacity.
+    An approximation (the silhouette is the footprint's), the same for every background."""
     from splatting.gaussians.container import Gaussians
     from splatting.gaussians.sh import rgb_to_sh0
-    means, quats, scales = [], [], []
-    for x, z, yaw, length, width in footprints:
+    means, quats, scales, opac = [], [], [], []
+    o = min(max(opacity, 1e-4), 0.99)
+    shift = np.zeros(2)
+    if sun is not None:
+        d = np.asarray(sun.direction(torch.float64))
+        el = max(math.asin(min(1.0, d[1])), math.radians(1.0))
+        lum = lambda c: float(np.dot(c, [0.2126, 0.7152, 0.0722]))  # noqa: E731
+        e_sun = sun.sun_strength * lum(sun.sun_colour) * math.sin(el) / math.pi
+        o = min(max(o * e_sun / (e_sun + lum(sun.sky) + 1e-9), 1e-4), 0.99)
+        flat = np.array([d[0], d[2]])
+        shift = -flat / max(np.linalg.norm(flat), 1e-9) / math.tan(el) if np.linalg.norm(flat) > 1e-6 else np.zeros(2)
+    for i, (x, z, yaw, length, width) in enumerate(footprints):
         a = math.radians(yaw)
         fwd = np.array([math.cos(a), 0.0, -math.sin(a)])
         q = [math.cos(a / 2), 0.0, math.sin(a / 2), 0.0]  # about +Y: local x -> heading
-        for t in np.linspace(-0.5, 0.5, n):
-            means.append(np.array([x, 0.004, z]) + t * 0.7 * length * fwd)
-            quats.append(q)
-            scales.append([0.45 * length / n * 1.6, 0.002, 0.35 * width])
+        h = 0.0 if sun is None else float(heights[i])
+        track = shift * h
+        if np.linalg.norm(track) > 4 * h:
+            track = track / np.linalg.norm(track) * 4 * h
+        # copies ~0.35 footprint lengths apart, so about two overlap anywhere: each takes the opacity
+        # whose double is o
+        m = 1 + int(math.ceil(np.linalg.norm(track) / max(0.35 * length, 1e-3)))
+        ob = o if m == 1 else 1.0 - math.sqrt(1.0 - o)
+        for c in np.linspace(0.0, 1.0, m) if m > 1 else [0.0]:
+            centre = np.array([x, 0.004, z])
+            if c:
+                centre = centre + np.array([c * track[0], 0.0, c * track[1]])
+            for t in np.linspace(-0.5, 0.5, n):
+                means.append(centre + t * 0.7 * length * fwd)
+                quats.append(q)
+                scales.append([0.45 * length / n * 1.6, 0.002, 0.35 * width])
+                opac.append(ob)
     if not means:
         return None
     k = len(means)
-    o = min(max(opacity, 1e-4), 0.99)
     return Gaussians(means=torch.tensor(np.array(means), dtype=torch.float32),
                      quats=torch.tensor(quats, dtype=torch.float32),
                      log_scales=torch.log(torch.tensor(scales, dtype=torch.float32)),
-                     opacity_logits=torch.full((k,), math.log(o / (1 - o))),
+                     opacity_logits=torch.tensor([math.log(p / (1 - p)) for p in opac], dtype=torch.float32),
                      sh=rgb_to_sh0(torch.full((k, 3), 0.03))[:, None, :])

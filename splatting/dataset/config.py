@@ -24,6 +24,7 @@ from splatting.dataset.camera_presets import DEFAULTS as CAMERA_DEFAULTS
 from splatting.cyclist.appearance import RECOLOUR
 from splatting.cyclist.lod import DEFAULT_COMPENSATE as LOD_COMPENSATE, DEFAULT_LEVELS as LOD_LEVELS
 from splatting.dataset.labels import DEFAULT_COMBINED, DEFAULT_NAMES, VEHICLES
+from splatting.dataset import lighting
 
 DEFAULTS = {
     "name": "dataset",
@@ -66,6 +67,9 @@ DEFAULTS = {
     # keep_share) and a gain: brightness x white balance (+-white_balance per channel)
     "appearance": {"enabled": False, "regions": list(RECOLOUR), "keep_share": 0.25, "saturation": [0.15, 0.9],
                    "value": [0.12, 0.95], "brightness": [0.75, 1.25], "white_balance": 0.08},
+    # per-image light (splatting/dataset/lighting.py): baked = the trained colour; relit = a sun and
+    # sky drawn per image from these ranges, bikes and riders shaded from their relight channels
+    "lighting": copy.deepcopy(lighting.DEFAULTS),
 }
 
 
@@ -236,6 +240,7 @@ def _validate_street(cfg):
         raise _err("depth_maps", f"expected true or false, got {cfg['depth_maps']!r}")
     _validate_lod(cfg["lod"])
     _validate_appearance(cfg["appearance"])
+    lighting.validate(cfg["lighting"])
 
 
 def _validate_appearance(a):
@@ -307,6 +312,7 @@ def resolve_assets(cfg):
             d = b if os.path.isdir(b) else os.path.join(root, b)
             if not os.path.isfile(os.path.join(d, "keypoints.json")):
                 raise _err("bikes", f"{b!r} is not a bike folder (no {os.path.join(d, 'keypoints.json')})")
+    lighting.check_assets(cfg)
     return cfg
 
 

@@ -19,7 +19,7 @@ from splatting.cyclist.assets import bike_dir, load_avatar, load_bike
 from splatting.cyclist.compose import Cyclist
 from splatting.cyclist.render import keypoint_visibility, orbit_camera, over, project_points, to_uint8
 from splatting.cyclist.scene_render import MASK_ALPHA, render_scene, union
-from splatting.dataset import camera_presets, kitti
+from splatting.dataset import camera_presets, kitti, lighting
 from splatting.dataset.backgrounds import contact_shadows, generated, load_scene, photo
 from splatting.dataset.config import POSE_KEYS
 from splatting.dataset.labels import BoxMask, annotation, vehicle_class
@@ -204,6 +204,7 @@ def make_sample(cfg, index, assets):
     extras: {"depth": (H, W) float32, "kitti": [objects], "calib": {...}}."""
     d = draw(cfg, index)
     street = cfg["mode"] == "street"
+    relit = lighting.RelitSample(cfg, index, assets) if lighting.relit(cfg) else None  # None: baked colour
     kp_cfg, lab = cfg["keypoints"], cfg["labels"]
     # instances of one (bike, rider) are posed in one batch: the IK's cost is mostly per iteration,
     # not per pose.  The groups follow from the draw, so a sample stays a function of its index.
@@ -223,6 +224,8 @@ def make_sample(cfg, index, assets):
                 people = [f.rider_joints for f in posed]
         for j, f, person in zip(js, posed, people):
             frames[j] = (d["instances"][j], f, person)
+        if relit is not None:
+            relit.posed(bike, rider, js, [f.pose for f in posed])
 
     if street:
         spec = camera_presets.resolve(cfg["camera"])
@@ -243,23 +246,28 @@ def make_sample(cfg, index, assets):
         g = frame.gaussians
         slot = torch.where(frame.ids == RIDER_ID, 2 * k + 2, 2 * k + 1).long()
         boxes.append(extent_box(g, inst["pose"]))  # labels come from the full model, LOD or not
+        idx = None
         if cfg["appearance"]["enabled"]:
             look, gain = appearance.draw_look(cfg, cfg["seed"], index, k)
             g = appearance.apply_look(g, frame.ids, look, gain, **assets.look_inputs(inst["bike"], inst["rider"], frame))
             looks.append({"colours": {r: None if c is None else [round(float(x), 4) for x in c] for r, c in look.items()},
                           "gain": [round(float(x), 4) for x in gain]})
+        looked = g
         if lod_cfg["enabled"]:
             keeps.append(lod.level_keep(_height_px(boxes[-1], cam), lod_cfg["levels"]))
             if keeps[-1] < 1.0:
                 g, idx = lod.reduce(g, assets.lod_order(inst["bike"], inst["rider"], g, frame.ids), keeps[-1],
                                     lod_cfg["compensate"], frame.ids)
                 slot = slot.index_select(0, idx)
+        if relit is not None:
+            relit.instance(k, inst["bike"], inst["rider"], frame.gaussians, looked, g, idx)
         parts.append(g)
         slots.append(slot)
     b = cfg["backgrounds"]
     if b["shadow"] and bg_kind in ("images", "scene") and frames:
-        sh = contact_shadows([(inst["pose"][5], inst["pose"][7], inst["pose"][3], bx["l"], bx["w"])
-                              for (inst, _, _), bx in zip(frames, boxes)], b["shadow_opacity"])
+        feet = [(inst["pose"][5], inst["pose"][7], inst["pose"][3], bx["l"], bx["w"]) for (inst, _, _), bx in zip(frames, boxes)]
+        sh = (contact_shadows(feet, b["shadow_opacity"]) if relit is None
+              else relit.ground_shadows(feet, [bx["h"] for bx in boxes], b["shadow_opacity"]))
         parts.append(sh)
         slots.append(torch.zeros(len(sh), dtype=torch.long))
     if bg_kind == "scene":
@@ -268,7 +276,10 @@ def make_sample(cfg, index, assets):
         slots.append(torch.zeros(len(sc), dtype=torch.long))
     n_slots = 2 * len(frames) + 1
     if parts:
-        L = render_scene(Gaussians.cat(parts), torch.cat(slots), n_slots, cam, range(1, n_slots), cfg["amodal_max_px"])
+        if relit is None:
+            L = render_scene(Gaussians.cat(parts), torch.cat(slots), n_slots, cam, range(1, n_slots), cfg["amodal_max_px"])
+        else:
+            L = relit.render(parts, torch.cat(slots), n_slots, cam, range(1, n_slots), cfg["amodal_max_px"])
     else:
         L = {"rgb": np.zeros((H, W, 3), np.float32), "alpha": np.zeros((H, W), np.float32),
              "depth": np.zeros((H, W), np.float32), "label": np.full((H, W), -1, np.int16), "amodal": {},
@@ -345,6 +356,8 @@ def make_sample(cfg, index, assets):
              "pose_fields": list(POSE_KEYS), "camera": cam_rec, "background": bg_rec}
     if street:
         image["dropped_placements"] = d["dropped"]
+    if relit is not None:
+        image["lighting"] = relit.record(cam)
     for rec, look in zip(image["instances"], looks):  # the sampled look: None = kept
         rec["appearance"] = look
     if keeps:  # the level each instance was rendered at (share of its Gaussians)
@@ -390,4 +403,4 @@ def sample_done(out_dir, index, cfg=None):
 
 
 def config_record(cfg):
-    return json.loads(json.dumps(cfg))
+    return json.loads(json.dumps(lighting.record_config(cfg)))

@@ -116,7 +116,7 @@ class RecordingAvatar:
 
     def __init__(self, avatar):
         self._avatar = avatar
-        self.last = None
+        self.last = self.rotations = None
 
     def __getattr__(self, k):
         return getattr(self._avatar, k)
@@ -126,4 +126,6 @@ class RecordingAvatar:
 
     def pose_tensors(self, local_rotmats, root_trans=None):
         self.last = (local_rotmats.detach().clone(), None if root_trans is None else root_trans.detach().clone())
-        return self._avatar.pose_tensors(local_rotmats, root_trans)
+        out = self._avatar.pose_tensors(local_rotmats, root_trans)
+        self.rotations = out["rotations"]  # (B, N, 3, 3): what turns a relit dataset's normals
+        return out

@@ -33,10 +33,14 @@ class RelightableAvatar:
         r = bike_folder.read_relight(os.path.join(folder, PLY_NAME), n=len(av))
         return cls(av, *(torch.from_numpy(r[k]) for k in ("albedo", "normal", "gloss")))
 
+    def posed_normals(self, rotations):
+        """(..., N, 3, 3) skinning rotations (RiderAvatar.pose_tensors' "rotations") -> (..., N, 3) normals."""
+        return (rotations @ self.normals[..., None]).squeeze(-1)
+
     def pose(self, local_rotmats, root_trans=None):
         """(B, 24, 3, 3), (B, 3) -> list of B (Gaussians, albedo, world normals, gloss)."""
         out = self.avatar.pose_tensors(local_rotmats, root_trans)
         g = self.avatar.gaussians
-        normals = (out["rotations"] @ self.normals[None, :, :, None]).squeeze(-1)
+        normals = self.posed_normals(out["rotations"])
         return [(Gaussians(out["means"][b], out["quats"][b], g.log_scales, g.opacity_logits, out["sh"][b]),
                  self.albedo, normals[b], self.gloss) for b in range(local_rotmats.shape[0])]

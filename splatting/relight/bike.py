@@ -23,10 +23,14 @@ class RelightableBike:
 
     @classmethod
     def load(cls, bike_dir):
-        model = BikeModel.load(bike_dir)
+        return cls.of(BikeModel.load(bike_dir), bike_dir)
+
+    @classmethod
+    def of(cls, model, bike_dir):
+        """The relight channels of bike_dir's parts (gaussians/PART.relight.npz) for its loaded model."""
         parts = [bike_folder.read_relight(bike_folder.gaussians_path(bike_dir, name), n=e - a)
                  for name, (a, e) in zip(model.part_names, model.ranges)]
-        cat = lambda k: torch.cat([torch.from_numpy(p[k]) for p in parts])
+        cat = lambda k: torch.cat([torch.from_numpy(p[k]) for p in parts])  # noqa: E731
         return cls(model, cat("albedo"), cat("normal"), cat("gloss"))
 
     def posed_normals(self, pose):

@@ -34,6 +34,51 @@ def composite_features(prep, features):
     return outs, alpha
 
 
+def relight_features(normals, gloss=None, roughness=None, visibility=None):
+    """The per-Gaussian channels shade_composited reads, as one (N, C) float32 table: the world
+    normal (3), then the gloss's luminance (1) when there is a gloss, a per-Gaussian roughness (1)
+    when given (scenes mixing materials: a bike's 0.4, a rider's 1.0), the sun visibility (1) when
+    given (cast shadows).  The reflectance albedo + gloss is composited through the colour
+    channels (or its own 3 features, splatting/relight/scene.py)."""
+    cols = [normals.float()]
+    if gloss is not None:
+        cols.append((gloss.float() @ LUMA)[:, None])
+    for x in (roughness, visibility):
+        if x is not None:
+            cols.append(x.float().reshape(-1, 1))
+    return torch.cat(cols, 1).contiguous()
+
+
+def shade_composited(R, feats, alpha, camera, light: Light, gloss=True, rough_channel=False, shadows=False,
+                     roughness=ROUGHNESS, highlight=HIGHLIGHT):
+    """Display colour of composited relight channels: R (H, W, 3) the premultiplied reflectance
+    albedo + gloss, feats (H, W, C) the composited relight_features (same flags), alpha (H, W) the
+    coverage of what they came from, camera the view they were rendered in (for the highlight's
+    view directions) -> dict rgb (H, W, 3) premultiplied, gloss (H, W, 3) or None,
+    sun_visibility (H, W, 1) or None.  Only covered pixels are shaded (an object fills a fraction
+    of its image; measured 48 -> 6 ms for a bike at 256 px)."""
+    H, W = alpha.shape
+    pix = torch.nonzero(alpha.reshape(-1) > 1e-5).squeeze(1)
+    f = feats.reshape(H * W, -1).index_select(0, pix)
+    a = alpha.reshape(-1).index_select(0, pix)
+    Rp = R.reshape(H * W, 3).index_select(0, pix)
+    nrm, c = f[:, :3], 3
+    gl, alb = None, Rp
+    if gloss:
+        # per pixel the gloss colour is the reflectance's tint times the composited gloss luminance
+        # (exact for grey gloss: metals, clear coats)
+        share = (f[:, c:c + 1] / (Rp @ LUMA.to(Rp.dtype))[:, None].clamp_min(1e-6)).clamp(0, 1)
+        gl, alb, c = Rp * share, Rp * (1 - share), c + 1
+    if rough_channel:
+        roughness, c = (f[:, c] / a.clamp_min(1e-6)).clamp(0.05, 1.0), c + 1
+    vis = (f[:, c:c + 1] / a[:, None].clamp_min(1e-6)).clamp(0, 1) if shadows else None
+    view = view_directions(camera, f.dtype, pix) if gloss else None
+    rgb = torch.zeros(H * W, 3, dtype=f.dtype)
+    rgb.index_copy_(0, pix, shade(alb, nrm, a, light, gl, view, roughness, highlight, vis))
+    full = lambda x, ch: None if x is None else torch.zeros(H * W, ch, dtype=f.dtype).index_copy_(0, pix, x).reshape(H, W, ch)  # noqa: E731
+    return {"rgb": rgb.reshape(H, W, 3), "gloss": full(gl, 3), "sun_visibility": full(vis, 1)}
+
+
 @torch.no_grad()
 def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
                  shadows=False, antialiased=True):
@@ -52,33 +97,16 @@ def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness
 
     # Channel budget (each composited channel costs the tiled compositor ~4-5 % of a render): the
     # reflectance albedo + gloss rides in the colour channels (degree-0 SH whose colour is it), the
-    # normal and the gloss's luminance are the features; per pixel the gloss colour is taken as
-    # the reflectance's tint times that luminance (exact for grey gloss: metals, clear coats).
+    # normal and the gloss's luminance are the features (relight_features).
     refl = albedo if gloss is None else albedo + gloss
-    feats = [normals] + ([] if gloss is None else [(gloss @ LUMA.to(gloss.dtype))[:, None]])
+    vis = None
     if shadows:
         from splatting.relight.shadow import sun_visibility
-        feats.append(sun_visibility(g, light)[:, None].to(albedo.dtype))
+        vis = sun_visibility(g, light)
+    feats = relight_features(normals, gloss, visibility=vis)
     gr = Gaussians(g.means, g.quats, g.log_scales, g.opacity_logits, ((refl.float() - 0.5) / C0)[:, None, :].contiguous())
-    r = render_gaussians(gr, camera, features=torch.cat(feats, 1).float().contiguous(), sh_degree=0,
-                         antialiased=antialiased)
-    out, alpha = r["features"], r["alpha"]
-    H, W = alpha.shape
-    # shade the covered pixels only (an object fills a fraction of its image; measured 48 -> 6 ms
-    # for a bike at 256 px)
-    pix = torch.nonzero(alpha.reshape(-1) > 1e-5).squeeze(1)
-    f, a = out.reshape(H * W, -1).index_select(0, pix), alpha.reshape(-1).index_select(0, pix)
-    R = r["rgb"].reshape(H * W, 3).index_select(0, pix)
-    nrm = f[:, :3]
-    if gloss is not None:
-        share = (f[:, 3:4] / (R @ LUMA.to(R.dtype))[:, None].clamp_min(1e-6)).clamp(0, 1)
-        gl, alb = R * share, R * (1 - share)
-    else:
-        gl, alb = None, R
-    vis = (f[:, -1:] / a[:, None].clamp_min(1e-6)).clamp(0, 1) if shadows else None
-    view = view_directions(camera, f.dtype, pix) if gloss is not None else None
-    rgb = torch.zeros(H * W, 3, dtype=f.dtype)
-    rgb[pix] = shade(alb, nrm, a, light, gl, view, roughness, highlight, vis)
-    full = lambda x, c: None if x is None else torch.zeros(H * W, c, dtype=f.dtype).index_copy_(0, pix, x).reshape(H, W, c)  # noqa: E731
-    return {"rgb": rgb.reshape(H, W, 3), "alpha": alpha, "reflectance": r["rgb"], "normal": out[..., :3],
-            "gloss": full(gl, 3), "sun_visibility": full(vis, 1)}
+    r = render_gaussians(gr, camera, features=feats, sh_degree=0, antialiased=antialiased)
+    out = shade_composited(r["rgb"], r["features"], r["alpha"], camera, light, gloss is not None, False, shadows,
+                           roughness, highlight)
+    return {"rgb": out["rgb"], "alpha": r["alpha"], "reflectance": r["rgb"], "normal": r["features"][..., :3],
+            "gloss": out["gloss"], "sun_visibility": out["sun_visibility"]}

@@ -75,7 +75,7 @@ def ggx_sun(normal, view, light: Light, roughness=ROUGHNESS):
     h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-6)
     nh = (normal * h).sum(-1).clamp(0.0, 1.0)
     nv = (normal * view).sum(-1).clamp_min(0.05)  # grazing pixels: the lobe's 1/(n.v) would explode
-    a2 = float(roughness) ** 4
+    a2 = roughness ** 4 if torch.is_tensor(roughness) else float(roughness) ** 4  # per pixel or one value
     D = a2 / (math.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2)
     return torch.where((normal @ l) > 0, D / (4.0 * nv), torch.zeros_like(D))
 

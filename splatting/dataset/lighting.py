@@ -1,0 +1,216 @@
+"""Per-image light in datasets (`lighting:` in the config; docs/cyclists_and_datasets.md).
+
+mode baked (the default): the Gaussians' trained colour, as before; nothing here runs and the
+dataset's bytes are those of a config without the section.  mode relit: every image draws a sun
+(elevation, azimuth, strength, a slight tint) and a sky from the config's ranges, the bikes and
+riders are shaded under it from their relight channels (albedo, gloss, normal per Gaussian:
+docs/relighting.md), each with its own cast shadows (`shadows`), and the ground contact shadow
+of the street backgrounds falls away from the sun.  The light is drawn from its own generator
+seeded with (seed, index, TAG), so a sample stays a function of (config, index) and the other
+draws are those of the baked set.  The image record gets "lighting": the sun used, in the world
+and the camera frame.  Only the RGB changes: masks, boxes, depth and keypoints come from the
+same rasterization as in baked mode.
+"""
+import math
+import os
+
+import numpy as np
+import torch
+
+from cyclist_formats import bike_folder
+from cyclist_formats.errors import UserError
+
+MODES = ("baked", "relit")
+TAG = 0x5A11  # separates the light's draws from the sample's other streams
+SKY_TINT = (0.92, 0.96, 1.0)  # the sky's colour per unit of `sky` (grey-blue; bench/relight.py's)
+DEFAULTS = {"mode": "baked", "elevation_deg": [15, 75], "azimuth_deg": [-180, 180], "strength": [2, 5],
+            "sky": [0.1, 0.6], "sun_tint": 0.15, "shadows": True}
+
+
+def _err(field, msg):
+    return UserError(f"config field 'lighting.{field}': {msg}")
+
+
+def _num(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def validate(lc):
+    """The merged `lighting` section: one UserError naming the first bad field."""
+    if lc["mode"] not in MODES:
+        raise _err("mode", f"expected one of {', '.join(MODES)}, got {lc['mode']!r}")
+    for f, lo, hi in (("elevation_deg", 0, 90), ("azimuth_deg", -360, 360), ("strength", 0, 1000), ("sky", 0, 100)):
+        v = lc[f]
+        if not (isinstance(v, list) and len(v) == 2 and all(_num(x) for x in v) and v[0] <= v[1]):
+            raise _err(f, f"expected [min, max] with min <= max, got {v!r}")
+        if v[0] < lo or v[1] > hi:
+            raise _err(f, f"expected values within [{lo}, {hi}], got {v!r}")
+    if not (_num(lc["sun_tint"]) and 0 <= lc["sun_tint"] < 1):
+        raise _err("sun_tint", f"expected a number within [0, 1), got {lc['sun_tint']!r}")
+    if not isinstance(lc["shadows"], bool):
+        raise _err("shadows", f"expected true or false, got {lc['shadows']!r}")
+
+
+def relit(cfg):
+    return (cfg.get("lighting") or {}).get("mode", "baked") == "relit"
+
+
+def record_config(cfg):
+    """The config as stored beside a dataset: without the section in baked mode, so a baked set's
+    config.json is byte for byte what it was before the section existed (and such sets resume)."""
+    if not relit(cfg):
+        cfg = {k: v for k, v in cfg.items() if k != "lighting"}
+    return cfg
+
+
+def check_assets(cfg):
+    """Relit mode: every bike and rider of the (asset-resolved) config must carry relight channels;
+    one UserError naming the first asset without them and the command that makes them."""
+    if not relit(cfg):
+        return
+    from splatting.bike.model import MAIN_PARTS, SUB_PARTS
+    from splatting.cyclist.assets import bike_dir, has_trained_gaussians
+    from splatting.rider.avatar import PLY_NAME, SKINNING_NAME
+    if cfg["synthetic_assets"] == "always":
+        raise _err("mode", "relit needs trained assets with relight channels, but synthetic_assets is 'always' "
+                           "(stand-ins carry no albedo or normals)")
+    for b in cfg["bikes"]:
+        d = bike_dir(b, cfg["bikes_root"])
+        if not has_trained_gaussians(d):
+            raise _err("mode", f"relit: bike {b!r} has no trained Gaussians in {d}/gaussians (stand-ins carry no "
+                               f"relight channels); train it with `python -m splatting train`, then relight-fit")
+        for p in MAIN_PARTS + SUB_PARTS:
+            ply = bike_folder.gaussians_path(d, p)
+            if os.path.isfile(ply) and not os.path.isfile(bike_folder.relight_path(ply)):
+                raise _err("mode", f"relit: bike {b!r} part {p!r} has no relight channels "
+                                   f"({bike_folder.relight_path(ply)}); make them with `python -m splatting relight-fit "
+                                   f"--views {os.path.join(d, 'views', p)}`")
+    for r in cfg["riders"]:
+        folder = os.path.join(cfg["riders_root"], r)
+        ply = os.path.join(folder, PLY_NAME)
+        if not (os.path.isfile(ply) and os.path.isfile(os.path.join(folder, SKINNING_NAME))):
+            raise _err("mode", f"relit: rider {r!r} has no trained avatar in {folder} (the mesh stand-in carries no "
+                               f"relight channels); build it with `python -m splatting rider-avatar --id {r} --out {folder}`")
+        if not os.path.isfile(bike_folder.relight_path(ply)):
+            raise _err("mode", f"relit: rider {r!r} has no relight channels ({bike_folder.relight_path(ply)}); make them "
+                               f"with `python -m splatting relight-fit --views {os.path.join(folder, 'views')} --ply {ply}`")
+
+
+def draw_light(lc, seed, index):
+    """The sun and sky of sample `index`: (Light, its record without the camera frame)."""
+    from splatting.relight.shading import Light
+    rng = np.random.default_rng([int(seed), int(index), TAG])
+    el, az = rng.uniform(*lc["elevation_deg"]), rng.uniform(*lc["azimuth_deg"])
+    strength, s = rng.uniform(*lc["strength"]), rng.uniform(*lc["sky"])
+    tint = rng.uniform(1.0 - lc["sun_tint"], 1.0, 3)
+    tint = tint / tint.max()
+    e, a = math.radians(el), math.radians(az)
+    # world frame: Y up; azimuth 0 = towards +X (a bike heading 0 faces it), 90 = towards +Z
+    d = (math.cos(e) * math.cos(a), math.sin(e), math.cos(e) * math.sin(a))
+    sky = tuple(float(c * s) for c in SKY_TINT)
+    light = Light(sun_direction=d, sun_colour=tuple(float(x) for x in tint), sun_strength=float(strength), sky=sky)
+    rec = {"mode": "relit", "sun_direction_world": list(d), "elevation_deg": float(el), "azimuth_deg": float(az),
+           "sun_strength": float(strength), "sun_colour": list(light.sun_colour), "sky": list(sky),
+           "shadows": bool(lc["shadows"])}
+    return light, rec
+
+
+class _Channels:
+    """Per-process cache (kept on the dataset's Assets): RelightableBike / RelightableAvatar by id."""
+
+    def __init__(self):
+        self.bikes, self.riders = {}, {}
+
+    def bike(self, assets, bike):
+        if bike not in self.bikes:
+            from splatting.cyclist.assets import bike_dir
+            from splatting.relight.bike import RelightableBike
+            self.bikes[bike] = RelightableBike.of(assets.bikes[bike], bike_dir(bike, assets.cfg["bikes_root"]))
+        return self.bikes[bike]
+
+    def rider(self, assets, rider):
+        if rider not in self.riders:
+            from splatting.relight.avatar import RelightableAvatar
+            from splatting.rider.avatar import PLY_NAME
+            av = assets.avatars[rider]
+            r = bike_folder.read_relight(os.path.join(assets.cfg["riders_root"], rider, PLY_NAME), n=len(av))
+            self.riders[rider] = RelightableAvatar(av, *(torch.from_numpy(r[k]) for k in ("albedo", "normal", "gloss")))
+        return self.riders[rider]
+
+
+def _srgb_decode(c):
+    from splatting.relight.shading import srgb_decode
+    return srgb_decode(c)
+
+
+class RelitSample:
+    """The relit side of one dataset sample, fed by generate.make_sample at four points: posed
+    groups (normals), instances (looks, level of detail, cast shadows), the ground shadows and the
+    render; record() is the image record's "lighting"."""
+
+    def __init__(self, cfg, index, assets):
+        lc = cfg["lighting"]
+        self.light, self.rec = draw_light(lc, cfg["seed"], index)
+        self.shadows = lc["shadows"]
+        if getattr(assets, "relight_channels", None) is None:
+            assets.relight_channels = _Channels()
+        self.assets, self.ch = assets, assets.relight_channels
+        self.normals, self.channels = {}, {}
+
+    def posed(self, bike, rider, js, poses):
+        """After Cyclist.pose of the instances js (poses (B, 8)): their world normals (bike parts then
+        rider, the CyclistFrame's order); the rider's skinning rotations are the recorder's."""
+        rb = self.ch.bike(self.assets, bike)
+        ra = self.ch.rider(self.assets, rider) if rider is not None else None
+        rot = self.assets.avatars[rider].rotations if rider is not None else None
+        for b, j in enumerate(js):
+            n = rb.posed_normals(torch.as_tensor(np.asarray(poses[b]), dtype=torch.float64))
+            if ra is not None:
+                n = torch.cat([n, ra.posed_normals(rot[b])])
+            self.normals[j] = n
+
+    def instance(self, k, bike, rider, trained, looked, g, idx):
+        """Instance k's channels: trained = its posed Gaussians, looked = after the appearance look
+        (the look's change of each Gaussian's colour goes into its albedo, in linear light),
+        g = what is rendered (after the level of detail, idx its rows of looked, or None)."""
+        from splatting.gaussians.sh import C0
+        from splatting.relight.avatar import RIDER_ROUGHNESS
+        from splatting.relight.render import relight_features
+        from splatting.relight.shading import ROUGHNESS
+        rb = self.ch.bike(self.assets, bike)
+        alb, gl = [rb.albedo], [rb.gloss]
+        rough = [torch.full((len(rb.albedo),), ROUGHNESS)]
+        if rider is not None:
+            ra = self.ch.rider(self.assets, rider)
+            alb.append(ra.albedo)
+            gl.append(ra.gloss)
+            rough.append(torch.full((len(ra.albedo),), float(RIDER_ROUGHNESS)))
+        alb, gl, rough, nrm = torch.cat(alb), torch.cat(gl), torch.cat(rough), self.normals[k]
+        if looked is not trained:
+            before = _srgb_decode((C0 * trained.sh[:, 0] + 0.5).float()).clamp_min(1e-3)
+            after = _srgb_decode((C0 * looked.sh[:, 0] + 0.5).float())
+            alb = (alb * (after / before).clamp(0, 20)).clamp(0, 1)
+        if idx is not None:
+            alb, gl, rough, nrm = (x.index_select(0, idx) for x in (alb, gl, rough, nrm))
+        vis = None
+        if self.shadows:
+            from splatting.relight.shadow import sun_visibility
+            vis = sun_visibility(g, self.light)
+        self.channels[k] = (alb + gl, relight_features(nrm, gl, rough, vis))
+
+    def ground_shadows(self, footprints, heights, opacity):
+        """The street backgrounds' contact shadows under this sun (backgrounds.contact_shadows)."""
+        from splatting.dataset.backgrounds import contact_shadows
+        return contact_shadows(footprints, opacity, sun=self.light, heights=heights)
+
+    def render(self, parts, slots, n_slots, camera, amodal_slots, amodal_max_px):
+        """render_scene's layers with the instances (the first len(self.channels) parts) relit."""
+        from splatting.relight.scene import render_scene_relit
+        ch = [self.channels[k] for k in range(len(self.channels))]
+        return render_scene_relit(parts, ch, slots, n_slots, camera, self.light, self.shadows, amodal_slots,
+                                  amodal_max_px)
+
+    def record(self, camera):
+        R = camera.R.double().numpy()
+        d = R @ np.asarray(self.rec["sun_direction_world"], float)
+        return dict(self.rec, sun_direction_camera=[float(x) for x in d], camera_frame="opencv (x right, y down, z forward)")

@@ -1,0 +1,181 @@
+"""Per-image light in datasets (`lighting:`, splatting/dataset/lighting.py): config checks, refusal
+of assets without relight channels, determinism, the recorded sun is the one rendered, and relit
+samples differ from baked ones in the RGB only."""
+import contextlib
+import io
+import math
+import os
+
+import numpy as np
+import pytest
+import torch
+
+from cyclist_formats import bike_folder
+from helpers import RIDER, make_bike, small_config, write_yaml
+
+RELIT = {"mode": "relit", "elevation_deg": [20, 70], "strength": [2, 5], "sky": [0.1, 0.5]}
+
+
+def _relight_files(plys, seed=0):
+    """A relight file beside each PLY: albedo, gloss, unit normals (random: what matters here is
+    that they are read, posed and shaded, not that they look like a bike)."""
+    from splatting.gaussians.container import read_ply
+    g = torch.Generator().manual_seed(seed)
+    for ply in plys:
+        n = len(read_ply(ply))
+        nrm = torch.nn.functional.normalize(torch.randn(n, 3, generator=g), dim=-1)
+        bike_folder.write_relight(ply, torch.rand(n, 3, generator=g).numpy() * 0.8, nrm.numpy(),
+                                  torch.rand(n, 3, generator=g).numpy() * 0.1)
+
+
+@pytest.fixture(scope="module")
+def assets(tmp_path_factory):
+    """A trained-looking bike (random part Gaussians) and a 1500-Gaussian avatar of the roster rider,
+    each with relight channels."""
+    torch.set_num_threads(1)
+    from splatting.cyclist.assets import mesh_avatar
+    from splatting.rider.roster import load_rider
+    root = tmp_path_factory.mktemp("relit")
+    d = make_bike(str(root), "rl", n=300, sh_degree=1)
+    _relight_files([os.path.join(d, "gaussians", p + ".ply") for p in ("frame", "steering", "crank")])
+    folder = root / "riders" / RIDER
+    mesh_avatar(load_rider(RIDER), 1500).save(str(folder))
+    _relight_files([str(folder / "rider.ply")], seed=1)
+    return str(root)
+
+
+def _cfg(root, **kw):
+    cfg = small_config(root, bikes=["rl"], riders_root=os.path.join(root, "riders"), synthetic_assets="never",
+                       count=2, image_size=64, lighting=dict(RELIT))
+    cfg.update(kw)
+    return cfg
+
+
+def _main(cfg, tmp_path):
+    from splatting.cli import main
+    path = write_yaml(str(tmp_path / "c.yaml"), cfg)
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        rc = main(["dataset", "--config", path, "--out", str(tmp_path / "o"), "--quiet"])
+    return rc, err.getvalue().strip()
+
+
+@pytest.mark.parametrize("light, field", [
+    ({"mode": "sunny"}, "lighting.mode"),
+    ({"elevation_deg": [60, 20]}, "lighting.elevation_deg"),
+    ({"elevation_deg": [-10, 20]}, "lighting.elevation_deg"),
+    ({"elevation_deg": [float("nan"), 20]}, "lighting.elevation_deg"),
+    ({"azimuth_deg": 30}, "lighting.azimuth_deg"),
+    ({"strength": [1, float("inf")]}, "lighting.strength"),
+    ({"sky": [-0.1, 0.5]}, "lighting.sky"),
+    ({"sun_tint": 1.0}, "lighting.sun_tint"),
+    ({"shadows": "yes"}, "lighting.shadows"),
+    ({"sunrise": 1}, "lighting.sunrise"),
+])
+def test_bad_lighting_fields_are_named(tmp_path, light, field):
+    rc, msg = _main(small_config(str(tmp_path), lighting=light), tmp_path)
+    assert rc == 2 and f"config field '{field}'" in msg and len(msg.splitlines()) == 1, msg
+    assert not os.path.exists(tmp_path / "o" / "annotations.json")
+
+
+def test_relit_refuses_assets_without_relight_channels(assets, tmp_path):
+    import shutil
+    root = str(tmp_path / "copy")
+    shutil.copytree(assets, root)
+    rc, msg = _main(_cfg(root, synthetic_assets="always"), tmp_path)
+    assert rc == 2 and "synthetic_assets" in msg and len(msg.splitlines()) == 1, msg
+    os.remove(bike_folder.relight_path(os.path.join(root, "rl", "gaussians", "crank.ply")))
+    rc, msg = _main(_cfg(root), tmp_path)
+    assert rc == 2 and len(msg.splitlines()) == 1, msg
+    assert "'rl'" in msg and "'crank'" in msg and "relight-fit --views" in msg
+    _relight_files([os.path.join(root, "rl", "gaussians", "crank.ply")])
+    os.remove(bike_folder.relight_path(os.path.join(root, "riders", RIDER, "rider.ply")))
+    rc, msg = _main(_cfg(root), tmp_path)
+    assert rc == 2 and len(msg.splitlines()) == 1 and RIDER in msg and "relight-fit" in msg, msg
+    shutil.rmtree(os.path.join(root, "riders", RIDER))
+    rc, msg = _main(_cfg(root), tmp_path)
+    assert rc == 2 and len(msg.splitlines()) == 1 and "rider-avatar" in msg, msg
+    assert not os.path.exists(tmp_path / "o")
+
+
+def _sample(cfg, index):
+    from splatting.dataset.config import resolve_assets, validate
+    from splatting.dataset.generate import Assets, config_record, make_sample
+    c = config_record(resolve_assets(validate(cfg)))
+    return make_sample(c, index, Assets(c))
+
+
+def test_relit_is_deterministic_and_records_the_sun_it_renders(assets, monkeypatch):
+    from splatting.relight import scene
+    used = []
+    real = scene.shade_composited
+    monkeypatch.setattr(scene, "shade_composited", lambda *a, **k: used.append(a[4]) or real(*a, **k))
+    cfg = _cfg(assets)
+    rgb0, img0, anns0, _ = _sample(cfg, 1)
+    rgb1, img1, anns1, _ = _sample(cfg, 1)  # fresh assets: a resumed run's worker
+    assert np.array_equal(rgb0, rgb1) and img0 == img1 and anns0 == anns1
+    assert len(used) == 2
+    light, rec = used[0], img0["lighting"]
+    assert rec["mode"] == "relit" and rec["shadows"] is True
+    np.testing.assert_allclose(rec["sun_direction_world"], light.direction(torch.float64).numpy(), atol=1e-12)
+    assert rec["sun_strength"] == light.sun_strength and tuple(rec["sun_colour"]) == light.sun_colour
+    assert tuple(rec["sky"]) == light.sky
+    R = np.asarray(img0["camera"]["R"])
+    np.testing.assert_allclose(rec["sun_direction_camera"], R @ np.asarray(rec["sun_direction_world"]), atol=1e-12)
+    # elevation / azimuth describe the same direction, within the configured ranges
+    e, a = math.radians(rec["elevation_deg"]), math.radians(rec["azimuth_deg"])
+    np.testing.assert_allclose(rec["sun_direction_world"], [math.cos(e) * math.cos(a), math.sin(e), math.cos(e) * math.sin(a)],
+                               atol=1e-12)
+    assert 20 <= rec["elevation_deg"] <= 70 and 2 <= rec["sun_strength"] <= 5
+    # another image, another sun
+    _, img2, _, _ = _sample(cfg, 0)
+    assert img2["lighting"]["sun_direction_world"] != rec["sun_direction_world"]
+
+
+@pytest.mark.parametrize("extra", [{}, {"appearance": {"enabled": True}, "lod": {"enabled": True}}])
+def test_relit_and_baked_differ_in_rgb_only(assets, extra):
+    relit = _cfg(assets, **extra)
+    baked = _cfg(assets, lighting={"mode": "baked"}, **extra)
+    for i in range(2):
+        rgb_r, img_r, anns_r, ex_r = _sample(relit, i)
+        rgb_b, img_b, anns_b, ex_b = _sample(baked, i)
+        assert "lighting" not in img_b
+        assert {k: v for k, v in img_r.items() if k != "lighting"} == img_b
+        assert anns_r == anns_b  # masks (RLE), boxes, keypoints, occlusion, 3D boxes
+        assert np.array_equal(ex_r["depth"], ex_b["depth"]) and ex_r["kitti"] == ex_b["kitti"]
+        changed = np.abs(rgb_r.astype(int) - rgb_b.astype(int)).max(-1) > 0
+        assert changed.mean() > 0.02
+        # the pixels that change are the instances' (the background stays)
+        from pycocotools import mask as mask_utils
+        ink = np.zeros(changed.shape, bool)
+        for a in anns_r:
+            ink |= mask_utils.decode(a["segmentation_amodal"] if "segmentation_amodal" in a else a["segmentation"]).astype(bool)
+        assert changed[ink].mean() > 0.5
+
+
+def test_baked_config_record_has_no_lighting_section(assets):
+    from splatting.dataset.config import validate
+    from splatting.dataset.generate import config_record
+    assert "lighting" not in config_record(validate(small_config(assets)))
+    assert config_record(validate(_cfg(assets)))["lighting"]["mode"] == "relit"
+
+
+def test_ground_shadow_falls_away_from_the_sun():
+    from splatting.dataset.backgrounds import contact_shadows
+    from splatting.relight.shading import Light
+    foot = [(2.0, 3.0, 0.0, 1.8, 0.6)]
+    base = contact_shadows(foot, 0.55)
+    el = math.radians(40.0)
+    sun = Light(sun_direction=(math.cos(el), math.sin(el), 0.0), sun_strength=4.0, sky=(0.2, 0.2, 0.2))
+    cast = contact_shadows(foot, 0.55, sun=sun, heights=[1.7])
+    # the sun stands towards +X: the shadow reaches h / tan(el) towards -X, not sideways
+    m = cast.means.double()
+    assert float(m[:, 0].min()) < 2.0 - 0.7 * 1.7 / math.tan(el) and abs(float(m[:, 2].mean()) - 3.0) < 1e-5
+    assert float(base.means[:, 0].min()) > 2.0 - 0.9
+    # the darkness is the sun's share of the ground's light, times the configured opacity
+    e_sun = 4.0 * math.sin(el) / math.pi
+    share = e_sun / (e_sun + 0.2)
+    dense = 1 - (1 - cast.opacities.double()[0]) ** 2  # two copies overlap anywhere
+    assert float(dense) == pytest.approx(0.55 * share, rel=1e-4)
+    low = contact_shadows(foot, 0.55, sun=Light(sun_direction=(1.0, 0.01, 0.0), sky=(0.2, 0.2, 0.2)), heights=[1.7])
+    assert float(low.means[:, 0].min()) > 2.0 - 4 * 1.7 - 1.0  # at most 4 heights long
