@@ -179,3 +179,31 @@ def test_ground_shadow_falls_away_from_the_sun():
     assert float(dense) == pytest.approx(0.55 * share, rel=1e-4)
     low = contact_shadows(foot, 0.55, sun=Light(sun_direction=(1.0, 0.01, 0.0), sky=(0.2, 0.2, 0.2)), heights=[1.7])
     assert float(low.means[:, 0].min()) > 2.0 - 4 * 1.7 - 1.0  # at most 4 heights long
+
+
+def test_relit_street_scene_on_a_photo(assets, tmp_path, monkeypatch):
+    # several cyclists, parked bikes, a photo background with contact shadows: the labels are the
+    # baked scene's; the instances' shadows fall on the road away from the sun (a layer darkening
+    # what is not an instance)
+    from PIL import Image
+    from helpers import street_config
+    from splatting.dataset import lighting
+    Image.fromarray(np.full((90, 160, 3), 200, np.uint8)).save(tmp_path / "road.png")
+    kw = dict(bikes=["rl"], riders_root=os.path.join(assets, "riders"), synthetic_assets="never",
+              backgrounds={"kinds": ["images"], "images_dir": str(tmp_path)},
+              camera={"preset": "kitti", "scale": 0.25}, street={"distance_m": [4, 8]})
+    baked = street_config(assets, **kw)
+    relit = street_config(assets, lighting=dict(RELIT, shadows=False), **kw)
+    seen = []
+    real = lighting.RelitSample.cast_shadows
+    monkeypatch.setattr(lighting.RelitSample, "cast_shadows",
+                        lambda self, rgb, L, *a: seen.append((rgb, L["relit_cover"], real(self, rgb, L, *a))) or seen[-1][2])
+    rgb_r, img_r, anns_r, _ = _sample(relit, 0)
+    rgb_b, img_b, anns_b, _ = _sample(baked, 0)
+    assert len(img_r["instances"]) >= 2 and anns_r == anns_b
+    assert img_r["lighting"]["shadows"] is False
+    (before, cover, after), = seen
+    assert np.array_equal(after, rgb_r) and (after <= before).all()
+    road = (cover < 1e-3) & (after < before).any(-1)
+    assert road.sum() > 50  # the shadows land on the road ...
+    assert ((after < before).any(-1) <= (cover < 0.999)).all()  # ... never on what an instance covers

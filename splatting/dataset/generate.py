@@ -266,8 +266,7 @@ def make_sample(cfg, index, assets):
     b = cfg["backgrounds"]
     if b["shadow"] and bg_kind in ("images", "scene") and frames:
         feet = [(inst["pose"][5], inst["pose"][7], inst["pose"][3], bx["l"], bx["w"]) for (inst, _, _), bx in zip(frames, boxes)]
-        sh = (contact_shadows(feet, b["shadow_opacity"]) if relit is None
-              else relit.ground_shadows(feet, [bx["h"] for bx in boxes], b["shadow_opacity"]))
+        sh = contact_shadows(feet, b["shadow_opacity"])
         parts.append(sh)
         slots.append(torch.zeros(len(sh), dtype=torch.long))
     if bg_kind == "scene":
@@ -293,6 +292,8 @@ def make_sample(cfg, index, assets):
     else:
         bg = generated(bg_kind, d["background"]["seed"], W, H)
     rgb = over_in_box(L, bg, union(L.get("boxes", [])))
+    if relit is not None and b["shadow"] and bg_kind in ("images", "scene") and frames:
+        rgb = relit.cast_shadows(rgb, L, cam, feet, [bx["h"] for bx in boxes], b["shadow_opacity"])
 
     K, R, T = cam.K.double().numpy(), cam.R.double().numpy(), cam.T.double().numpy()
     # the depth test compares with the surface seen through the keypoint's whole pixel, whose

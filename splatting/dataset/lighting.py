@@ -4,8 +4,8 @@ mode baked (the default): the Gaussians' trained colour, as before; nothing here
 dataset's bytes are those of a config without the section.  mode relit: every image draws a sun
 (elevation, azimuth, strength, a slight tint) and a sky from the config's ranges, the bikes and
 riders are shaded under it from their relight channels (albedo, gloss, normal per Gaussian:
-docs/relighting.md), each with its own cast shadows (`shadows`), and the ground contact shadow
-of the street backgrounds falls away from the sun.  The light is drawn from its own generator
+docs/relighting.md), each with its own cast shadows (`shadows`), and on photo and scene
+backgrounds their shadows fall on the ground away from the sun (beside the baked contact shadow).  The light is drawn from its own generator
 seeded with (seed, index, TAG), so a sample stays a function of (config, index) and the other
 draws are those of the baked set.  The image record gets "lighting": the sun used, in the world
 and the camera frame.  Only the RGB changes: masks, boxes, depth and keypoints come from the
@@ -145,8 +145,8 @@ def _srgb_decode(c):
 
 class RelitSample:
     """The relit side of one dataset sample, fed by generate.make_sample at four points: posed
-    groups (normals), instances (looks, level of detail, cast shadows), the ground shadows and the
-    render; record() is the image record's "lighting"."""
+    groups (normals), instances (looks, level of detail, cast shadows), the render and the
+    shadows on the ground; record() is the image record's "lighting"."""
 
     def __init__(self, cfg, index, assets):
         lc = cfg["lighting"]
@@ -198,10 +198,21 @@ class RelitSample:
             vis = sun_visibility(g, self.light)
         self.channels[k] = (alb + gl, relight_features(nrm, gl, rough, vis))
 
-    def ground_shadows(self, footprints, heights, opacity):
-        """The street backgrounds' contact shadows under this sun (backgrounds.contact_shadows)."""
+    def cast_shadows(self, rgb, L, camera, footprints, heights, opacity):
+        """The final image (H, W, 3) uint8 with the instances' shadows cast on the ground away from the
+        sun (backgrounds.contact_shadows with the sun) darkening what is not an instance: the
+        background, the contact shadows, a 3DGS scene.  A layer of its own rather than Gaussians in
+        the scene's rasterization, so it cannot sort in front of a wheel and move a label: the
+        labels stay the baked render's."""
         from splatting.dataset.backgrounds import contact_shadows
-        return contact_shadows(footprints, opacity, sun=self.light, heights=heights)
+        from splatting.raster.sparse import render_gaussians
+        g = contact_shadows(footprints, opacity, sun=self.light, heights=heights)
+        a = render_gaussians(g, camera, sh_degree=0)["alpha"].numpy()
+        keep = 1.0 - a * (1.0 - np.clip(L["relit_cover"], 0.0, 1.0))
+        out = rgb.copy()
+        m = keep < 1.0
+        out[m] = np.clip(np.round(rgb[m].astype(np.float32) * keep[m][:, None]), 0, 255).astype(np.uint8)
+        return out
 
     def render(self, parts, slots, n_slots, camera, amodal_slots, amodal_max_px):
         """render_scene's layers with the instances (the first len(self.channels) parts) relit."""

@@ -9,6 +9,7 @@ over the relit coverage (the summed weights of slots 1..: render_scene's slot ch
 to it.  Geometry, and so alpha, depth, labels, boxes and amodal masks, is the baked render's:
 only the RGB differs (tests/test_dataset_lighting.py).
 """
+import numpy as np
 import torch
 
 from splatting.cyclist.scene_render import cropped_camera, render_scene
@@ -21,7 +22,8 @@ from splatting.relight.render import shade_composited
 def render_scene_relit(parts, channels, slots, n_slots, camera, light, shadows, amodal_slots=(), amodal_max_px=None):
     """parts: list of Gaussians, of which the first len(channels) are relit with channels
     [(reflectance (n, 3), relight_features(normals, gloss, roughness, visibility) (n, C))]
-    (one layout for all); the rest baked.  Slot 0 must hold the baked parts only.  -> render_scene's dict."""
+    (one layout for all); the rest baked.  Slot 0 must hold the baked parts only.  -> render_scene's
+    dict and relit_cover (H, W): the relit parts' coverage."""
     C = channels[0][1].shape[1] if channels else 0
     gs, feats = [], []
     for i, g in enumerate(parts):
@@ -35,9 +37,11 @@ def render_scene_relit(parts, channels, slots, n_slots, camera, light, shadows, 
             feats.append(torch.zeros(len(g), 3 + C))
     L = render_scene(Gaussians.cat(gs), slots, n_slots, camera, amodal_slots, amodal_max_px, features=torch.cat(feats))
     F, crop = L.pop("features"), L.pop("crop")
+    L["relit_cover"] = np.zeros(L["alpha"].shape, np.float32)  # the relit parts' coverage, full frame
     if crop is not None and channels:
         u0, v0, w, h = crop
         cover = F[..., 1:n_slots].sum(-1)
+        L["relit_cover"][v0:v0 + h, u0:u0 + w] = cover.numpy()
         out = shade_composited(F[..., n_slots:n_slots + 3], F[..., n_slots + 3:], cover, cropped_camera(camera, crop),
                                light, gloss=True, rough_channel=True, shadows=shadows)
         L["rgb"][v0:v0 + h, u0:u0 + w] += out["rgb"].numpy()
