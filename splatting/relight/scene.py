@@ -42,7 +42,7 @@ def render_scene_relit(parts, channels, slots, n_slots, camera, light, shadows, 
         u0, v0, w, h = crop
         cover = F[..., 1:n_slots].sum(-1)
         L["relit_cover"][v0:v0 + h, u0:u0 + w] = cover.numpy()
-        out = shade_composited(F[..., n_slots:n_slots + 3], F[..., n_slots + 3:], cover, cropped_camera(camera, crop),
+        rgb = shade_composited(F[..., n_slots:n_slots + 3], F[..., n_slots + 3:], cover, cropped_camera(camera, crop),
                                light, gloss=True, rough_channel=True, shadows=shadows)
-        L["rgb"][v0:v0 + h, u0:u0 + w] += out["rgb"].numpy()
+        L["rgb"][v0:v0 + h, u0:u0 + w] += rgb.numpy()
     return L

@@ -66,18 +66,23 @@ ROUGHNESS = 0.4
 HIGHLIGHT = 0.25
 
 
-def ggx_sun(normal, view, light: Light, roughness=ROUGHNESS):
+def ggx_sun(normal, view, light: Light, roughness=ROUGHNESS, cos_l=None):
     """Sun radiance factor of a glossy surface per unit glossy colour: D_GGX(n.h) / (4 n.v) where
     n.l > 0 (Cook-Torrance with F G folded into the Glossy Color pass, which is the lobe's
-    directional albedo).  normal, view: (..., 3) unit, view pointing to the camera."""
+    directional albedo).  normal, view: (..., 3) unit, view pointing to the camera; roughness one
+    value or per pixel (...,); cos_l: n.l if the caller has it.  In-place ops on temporaries:
+    this runs per covered pixel of every relit render (relight_render_overhead)."""
     l = light.direction(normal.dtype)
     h = view + l
-    h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-6)
-    nh = (normal * h).sum(-1).clamp(0.0, 1.0)
-    nv = (normal * view).sum(-1).clamp_min(0.05)  # grazing pixels: the lobe's 1/(n.v) would explode
+    h.div_(torch.linalg.vector_norm(h, dim=-1, keepdim=True).clamp_min_(1e-6))
+    nh = torch.linalg.vecdot(normal, h).clamp_(0.0, 1.0)
+    nv = torch.linalg.vecdot(normal, view).clamp_min_(0.05)  # grazing pixels: the lobe's 1/(n.v) would explode
     a2 = roughness ** 4 if torch.is_tensor(roughness) else float(roughness) ** 4  # per pixel or one value
-    D = a2 / (math.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2)
-    return torch.where((normal @ l) > 0, D / (4.0 * nv), torch.zeros_like(D))
+    t = nh.mul_(nh).mul_(a2 - 1.0).add_(1.0)  # n.h^2 (a2 - 1) + 1
+    D = t.mul_(t).mul_(4.0 * math.pi).mul_(nv)  # 4 pi t^2 n.v: the denominator of D / (4 n.v)
+    D = torch.reciprocal_(D).mul_(a2)
+    cos = normal @ l if cos_l is None else cos_l
+    return D.masked_fill_(cos <= 0, 0.0)
 
 
 def shade_linear(albedo, normal, light: Light, gloss=None, view=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
@@ -88,33 +93,42 @@ def shade_linear(albedo, normal, light: Light, gloss=None, view=None, roughness=
     and the sun as a GGX highlight seen along `view` ((H, W, 3) unit, towards the camera); without
     a view it is shaded like the albedo (the diffuse-like approximation).  sun_visibility (H, W, 1)
     in [0, 1] scales the sun (cast shadows, splatting/relight/shadow.py); the sky is not occluded."""
-    n = normal / normal.norm(dim=-1, keepdim=True).clamp_min(1e-6)
-    l = light.direction(albedo.dtype)
-    cos = (n @ l).clamp_min(0.0)[..., None]
-    sun = torch.as_tensor(light.sun_colour, dtype=albedo.dtype) * light.sun_strength
+    dt = albedo.dtype
+    n = normal / torch.linalg.vector_norm(normal, dim=-1, keepdim=True).clamp_min_(1e-6)
+    cos = (n @ light.direction(dt)).clamp_min_(0.0)
+    sun = torch.as_tensor(light.sun_colour, dtype=dt) * light.sun_strength
+    sky = torch.as_tensor(light.sky, dtype=dt)
+    lit = cos[..., None] * (sun / math.pi)  # the sun's diffuse irradiance / pi, per channel
     if sun_visibility is not None:
-        sun = sun * sun_visibility
-    sky = torch.as_tensor(light.sky, dtype=albedo.dtype)
-    out = albedo * (cos * sun / math.pi + sky)
-    if gloss is not None:
-        spec = cos * sun / math.pi if view is None else highlight * ggx_sun(n, view, light, roughness)[..., None] * sun
-        out = out + gloss * (spec + sky)
-    return out
+        lit.mul_(sun_visibility)
+    if gloss is None:
+        return lit.add_(sky).mul_(albedo)
+    if view is None:
+        return lit.add_(sky).mul_(albedo + gloss)
+    spec = ggx_sun(n, view, light, roughness, cos)[..., None] * (highlight * sun)
+    if sun_visibility is not None:
+        spec.mul_(sun_visibility)
+    return lit.add_(sky).mul_(albedo).addcmul_(spec.add_(sky), gloss)
 
 
-def view_directions(camera, dtype=torch.float32, pixels=None):
+def view_directions(camera, dtype=torch.float32, pixels=None, rows_cols=None):
     """Unit vectors from each pixel's surface towards the camera (world frame): (H, W, 3), or (P, 3)
-    for the flat pixel indices `pixels` (P,)."""
+    for the flat pixel indices `pixels` (P,) or the pixels (rows (P,), cols (P,)) `rows_cols`."""
     H, W = camera.height, camera.width
     K = camera.K.to(torch.float64)
-    if pixels is None:
-        v, u = torch.meshgrid(torch.arange(H, dtype=torch.float64) + 0.5, torch.arange(W, dtype=torch.float64) + 0.5,
-                              indexing="ij")
+    fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
+    if rows_cols is not None:
+        v, u = (x.to(dtype) for x in rows_cols)
+    elif pixels is None:
+        v, u = torch.meshgrid(torch.arange(H, dtype=dtype), torch.arange(W, dtype=dtype), indexing="ij")
     else:
-        v, u = (pixels // W).to(torch.float64) + 0.5, (pixels % W).to(torch.float64) + 0.5
-    d = torch.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], torch.ones_like(u)], -1)
-    d = d @ camera.R.to(torch.float64)  # R^T d: the ray in the world
-    return (-d / d.norm(dim=-1, keepdim=True)).to(dtype)
+        v, u = (pixels // W).to(dtype), (pixels % W).to(dtype)
+    x, y = (u + (0.5 - cx)) / fx, (v + (0.5 - cy)) / fy
+    R = camera.R.to(dtype)
+    # the ray R^T (x, y, 1) in the world, as x R[0] + y R[1] + R[2] (three broadcasts, no matmul)
+    d = x[..., None] * R[0] + R[2]
+    d.addcmul_(y[..., None], R[1])
+    return d.div_(-torch.linalg.vector_norm(d, dim=-1, keepdim=True))
 
 
 def shade(albedo, normal, alpha, light: Light, gloss=None, view=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
@@ -123,8 +137,17 @@ def shade(albedo, normal, alpha, light: Light, gloss=None, view=None, roughness=
     linear colour, times coverage (what an RGBA render composited over black shows)."""
     lin = shade_linear(albedo, normal, light, gloss, view, roughness, highlight, sun_visibility)
     a = alpha[..., None]
-    straight = torch.where(a > 1e-6, lin / a.clamp_min(1e-6), torch.zeros_like(lin))
-    return srgb_encode(straight) * a
+    lin.div_(a.clamp_min(1e-6)).masked_fill_(a <= 1e-6, 0.0)  # the straight colour
+    return srgb_encode_(lin).mul_(a)
+
+
+def srgb_encode_(x):
+    """srgb_encode in place (x is overwritten and returned)."""
+    x.clamp_(0.0, 1.0)
+    low = x <= 0.0031308
+    lin = x * 12.92
+    x.clamp_min_(1e-12).pow_(1 / 2.4).mul_(1.055).sub_(0.055)
+    return torch.where(low, lin, x)
 
 
 def lambert_reference(albedo, normal, light: Light):
