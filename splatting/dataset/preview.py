@@ -86,3 +86,35 @@ def keypoint_figure(coco_dir, out_png, image_id=1, scale=2, names=("person", "bi
     with atomic_path(out_png) as tmp:
         img.save(tmp, format="PNG")
     return out_png
+
+
+def relit_preview(baked_dir, relit_dir, out_png, n=4, tile=192, margin=12):
+    """The same samples of a baked and a relit set (same config and seed; the light has its own
+    random stream, so poses and cameras agree), cropped to the instances: baked on top, relit
+    below, each relit tile captioned with its sun (elevation / azimuth, degrees)."""
+    from PIL import Image, ImageDraw
+
+    docs = []
+    for d in (baked_dir, relit_dir):
+        with open(os.path.join(d, "annotations.json")) as f:
+            docs.append(json.load(f))
+    images = docs[1]["images"][:n]
+    sheet = Image.new("RGB", (max(1, tile * len(images)), 2 * tile + 16), (255, 255, 255))
+    draw = ImageDraw.Draw(sheet)
+    for i, im in enumerate(images):
+        boxes = [a["bbox"] for a in docs[1]["annotations"] if a["image_id"] == im["id"]] or [[0, 0, im["width"], im["height"]]]
+        x0, y0 = min(b[0] for b in boxes), min(b[1] for b in boxes)
+        x1, y1 = max(b[0] + b[2] for b in boxes), max(b[1] + b[3] for b in boxes)
+        s = max(x1 - x0, y1 - y0) / 2 + margin  # a square around the instances
+        cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+        crop = tuple(round(v) for v in (cx - s, cy - s, cx + s, cy + s))
+        for row, d in enumerate((baked_dir, relit_dir)):
+            img = Image.open(os.path.join(d, "images", im["file_name"])).convert("RGB")
+            sheet.paste(img.crop(crop).resize((tile, tile), Image.LANCZOS), (i * tile, row * tile))
+        sun = im.get("lighting") or {}
+        if sun:
+            draw.text((i * tile + 4, 2 * tile + 2), f"sun {sun['elevation_deg']:.0f} / {sun['azimuth_deg']:.0f} deg",
+                      fill=(0, 0, 0))
+    with atomic_path(out_png) as tmp:
+        sheet.save(tmp, format="PNG")
+    return len(images)
