@@ -1,0 +1,178 @@
+"""README picture: one whole cyclist (bike + rider) under four suns, Blender (top) beside the relit
+Gaussians (bottom), with the box PSNR and mask IoU of each sun.
+
+    python bench/cyclist_suns.py --bike BIKE_DIR --avatar AVATAR_DIR --out docs/img/cyclist_suns.png
+
+Both need their relight channels (gaussians/PART.relight.npz, rider.relight.npz: relight-fit).
+The Gaussian side is the dataset's: Cyclist poses the bike and fits the rider by IK, the normals
+turn with the parts and the skinning (RelightableBike, RelightableAvatar), one rasterization
+carries the relight channels with a per-Gaussian roughness (bike 0.4, rider 1.0), cast shadows
+from the sun's shadow map.  Blender renders the bike's .blend posed by the same 8 values plus the
+rider mesh posed by the same IK result (LBS), under the same sun and sky (bench/relight.py's
+sun_and_sky).  The saddle auto-fit's slide is turned off on the Gaussian side: the .blend's saddle
+does not slide.
+"""
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SUNS = ((20.0, 40.0), (50.0, 150.0), (75.0, 260.0), (30.0, 320.0))  # (elevation, azimuth) degrees, as relit_suns
+POSE = [70.0, 10.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # theta_p, theta_s, H_g identity
+CAMERA_AZIMUTH = 300.0
+SAMPLES = 32
+
+
+def blender_worker(job_path):
+    """Under bpy: the posed bike + the posed rider mesh, one render per sun."""
+    sys.path.insert(0, ROOT)
+    from dataclasses import replace
+
+    import bpy
+
+    from addon.core import render
+    from addon.core.articulation import apply_pose
+    from addon.core.bike_asset import open_bike
+    from addon.core.render_pose import load_camera
+    from addon.core.rider_import import import_rider
+    from bench.relight import sun_and_sky
+
+    with open(job_path) as f:
+        job = json.load(f)
+    s = replace(render.RenderSettings(), samples=job["samples"], threads=1)
+    for i, light in enumerate(job["lights"]):
+        out = os.path.join(job["out"], f"gt_{i}.png")
+        if os.path.isfile(out):
+            continue
+        K, R, T = load_camera(job["camera"], job["bike"])
+        bike = open_bike(job["bike"])
+        scene = bpy.context.scene
+        size = int(round(2 * K[0, 2]))
+        render.configure_cycles(scene, replace(s, size=size))
+        sun_and_sky(light)(scene)
+        p = job["pose"]
+        apply_pose(bike["armature"], p[0], p[1], tuple(p[2:5]), tuple(p[5:8]))
+        rider = import_rider(job["mesh"], scene=scene)
+        render.show_only(scene, list(bike["parts"].values()) + [rider])
+        cam = render.ensure_camera(scene, size, K[0, 0])
+        render.place_camera(cam, R, T)
+        bpy.context.view_layer.update()
+        render.render_atomic(scene, out)
+        print(f"  blender sun {i + 1}/{len(job['lights'])}", flush=True)
+
+
+def posed_cyclist(bike_dir, avatar_dir):
+    """-> (Gaussians, reflectance (N, 3), relight_features with roughness (N, 5), rider (body), rot, root)."""
+    import torch
+
+    from splatting.cyclist.compose import Cyclist
+    from splatting.dataset.person_keypoints import RecordingAvatar
+    from splatting.relight.avatar import RIDER_ROUGHNESS, RelightableAvatar
+    from splatting.relight.bike import RelightableBike
+    from splatting.relight.shading import ROUGHNESS
+    from splatting.rider.roster import load_rider
+
+    rb, ra = RelightableBike.load(bike_dir), RelightableAvatar.load(avatar_dir)
+    rec = RecordingAvatar(ra.avatar)
+    cyc = Cyclist(rb.model, rec)
+    cyc.saddle_mask = None  # the .blend's saddle stays where it is
+    pose = torch.tensor(POSE, dtype=torch.float64)
+    frame, = cyc.pose(pose)
+    rot, root = rec.last
+    nrm = torch.cat([rb.posed_normals(pose), ra.posed_normals(rec.rotations[0])])
+    alb, gl = torch.cat([rb.albedo, ra.albedo]), torch.cat([rb.gloss, ra.gloss])
+    rough = torch.cat([torch.full((len(rb.albedo),), ROUGHNESS), torch.full((len(ra.albedo),), float(RIDER_ROUGHNESS))])
+    return frame.gaussians, alb + gl, nrm, gl, rough, load_rider(ra.avatar.rider_id), rot, root
+
+
+def render_relit_cyclist(g, refl, nrm, gl, rough, camera, light):
+    """One rasterization with the relight channels (reflectance as the colour), shaded per pixel."""
+    from splatting.gaussians.container import Gaussians
+    from splatting.gaussians.sh import C0
+    from splatting.raster.sparse import render_gaussians
+    from splatting.relight.render import relight_features, shade_composited
+    from splatting.relight.shadow import sun_visibility
+
+    feats = relight_features(nrm, gl, rough, sun_visibility(g, light))
+    gr = Gaussians(g.means, g.quats, g.log_scales, g.opacity_logits, ((refl.float() - 0.5) / C0)[:, None, :].contiguous())
+    r = render_gaussians(gr, camera, features=feats, sh_degree=0)
+    rgb = shade_composited(r["rgb"], r["features"], r["alpha"], camera, light, gloss=True, rough_channel=True,
+                           shadows=True)
+    return rgb.numpy().astype(np.float64), r["alpha"].numpy().astype(np.float64)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--worker", metavar="JOB_JSON", help=argparse.SUPPRESS)
+    ap.add_argument("--bike", help="trained bike folder with gaussians/PART.relight.npz and bike.blend")
+    ap.add_argument("--avatar", help="trained avatar folder with rider.relight.npz")
+    ap.add_argument("--out", help="PNG to write")
+    ap.add_argument("--work", default=os.path.join(ROOT, "out", "cyclist_suns"))
+    a = ap.parse_args()
+    if a.worker:
+        return blender_worker(a.worker)
+    if not (a.bike and a.avatar and a.out):
+        ap.error("--bike, --avatar and --out are required")
+    if not os.path.isfile(os.path.join(a.avatar, "rider.relight.npz")):
+        sys.exit(f"error: {a.avatar} has no rider.relight.npz (run relight-fit on it first)")
+    if not os.path.isfile(os.path.join(a.bike, "bike.blend")):
+        sys.exit(f"error: {a.bike} has no bike.blend (Blender renders the bike from it)")
+    sys.path.insert(0, ROOT)
+    import torch
+    from PIL import Image
+
+    from bench.compare import score_png
+    from bench.relight import light_json
+    from bench.rider import camera_json
+    from splatting.raster.camera import ring_camera
+    from splatting.relight.shading import Light
+    from splatting.rider.body import export_rider, pose_vertices
+
+    torch.set_num_threads(1)
+    g, refl, nrm, gl, rough, rider, rot, root = posed_cyclist(a.bike, a.avatar)
+    lo, hi = g.means.min(0).values.double(), g.means.max(0).values.double()
+    cam = ring_camera(CAMERA_AZIMUTH, tuple(float(x) for x in (lo + hi) / 2), name="camera_suns")
+    os.makedirs(a.work, exist_ok=True)
+    mesh = os.path.join(a.work, "rider_posed.ply")
+    export_rider(rider, mesh, vertices=pose_vertices(rider, rot.double(), root.double())[0])
+    cj = os.path.join(a.work, "camera.json")
+    with open(cj, "w") as f:
+        json.dump({cam.name: camera_json(cam)}, f)
+    lights = []
+    for el, az in SUNS:
+        e, z = math.radians(el), math.radians(az)
+        lights.append(Light(sun_direction=(math.cos(e) * math.cos(z), math.sin(e), math.cos(e) * math.sin(z)),
+                            sun_colour=(1.0, 0.95, 0.9), sun_strength=3.5, sky=(0.28, 0.29, 0.3)))
+    jp = os.path.join(a.work, "job.json")
+    with open(jp, "w") as f:
+        json.dump({"bike": os.path.abspath(a.bike), "mesh": mesh, "camera": f"{cj}:{cam.name}", "pose": POSE,
+                   "out": a.work, "samples": SAMPLES, "lights": [light_json(l) for l in lights]}, f)
+    if subprocess.run([sys.executable, os.path.abspath(__file__), "--worker", jp]).returncode:
+        sys.exit("error: the Blender worker failed")
+    top, bottom, rows = [], [], []
+    for i, light in enumerate(lights):
+        gt_png = os.path.join(a.work, f"gt_{i}.png")
+        rgb, alpha = render_relit_cyclist(g, refl, nrm, gl, rough, cam, light)
+        iou, ps, gt_rgb, _ = score_png(gt_png, rgb, alpha)
+        rows.append({"elevation_deg": SUNS[i][0], "azimuth_deg": SUNS[i][1], "box_psnr": round(ps, 2), "iou": round(iou, 4)})
+        gt = np.asarray(Image.open(gt_png).convert("RGBA")).astype(np.float64) / 255
+        top.append(gt[..., :3] * gt[..., 3:] + (1 - gt[..., 3:]))  # over white
+        bottom.append(rgb + (1 - alpha[..., None]))
+    m = np.nonzero(np.asarray(Image.open(os.path.join(a.work, "gt_0.png")).convert("RGBA"))[..., 3] > 0)
+    y0, y1, x0, x1 = max(0, m[0].min() - 10), m[0].max() + 11, max(0, m[1].min() - 10), m[1].max() + 11
+    grid = np.concatenate([np.concatenate([t[y0:y1, x0:x1] for t in row], 1) for row in (top, bottom)], 0)
+    Image.fromarray((grid.clip(0, 1) * 255).round().astype(np.uint8)).save(a.out)
+    with open(os.path.splitext(a.out)[0] + ".json", "w") as f:
+        json.dump({"pose": POSE, "camera_azimuth_deg": CAMERA_AZIMUTH, "blender_samples": SAMPLES, "suns": rows}, f, indent=1)
+    print(f"{a.out}: Blender (top) and the relit cyclist (bottom) under {len(SUNS)} suns")
+    for r in rows:
+        print(f"  sun {r['elevation_deg']:.0f}/{r['azimuth_deg']:.0f} deg: box PSNR {r['box_psnr']:.2f} dB, IoU {r['iou']:.4f}")
+
+
+if __name__ == "__main__":
+    main()
