@@ -67,7 +67,7 @@ def blender_worker(job_path):
 
 
 def posed_cyclist(bike_dir, avatar_dir):
-    """-> (Gaussians, reflectance (N, 3), relight_features with roughness (N, 5), rider (body), rot, root)."""
+    """-> (posed Gaussians, reflectance, world normals, gloss, roughness (per Gaussian), rider body, IK rotations, root)."""
     import torch
 
     from splatting.cyclist.compose import Cyclist
