@@ -14,7 +14,6 @@ does not slide.
 """
 import argparse
 import json
-import math
 import os
 import subprocess
 import sys
@@ -22,10 +21,9 @@ import sys
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SUNS = ((20.0, 40.0), (50.0, 150.0), (75.0, 260.0), (30.0, 320.0))  # (elevation, azimuth) degrees, as relit_suns
 POSE = [70.0, 10.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # theta_p, theta_s, H_g identity
 CAMERA_AZIMUTH = 300.0
-SAMPLES = 32
+SAMPLES = 32  # the suns are bench/relit_suns.py's SUNS
 
 
 def blender_worker(job_path):
@@ -128,9 +126,8 @@ def main():
 
     from bench.compare import score_png
     from bench.relight import light_json
-    from bench.rider import camera_json
+    from bench.relit_suns import SUNS, four_suns, write_camera
     from splatting.raster.camera import ring_camera
-    from splatting.relight.shading import Light
     from splatting.rider.body import export_rider, pose_vertices
 
     torch.set_num_threads(1)
@@ -140,14 +137,8 @@ def main():
     os.makedirs(a.work, exist_ok=True)
     mesh = os.path.join(a.work, "rider_posed.ply")
     export_rider(rider, mesh, vertices=pose_vertices(rider, rot.double(), root.double())[0])
-    cj = os.path.join(a.work, "camera.json")
-    with open(cj, "w") as f:
-        json.dump({cam.name: camera_json(cam)}, f)
-    lights = []
-    for el, az in SUNS:
-        e, z = math.radians(el), math.radians(az)
-        lights.append(Light(sun_direction=(math.cos(e) * math.cos(z), math.sin(e), math.cos(e) * math.sin(z)),
-                            sun_colour=(1.0, 0.95, 0.9), sun_strength=3.5, sky=(0.28, 0.29, 0.3)))
+    cj = write_camera(cam, a.work)
+    lights = four_suns()
     jp = os.path.join(a.work, "job.json")
     with open(jp, "w") as f:
         json.dump({"bike": os.path.abspath(a.bike), "mesh": mesh, "camera": f"{cj}:{cam.name}", "pose": POSE,

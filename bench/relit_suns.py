@@ -7,7 +7,6 @@ the LBS-posed mesh under each sun with bench/rider_relit.py's worker.
 """
 import argparse
 import json
-import math
 import os
 import subprocess
 import sys
@@ -16,6 +15,22 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SUNS = ((20.0, 40.0), (50.0, 150.0), (75.0, 260.0), (30.0, 320.0))  # (elevation, azimuth) degrees
+
+
+def four_suns():
+    """The picture's suns: SUNS with one slightly warm strength-3.5 sun and a grey sky."""
+    from splatting.relight.shading import Light, sun_direction
+    return [Light(sun_direction=sun_direction(el, az), sun_colour=(1.0, 0.95, 0.9), sun_strength=3.5,
+                  sky=(0.28, 0.29, 0.3)) for el, az in SUNS]
+
+
+def write_camera(cam, work):
+    """cam as WORK/camera.json (the one-camera file the Blender workers read) -> its path."""
+    from bench.rider import camera_json
+    cj = os.path.join(work, "camera.json")
+    with open(cj, "w") as f:
+        json.dump({cam.name: camera_json(cam)}, f)
+    return cj
 
 
 def main():
@@ -31,11 +46,10 @@ def main():
     from PIL import Image
 
     from bench.relight import light_json
-    from bench.rider import camera_json, posed_batch
+    from bench.rider import posed_batch
     from splatting.raster.camera import ring_camera
     from splatting.relight.avatar import RIDER_ROUGHNESS, RelightableAvatar
     from splatting.relight.render import render_relit
-    from splatting.relight.shading import Light
     from splatting.rider.body import export_rider, pose_vertices
     from splatting.rider.roster import load_rider
 
@@ -49,14 +63,8 @@ def main():
     os.makedirs(a.work, exist_ok=True)
     mesh = os.path.join(a.work, "posed.ply")
     export_rider(rider, mesh, vertices=v)
-    cj = os.path.join(a.work, "camera.json")
-    with open(cj, "w") as f:
-        json.dump({cam.name: camera_json(cam)}, f)
-    lights = []
-    for el, az in SUNS:
-        e, z = math.radians(el), math.radians(az)
-        lights.append(Light(sun_direction=(math.cos(e) * math.cos(z), math.sin(e), math.cos(e) * math.sin(z)),
-                            sun_colour=(1.0, 0.95, 0.9), sun_strength=3.5, sky=(0.28, 0.29, 0.3)))
+    cj = write_camera(cam, a.work)
+    lights = four_suns()
     jobs = [{"mesh": mesh, "camera": f"{cj}:{cam.name}", "out": os.path.join(a.work, f"sun_{i}.png"),
              "light": light_json(l)} for i, l in enumerate(lights)]
     jp = os.path.join(a.work, "jobs.json")

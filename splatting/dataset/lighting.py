@@ -98,15 +98,13 @@ def check_assets(cfg):
 
 def draw_light(lc, seed, index):
     """The sun and sky of sample `index`: (Light, its record without the camera frame)."""
-    from splatting.relight.shading import Light
+    from splatting.relight.shading import Light, sun_direction
     rng = np.random.default_rng([int(seed), int(index), TAG])
     el, az = rng.uniform(*lc["elevation_deg"]), rng.uniform(*lc["azimuth_deg"])
     strength, s = rng.uniform(*lc["strength"]), rng.uniform(*lc["sky"])
     tint = rng.uniform(1.0 - lc["sun_tint"], 1.0, 3)
     tint = tint / tint.max()
-    e, a = math.radians(el), math.radians(az)
-    # world frame: Y up; azimuth 0 = towards +X (a bike heading 0 faces it), 90 = towards +Z
-    d = (math.cos(e) * math.cos(a), math.sin(e), math.cos(e) * math.sin(a))
+    d = sun_direction(el, az)  # world: Y up; azimuth 0 = towards +X (where a bike at heading 0 rides)
     sky = tuple(float(c * s) for c in SKY_TINT)
     light = Light(sun_direction=d, sun_colour=tuple(float(x) for x in tint), sun_strength=float(strength), sky=sky)
     rec = {"mode": "relit", "sun_direction_world": list(d), "elevation_deg": float(el), "azimuth_deg": float(az),

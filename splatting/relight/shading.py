@@ -34,6 +34,13 @@ class Light:
         return d / d.norm().clamp_min(1e-12)
 
 
+def sun_direction(elevation_deg, azimuth_deg):
+    """Towards a sun at this elevation above the ground and azimuth, canonical world frame (Y up;
+    azimuth 0 = towards +X, 90 = towards +Z)."""
+    e, a = math.radians(elevation_deg), math.radians(azimuth_deg)
+    return (math.cos(e) * math.cos(a), math.sin(e), math.cos(e) * math.sin(a))
+
+
 def random_light(rng, min_elevation_deg=15.0, strength=(2.0, 5.0), sky=(0.1, 0.6)):
     """A sun somewhere above the horizon (uniform azimuth, elevation in [min, 90]) with a random warm/cool
     tint and a grey-blue sky; rng: numpy Generator.  What bench/relight.py uses against Blender."""
