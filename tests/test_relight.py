@@ -235,3 +235,35 @@ def test_cast_shadow_of_a_blob_on_a_plane():
         assert float(vis[: len(plane)][far].min()) > 0.9
         top = int((blob @ l).argmax())  # the blob's most sunward Gaussian is lit (those below its
         assert float(vis[len(plane) + top]) > 0.9  # 3 cm footprint are, rightly, in its shadow)
+
+
+@pytest.mark.parametrize("gloss, rough, shadows", [(True, False, False), (True, True, True), (False, False, True)])
+def test_fused_shading_equals_the_torch_formula(gloss, rough, shadows):
+    # shade_composited's C loop (csrc/shade.cpp) against its torch reference, on channels as the
+    # compositor leaves them: strided (H, W, C) views of one table, partly covered pixels
+    from splatting.relight.render import shade_composited
+    gen = torch.Generator().manual_seed(5)
+    H, W = 24, 40
+    C = 3 + 3 + int(gloss) + int(rough) + int(shadows)
+    table = torch.rand(H, W, C + 2, generator=gen)
+    alpha = torch.rand(H, W, generator=gen) * (torch.rand(H, W, generator=gen) > 0.3)
+    alpha[0, :5] = torch.tensor([0.0, 1e-6, 2e-5, 0.5, 1.0])
+    R = table[..., 1:4] * alpha[..., None]
+    feats = table[..., 4:4 + C - 3].clone()
+    feats[..., :3] = torch.randn(H, W, 3, generator=gen)  # composited normals: any length, any sign
+    table[..., 4:4 + C - 3] = feats * alpha[..., None] if (rough or shadows) else feats
+    feats = table[..., 4:4 + C - 3]
+    cam = ring_camera(35, orbit_centre=(0, 1, 0), size=W, focal=50.0)
+    cam = type(cam)(cam.R, cam.T, cam.K, W, H, "c")
+    light = Light(sun_direction=(0.3, 0.8, -0.5), sun_colour=(1.0, 0.9, 0.8), sun_strength=4.0, sky=(0.2, 0.25, 0.3))
+    kw = dict(gloss=gloss, rough_channel=rough, shadows=shadows, roughness=0.4, highlight=0.25)
+    c = shade_composited(R, feats, alpha, cam, light, backend="c", **kw)
+    t = shade_composited(R, feats, alpha, cam, light, backend="torch", **kw)
+    assert float(t.abs().max()) > 0.1 and int((t.sum(-1) > 0).sum()) > 0.5 * H * W
+    torch.testing.assert_close(c, t, atol=2e-5, rtol=1e-4)
+    box = (5, 3, 30, 20)  # (u0, v0, u1, v1): only these pixels are shaded
+    cb = shade_composited(R, feats, alpha, cam, light, backend="c", box=box, **kw)
+    torch.testing.assert_close(cb, shade_composited(R, feats, alpha, cam, light, backend="torch", box=box, **kw),
+                               atol=2e-5, rtol=1e-4)
+    torch.testing.assert_close(cb[3:20, 5:30], c[3:20, 5:30])
+    assert float(cb.sum()) < float(c.sum()) and float(cb[:3].abs().sum() + cb[:, :5].abs().sum()) == 0

@@ -24,7 +24,10 @@ FLAGS = ["-O3", "-march=native", "-fopenmp", "-fPIC", "-std=c++17"]
 # contraction is free to apply; no errno / trapping math lets sqrt and the clamps vectorise.
 # (Not -ffast-math: the culling relies on isfinite and NaN comparisons.)
 SOURCES = {HERE / "csrc" / "tiles.cpp": ["-ffp-contract=off"],
-           HERE / "csrc" / "project.cpp": ["-ffp-contract=fast", "-fno-math-errno", "-fno-trapping-math"]}
+           HERE / "csrc" / "project.cpp": ["-ffp-contract=fast", "-fno-math-errno", "-fno-trapping-math"],
+           # relit shading (splatting/relight/render.py): a serial per-pixel formula; -ffast-math lets
+           # the sRGB encoding's powf vectorise (glibc's SIMD variants); no NaN or inf reach it
+           HERE.parent / "relight" / "csrc" / "shade.cpp": ["-ffast-math"]}
 SRCS = list(SOURCES)
 BUILD_DIR = HERE / "_build"
 
