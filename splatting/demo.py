@@ -94,8 +94,9 @@ def run(args):
                                           os.path.join(riders, args.rider), "--time-budget-s", str(args.rider_train_seconds)],
            done=os.path.join(riders, args.rider, "skinning.npz"))
     # relight channels (docs/relighting.md): 150 steps reach 42.7 / 47.7 / 39.9 dB held-out albedo
-    # (frame / steering / crank) and the rider 33.6 dB, 6.4 deg normals, against 44.1 dB and
-    # 33.8 dB, 6.2 deg at 300 steps, for ~2.5 min on 2 cores instead of twice that
+    # (frame / steering / crank) and 33.6 dB, 6.4 deg normals for the rider, ~145 s for all four on
+    # the loaded 2 cores; 300 steps gave the frame 44.2 dB, 23.2 deg (150: 23.7 deg) for 41 s
+    # instead of 28 s of fitting: the demo keeps the margin to its 20 minutes
     for part in PARTS:
         ply = os.path.join(bike, "gaussians", f"{part}.ply")
         st.run(f"relight fit {part}", [py, "-m", "splatting", "relight-fit", "--views", os.path.join(bike, "views", part),
