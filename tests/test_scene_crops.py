@@ -87,3 +87,33 @@ def test_over_in_box_equals_over_on_the_whole_image(photo_bytes):
     want = over({"rgb": rgb, "alpha": alpha}, bgf)
     got = over_in_box({"rgb": rgb, "alpha": alpha}, bg8 if photo_bytes else bgf, (10, 5, 20, 15))
     assert got.dtype == np.uint8 and (got == want).all()
+
+
+@pytest.mark.parametrize("seed, W, H", [(0, 40, 24), (5, 17, 33), (9, 1, 8)])
+def test_generated_backgrounds_equal_the_per_pixel_formulas(seed, W, H):
+    """The separable noise (one matmul for every octave's columns) and the broadcast gradient give
+    the per-pixel definitions: bilinear value noise of 4 octaves, a clipped linear ramp."""
+    from splatting.dataset.backgrounds import generated
+    rng = np.random.default_rng(seed)
+    want = np.zeros((H, W, 3))
+    amp, total = 1.0, 0.0
+    for cells in (4, 8, 16, 64):
+        grid = rng.uniform(0, 1, (cells + 1, cells + 1, 3))
+        for i in range(H):
+            for j in range(W):
+                y, x = i * cells / max(H - 1, 1), j * cells / max(W - 1, 1)
+                y0, x0 = min(int(y), cells - 1), min(int(x), cells - 1)
+                fy, fx = y - y0, x - x0
+                want[i, j] += amp * ((1 - fy) * ((1 - fx) * grid[y0, x0] + fx * grid[y0, x0 + 1])
+                                     + fy * ((1 - fx) * grid[y0 + 1, x0] + fx * grid[y0 + 1, x0 + 1]))
+        total += amp
+        amp *= 0.5
+    got = generated("noise", seed, W, H)
+    assert got.dtype == np.float32 and got.shape == (H, W, 3)
+    assert np.abs(got - want / total).max() < 1e-6
+    rng = np.random.default_rng(seed)
+    a, b, ang = rng.uniform(0, 1, 3), rng.uniform(0, 1, 3), rng.uniform(0, 2 * np.pi)
+    grad = generated("gradient", seed, W, H)
+    for i, j in ((0, 0), (H - 1, W - 1), (H // 2, W // 3)):
+        t = min(max((j / max(W - 1, 1) - 0.5) * np.cos(ang) + (i / max(H - 1, 1) - 0.5) * np.sin(ang) + 0.5, 0), 1)
+        assert np.abs(grad[i, j] - ((1 - t) * a + t * b)).max() < 1e-6

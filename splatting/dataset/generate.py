@@ -19,7 +19,7 @@ from splatting.cyclist.assets import bike_dir, load_avatar, load_bike
 from splatting.cyclist.compose import Cyclist
 from splatting.cyclist.render import keypoint_visibility, orbit_camera, over, project_points, to_uint8
 from splatting.cyclist.scene_render import MASK_ALPHA, render_scene, union
-from splatting.dataset import camera_presets, kitti
+from splatting.dataset import camera_presets, kitti, png
 from splatting.dataset.backgrounds import contact_shadows, generated, load_scene, photo
 from splatting.dataset.config import POSE_KEYS
 from splatting.dataset.labels import BoxMask, annotation, vehicle_class
@@ -362,18 +362,17 @@ def make_sample(cfg, index, assets):
 def write_sample(cfg, index, out_dir, assets):
     """Render and store one sample: image, depth map, KITTI files, then its shard (the shard marks it
     complete: a killed run redoes the sample, overwriting whatever part of it was written)."""
-    from PIL import Image
     rgb, image, anns, extras = make_sample(cfg, index, assets)
     img_path = os.path.join(out_dir, "images", image["file_name"])
     os.makedirs(os.path.dirname(img_path), exist_ok=True)
     with atomic_path(img_path) as tmp:
-        Image.fromarray(rgb).save(tmp, format="PNG", compress_level=cfg["png_compress_level"])
+        png.write(tmp, rgb, cfg["png_compress_level"])
     if cfg["depth_maps"]:
         dpath = os.path.join(out_dir, "depth", image["file_name"])
         os.makedirs(os.path.dirname(dpath), exist_ok=True)
         mm = np.clip(np.round(extras["depth"] * 1000.0), 0, 65535).astype(np.uint16)
         with atomic_path(dpath) as tmp:
-            Image.fromarray(mm).save(tmp, format="PNG", compress_level=cfg["png_compress_level"])
+            png.write(tmp, mm, cfg["png_compress_level"])
     if "kitti" in cfg["labels"]["formats"]:
         kitti.write_sample(out_dir, index, img_path, extras["kitti"], extras["calib"])
     os.makedirs(os.path.join(out_dir, "shards"), exist_ok=True)
