@@ -117,3 +117,26 @@ def test_generated_backgrounds_equal_the_per_pixel_formulas(seed, W, H):
     for i, j in ((0, 0), (H - 1, W - 1), (H // 2, W // 3)):
         t = min(max((j / max(W - 1, 1) - 0.5) * np.cos(ang) + (i / max(H - 1, 1) - 0.5) * np.sin(ang) + 0.5, 0), 1)
         assert np.abs(grad[i, j] - ((1 - t) * a + t * b)).max() < 1e-6
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_one_pass_amodal_alphas_equal_each_slot_rendered_alone(seed):
+    """render_scene's amodal alphas from the image's own pass (groups) equal each slot's
+    Gaussians rasterized alone through its cropped camera (the amodal_max_px path at full size),
+    and the slots do occlude each other (the amodal masks are larger than the visible ones)."""
+    torch.set_num_threads(1)
+    from splatting.cyclist.scene_render import render_scene
+    g = _scene(seed, n=600)
+    slots = torch.arange(len(g)) % 3
+    cam = look_at_camera((0.5, 1.0, 7.0), width=160, height=96, focal=90.0, cx=70.0, cy=40.0)
+    one = render_scene(g, slots, 3, cam, (1, 2))
+    alone = render_scene(g, slots, 3, cam, (1, 2), amodal_max_px=10 ** 6)
+    for k in ("rgb", "alpha", "depth", "label"):
+        assert (one[k] == alone[k]).all(), k
+    for s in (1, 2):
+        (a, at), (b, bt) = one["amodal"][s], alone["amodal"][s]
+        assert at == bt and a.shape == b.shape
+        assert np.abs(a - b).max() < 1e-5
+        u0, v0 = at
+        vis = one["label"][v0:v0 + a.shape[0], u0:u0 + a.shape[1]] == s
+        assert (a > 0.5).sum() > vis.sum() + 20

@@ -6,8 +6,11 @@ per instance: bike then rider).  The image is rasterized once for all slots with
 one-hot as feature channels, so nearer Gaussians hide farther ones whatever instance they belong
 to, and each feature channel is that slot's summed compositing weight w = alpha T per pixel.  The
 label of a pixel is the slot with the largest weight, -1 where alpha <= 0.5.  Amodal alphas:
-each slot's Gaussians rasterized alone (opacity only: no colour) through a camera cropped to that
-slot's screen box, so their total work is about one more render of the instances' pixels.
+each slot's Gaussians as if rasterized alone, from the same pass (the rasterizer's `groups`: the
+alpha a Gaussian has at a pixel is computed once for the image and for its slot, and a pixel's
+list is walked past the image's cut-off only for slots still open there).  With amodal_max_px
+(street scenes) each slot is instead rasterized alone (opacity only) through a camera cropped to
+its screen box, at reduced resolution when the box is larger.
 
 Screen boxes come from slot_boxes(): each Gaussian's projected mean with a bound on its 3-sigma
 radius (conservative, a few multiply-adds per Gaussian) instead of a second EWA projection of
@@ -134,11 +137,18 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None)
     rgb, alpha, depth = torch.zeros(H, W, 3), torch.zeros(H, W), torch.zeros(H, W)
     label = torch.full((H, W), -1, dtype=torch.int16)
     crop = union(boxes)
+    groups = None
     if crop is not None:
         u0, v0, w, h = crop
         onehot = torch.zeros(len(g), n_slots)
         onehot[torch.arange(len(g)), slots.long()] = 1.0
-        out = rasterize(*t, g.sh.float(), cropped_camera(camera, crop), features=onehot)
+        # one pass for the amodal alphas too (no reduced resolution asked for)
+        group_of = torch.full((n_slots,), -1, dtype=torch.int32)
+        for k, s in enumerate(amodal_slots):
+            group_of[s] = k
+        if amodal_max_px is None and len(amodal_slots):
+            groups = (group_of[slots.long()], len(amodal_slots))
+        out = rasterize(*t, g.sh.float(), cropped_camera(camera, crop), features=onehot, groups=groups)
         a_c = out["alpha"]
         rgb[v0:v0 + h, u0:u0 + w], alpha[v0:v0 + h, u0:u0 + w], depth[v0:v0 + h, u0:u0 + w] = out["rgb"], a_c, out["depth"]
         # the back end's channels are (H, W, C) views of channel-major memory: reduce over C there
@@ -147,8 +157,14 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None)
         label[v0:v0 + h, u0:u0 + w] = lab
     d = torch.where(alpha > 1e-4, depth / alpha.clamp_min(1e-4), torch.zeros_like(depth))
     amodal = {}
-    for s in amodal_slots:
-        idx = torch.nonzero(slots == s).squeeze(1)
-        amodal[s] = _subset_alpha(t, idx, camera, boxes[s], amodal_max_px) if len(idx) and boxes[s] else None
+    for k, s in enumerate(amodal_slots):
+        if boxes[s] is None or not bool((slots == s).any()):
+            amodal[s] = None
+        elif groups is not None:  # the slot's box, inside the union crop
+            bu, bv, bw, bh = boxes[s]
+            u, v = bu - crop[0], bv - crop[1]
+            amodal[s] = out["group_alpha"][k, v:v + bh, u:u + bw].numpy(), (bu, bv)
+        else:
+            amodal[s] = _subset_alpha(t, torch.nonzero(slots == s).squeeze(1), camera, boxes[s], amodal_max_px)
     return {"rgb": rgb.numpy(), "alpha": alpha.numpy(), "depth": d.numpy(), "label": label.numpy(),
             "amodal": amodal, "boxes": boxes}

@@ -14,6 +14,8 @@ Steps (all threads: torch.get_num_threads()):
   2. gs_forward: tile lists filled in depth order, then per 16x16 tile front-to-back blending with
      early termination;
   3. gs_backward: per tile back to front, per-(tile, Gaussian) sums, then per Gaussian.
+Optionally (groups, forward only) each group's transmittance as if it were rendered alone, from
+the same pass (csrc/tiles.cpp, forward<S, GROUPS>): what amodal instance masks need.
 """
 import torch
 
@@ -36,7 +38,7 @@ class _TileComposite(torch.autograd.Function):
     rather than as a zero image."""
 
     @staticmethod
-    def forward(ctx, means2d, conics, opacities, feats, depths, radii, boxes, H, W):
+    def forward(ctx, means2d, conics, opacities, feats, depths, radii, boxes, H, W, groups, n_groups):
         lib = build.load()
         dt = means2d.dtype
         if dt not in _SUFFIX:
@@ -69,16 +71,22 @@ class _TileComposite(torch.autograd.Function):
         out = torch.empty(H, W, cf, dtype=dt)
         T_final = torch.empty(H, W, dtype=dt)
         last = torch.empty(H, W, dtype=torch.int32)
+        ng = int(n_groups) if groups is not None else 0
+        gr = groups.to(torch.int32).contiguous() if ng else None
+        g_sorted = torch.empty(max(nv, 1), dtype=torch.int32) if ng else None
+        T_groups = torch.empty(ng, H, W, dtype=dt)
         getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), _ptr(fe), cf, W, H, nt, _ptr(recs), _ptr(cursor),
                                           _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(slot), _ptr(fs),
-                                          _ptr(out), _ptr(T_final), _ptr(last))
+                                          _ptr(out), _ptr(T_final), _ptr(last), _nptr(gr), ng, _nptr(g_sorted),
+                                          _ptr(T_groups) if ng else None)
+        ctx.mark_non_differentiable(T_groups)
         ctx.geom = (n, cf, H, W, nv, order, recs, tile_off, goff, lst, slot, fs, last)
         ctx.save_for_backward(T_final)
         ctx.dtypes = (conics.dtype, opacities.dtype, feats.dtype)
-        return out, T_final
+        return out, T_final, T_groups
 
     @staticmethod
-    def backward(ctx, g_out, g_T):
+    def backward(ctx, g_out, g_T, g_groups):
         n, cf, H, W, nv, order, recs, tile_off, goff, lst, slot, fs, last = ctx.geom
         (T_final,) = ctx.saved_tensors
         dt = T_final.dtype
@@ -95,12 +103,23 @@ class _TileComposite(torch.autograd.Function):
                                            _ptr(T_final), _ptr(last), _nptr(g_out), _nptr(g_T),
                                            _ptr(g_m2), _ptr(g_cn), _ptr(g_op), _ptr(g_fe))
         dc, do, df = ctx.dtypes
-        return g_m2, g_cn.to(dc), g_op.to(do), g_fe.to(df), None, None, None, None, None
+        return g_m2, g_cn.to(dc), g_op.to(do), g_fe.to(df), None, None, None, None, None, None, None
 
 
-def composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, W):
-    """See the module docstring. CPU tensors only; float32 or float64 (means2d's dtype)."""
+def composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, W, groups=None, n_groups=0):
+    """See the module docstring. CPU tensors only; float32 or float64 (means2d's dtype).
+    groups (N,) int in [-1, n_groups) (-1: in no group), n_groups >= 1: also returns T_groups
+    (n_groups, H, W), each group's transmittance rendered alone (not differentiable)."""
     if means2d.device.type != "cpu":
         raise ValueError("the tiled rasterizer runs on CPU tensors; use backend='torch' for "
                          f"{means2d.device.type} tensors")
-    return _TileComposite.apply(means2d, conics, opacities, feats, depths, radii, boxes, H, W)
+    if groups is not None:
+        if n_groups < 1 or groups.shape != (means2d.shape[0],):
+            raise ValueError(f"composite_tiles: groups must be ({means2d.shape[0]},) with n_groups >= 1")
+        if len(groups) and not (int(groups.min()) >= -1 and int(groups.max()) < n_groups):
+            raise ValueError(f"composite_tiles: group ids must lie in [-1, {n_groups})")
+        out, T_final, T_groups = _TileComposite.apply(means2d, conics, opacities, feats, depths, radii, boxes, H, W,
+                                                      groups, n_groups)
+        return out, T_final, T_groups
+    out, T_final, _ = _TileComposite.apply(means2d, conics, opacities, feats, depths, radii, boxes, H, W, None, 0)
+    return out, T_final

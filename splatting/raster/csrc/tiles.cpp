@@ -382,10 +382,18 @@ inline void store_lanes(T* dst, const V& v, int n) {
 // order (feats), then blend every tile front to back.
 // out (H x W x Cf, pixel-major), T_final (H x W), last (H x W): per pixel 1 + the tile-list
 // position of its last contributor (0: none).
-template <typename S>
+// GROUPS (forward only, no backward): every Gaussian also belongs to one of NG groups (grp_in,
+// per input Gaussian; -1: none), and T_grp (NG x H x W) gets each group's transmittance as if
+// its Gaussians were rendered alone (no occlusion by the others: the amodal alpha of an instance
+// is 1 - T_grp), with the same per-pixel rules (alpha test, clamp, the step that would take T
+// below 1e-4 not taken). One pass: the alpha a Gaussian has at a pixel is computed once for the
+// image and its group, and a pixel's list is walked past the image's own cut-off only while
+// some group at that pixel is still open. grp (nv): the groups gathered into depth order.
+template <typename S, bool GROUPS>
 void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W, int H, int nt,
              const Rec<S>* recs, int64_t* cursor, const int64_t* tile_off, const int64_t* goff,
-             int32_t* list, int64_t* slot, S* feats, S* out, S* T_final, int32_t* last) {
+             int32_t* list, int64_t* slot, S* feats, S* out, S* T_final, int32_t* last,
+             const int32_t* grp_in, int NG, int32_t* grp, S* T_grp) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   const std::vector<int> torder = busiest_first(tile_off, NT);
 #pragma omp parallel num_threads(nt)
@@ -397,6 +405,7 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
     for (int64_t s = b; s < e; ++s) {
       if (s + 16 < e) __builtin_prefetch(feats_in + (int64_t)order[s + 16] * Cf);
       std::copy_n(feats_in + (int64_t)order[s] * Cf, Cf, feats + s * Cf);
+      if (GROUPS) grp[s] = grp_in[order[s]];
       const Rec<S>& r = recs[s];
       if (r.u1 < r.u0 || r.v1 < r.v0) continue;
       int64_t k = goff[s];
@@ -416,6 +425,8 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
     std::vector<V> T(NV);
     std::vector<I> done(NV), lst(NV);
     std::vector<V> acc((size_t)NV * Cf);
+    std::vector<V> TG(GROUPS ? (size_t)NG * NV : 0);  // per group and pixel: its own transmittance
+    std::vector<I> gdone(GROUPS ? (size_t)NG * NV : 0);
 #pragma omp for schedule(dynamic, 1)
     for (int it = 0; it < NT; ++it) {
       const int t = torder[it];
@@ -426,6 +437,7 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
           std::fill_n(T_final + p, nx, (S)1);
           std::fill_n(last + p, nx, 0);
           std::fill_n(out + p * Cf, nx * Cf, (S)0);
+          for (int q = 0; q < (GROUPS ? NG : 0); ++q) std::fill_n(T_grp + (int64_t)q * H * W + p, nx, (S)1);
         }
         continue;
       }
@@ -440,15 +452,27 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
           active += inside;
         }
       }
+      if (GROUPS)
+        for (int q = 0; q < NG; ++q)
+          for (int v = 0; v < NV; ++v) {
+            TG[(size_t)q * NV + v] = (V){} + (S)1;
+            gdone[(size_t)q * NV + v] = done[v];
+          }
       std::fill(acc.begin(), acc.end(), (V){});
       const int64_t t0 = tile_off[t], n = tile_off[t + 1] - t0;
-      for (int64_t k = 0; k < n && active > 0; ++k) {
+      // with groups the list is walked to its end: a group's pixels close only when its own
+      // transmittance runs out, and pixels that no Gaussian of a group reaches never do
+      for (int64_t k = 0; k < n && (GROUPS || active > 0); ++k) {
         if (k + PF < n) {
           __builtin_prefetch(recs + list[t0 + k + PF]);
           __builtin_prefetch(feats + (int64_t)list[t0 + k + PF] * Cf);
         }
         const int32_t sp = list[t0 + k];
         const Rec<S>& g = recs[sp];
+        const int q = GROUPS ? grp[sp] : -1;
+        if (GROUPS && q < 0 && active == 0) continue;
+        V* const Tq = q >= 0 ? TG.data() + (size_t)q * NV : nullptr;
+        I* const dq = q >= 0 ? gdone.data() + (size_t)q * NV : nullptr;
         const Entry<S> en(g, ox, oy, ex, ey, lane_xc.data());
         const S* f = feats + (int64_t)sp * Cf;
         const I kk = (I){} + (IS)(k + 1);
@@ -457,15 +481,24 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
           Entry<S>::row(g, y, by, cyy);
           for (int j = en.j0; j <= en.j1; ++j) {
             const int v = (y - oy) * NJ + j;
-            const I live = en.box[j] & ~done[v];
+            const I live = GROUPS && q >= 0 ? en.box[j] & ~(done[v] & dq[v]) : en.box[j] & ~done[v];
             if (!any(live)) continue;  // finished pixels: no sigma, no exp
             const V sigma = en.sigma(j, by, cyy);
             const I pre = live & (sigma <= g.tau);
             if (!any(pre)) continue;
             const V ar = Entry<S>::alpha_raw(g, sigma);
-            const I m = pre & (ar >= (S)ALPHA_MIN);
-            if (!any(m)) continue;
+            const I mg = pre & (ar >= (S)ALPHA_MIN);
+            if (!any(mg)) continue;
             const V al = ar < (S)ALPHA_MAX ? ar : (V){} + (S)ALPHA_MAX;
+            if (GROUPS && q >= 0) {  // the group alone: the same steps on its own transmittance
+              const I mq = mg & ~dq[v];
+              const V test_q = Tq[v] * ((S)1 - al);
+              const I term_q = mq & (test_q < (S)T_MIN);
+              dq[v] |= term_q;
+              Tq[v] = (mq & ~term_q) ? test_q : Tq[v];
+            }
+            const I m = GROUPS ? mg & ~done[v] : mg;  // without groups live already excludes done
+            if (GROUPS && !any(m)) continue;
             const V test_T = T[v] * ((S)1 - al);
             const I term = m & (test_T < (S)T_MIN);
             if (any(term)) {
@@ -485,6 +518,8 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
         for (int j = 0; j < NJ && ox + j * L <= ex; ++j) {
           const int v = (y - oy) * NJ + j, nl = std::min(L, ex - (ox + j * L) + 1);
           const int64_t p = (int64_t)y * W + ox + j * L;
+          for (int q = 0; q < (GROUPS ? NG : 0); ++q)
+            store_lanes(T_grp + (int64_t)q * H * W + p, TG[(size_t)q * NV + v], nl);
           store_lanes(T_final + p, T[v], nl);
           if (sizeof(IS) == 4) {
             store_lanes(last + p, lst[v], nl);
@@ -655,9 +690,15 @@ int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
   void gs_forward_##SUFFIX(int64_t nv, const int32_t* order, const S* feats, int Cf, int W, int H, \
                            int nt, const void* recs, int64_t* cursor, const int64_t* tile_off,     \
                            const int64_t* goff, int32_t* list, int64_t* slot, S* feats_sorted,    \
-                           S* out, S* T_final, int32_t* last) {                                    \
-    forward<S>(nv, order, feats, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off, goff, list,  \
-               slot, feats_sorted, out, T_final, last);                                            \
+                           S* out, S* T_final, int32_t* last, const int32_t* grp_in, int NG,       \
+                           int32_t* grp, S* T_grp) {                                               \
+    if (NG > 0)                                                                                    \
+      forward<S, true>(nv, order, feats, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off,      \
+                       goff, list, slot, feats_sorted, out, T_final, last, grp_in, NG, grp, T_grp); \
+    else                                                                                           \
+      forward<S, false>(nv, order, feats, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off,     \
+                        goff, list, slot, feats_sorted, out, T_final, last, nullptr, 0, nullptr,   \
+                        nullptr);                                                                  \
   }                                                                                                \
   void gs_backward_##SUFFIX(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt,        \
                             const void* recs, const int64_t* tile_off, const int64_t* goff,        \
