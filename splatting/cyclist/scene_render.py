@@ -51,7 +51,9 @@ def slot_boxes(means, scales, slots, n_slots, camera, near=0.01):
     K = camera.K.double()
     x, y = p[:, 0] / zs, p[:, 1] / zs
     u, v = float(K[0, 0]) * x + float(K[0, 2]), float(K[1, 1]) * y + float(K[1, 2])
-    r = 3.0 * scales.max(1).values.float() / zs * torch.sqrt(1 + x * x + y * y)
+    sc = scales.float()
+    smax = torch.maximum(torch.maximum(sc[:, 0], sc[:, 1]), sc[:, 2])  # elementwise: max(1) over 3 columns is slower
+    r = 3.0 * smax / zs * torch.sqrt(1 + x * x + y * y)
     # + 0.5 px for float32 rounding of pixel coordinates up to ~1e4
     ru, rv = float(K[0, 0]) * r + BOX_MARGIN_PX + 0.5, float(K[1, 1]) * r + BOX_MARGIN_PX + 0.5
     inf = torch.full_like(u, math.inf)
@@ -134,8 +136,10 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None)
     H, W = camera.height, camera.width
     t = (g.means.float(), g.quats.float(), g.scales.float(), g.opacities.float())
     boxes = slot_boxes(t[0], t[2], slots, n_slots, camera)
-    rgb, alpha, depth = torch.zeros(H, W, 3), torch.zeros(H, W), torch.zeros(H, W)
-    label = torch.full((H, W), -1, dtype=torch.int16)
+    # numpy's zeros are calloc'ed pages (zeroed when first touched): the full-size images cost
+    # only where the crop is written; everything per pixel is computed inside the crop
+    rgb, alpha, d = np.zeros((H, W, 3), np.float32), np.zeros((H, W), np.float32), np.zeros((H, W), np.float32)
+    label = np.full((H, W), -1, np.int16)
     crop = union(boxes)
     groups = None
     if crop is not None:
@@ -150,12 +154,13 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None)
             groups = (group_of[slots.long()], len(amodal_slots))
         out = rasterize(*t, g.sh.float(), cropped_camera(camera, crop), features=onehot, groups=groups)
         a_c = out["alpha"]
-        rgb[v0:v0 + h, u0:u0 + w], alpha[v0:v0 + h, u0:u0 + w], depth[v0:v0 + h, u0:u0 + w] = out["rgb"], a_c, out["depth"]
+        sl = np.s_[v0:v0 + h, u0:u0 + w]
+        rgb[sl], alpha[sl] = out["rgb"].numpy(), a_c.numpy()
+        d[sl] = torch.where(a_c > 1e-4, out["depth"] / a_c.clamp_min(1e-4), torch.zeros_like(a_c)).numpy()
         # the back end's channels are (H, W, C) views of channel-major memory: reduce over C there
         lab = _argmax_channels(out["features"].permute(2, 0, 1).contiguous())
         lab[a_c <= MASK_ALPHA] = -1
-        label[v0:v0 + h, u0:u0 + w] = lab
-    d = torch.where(alpha > 1e-4, depth / alpha.clamp_min(1e-4), torch.zeros_like(depth))
+        label[sl] = lab.numpy()
     amodal = {}
     for k, s in enumerate(amodal_slots):
         if boxes[s] is None or not bool((slots == s).any()):
@@ -166,5 +171,4 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None)
             amodal[s] = out["group_alpha"][k, v:v + bh, u:u + bw].numpy(), (bu, bv)
         else:
             amodal[s] = _subset_alpha(t, torch.nonzero(slots == s).squeeze(1), camera, boxes[s], amodal_max_px)
-    return {"rgb": rgb.numpy(), "alpha": alpha.numpy(), "depth": d.numpy(), "label": label.numpy(),
-            "amodal": amodal, "boxes": boxes}
+    return {"rgb": rgb, "alpha": alpha, "depth": d, "label": label, "amodal": amodal, "boxes": boxes}
