@@ -57,7 +57,7 @@ class _TileComposite(torch.autograd.Function):
         ntiles = -(-W // tile) * -(-H // tile)
         recs = torch.empty(max(n, 1) * getattr(lib, f"gs_rec_bytes_{sfx}")(), dtype=torch.uint8)
         order = torch.empty(max(n, 1), dtype=torch.int32)
-        cursor = torch.empty(nt * ntiles, dtype=torch.int64)
+        cursor = torch.empty(lib.gs_chunks(nt) * ntiles, dtype=torch.int64)
         tile_off = torch.empty(ntiles + 1, dtype=torch.int64)
         goff = torch.empty(n + 1, dtype=torch.int64)
         sizes = torch.zeros(2, dtype=torch.int64)

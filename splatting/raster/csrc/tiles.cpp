@@ -248,6 +248,16 @@ inline void chunk(int64_t n, int nt, int th, int64_t& b, int64_t& e) {
   e = n * (th + 1) / nt;
 }
 
+// The depth order is binned and filled in CHUNKS_PER_THREAD * nt contiguous chunks handed out
+// dynamically, not one chunk per thread: on a shared machine a thread that starts late (its core
+// busy with another process) then delays the other by one small chunk, not by half the work at the
+// barrier. Each chunk has its own tile cursors (cursor: chunks x tiles), so the tile lists come
+// out the same for any thread count or schedule.
+constexpr int CHUNKS_PER_THREAD = 8;
+inline int n_chunks(int nt) { return CHUNKS_PER_THREAD * std::max(nt, 1); }
+// Gaussians per dynamically scheduled block of per-Gaussian loops (same reason).
+constexpr int64_t GAUSS_BLOCK = 2048;
+
 // Order-preserving unsigned keys of floats (negative values flipped).
 inline uint32_t fkey(float x) {
   uint32_t u;
@@ -289,8 +299,8 @@ void radix_sort(std::vector<K>& key, std::vector<int32_t>& idx) {
 
 // Phase 1: the visible Gaussians (radii > 0) sorted by depth into order, their records in that
 // order (recs[s] for Gaussian order[s]);
-// tile counts per thread chunk of that order, tile offsets, per-Gaussian entry offsets (goff,
-// in depth order). cursor (nt x ntiles) becomes each thread's first write position per tile.
+// tile counts per chunk of that order, tile offsets, per-Gaussian entry offsets (goff, in depth
+// order). cursor (n_chunks(nt) x ntiles) becomes each chunk's first write position per tile.
 // sizes[0] = visible count nv, sizes[1] = number of (tile, Gaussian) entries.
 template <typename S>
 void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* depths,
@@ -310,7 +320,8 @@ void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* d
   radix_sort(key, idx);
   const int64_t nv = (int64_t)idx.size();
   std::copy(idx.begin(), idx.end(), order);
-  std::fill(cursor, cursor + (int64_t)nt * NT, 0);
+  const int NC = n_chunks(nt);
+  std::fill(cursor, cursor + (int64_t)NC * NT, 0);
   // records computed in index order (sequential reads), then gathered into depth order: one
   // random read per Gaussian here, and sequential or monotonic reads everywhere after
   // reused across calls (no page faults per frame); thread_local is the calling thread's, so the
@@ -320,23 +331,25 @@ void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* d
   Rec<S>* const by_index = by_index_buf.data();
 #pragma omp parallel num_threads(nt)
   {
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, GAUSS_BLOCK)
     for (int64_t i = 0; i < N; ++i) make_rec(by_index[i], i, means2d, conics, opac, radii, boxes, W, H);
-    const int th = omp_get_thread_num();
-    int64_t b, e;
-    chunk(nv, nt, th, b, e);
-    int64_t* cnt = cursor + (int64_t)th * NT;
-    for (int64_t s = b; s < e; ++s) {
-      if (s + 16 < e) __builtin_prefetch(by_index + order[s + 16]);  // the gather's misses overlap
-      const Rec<S>& r = recs[s] = by_index[order[s]];
-      if (r.u1 < r.u0 || r.v1 < r.v0) {
-        goff[s + 1] = 0;
-        continue;
+#pragma omp for schedule(dynamic, 1)
+    for (int c = 0; c < NC; ++c) {
+      int64_t b, e;
+      chunk(nv, NC, c, b, e);
+      int64_t* cnt = cursor + (int64_t)c * NT;
+      for (int64_t s = b; s < e; ++s) {
+        if (s + 16 < e) __builtin_prefetch(by_index + order[s + 16]);  // the gather's misses overlap
+        const Rec<S>& r = recs[s] = by_index[order[s]];
+        if (r.u1 < r.u0 || r.v1 < r.v0) {
+          goff[s + 1] = 0;
+          continue;
+        }
+        const int tx0 = r.u0 / TILE, tx1 = r.u1 / TILE, ty0 = r.v0 / TILE, ty1 = r.v1 / TILE;
+        for (int ty = ty0; ty <= ty1; ++ty)
+          for (int tx = tx0; tx <= tx1; ++tx) cnt[ty * TX + tx]++;
+        goff[s + 1] = (int64_t)(tx1 - tx0 + 1) * (ty1 - ty0 + 1);
       }
-      const int tx0 = r.u0 / TILE, tx1 = r.u1 / TILE, ty0 = r.v0 / TILE, ty1 = r.v1 / TILE;
-      for (int ty = ty0; ty <= ty1; ++ty)
-        for (int tx = tx0; tx <= tx1; ++tx) cnt[ty * TX + tx]++;
-      goff[s + 1] = (int64_t)(tx1 - tx0 + 1) * (ty1 - ty0 + 1);
     }
   }
   goff[0] = 0;
@@ -344,9 +357,9 @@ void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* d
   int64_t pos = 0;
   for (int t = 0; t < NT; ++t) {
     tile_off[t] = pos;
-    for (int th = 0; th < nt; ++th) {
-      const int64_t c = cursor[(int64_t)th * NT + t];
-      cursor[(int64_t)th * NT + t] = pos;
+    for (int ch = 0; ch < NC; ++ch) {
+      const int64_t c = cursor[(int64_t)ch * NT + t];
+      cursor[(int64_t)ch * NT + t] = pos;
       pos += c;
     }
   }
@@ -396,27 +409,29 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
              const int32_t* grp_in, int NG, int32_t* grp, S* T_grp) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   const std::vector<int> torder = busiest_first(tile_off, NT);
+  const int NC = n_chunks(nt);
 #pragma omp parallel num_threads(nt)
   {
-    const int th = omp_get_thread_num();
-    int64_t b, e;
-    chunk(nv, nt, th, b, e);
-    int64_t* cur = cursor + (int64_t)th * NT;
-    for (int64_t s = b; s < e; ++s) {
-      if (s + 16 < e) __builtin_prefetch(feats_in + (int64_t)order[s + 16] * Cf);
-      std::copy_n(feats_in + (int64_t)order[s] * Cf, Cf, feats + s * Cf);
-      if (GROUPS) grp[s] = grp_in[order[s]];
-      const Rec<S>& r = recs[s];
-      if (r.u1 < r.u0 || r.v1 < r.v0) continue;
-      int64_t k = goff[s];
-      for (int ty = r.v0 / TILE; ty <= r.v1 / TILE; ++ty)
-        for (int tx = r.u0 / TILE; tx <= r.u1 / TILE; ++tx) {
-          const int64_t p = cur[ty * TX + tx]++;
-          list[p] = (int32_t)s;
-          slot[p] = k++;
-        }
-    }
-#pragma omp barrier
+#pragma omp for schedule(dynamic, 1)
+    for (int c = 0; c < NC; ++c) {
+      int64_t b, e;
+      chunk(nv, NC, c, b, e);
+      int64_t* cur = cursor + (int64_t)c * NT;
+      for (int64_t s = b; s < e; ++s) {
+        if (s + 16 < e) __builtin_prefetch(feats_in + (int64_t)order[s + 16] * Cf);
+        std::copy_n(feats_in + (int64_t)order[s] * Cf, Cf, feats + s * Cf);
+        if (GROUPS) grp[s] = grp_in[order[s]];
+        const Rec<S>& r = recs[s];
+        if (r.u1 < r.u0 || r.v1 < r.v0) continue;
+        int64_t k = goff[s];
+        for (int ty = r.v0 / TILE; ty <= r.v1 / TILE; ++ty)
+          for (int tx = r.u0 / TILE; tx <= r.u1 / TILE; ++tx) {
+            const int64_t p = cur[ty * TX + tx]++;
+            list[p] = (int32_t)s;
+            slot[p] = k++;
+          }
+      }
+    }  // (the implicit barrier: every list is filled before any tile blends)
     typedef typename VT<S>::V V;
     typedef typename VT<S>::I I;
     typedef typename std::remove_reference<decltype(I{}[0])>::type IS;
@@ -647,7 +662,7 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
       for (int64_t k = kmax; k < n; ++k) std::fill_n(gbuf + (size_t)slot[t0 + k] * NB, NB, (S)0);
     }
     std::vector<S> accv(NB);
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, GAUSS_BLOCK)
     for (int64_t s = 0; s < nv; ++s) {
       // summed locally, written once (read-modify-write of the output stalled on store forwarding)
       S* acc = accv.data();
@@ -676,6 +691,7 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
 extern "C" {
 
 int gs_tile_size() { return TILE; }
+int gs_chunks(int nt) { return n_chunks(nt); }
 int gs_rec_bytes_f32() { return (int)sizeof(Rec<float>); }
 int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
 
