@@ -157,7 +157,7 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None)
         sl = np.s_[v0:v0 + h, u0:u0 + w]
         rgb[sl], alpha[sl] = out["rgb"].numpy(), a_c.numpy()
         d[sl] = torch.where(a_c > 1e-4, out["depth"] / a_c.clamp_min(1e-4), torch.zeros_like(a_c)).numpy()
-        # the back end's channels are (H, W, C) views of channel-major memory: reduce over C there
+        # the features are (H, W, C) pixel-major: reduce over C channel-major
         lab = _argmax_channels(out["features"].permute(2, 0, 1).contiguous())
         lab[a_c <= MASK_ALPHA] = -1
         label[sl] = lab.numpy()

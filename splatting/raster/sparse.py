@@ -375,19 +375,20 @@ def _composite_tiles(means2d, conics, opacities, colors, features, depths, radii
                      groups=None):
     """The tiled C++ compositor with the torch path's outputs: rgb (H,W,3) over the background,
     alpha, depth (camera z composited as the last channel), features (H,W,F) or None. Colour,
-    features and depth ride in one (N, 3 + F + 1) table; each output is one slice of the
-    compositor's (H, W, 3 + F + 1) image (one slice, so one small backward per output)."""
+    features and depth ride in one (N, 3 + F + 1) table; the compositor writes each as its own
+    contiguous image (and takes their gradients back the same way)."""
     from splatting.raster.cpu_tiles import composite_tiles
 
-    parts = [colors] + ([] if features is None else [features.to(colors)]) + [depths[:, None]]
+    has_f = features is not None and features.shape[1] > 0
+    parts = [colors] + ([features.to(colors)] if has_f else []) + [depths[:, None]]
+    split = [p.shape[1] for p in parts]
     res = composite_tiles(means2d, conics, opacities, torch.cat(parts, 1), depths.detach(), radii, boxes, H, W,
-                          *(() if groups is None else groups))
-    out, T_final = res[:2]
-    rgb = out[..., :3]
+                          *(() if groups is None else groups), split=split)
+    rgb, depth, T_final = res[0], res[len(parts) - 1], res[len(parts)]
     if background is not None:
         rgb = rgb + T_final[..., None] * background.to(rgb)
-    feats = None if features is None else out[..., 3:-1]
-    return rgb, 1.0 - T_final, out[..., -1], feats, None if groups is None else 1.0 - res[2]
+    feats = res[1] if has_f else None if features is None else features.new_zeros(H, W, 0)
+    return rgb, 1.0 - T_final, depth, feats, None if groups is None else 1.0 - res[-1]
 
 
 def render_gaussians(g, camera, **kw):

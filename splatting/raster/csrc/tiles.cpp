@@ -390,10 +390,22 @@ inline void store_lanes(T* dst, const V& v, int n) {
   for (int l = 0; l < n; ++l) dst[l] = (T)v[l];
 }
 
+// The Cf channels of a pixel as n consecutive planes: plane q holds size[q] channels per pixel,
+// pixel-major (H x W x size[q]), so each output the caller wants apart (colour, extra features,
+// depth) is its own contiguous image and its gradient comes back the same way: no strided slicing
+// of one interleaved image (and no zero-filled full-size gradient for the channels nobody used).
+// P: S* for the outputs, const S* for their gradients (a null plane: no gradient).
+template <typename P>
+struct Planes {
+  int n;
+  const int* size;
+  const P* ptr;
+};
+
 // Phase 2: fill the tile lists with depth-order positions (depth order kept: each thread writes
 // its depth-ordered chunk after the chunks in front of it), gather the Cf channels into depth
 // order (feats), then blend every tile front to back.
-// out (H x W x Cf, pixel-major), T_final (H x W), last (H x W): per pixel 1 + the tile-list
+// out: the Cf channels as Planes, T_final (H x W), last (H x W): per pixel 1 + the tile-list
 // position of its last contributor (0: none).
 // GROUPS (forward only, no backward): every Gaussian also belongs to one of NG groups (grp_in,
 // per input Gaussian; -1: none), and T_grp (NG x H x W) gets each group's transmittance as if
@@ -405,7 +417,7 @@ inline void store_lanes(T* dst, const V& v, int n) {
 template <typename S, bool GROUPS>
 void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W, int H, int nt,
              const Rec<S>* recs, int64_t* cursor, const int64_t* tile_off, const int64_t* goff,
-             int32_t* list, int64_t* slot, S* feats, S* out, S* T_final, int32_t* last,
+             int32_t* list, int64_t* slot, S* feats, Planes<S*> out, S* T_final, int32_t* last,
              const int32_t* grp_in, int NG, int32_t* grp, S* T_grp) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   const std::vector<int> torder = busiest_first(tile_off, NT);
@@ -451,7 +463,7 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
           const int64_t p = (int64_t)y * W + ox, nx = ex - ox + 1;
           std::fill_n(T_final + p, nx, (S)1);
           std::fill_n(last + p, nx, 0);
-          std::fill_n(out + p * Cf, nx * Cf, (S)0);
+          for (int q = 0; q < out.n; ++q) std::fill_n(out.ptr[q] + p * out.size[q], nx * out.size[q], (S)0);
           for (int q = 0; q < (GROUPS ? NG : 0); ++q) std::fill_n(T_grp + (int64_t)q * H * W + p, nx, (S)1);
         }
         continue;
@@ -542,8 +554,12 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
             for (int l = 0; l < nl; ++l) last[p + l] = (int32_t)lst[v][l];
           }
           const V* a = acc.data() + (size_t)v * Cf;
-          for (int l = 0; l < nl; ++l)  // pixel-major (H, W, Cf): what the caller slices into images
-            for (int c = 0; c < Cf; ++c) out[(p + l) * Cf + c] = a[c][l];
+          for (int q = 0, c0 = 0; q < out.n; c0 += out.size[q++]) {  // pixel-major per plane
+            const int cq = out.size[q];
+            S* const o = out.ptr[q];
+            for (int l = 0; l < nl; ++l)
+              for (int c = 0; c < cq; ++c) o[(p + l) * cq + c] = a[c0 + c][l];
+          }
         }
     }
   }
@@ -553,12 +569,13 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
 // dividing by (1 - alpha_k) (alpha <= 0.99). Per (tile, Gaussian) entry the sums over the tile's
 // pixels go to gbuf, at the entry's slot in Gaussian-major order (slot, from the fill); then per
 // Gaussian its contiguous slots are summed in a fixed order (deterministic, no atomics) and turned into gradients of means2d, conics, opacity and the Cf channels.
-// g_out (H x W x Cf): dL/d out; g_T (H x W): dL/d T_final; either may be null (no gradient). Gradient arrays are indexed like the
+// g_out: dL/d out, as the forward's Planes (a null plane: no gradient); g_T (H x W): dL/d
+// T_final, or null. Gradient arrays are indexed like the
 // inputs; entries of Gaussians that are not visible are left untouched (the caller zeroes them).
 template <typename S>
 void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, const Rec<S>* recs,
               const int64_t* tile_off, const int64_t* goff, const int32_t* list, const int64_t* slot,
-              const S* feats, const S* T_final, const int32_t* last, const S* g_out, const S* g_T,
+              const S* feats, const S* T_final, const int32_t* last, Planes<const S*> g_out, const S* g_T,
               S* g_means2d, S* g_conics, S* g_opac, S* g_feats) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   const std::vector<int> torder = busiest_first(tile_off, NT);
@@ -600,7 +617,11 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
             accum[v][l] = g_T ? T_final[p + l] * g_T[p + l] : (S)0;  // behind: S_k + T_final dL/dT_final
           }
           for (int l = 0; l < nl; ++l)
-            for (int c = 0; c < Cf; ++c) G[(size_t)v * Cf + c][l] = g_out ? g_out[(p + l) * Cf + c] : (S)0;
+            for (int q = 0, c0 = 0; q < g_out.n; c0 += g_out.size[q++]) {
+              const int cq = g_out.size[q];
+              const S* const go = g_out.ptr[q];
+              for (int c = 0; c < cq; ++c) G[(size_t)v * Cf + c0 + c][l] = go ? go[(p + l) * cq + c] : (S)0;
+            }
         }
       for (int k = kmax - 1; k >= 0; --k) {
         if (k >= PF) {
@@ -706,8 +727,9 @@ int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
   void gs_forward_##SUFFIX(int64_t nv, const int32_t* order, const S* feats, int Cf, int W, int H, \
                            int nt, const void* recs, int64_t* cursor, const int64_t* tile_off,     \
                            const int64_t* goff, int32_t* list, int64_t* slot, S* feats_sorted,    \
-                           S* out, S* T_final, int32_t* last, const int32_t* grp_in, int NG,       \
-                           int32_t* grp, S* T_grp) {                                               \
+                           int NO, const int* osz, S* const* outs, S* T_final, int32_t* last,     \
+                           const int32_t* grp_in, int NG, int32_t* grp, S* T_grp) {               \
+    const Planes<S*> out{NO, osz, outs};                                                           \
     if (NG > 0)                                                                                    \
       forward<S, true>(nv, order, feats, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off,      \
                        goff, list, slot, feats_sorted, out, T_final, last, grp_in, NG, grp, T_grp); \
@@ -719,10 +741,12 @@ int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
   void gs_backward_##SUFFIX(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt,        \
                             const void* recs, const int64_t* tile_off, const int64_t* goff,        \
                             const int32_t* list, const int64_t* slot, const S* feats,              \
-                            const S* T_final, const int32_t* last, const S* g_out, const S* g_T,   \
-                            S* g_means2d, S* g_conics, S* g_opac, S* g_feats) {                    \
+                            const S* T_final, const int32_t* last, int NO, const int* osz,         \
+                            const S* const* g_outs, const S* g_T, S* g_means2d, S* g_conics,       \
+                            S* g_opac, S* g_feats) {                                               \
     backward<S>(nv, order, Cf, W, H, nt, (const Rec<S>*)recs, tile_off, goff, list, slot, feats,   \
-                T_final, last, g_out, g_T, g_means2d, g_conics, g_opac, g_feats);                  \
+                T_final, last, Planes<const S*>{NO, osz, g_outs}, g_T, g_means2d, g_conics,        \
+                g_opac, g_feats);                                                                  \
   }
 
 GS_EXPORT(f32, float)
