@@ -258,6 +258,20 @@ inline int n_chunks(int nt) { return CHUNKS_PER_THREAD * std::max(nt, 1); }
 // Gaussians per dynamically scheduled block of per-Gaussian loops (same reason).
 constexpr int64_t GAUSS_BLOCK = 2048;
 
+// body(s, e, cur) for every position s of the depth order [0, nv), chunk by chunk: the chunks are
+// shared out among the threads of the enclosing parallel region (an orphaned omp for, with its
+// barrier at the end); e is the chunk's end, cur its tile cursors (cursor + chunk * NT).
+template <typename F>
+inline void over_chunks(int64_t nv, int NC, int64_t* cursor, int NT, F&& body) {
+#pragma omp for schedule(dynamic, 1)
+  for (int c = 0; c < NC; ++c) {
+    int64_t b, e;
+    chunk(nv, NC, c, b, e);
+    int64_t* const cur = cursor + (int64_t)c * NT;
+    for (int64_t s = b; s < e; ++s) body(s, e, cur);
+  }
+}
+
 // Order-preserving unsigned keys of floats (negative values flipped).
 inline uint32_t fkey(float x) {
   uint32_t u;
@@ -333,24 +347,18 @@ void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* d
   {
 #pragma omp for schedule(dynamic, GAUSS_BLOCK)
     for (int64_t i = 0; i < N; ++i) make_rec(by_index[i], i, means2d, conics, opac, radii, boxes, W, H);
-#pragma omp for schedule(dynamic, 1)
-    for (int c = 0; c < NC; ++c) {
-      int64_t b, e;
-      chunk(nv, NC, c, b, e);
-      int64_t* cnt = cursor + (int64_t)c * NT;
-      for (int64_t s = b; s < e; ++s) {
-        if (s + 16 < e) __builtin_prefetch(by_index + order[s + 16]);  // the gather's misses overlap
-        const Rec<S>& r = recs[s] = by_index[order[s]];
-        if (r.u1 < r.u0 || r.v1 < r.v0) {
-          goff[s + 1] = 0;
-          continue;
-        }
-        const int tx0 = r.u0 / TILE, tx1 = r.u1 / TILE, ty0 = r.v0 / TILE, ty1 = r.v1 / TILE;
-        for (int ty = ty0; ty <= ty1; ++ty)
-          for (int tx = tx0; tx <= tx1; ++tx) cnt[ty * TX + tx]++;
-        goff[s + 1] = (int64_t)(tx1 - tx0 + 1) * (ty1 - ty0 + 1);
+    over_chunks(nv, NC, cursor, NT, [&](int64_t s, int64_t e, int64_t* cnt) {
+      if (s + 16 < e) __builtin_prefetch(by_index + order[s + 16]);  // the gather's misses overlap
+      const Rec<S>& r = recs[s] = by_index[order[s]];
+      if (r.u1 < r.u0 || r.v1 < r.v0) {
+        goff[s + 1] = 0;
+        return;
       }
-    }
+      const int tx0 = r.u0 / TILE, tx1 = r.u1 / TILE, ty0 = r.v0 / TILE, ty1 = r.v1 / TILE;
+      for (int ty = ty0; ty <= ty1; ++ty)
+        for (int tx = tx0; tx <= tx1; ++tx) cnt[ty * TX + tx]++;
+      goff[s + 1] = (int64_t)(tx1 - tx0 + 1) * (ty1 - ty0 + 1);
+    });
   }
   goff[0] = 0;
   for (int64_t s = 0; s < nv; ++s) goff[s + 1] += goff[s];
@@ -424,26 +432,20 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
   const int NC = n_chunks(nt);
 #pragma omp parallel num_threads(nt)
   {
-#pragma omp for schedule(dynamic, 1)
-    for (int c = 0; c < NC; ++c) {
-      int64_t b, e;
-      chunk(nv, NC, c, b, e);
-      int64_t* cur = cursor + (int64_t)c * NT;
-      for (int64_t s = b; s < e; ++s) {
-        if (s + 16 < e) __builtin_prefetch(feats_in + (int64_t)order[s + 16] * Cf);
-        std::copy_n(feats_in + (int64_t)order[s] * Cf, Cf, feats + s * Cf);
-        if (GROUPS) grp[s] = grp_in[order[s]];
-        const Rec<S>& r = recs[s];
-        if (r.u1 < r.u0 || r.v1 < r.v0) continue;
-        int64_t k = goff[s];
-        for (int ty = r.v0 / TILE; ty <= r.v1 / TILE; ++ty)
-          for (int tx = r.u0 / TILE; tx <= r.u1 / TILE; ++tx) {
-            const int64_t p = cur[ty * TX + tx]++;
-            list[p] = (int32_t)s;
-            slot[p] = k++;
-          }
-      }
-    }  // (the implicit barrier: every list is filled before any tile blends)
+    over_chunks(nv, NC, cursor, NT, [&](int64_t s, int64_t e, int64_t* cur) {
+      if (s + 16 < e) __builtin_prefetch(feats_in + (int64_t)order[s + 16] * Cf);
+      std::copy_n(feats_in + (int64_t)order[s] * Cf, Cf, feats + s * Cf);
+      if (GROUPS) grp[s] = grp_in[order[s]];
+      const Rec<S>& r = recs[s];
+      if (r.u1 < r.u0 || r.v1 < r.v0) return;
+      int64_t k = goff[s];
+      for (int ty = r.v0 / TILE; ty <= r.v1 / TILE; ++ty)
+        for (int tx = r.u0 / TILE; tx <= r.u1 / TILE; ++tx) {
+          const int64_t p = cur[ty * TX + tx]++;
+          list[p] = (int32_t)s;
+          slot[p] = k++;
+        }
+    });  // (over_chunks ends with a barrier: every list is filled before any tile blends)
     typedef typename VT<S>::V V;
     typedef typename VT<S>::I I;
     typedef typename std::remove_reference<decltype(I{}[0])>::type IS;
@@ -556,9 +558,13 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
           const V* a = acc.data() + (size_t)v * Cf;
           for (int q = 0, c0 = 0; q < out.n; c0 += out.size[q++]) {  // pixel-major per plane
             const int cq = out.size[q];
-            S* const o = out.ptr[q];
+            S* __restrict const o = out.ptr[q] + p * cq;
+            if (cq == 1) {  // one channel (depth): the lanes are the pixels
+              store_lanes(o, a[c0], nl);
+              continue;
+            }
             for (int l = 0; l < nl; ++l)
-              for (int c = 0; c < cq; ++c) o[(p + l) * cq + c] = a[c0 + c][l];
+              for (int c = 0; c < cq; ++c) o[l * cq + c] = a[c0 + c][l];
           }
         }
     }
