@@ -125,7 +125,9 @@ def analytic_init_pose(rest_joints, targets, pairs=DEFAULT_PAIRS):
             err = err + (torch.linalg.vector_norm(targets[t][:, None] - sh, dim=-1) - reach).abs()
         best = err.argmin(1)
         R_lean = R_grid[best]
-        aa[:, JOINT_INDEX["spine1"]] = _rotmat_to_aa(R_lean)
+        local_R = {"spine1": R_lean}
+    else:
+        local_R = {}
     for s, sz in (("left", -1.0), ("right", 1.0)):
         for a, b, c, pole, parent_R, origin in (
                 (f"{s}_hip", f"{s}_knee", f"{s}_ankle", KNEE_POLE, None, trans),
@@ -140,8 +142,12 @@ def analytic_init_pose(rest_joints, targets, pairs=DEFAULT_PAIRS):
             u0 = _unit(J(b) - J(a))
             u1, axis_w, theta = _two_bone(start, targets[of[c]], seg(a, b), J(c) - J(b), u0, axes[b], pole_t)
             R_w = _frame(u1, axis_w) @ _frame(u0, axes[b]).T
-            aa[:, JOINT_INDEX[a]] = _rotmat_to_aa(R_w if parent_R is None else parent_R.transpose(-1, -2) @ R_w)
+            local_R[a] = R_w if parent_R is None else parent_R.transpose(-1, -2) @ R_w
             aa[:, JOINT_INDEX[b]] = theta[:, None] * axes[b]
+    if local_R:  # one conversion for every joint set above (per-matrix maths: the same values)
+        rv = _rotmat_to_aa(torch.cat(list(local_R.values()))).view(len(local_R), B, 3)
+        for name, v in zip(local_R, rv):
+            aa[:, JOINT_INDEX[name]] = v
     return aa, trans
 
 
