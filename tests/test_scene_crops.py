@@ -122,21 +122,32 @@ def test_generated_backgrounds_equal_the_per_pixel_formulas(seed, W, H):
 @pytest.mark.parametrize("seed", [0, 1])
 def test_one_pass_amodal_alphas_equal_each_slot_rendered_alone(seed):
     """render_scene's amodal alphas from the image's own pass (groups) equal each slot's
-    Gaussians rasterized alone through its cropped camera (the amodal_max_px path at full size),
-    and the slots do occlude each other (the amodal masks are larger than the visible ones)."""
+    Gaussians rasterized alone through its cropped camera (_subset_alpha at full size), also
+    when amodal_max_px sends the larger slots to the reduced-resolution path; and the slots do
+    occlude each other (the amodal masks are larger than the visible ones)."""
     torch.set_num_threads(1)
-    from splatting.cyclist.scene_render import render_scene
+    from splatting.cyclist.scene_render import _subset_alpha, render_scene
     g = _scene(seed, n=600)
     slots = torch.arange(len(g)) % 3
+    slots[:100] = 2  # uneven slots: slot 2 larger on screen
     cam = look_at_camera((0.5, 1.0, 7.0), width=160, height=96, focal=90.0, cx=70.0, cy=40.0)
+    t = (g.means.float(), g.quats.float(), g.scales.float(), g.opacities.float())
     one = render_scene(g, slots, 3, cam, (1, 2))
-    alone = render_scene(g, slots, 3, cam, (1, 2), amodal_max_px=10 ** 6)
-    for k in ("rgb", "alpha", "depth", "label"):
-        assert (one[k] == alone[k]).all(), k
     for s in (1, 2):
-        (a, at), (b, bt) = one["amodal"][s], alone["amodal"][s]
-        assert at == bt and a.shape == b.shape
-        assert np.abs(a - b).max() < 1e-5
+        ref, rt = _subset_alpha(t, torch.nonzero(slots == s).squeeze(1), cam, one["boxes"][s])
+        a, at = one["amodal"][s]
+        assert at == rt and a.shape == ref.shape
+        assert np.abs(a - ref).max() < 1e-5
         u0, v0 = at
         vis = one["label"][v0:v0 + a.shape[0], u0:u0 + a.shape[1]] == s
         assert (a > 0.5).sum() > vis.sum() + 20
+    # a max_px between the two boxes: the smaller slot stays in the one pass, the larger is reduced
+    sizes = {s: max(one["boxes"][s][2:]) for s in (1, 2)}
+    small, big = sorted(sizes, key=sizes.get)
+    assert sizes[small] < sizes[big]
+    mixed = render_scene(g, slots, 3, cam, (1, 2), amodal_max_px=sizes[small])
+    for k in ("rgb", "alpha", "depth", "label"):
+        assert (mixed[k] == one[k]).all(), k
+    assert (mixed["amodal"][small][0] == one["amodal"][small][0]).all()
+    want = _subset_alpha(t, torch.nonzero(slots == big).squeeze(1), cam, one["boxes"][big], sizes[small])
+    assert (mixed["amodal"][big][0] == want[0]).all() and mixed["amodal"][big][1] == want[1]

@@ -9,8 +9,8 @@ label of a pixel is the slot with the largest weight, -1 where alpha <= 0.5.  Am
 each slot's Gaussians as if rasterized alone, from the same pass (the rasterizer's `groups`: the
 alpha a Gaussian has at a pixel is computed once for the image and for its slot, and a pixel's
 list is walked past the image's cut-off only for slots still open there).  With amodal_max_px
-(street scenes) each slot is instead rasterized alone (opacity only) through a camera cropped to
-its screen box, at reduced resolution when the box is larger.
+(street scenes) a slot whose screen box is larger is instead rasterized alone (opacity only)
+through a camera cropped to its box, at max_px / size of the resolution.
 
 Screen boxes come from slot_boxes(): each Gaussian's projected mean with a bound on its 3-sigma
 radius (conservative, a few multiply-adds per Gaussian) instead of a second EWA projection of
@@ -141,17 +141,20 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None)
     rgb, alpha, d = np.zeros((H, W, 3), np.float32), np.zeros((H, W), np.float32), np.zeros((H, W), np.float32)
     label = np.full((H, W), -1, np.int16)
     crop = union(boxes)
-    groups = None
+    groups, one_pass = None, []
     if crop is not None:
         u0, v0, w, h = crop
         onehot = torch.zeros(len(g), n_slots)
         onehot[torch.arange(len(g)), slots.long()] = 1.0
-        # one pass for the amodal alphas too (no reduced resolution asked for)
+        # the amodal alphas from the same pass, except for parts larger than amodal_max_px (those
+        # are rendered alone at reduced resolution, _subset_alpha)
+        one_pass = [s for s in amodal_slots if boxes[s] is not None
+                    and (amodal_max_px is None or max(boxes[s][2:]) <= amodal_max_px)]
         group_of = torch.full((n_slots,), -1, dtype=torch.int32)
-        for k, s in enumerate(amodal_slots):
+        for k, s in enumerate(one_pass):
             group_of[s] = k
-        if amodal_max_px is None and len(amodal_slots):
-            groups = (group_of[slots.long()], len(amodal_slots))
+        if one_pass:
+            groups = (group_of[slots.long()], len(one_pass))
         out = rasterize(*t, g.sh.float(), cropped_camera(camera, crop), features=onehot, groups=groups)
         a_c = out["alpha"]
         sl = np.s_[v0:v0 + h, u0:u0 + w]
@@ -162,13 +165,13 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None)
         lab[a_c <= MASK_ALPHA] = -1
         label[sl] = lab.numpy()
     amodal = {}
-    for k, s in enumerate(amodal_slots):
+    for s in amodal_slots:
         if boxes[s] is None or not bool((slots == s).any()):
             amodal[s] = None
-        elif groups is not None:  # the slot's box, inside the union crop
+        elif s in one_pass:  # the slot's box, inside the union crop
             bu, bv, bw, bh = boxes[s]
             u, v = bu - crop[0], bv - crop[1]
-            amodal[s] = out["group_alpha"][k, v:v + bh, u:u + bw].numpy(), (bu, bv)
+            amodal[s] = out["group_alpha"][one_pass.index(s), v:v + bh, u:u + bw].numpy(), (bu, bv)
         else:
             amodal[s] = _subset_alpha(t, torch.nonzero(slots == s).squeeze(1), camera, boxes[s], amodal_max_px)
     return {"rgb": rgb, "alpha": alpha, "depth": d, "label": label, "amodal": amodal, "boxes": boxes}
