@@ -54,10 +54,12 @@ def atomic_path(path):
 
 
 def write_json(path, obj, indent=1):
+    # json.dumps, not json.dump: dump always streams through the pure-Python encoder, dumps uses
+    # the C one when indent is None (a dataset shard: 6 ms -> <1 ms); the text is the same
+    text = json.dumps(obj, indent=indent)
     with atomic_path(path) as tmp:
         with open(tmp, "w") as f:
-            json.dump(obj, f, indent=indent)
-            f.write("\n")
+            f.write(text + "\n")
 
 
 def write_bytes(path, data):

@@ -287,3 +287,35 @@ def test_antialiased_tiles_match_torch_gradients():
         _assert_close(a[key].detach(), b[key].detach(), f"aa {key}")
     for pname, x, y in zip(("means", "quats", "scales", "opacities", "sh"), ga, gb):
         _assert_close(x, y, f"aa d/d{pname}")
+
+
+@pytest.mark.parametrize("name,scene,cam,bg", [s for s in SCENES if s[0] != "empty"] + [
+    ("crowded", *_crowded_tile_scene(), None)], ids=[s[0] for s in SCENES if s[0] != "empty"] + ["crowded"])
+def test_group_alphas_equal_each_group_rendered_alone(name, scene, cam, bg):
+    """groups: each group's alpha from the image's own pass equals that group's Gaussians
+    rendered alone (both back ends, 1e-5), Gaussians in no group (-1) occlude but count for no
+    group, and the image itself is the one rendered without groups, bit for bit."""
+    n = len(scene[0])
+    ids = torch.arange(n) % 3 - 1  # -1, 0, 1, -1, ...
+    ids[: n // 4] = 1  # uneven groups
+    plain = rasterize(*scene, cam, background=bg, backend="tiles")
+    for backend in ("tiles", "torch"):
+        out = rasterize(*scene, cam, background=bg, backend=backend, groups=(ids, 2))
+        assert out["group_alpha"].shape == (2, cam.height, cam.width)
+        for q in range(2):
+            keep = ids == q
+            alone = rasterize(*(t[keep] for t in scene), cam, backend="torch")["alpha"]
+            _assert_close(out["group_alpha"][q], alone, f"{name} {backend} group {q}")
+        if backend == "tiles":
+            for key in ("rgb", "alpha", "depth"):
+                assert torch.equal(out[key], plain[key]), key
+    if name in ("dense_opaque", "crowded"):  # the groups really reach behind the image's cut-off
+        ga = out["group_alpha"]
+        assert ((ga[0] > 0.5) & (ga[1] > 0.5) & (plain["alpha"] > 0.99)).any()
+
+
+def test_group_ids_out_of_range_are_refused():
+    scene = single_gaussian([0.0, 0.0, 0.0], scale=0.2)
+    cam = look_at_camera((0.0, 0.0, -3.0))
+    with pytest.raises(ValueError, match="group"):
+        rasterize(*scene, cam, groups=(torch.tensor([2]), 2))

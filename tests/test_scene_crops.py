@@ -87,3 +87,67 @@ def test_over_in_box_equals_over_on_the_whole_image(photo_bytes):
     want = over({"rgb": rgb, "alpha": alpha}, bgf)
     got = over_in_box({"rgb": rgb, "alpha": alpha}, bg8 if photo_bytes else bgf, (10, 5, 20, 15))
     assert got.dtype == np.uint8 and (got == want).all()
+
+
+@pytest.mark.parametrize("seed, W, H", [(0, 40, 24), (5, 17, 33), (9, 1, 8)])
+def test_generated_backgrounds_equal_the_per_pixel_formulas(seed, W, H):
+    """The separable noise (one matmul for every octave's columns) and the broadcast gradient give
+    the per-pixel definitions: bilinear value noise of 4 octaves, a clipped linear ramp."""
+    from splatting.dataset.backgrounds import generated
+    rng = np.random.default_rng(seed)
+    want = np.zeros((H, W, 3))
+    amp, total = 1.0, 0.0
+    for cells in (4, 8, 16, 64):
+        grid = rng.uniform(0, 1, (cells + 1, cells + 1, 3))
+        for i in range(H):
+            for j in range(W):
+                y, x = i * cells / max(H - 1, 1), j * cells / max(W - 1, 1)
+                y0, x0 = min(int(y), cells - 1), min(int(x), cells - 1)
+                fy, fx = y - y0, x - x0
+                want[i, j] += amp * ((1 - fy) * ((1 - fx) * grid[y0, x0] + fx * grid[y0, x0 + 1])
+                                     + fy * ((1 - fx) * grid[y0 + 1, x0] + fx * grid[y0 + 1, x0 + 1]))
+        total += amp
+        amp *= 0.5
+    got = generated("noise", seed, W, H)
+    assert got.dtype == np.float32 and got.shape == (H, W, 3)
+    assert np.abs(got - want / total).max() < 1e-6
+    rng = np.random.default_rng(seed)
+    a, b, ang = rng.uniform(0, 1, 3), rng.uniform(0, 1, 3), rng.uniform(0, 2 * np.pi)
+    grad = generated("gradient", seed, W, H)
+    for i, j in ((0, 0), (H - 1, W - 1), (H // 2, W // 3)):
+        t = min(max((j / max(W - 1, 1) - 0.5) * np.cos(ang) + (i / max(H - 1, 1) - 0.5) * np.sin(ang) + 0.5, 0), 1)
+        assert np.abs(grad[i, j] - ((1 - t) * a + t * b)).max() < 1e-6
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_one_pass_amodal_alphas_equal_each_slot_rendered_alone(seed):
+    """render_scene's amodal alphas from the image's own pass (groups) equal each slot's
+    Gaussians rasterized alone through its cropped camera (_subset_alpha at full size), also
+    when amodal_max_px sends the larger slots to the reduced-resolution path; and the slots do
+    occlude each other (the amodal masks are larger than the visible ones)."""
+    torch.set_num_threads(1)
+    from splatting.cyclist.scene_render import _subset_alpha, render_scene
+    g = _scene(seed, n=600)
+    slots = torch.arange(len(g)) % 3
+    slots[:100] = 2  # uneven slots: slot 2 larger on screen
+    cam = look_at_camera((0.5, 1.0, 7.0), width=160, height=96, focal=90.0, cx=70.0, cy=40.0)
+    t = (g.means.float(), g.quats.float(), g.scales.float(), g.opacities.float())
+    one = render_scene(g, slots, 3, cam, (1, 2))
+    for s in (1, 2):
+        ref, rt = _subset_alpha(t, torch.nonzero(slots == s).squeeze(1), cam, one["boxes"][s])
+        a, at = one["amodal"][s]
+        assert at == rt and a.shape == ref.shape
+        assert np.abs(a - ref).max() < 1e-5
+        u0, v0 = at
+        vis = one["label"][v0:v0 + a.shape[0], u0:u0 + a.shape[1]] == s
+        assert (a > 0.5).sum() > vis.sum() + 20
+    # a max_px between the two boxes: the smaller slot stays in the one pass, the larger is reduced
+    sizes = {s: max(one["boxes"][s][2:]) for s in (1, 2)}
+    small, big = sorted(sizes, key=sizes.get)
+    assert sizes[small] < sizes[big]
+    mixed = render_scene(g, slots, 3, cam, (1, 2), amodal_max_px=sizes[small])
+    for k in ("rgb", "alpha", "depth", "label"):
+        assert (mixed[k] == one[k]).all(), k
+    assert (mixed["amodal"][small][0] == one["amodal"][small][0]).all()
+    want = _subset_alpha(t, torch.nonzero(slots == big).squeeze(1), cam, one["boxes"][big], sizes[small])
+    assert (mixed["amodal"][big][0] == want[0]).all() and mixed["amodal"][big][1] == want[1]

@@ -6,8 +6,11 @@ per instance: bike then rider).  The image is rasterized once for all slots with
 one-hot as feature channels, so nearer Gaussians hide farther ones whatever instance they belong
 to, and each feature channel is that slot's summed compositing weight w = alpha T per pixel.  The
 label of a pixel is the slot with the largest weight, -1 where alpha <= 0.5.  Amodal alphas:
-each slot's Gaussians rasterized alone (opacity only: no colour) through a camera cropped to that
-slot's screen box, so their total work is about one more render of the instances' pixels.
+each slot's Gaussians as if rasterized alone, from the same pass (the rasterizer's `groups`: the
+alpha a Gaussian has at a pixel is computed once for the image and for its slot, and a pixel's
+list is walked past the image's cut-off only for slots still open there).  With amodal_max_px
+(street scenes) a slot whose screen box is larger is instead rasterized alone (opacity only)
+through a camera cropped to its box, at max_px / size of the resolution.
 
 Screen boxes come from slot_boxes(): each Gaussian's projected mean with a bound on its 3-sigma
 radius (conservative, a few multiply-adds per Gaussian) instead of a second EWA projection of
@@ -48,7 +51,9 @@ def slot_boxes(means, scales, slots, n_slots, camera, near=0.01):
     K = camera.K.double()
     x, y = p[:, 0] / zs, p[:, 1] / zs
     u, v = float(K[0, 0]) * x + float(K[0, 2]), float(K[1, 1]) * y + float(K[1, 2])
-    r = 3.0 * scales.max(1).values.float() / zs * torch.sqrt(1 + x * x + y * y)
+    sc = scales.float()
+    smax = torch.maximum(torch.maximum(sc[:, 0], sc[:, 1]), sc[:, 2])  # elementwise: max(1) over 3 columns is slower
+    r = 3.0 * smax / zs * torch.sqrt(1 + x * x + y * y)
     # + 0.5 px for float32 rounding of pixel coordinates up to ~1e4
     ru, rv = float(K[0, 0]) * r + BOX_MARGIN_PX + 0.5, float(K[1, 1]) * r + BOX_MARGIN_PX + 0.5
     inf = torch.full_like(u, math.inf)
@@ -134,31 +139,48 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None,
     H, W = camera.height, camera.width
     t = (g.means.float(), g.quats.float(), g.scales.float(), g.opacities.float())
     boxes = slot_boxes(t[0], t[2], slots, n_slots, camera)
-    rgb, alpha, depth = torch.zeros(H, W, 3), torch.zeros(H, W), torch.zeros(H, W)
-    label = torch.full((H, W), -1, dtype=torch.int16)
+    # numpy's zeros are calloc'ed pages (zeroed when first touched): the full-size images cost
+    # only where the crop is written; everything per pixel is computed inside the crop
+    rgb, alpha, d = np.zeros((H, W, 3), np.float32), np.zeros((H, W), np.float32), np.zeros((H, W), np.float32)
+    label = np.full((H, W), -1, np.int16)
     crop = union(boxes)
-    feats = None
+    groups, one_pass, feats = None, [], None
     if crop is not None:
         u0, v0, w, h = crop
         onehot = torch.zeros(len(g), n_slots)
         onehot[torch.arange(len(g)), slots.long()] = 1.0
         if features is not None:
             onehot = torch.cat([onehot, features.float()], 1)
-        out = rasterize(*t, g.sh.float(), cropped_camera(camera, crop), features=onehot)
+        # the amodal alphas from the same pass, except for parts larger than amodal_max_px (those
+        # are rendered alone at reduced resolution, _subset_alpha)
+        one_pass = [s for s in amodal_slots if boxes[s] is not None
+                    and (amodal_max_px is None or max(boxes[s][2:]) <= amodal_max_px)]
+        group_of = torch.full((n_slots,), -1, dtype=torch.int32)
+        for k, s in enumerate(one_pass):
+            group_of[s] = k
+        if one_pass:
+            groups = (group_of[slots.long()], len(one_pass))
+        out = rasterize(*t, g.sh.float(), cropped_camera(camera, crop), features=onehot, groups=groups)
         feats = out["features"]
         a_c = out["alpha"]
-        rgb[v0:v0 + h, u0:u0 + w], alpha[v0:v0 + h, u0:u0 + w], depth[v0:v0 + h, u0:u0 + w] = out["rgb"], a_c, out["depth"]
-        # the back end's channels are (H, W, C) views of channel-major memory: reduce over C there
-        lab = _argmax_channels(out["features"][..., :n_slots].permute(2, 0, 1).contiguous())
+        sl = np.s_[v0:v0 + h, u0:u0 + w]
+        rgb[sl], alpha[sl] = out["rgb"].numpy(), a_c.numpy()
+        d[sl] = torch.where(a_c > 1e-4, out["depth"] / a_c.clamp_min(1e-4), torch.zeros_like(a_c)).numpy()
+        # the features are (H, W, C) pixel-major: reduce over the slots' channels channel-major
+        lab = _argmax_channels(feats[..., :n_slots].permute(2, 0, 1).contiguous())
         lab[a_c <= MASK_ALPHA] = -1
-        label[v0:v0 + h, u0:u0 + w] = lab
-    d = torch.where(alpha > 1e-4, depth / alpha.clamp_min(1e-4), torch.zeros_like(depth))
+        label[sl] = lab.numpy()
     amodal = {}
     for s in amodal_slots:
-        idx = torch.nonzero(slots == s).squeeze(1)
-        amodal[s] = _subset_alpha(t, idx, camera, boxes[s], amodal_max_px) if len(idx) and boxes[s] else None
-    L = {"rgb": rgb.numpy(), "alpha": alpha.numpy(), "depth": d.numpy(), "label": label.numpy(),
-         "amodal": amodal, "boxes": boxes}
+        if boxes[s] is None or not bool((slots == s).any()):
+            amodal[s] = None
+        elif s in one_pass:  # the slot's box, inside the union crop
+            bu, bv, bw, bh = boxes[s]
+            u, v = bu - crop[0], bv - crop[1]
+            amodal[s] = out["group_alpha"][one_pass.index(s), v:v + bh, u:u + bw].numpy(), (bu, bv)
+        else:
+            amodal[s] = _subset_alpha(t, torch.nonzero(slots == s).squeeze(1), camera, boxes[s], amodal_max_px)
+    L = {"rgb": rgb, "alpha": alpha, "depth": d, "label": label, "amodal": amodal, "boxes": boxes}
     if features is not None:
         L.update(features=feats, crop=crop)
     return L

@@ -36,25 +36,37 @@ def generated(kind, seed, width, height):
     if kind == "gradient":
         a, b = rng.uniform(0, 1, 3), rng.uniform(0, 1, 3)
         ang = rng.uniform(0, 2 * np.pi)
-        y, x = np.mgrid[0:H, 0:W].astype(np.float64)
-        y, x = y / max(H - 1, 1) - 0.5, x / max(W - 1, 1) - 0.5
-        t = np.clip(x * np.cos(ang) + y * np.sin(ang) + 0.5, 0, 1)[..., None]
-        return ((1 - t) * a + t * b).astype(np.float32)
+        y = np.arange(H) / max(H - 1, 1) - 0.5
+        x = np.arange(W) / max(W - 1, 1) - 0.5
+        # the ramp is a sum of a row and a column term: built by broadcasting, in float32
+        t = (x[None, :] * np.cos(ang) + (y * np.sin(ang) + 0.5)[:, None]).astype(np.float32)
+        np.clip(t, 0, 1, out=t)
+        return a.astype(np.float32) + t[..., None] * (b - a).astype(np.float32)
     if kind != "noise":
         raise ValueError(f"not a generated background: {kind}")
-    # a few octaves of bilinearly upsampled random grids (value noise)
-    img = np.zeros((H, W, 3))
+    # a few octaves of bilinearly upsampled random grids (value noise). Bilinear upsampling is
+    # separable: each octave's rows are interpolated on its small grid, and the columns of all
+    # octaves at once by one (3, H, K) x (K, W) matmul with the column interpolation weights
+    # (K = 96 grid columns in all). Measured 4 ms instead of 67-94 ms for per-octave full-size
+    # gathers in float64, same values to 2e-7.
     amp, total = 1.0, 0.0
+    rows, cols = [], []
     for cells in (4, 8, 16, 64):
         grid = rng.uniform(0, 1, (cells + 1, cells + 1, 3))
         cy, cx = np.linspace(0, cells, H), np.linspace(0, cells, W)
         iy, ix = np.minimum(cy.astype(int), cells - 1), np.minimum(cx.astype(int), cells - 1)
-        fy, fx = (cy - iy)[:, None, None], (cx - ix)[None, :, None]
-        rows = grid[iy] * (1 - fy) + grid[iy + 1] * fy  # (H, cells+1, 3)
-        img += amp * (rows[:, ix] * (1 - fx) + rows[:, ix + 1] * fx)
+        fy, fx = (cy - iy)[:, None, None], cx - ix
+        rows.append(amp * (grid[iy] * (1 - fy) + grid[iy + 1] * fy))  # (H, cells+1, 3)
+        wx = np.zeros((W, cells + 1))
+        wx[np.arange(W), ix] = 1 - fx
+        wx[np.arange(W), ix + 1] += fx
+        cols.append(wx)
         total += amp
         amp *= 0.5
-    return (img / total).astype(np.float32)
+    r = torch.from_numpy(np.concatenate(rows, 1).transpose(2, 0, 1) / total).float()  # (3, H, K)
+    wx = torch.from_numpy(np.concatenate(cols, 1).T).float()  # (K, W)
+    # torch, not numpy: it keeps to the worker's one thread (numpy's BLAS would start its own)
+    return (r @ wx).permute(1, 2, 0).contiguous().numpy()
 
 
 def list_images(folder, field="backgrounds.images_dir"):

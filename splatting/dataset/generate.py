@@ -19,7 +19,7 @@ from splatting.cyclist.assets import bike_dir, load_avatar, load_bike
 from splatting.cyclist.compose import Cyclist
 from splatting.cyclist.render import keypoint_visibility, orbit_camera, over, project_points, to_uint8
 from splatting.cyclist.scene_render import MASK_ALPHA, render_scene, union
-from splatting.dataset import camera_presets, kitti, lighting
+from splatting.dataset import camera_presets, kitti, lighting, png
 from splatting.dataset.backgrounds import contact_shadows, generated, load_scene, photo
 from splatting.dataset.config import POSE_KEYS
 from splatting.dataset.labels import BoxMask, annotation, vehicle_class
@@ -35,7 +35,7 @@ class Assets:
         self.cfg, self.log = cfg, log
         self.bikes, self.avatars, self.cyclists, self.persons = {}, {}, {}, {}
         self._scene = None
-        self.lod_orders, self.bodies, self.looks = {}, {}, {}
+        self.lod_orders, self.bodies, self.looks, self.label_prep = {}, {}, {}, {}
 
     def cyclist(self, bike, rider):
         key = (bike, rider)
@@ -88,6 +88,19 @@ class Assets:
     def meta(self, bike):
         return getattr(self.bikes[bike], "meta", None) or {}
 
+    def label_inputs(self, bike, rider, frame):
+        """What the labels need of a (bike, rider)'s Gaussians apart from their posed means,
+        computed once (pose changes neither opacities, scales nor ids): extent_prep(), and the
+        indices of the dense (opacity >= 0.1) bike and rider Gaussians for the projected extents."""
+        key = (bike, rider)
+        if key not in self.label_prep:
+            g = frame.gaussians
+            dense = (g.opacities >= 0.1).numpy()
+            is_r = (frame.ids == RIDER_ID).numpy()
+            self.label_prep[key] = {"extent": extent_prep(g), "bike": np.flatnonzero(dense & ~is_r),
+                                    "rider": np.flatnonzero(dense & is_r)}
+        return self.label_prep[key]
+
     def scene(self):
         if self._scene is None:
             b = self.cfg["backgrounds"]
@@ -129,16 +142,23 @@ def _ry(deg):
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
-def extent_box(g, pose, min_opacity=0.1):
+def extent_prep(g, min_opacity=0.1):
+    """(indices of the Gaussians with opacity >= min_opacity, their radii (n, 1) float64) for
+    extent_box: they depend on opacities and scales alone, which posing leaves unchanged."""
+    o = g.opacities
+    keep = torch.nonzero(o >= min_opacity).squeeze(1)
+    oo = o[keep].double().clamp_max(0.99)
+    r = (g.scales[keep].max(1).values.double() * torch.sqrt(torch.clamp_min(2 * torch.log(2 * oo), 0.0)))[:, None]
+    return keep, r
+
+
+def extent_box(g, pose, min_opacity=0.1, prep=None):
     """The posed instance's 3D box in its heading frame -> {bottom_centre (world), heading_deg, h, w, l}.
     Gaussians with opacity >= min_opacity count, each widened by the radius where it alone renders
     alpha 0.5 (sigma sqrt(2 ln 2o) of its largest scale; none below opacity 0.5): the extent of
-    the masks, whose threshold is alpha 0.5."""
-    o = g.opacities
-    keep = o >= min_opacity
-    m = g.means[keep].double()
-    oo = o[keep].double().clamp_max(0.99)
-    r = (g.scales[keep].max(1).values.double() * torch.sqrt(torch.clamp_min(2 * torch.log(2 * oo), 0.0)))[:, None]
+    the masks, whose threshold is alpha 0.5.  prep: extent_prep(g, min_opacity), when known."""
+    keep, r = prep if prep is not None else extent_prep(g, min_opacity)
+    m = g.means.index_select(0, keep).double()
     t = torch.tensor(pose[5:8], dtype=torch.float64)
     R = _ry(pose[3])
     local = (m - t) @ torch.from_numpy(R)  # R^T (p - t) for row vectors
@@ -245,7 +265,8 @@ def make_sample(cfg, index, assets):
     for k, (inst, frame, _) in enumerate(frames):
         g = frame.gaussians
         slot = torch.where(frame.ids == RIDER_ID, 2 * k + 2, 2 * k + 1).long()
-        boxes.append(extent_box(g, inst["pose"]))  # labels come from the full model, LOD or not
+        prep = assets.label_inputs(inst["bike"], inst["rider"], frame)
+        boxes.append(extent_box(g, inst["pose"], prep=prep["extent"]))  # labels come from the full model, LOD or not
         idx = None
         if cfg["appearance"]["enabled"]:
             look, gain = appearance.draw_look(cfg, cfg["seed"], index, k)
@@ -306,10 +327,8 @@ def make_sample(cfg, index, assets):
         vis_b, vis_r = box_mask(L["label"], box, sb), box_mask(L["label"], box, sr)
         am_b = amodal_mask(L["amodal"].get(sb), box, vis_b)
         am_r = amodal_mask(L["amodal"].get(sr), box, vis_r)
-        g = frame.gaussians
-        dense = (g.opacities >= 0.1).numpy()
-        is_r = (frame.ids == RIDER_ID).numpy()
-        ext_b = projected_extent(g.means.numpy()[dense & ~is_r], cam)
+        means, prep = frame.gaussians.means.numpy(), assets.label_inputs(inst["bike"], inst["rider"], frame)
+        ext_b = projected_extent(means[prep["bike"]], cam)
         bx = boxes[k]
         loc, ry, alpha = kitti.box3d(R, T, bx)
         vclass = vehicle_class(assets.meta(inst["bike"]), lab["vehicle_of"].get(inst["bike"]))
@@ -327,7 +346,7 @@ def make_sample(cfg, index, assets):
         a_b = annotation(vclass, vis_b, am_b, ext_b, W, H, np.column_stack([uv, vis]), extra)
         inst_anns = [a_b]
         if inst["rider"] is not None:
-            ext_r = projected_extent(g.means.numpy()[dense & is_r], cam)
+            ext_r = projected_extent(means[prep["rider"]], cam)
             uvr, zr = project_points(person, cam)
             # COCO-17: per-point depths under the skin; SMPL joints: one tolerance for joint centres
             tol = COCO17_TOLERANCE_M if kp_cfg["person"] == "coco17" else kp_cfg["tolerance_rider_m"]
@@ -376,18 +395,17 @@ def make_sample(cfg, index, assets):
 def write_sample(cfg, index, out_dir, assets):
     """Render and store one sample: image, depth map, KITTI files, then its shard (the shard marks it
     complete: a killed run redoes the sample, overwriting whatever part of it was written)."""
-    from PIL import Image
     rgb, image, anns, extras = make_sample(cfg, index, assets)
     img_path = os.path.join(out_dir, "images", image["file_name"])
     os.makedirs(os.path.dirname(img_path), exist_ok=True)
     with atomic_path(img_path) as tmp:
-        Image.fromarray(rgb).save(tmp, format="PNG", compress_level=cfg["png_compress_level"])
+        png.write(tmp, rgb, cfg["png_compress_level"])
     if cfg["depth_maps"]:
         dpath = os.path.join(out_dir, "depth", image["file_name"])
         os.makedirs(os.path.dirname(dpath), exist_ok=True)
         mm = np.clip(np.round(extras["depth"] * 1000.0), 0, 65535).astype(np.uint16)
         with atomic_path(dpath) as tmp:
-            Image.fromarray(mm).save(tmp, format="PNG", compress_level=cfg["png_compress_level"])
+            png.write(tmp, mm, cfg["png_compress_level"])
     if "kitti" in cfg["labels"]["formats"]:
         kitti.write_sample(out_dir, index, img_path, extras["kitti"], extras["calib"])
     os.makedirs(os.path.join(out_dir, "shards"), exist_ok=True)

@@ -1,11 +1,12 @@
 """Tiled multi-threaded CPU compositing (csrc/tiles.cpp) as a torch autograd Function.
 
-composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, W) -> (out (H, W, Cf)
-contiguous, T_final (H, W)): out = sum_k w_k feats_k over the Gaussians at each pixel front to back,
-w_k = alpha_k T_k, T_final the transmittance left (alpha = 1 - T_final). Differentiable in
-means2d, conics, opacities and feats (any number Cf of channels: colour, extra features, depth
-ride along together). Same image formation as splatting/raster/sparse.py's torch path; see
-docs/rasterizer.md.
+composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, W, split=(Cf,)) ->
+(one contiguous (H, W, c) image per entry c of split (c == 1: (H, W)), T_final (H, W)): the Cf
+channels of sum_k w_k feats_k over the Gaussians at each pixel front to back, w_k = alpha_k T_k,
+T_final the transmittance left (alpha = 1 - T_final), cut into consecutive channel groups (colour,
+extra features, depth) that the C++ writes and reads as separate images. Differentiable in
+means2d, conics, opacities and feats (any number Cf of channels). Same image formation as
+splatting/raster/sparse.py's torch path; see docs/rasterizer.md.
 
 Steps (all threads: torch.get_num_threads()):
   1. gs_bin: one record per Gaussian, its pixel rectangle (3-sigma box clipped to where alpha can
@@ -14,7 +15,11 @@ Steps (all threads: torch.get_num_threads()):
   2. gs_forward: tile lists filled in depth order, then per 16x16 tile front-to-back blending with
      early termination;
   3. gs_backward: per tile back to front, per-(tile, Gaussian) sums, then per Gaussian.
+Optionally (groups, forward only) each group's transmittance as if it were rendered alone, from
+the same pass (csrc/tiles.cpp, forward<S, GROUPS>): what amodal instance masks need.
 """
+import ctypes
+
 import torch
 
 from . import build
@@ -30,13 +35,18 @@ def _nptr(t):
     return None if t is None else t.data_ptr()
 
 
+def _ptrs(ts):
+    """A C array of the tensors' data pointers (null for None)."""
+    return (ctypes.c_void_p * len(ts))(*[None if t is None else t.data_ptr() for t in ts])
+
+
 class _TileComposite(torch.autograd.Function):
-    """out (H, W, Cf) pixel-major, T_final (H, W). A gradient that autograd hands over as None
+    """The split's images, T_final (H, W), T_groups. A gradient that autograd hands over as None
     (an output nobody used, e.g. alpha under an RGB loss) goes to the C++ as a null pointer
     rather than as a zero image."""
 
     @staticmethod
-    def forward(ctx, means2d, conics, opacities, feats, depths, radii, boxes, H, W):
+    def forward(ctx, means2d, conics, opacities, feats, depths, radii, boxes, H, W, groups, n_groups, split):
         lib = build.load()
         dt = means2d.dtype
         if dt not in _SUFFIX:
@@ -55,7 +65,7 @@ class _TileComposite(torch.autograd.Function):
         ntiles = -(-W // tile) * -(-H // tile)
         recs = torch.empty(max(n, 1) * getattr(lib, f"gs_rec_bytes_{sfx}")(), dtype=torch.uint8)
         order = torch.empty(max(n, 1), dtype=torch.int32)
-        cursor = torch.empty(nt * ntiles, dtype=torch.int64)
+        cursor = torch.empty(lib.gs_chunks(nt) * ntiles, dtype=torch.int64)
         tile_off = torch.empty(ntiles + 1, dtype=torch.int64)
         goff = torch.empty(n + 1, dtype=torch.int64)
         sizes = torch.zeros(2, dtype=torch.int64)
@@ -66,24 +76,32 @@ class _TileComposite(torch.autograd.Function):
         lst = torch.empty(max(total, 1), dtype=torch.int32)
         slot = torch.empty(max(total, 1), dtype=torch.int64)
         fs = torch.empty(max(nv, 1), cf, dtype=dt)
-        out = torch.empty(H, W, cf, dtype=dt)
+        outs = [torch.empty((H, W, c) if c > 1 else (H, W), dtype=dt) for c in split]
         T_final = torch.empty(H, W, dtype=dt)
         last = torch.empty(H, W, dtype=torch.int32)
+        ng = int(n_groups) if groups is not None else 0
+        gr = groups.to(torch.int32).contiguous() if ng else None
+        g_sorted = torch.empty(max(nv, 1), dtype=torch.int32) if ng else None
+        T_groups = torch.empty(ng, H, W, dtype=dt)
+        osz = (ctypes.c_int * len(split))(*split)
         getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), _ptr(fe), cf, W, H, nt, _ptr(recs), _ptr(cursor),
                                           _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(slot), _ptr(fs),
-                                          _ptr(out), _ptr(T_final), _ptr(last))
-        ctx.geom = (n, cf, H, W, nv, order, recs, tile_off, goff, lst, slot, fs, last)
+                                          len(split), osz, _ptrs(outs), _ptr(T_final), _ptr(last), _nptr(gr), ng,
+                                          _nptr(g_sorted), _ptr(T_groups) if ng else None)
+        ctx.mark_non_differentiable(T_groups)
+        ctx.geom = (n, cf, H, W, nv, order, recs, tile_off, goff, lst, slot, fs, last, split)
         ctx.save_for_backward(T_final)
         ctx.dtypes = (conics.dtype, opacities.dtype, feats.dtype)
-        return out, T_final
+        return (*outs, T_final, T_groups)
 
     @staticmethod
-    def backward(ctx, g_out, g_T):
-        n, cf, H, W, nv, order, recs, tile_off, goff, lst, slot, fs, last = ctx.geom
+    def backward(ctx, *grads):
+        n, cf, H, W, nv, order, recs, tile_off, goff, lst, slot, fs, last, split = ctx.geom
         (T_final,) = ctx.saved_tensors
         dt = T_final.dtype
         sfx = _SUFFIX[dt]
-        g_out = None if g_out is None else g_out.to(dt).contiguous()
+        g_outs = [None if g is None else g.to(dt).contiguous() for g in grads[:len(split)]]
+        g_T = grads[len(split)]
         g_T = None if g_T is None else g_T.to(dt).contiguous()
         g_m2 = torch.zeros(n, 2, dtype=dt)
         g_cn = torch.zeros(n, 3, dtype=dt)
@@ -92,15 +110,30 @@ class _TileComposite(torch.autograd.Function):
         lib = build.load()
         getattr(lib, f"gs_backward_{sfx}")(nv, _ptr(order), cf, W, H, max(1, torch.get_num_threads()), _ptr(recs),
                                            _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(slot), _ptr(fs),
-                                           _ptr(T_final), _ptr(last), _nptr(g_out), _nptr(g_T),
-                                           _ptr(g_m2), _ptr(g_cn), _ptr(g_op), _ptr(g_fe))
+                                           _ptr(T_final), _ptr(last), len(split), (ctypes.c_int * len(split))(*split),
+                                           _ptrs(g_outs), _nptr(g_T), _ptr(g_m2), _ptr(g_cn), _ptr(g_op), _ptr(g_fe))
         dc, do, df = ctx.dtypes
-        return g_m2, g_cn.to(dc), g_op.to(do), g_fe.to(df), None, None, None, None, None
+        return g_m2, g_cn.to(dc), g_op.to(do), g_fe.to(df), None, None, None, None, None, None, None, None
 
 
-def composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, W):
-    """See the module docstring. CPU tensors only; float32 or float64 (means2d's dtype)."""
+def composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, W, groups=None, n_groups=0,
+                    split=None):
+    """See the module docstring. CPU tensors only; float32 or float64 (means2d's dtype).
+    split: channel counts (each >= 1) summing to feats.shape[1]; None: one (H, W, Cf) image.
+    groups (N,) int in [-1, n_groups) (-1: in no group), n_groups >= 1: also returns T_groups
+    (n_groups, H, W), each group's transmittance rendered alone (not differentiable).
+    -> (*images, T_final) or (*images, T_final, T_groups) with groups."""
     if means2d.device.type != "cpu":
         raise ValueError("the tiled rasterizer runs on CPU tensors; use backend='torch' for "
                          f"{means2d.device.type} tensors")
-    return _TileComposite.apply(means2d, conics, opacities, feats, depths, radii, boxes, H, W)
+    split = (feats.shape[1],) if split is None else tuple(int(c) for c in split)
+    if not split or min(split) < 1 or sum(split) != feats.shape[1]:
+        raise ValueError(f"composite_tiles: split {split} must be channel counts >= 1 summing to {feats.shape[1]}")
+    if groups is not None:
+        if n_groups < 1 or groups.shape != (means2d.shape[0],):
+            raise ValueError(f"composite_tiles: groups must be ({means2d.shape[0]},) with n_groups >= 1")
+        if len(groups) and not (int(groups.min()) >= -1 and int(groups.max()) < n_groups):
+            raise ValueError(f"composite_tiles: group ids must lie in [-1, {n_groups})")
+        return _TileComposite.apply(means2d, conics, opacities, feats, depths, radii, boxes, H, W, groups, n_groups,
+                                    split)
+    return _TileComposite.apply(means2d, conics, opacities, feats, depths, radii, boxes, H, W, None, 0, split)[:-1]

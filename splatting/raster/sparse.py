@@ -277,7 +277,7 @@ def composite(means2d, conics, opacities, colors, depths, background, pairs, H, 
 
 
 def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_degree=None,
-              near=0.01, eps2d=0.3, features=None, antialiased=False, backend=None):
+              near=0.01, eps2d=0.3, features=None, antialiased=False, backend=None, groups=None):
     """Render N Gaussians into camera. See the module docstring for shapes.
 
     features: optional (N, F) extra channels composited like the colour (instance ids, albedo,
@@ -286,6 +286,9 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
     mode): opacity x sqrt(det S / det(S + eps2d I)), S the projected covariance before the eps2d
     low-pass, so a Gaussian smaller than a pixel keeps its true footprint instead of growing
     to a 0.3 px^2 blob at full opacity (thin spokes, far-away cyclists).
+    groups: optional (ids (N,) int in [-1, G), G): also out["group_alpha"] (G, H, W), the alpha of
+    each group's Gaussians rendered alone (no occlusion by the other Gaussians: amodal masks), not
+    differentiable; "tiles" computes them in the image's own pass, "torch" renders each group.
     backend: "tiles" (the fused OpenMP C++ compositor, splatting/raster/cpu_tiles.py; CPU tensors),
     "torch" (the pure-torch pair list below: the reference, and the path for CUDA tensors), or
     None: "tiles" for CPU tensors, "torch" otherwise. out["backend"] says which one ran."""
@@ -307,19 +310,39 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
     if antialiased:
         opacities = opacities * aa_compensation(conics, eps2d)
     nf = 0 if features is None else features.shape[1]
+    group_alpha = None
     if backend == "tiles":
-        rgb, alpha, depth, feats = _composite_tiles(means2d, conics, opacities, colors, features, depths, radii,
-                                                    boxes, background, H, W)
+        rgb, alpha, depth, feats, group_alpha = _composite_tiles(means2d, conics, opacities, colors, features, depths,
+                                                                 radii, boxes, background, H, W, groups)
     else:
         if nf:
             colors = torch.cat([colors, features.to(colors)], 1)
         pairs = intersect(means2d.detach(), conics.detach(), opacities.detach(), depths.detach(), boxes, radii, W, H)
         col, alpha, depth = composite(means2d, conics, opacities, colors, depths, background, pairs, H, W)
         rgb, feats = col[..., :3], col[..., 3:]
+        if groups is not None:
+            group_alpha = _group_alpha_torch(means2d, conics, opacities, depths, radii, boxes, groups, H, W)
     out = {"rgb": rgb, "alpha": alpha, "depth": depth, "means2d": means2d, "radii": radii,
            "visible": radii > 0, "backend": backend}
     if nf:
         out["features"] = feats
+    if groups is not None:
+        out["group_alpha"] = group_alpha
+    return out
+
+
+@torch.no_grad()
+def _group_alpha_torch(means2d, conics, opacities, depths, radii, boxes, groups, H, W):
+    """(G, H, W): each group's Gaussians intersected and composited alone (the reference for the
+    tiled back end's one-pass group alphas)."""
+    ids, n = groups
+    out = means2d.new_zeros(n, H, W)
+    for q in range(n):
+        i = torch.nonzero(ids == q).squeeze(1)
+        if len(i):
+            sel = [t.detach().index_select(0, i) for t in (means2d, conics, opacities, depths, boxes, radii)]
+            pairs = intersect(*sel, W, H)
+            _, out[q], _ = composite(sel[0], sel[1], sel[2], sel[0].new_zeros(len(i), 1), sel[3], None, pairs, H, W)
     return out
 
 
@@ -348,21 +371,24 @@ def resolve_backend(backend, means):
     return backend
 
 
-def _composite_tiles(means2d, conics, opacities, colors, features, depths, radii, boxes, background, H, W):
+def _composite_tiles(means2d, conics, opacities, colors, features, depths, radii, boxes, background, H, W,
+                     groups=None):
     """The tiled C++ compositor with the torch path's outputs: rgb (H,W,3) over the background,
     alpha, depth (camera z composited as the last channel), features (H,W,F) or None. Colour,
-    features and depth ride in one (N, 3 + F + 1) table; each output is one slice of the
-    compositor's (H, W, 3 + F + 1) image (one slice, so one small backward per output)."""
+    features and depth ride in one (N, 3 + F + 1) table; the compositor writes each as its own
+    contiguous image (and takes their gradients back the same way)."""
     from splatting.raster.cpu_tiles import composite_tiles
 
-    parts = [colors] + ([] if features is None else [features.to(colors)]) + [depths[:, None]]
-    out, T_final = composite_tiles(means2d, conics, opacities, torch.cat(parts, 1), depths.detach(), radii, boxes,
-                                   H, W)
-    rgb = out[..., :3]
+    has_f = features is not None and features.shape[1] > 0
+    parts = [colors] + ([features.to(colors)] if has_f else []) + [depths[:, None]]
+    split = [p.shape[1] for p in parts]
+    res = composite_tiles(means2d, conics, opacities, torch.cat(parts, 1), depths.detach(), radii, boxes, H, W,
+                          *(() if groups is None else groups), split=split)
+    rgb, depth, T_final = res[0], res[len(parts) - 1], res[len(parts)]
     if background is not None:
         rgb = rgb + T_final[..., None] * background.to(rgb)
-    feats = None if features is None else out[..., 3:-1]
-    return rgb, 1.0 - T_final, out[..., -1], feats
+    feats = res[1] if has_f else None if features is None else features.new_zeros(H, W, 0)
+    return rgb, 1.0 - T_final, depth, feats, None if groups is None else 1.0 - res[-1]
 
 
 def render_gaussians(g, camera, **kw):

@@ -159,7 +159,7 @@ template <typename S, int nb>
 void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, const S* scales, const S* sh,
                     int K, int nt, S* means2d, S* conics, S* depths, S* colors, int64_t* radii,
                     int64_t* boxes) {
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 2048)  // a late thread delays by one block
   for (int64_t n = 0; n < N; ++n) {
     Geo<S> g;
     geometry(cam, means + 3 * n, quats + 4 * n, scales + 3 * n, g);
@@ -202,7 +202,7 @@ template <typename S, int nb>
 void preprocess_bwd(int64_t N, const Cam& cam, const S* means, const S* quats, const S* scales, const S* sh,
                     int K, int nt, const int64_t* radii, const S* g_means2d, const S* g_conics,
                     const S* g_depths, const S* g_colors, S* g_means, S* g_quats, S* g_scales, S* g_sh) {
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 2048)  // a late thread delays by one block
   for (int64_t n = 0; n < N; ++n) {
     S* gm = g_means + 3 * n;
     gm[0] = gm[1] = gm[2] = 0;

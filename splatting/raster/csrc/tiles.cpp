@@ -248,6 +248,30 @@ inline void chunk(int64_t n, int nt, int th, int64_t& b, int64_t& e) {
   e = n * (th + 1) / nt;
 }
 
+// The depth order is binned and filled in CHUNKS_PER_THREAD * nt contiguous chunks handed out
+// dynamically, not one chunk per thread: on a shared machine a thread that starts late (its core
+// busy with another process) then delays the other by one small chunk, not by half the work at the
+// barrier. Each chunk has its own tile cursors (cursor: chunks x tiles), so the tile lists come
+// out the same for any thread count or schedule.
+constexpr int CHUNKS_PER_THREAD = 8;
+inline int n_chunks(int nt) { return CHUNKS_PER_THREAD * std::max(nt, 1); }
+// Gaussians per dynamically scheduled block of per-Gaussian loops (same reason).
+constexpr int64_t GAUSS_BLOCK = 2048;
+
+// body(s, e, cur) for every position s of the depth order [0, nv), chunk by chunk: the chunks are
+// shared out among the threads of the enclosing parallel region (an orphaned omp for, with its
+// barrier at the end); e is the chunk's end, cur its tile cursors (cursor + chunk * NT).
+template <typename F>
+inline void over_chunks(int64_t nv, int NC, int64_t* cursor, int NT, F&& body) {
+#pragma omp for schedule(dynamic, 1)
+  for (int c = 0; c < NC; ++c) {
+    int64_t b, e;
+    chunk(nv, NC, c, b, e);
+    int64_t* const cur = cursor + (int64_t)c * NT;
+    for (int64_t s = b; s < e; ++s) body(s, e, cur);
+  }
+}
+
 // Order-preserving unsigned keys of floats (negative values flipped).
 inline uint32_t fkey(float x) {
   uint32_t u;
@@ -289,8 +313,8 @@ void radix_sort(std::vector<K>& key, std::vector<int32_t>& idx) {
 
 // Phase 1: the visible Gaussians (radii > 0) sorted by depth into order, their records in that
 // order (recs[s] for Gaussian order[s]);
-// tile counts per thread chunk of that order, tile offsets, per-Gaussian entry offsets (goff,
-// in depth order). cursor (nt x ntiles) becomes each thread's first write position per tile.
+// tile counts per chunk of that order, tile offsets, per-Gaussian entry offsets (goff, in depth
+// order). cursor (n_chunks(nt) x ntiles) becomes each chunk's first write position per tile.
 // sizes[0] = visible count nv, sizes[1] = number of (tile, Gaussian) entries.
 template <typename S>
 void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* depths,
@@ -310,7 +334,8 @@ void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* d
   radix_sort(key, idx);
   const int64_t nv = (int64_t)idx.size();
   std::copy(idx.begin(), idx.end(), order);
-  std::fill(cursor, cursor + (int64_t)nt * NT, 0);
+  const int NC = n_chunks(nt);
+  std::fill(cursor, cursor + (int64_t)NC * NT, 0);
   // records computed in index order (sequential reads), then gathered into depth order: one
   // random read per Gaussian here, and sequential or monotonic reads everywhere after
   // reused across calls (no page faults per frame); thread_local is the calling thread's, so the
@@ -320,33 +345,29 @@ void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* d
   Rec<S>* const by_index = by_index_buf.data();
 #pragma omp parallel num_threads(nt)
   {
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, GAUSS_BLOCK)
     for (int64_t i = 0; i < N; ++i) make_rec(by_index[i], i, means2d, conics, opac, radii, boxes, W, H);
-    const int th = omp_get_thread_num();
-    int64_t b, e;
-    chunk(nv, nt, th, b, e);
-    int64_t* cnt = cursor + (int64_t)th * NT;
-    for (int64_t s = b; s < e; ++s) {
+    over_chunks(nv, NC, cursor, NT, [&](int64_t s, int64_t e, int64_t* cnt) {
       if (s + 16 < e) __builtin_prefetch(by_index + order[s + 16]);  // the gather's misses overlap
       const Rec<S>& r = recs[s] = by_index[order[s]];
       if (r.u1 < r.u0 || r.v1 < r.v0) {
         goff[s + 1] = 0;
-        continue;
+        return;
       }
       const int tx0 = r.u0 / TILE, tx1 = r.u1 / TILE, ty0 = r.v0 / TILE, ty1 = r.v1 / TILE;
       for (int ty = ty0; ty <= ty1; ++ty)
         for (int tx = tx0; tx <= tx1; ++tx) cnt[ty * TX + tx]++;
       goff[s + 1] = (int64_t)(tx1 - tx0 + 1) * (ty1 - ty0 + 1);
-    }
+    });
   }
   goff[0] = 0;
   for (int64_t s = 0; s < nv; ++s) goff[s + 1] += goff[s];
   int64_t pos = 0;
   for (int t = 0; t < NT; ++t) {
     tile_off[t] = pos;
-    for (int th = 0; th < nt; ++th) {
-      const int64_t c = cursor[(int64_t)th * NT + t];
-      cursor[(int64_t)th * NT + t] = pos;
+    for (int ch = 0; ch < NC; ++ch) {
+      const int64_t c = cursor[(int64_t)ch * NT + t];
+      cursor[(int64_t)ch * NT + t] = pos;
       pos += c;
     }
   }
@@ -377,28 +398,46 @@ inline void store_lanes(T* dst, const V& v, int n) {
   for (int l = 0; l < n; ++l) dst[l] = (T)v[l];
 }
 
+// The Cf channels of a pixel as n consecutive planes: plane q holds size[q] channels per pixel,
+// pixel-major (H x W x size[q]), so each output the caller wants apart (colour, extra features,
+// depth) is its own contiguous image and its gradient comes back the same way: no strided slicing
+// of one interleaved image (and no zero-filled full-size gradient for the channels nobody used).
+// P: S* for the outputs, const S* for their gradients (a null plane: no gradient).
+template <typename P>
+struct Planes {
+  int n;
+  const int* size;
+  const P* ptr;
+};
+
 // Phase 2: fill the tile lists with depth-order positions (depth order kept: each thread writes
 // its depth-ordered chunk after the chunks in front of it), gather the Cf channels into depth
 // order (feats), then blend every tile front to back.
-// out (H x W x Cf, pixel-major), T_final (H x W), last (H x W): per pixel 1 + the tile-list
+// out: the Cf channels as Planes, T_final (H x W), last (H x W): per pixel 1 + the tile-list
 // position of its last contributor (0: none).
-template <typename S>
+// GROUPS (forward only, no backward): every Gaussian also belongs to one of NG groups (grp_in,
+// per input Gaussian; -1: none), and T_grp (NG x H x W) gets each group's transmittance as if
+// its Gaussians were rendered alone (no occlusion by the others: the amodal alpha of an instance
+// is 1 - T_grp), with the same per-pixel rules (alpha test, clamp, the step that would take T
+// below 1e-4 not taken). One pass: the alpha a Gaussian has at a pixel is computed once for the
+// image and its group, and a pixel's list is walked past the image's own cut-off only while
+// some group at that pixel is still open. grp (nv): the groups gathered into depth order.
+template <typename S, bool GROUPS>
 void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W, int H, int nt,
              const Rec<S>* recs, int64_t* cursor, const int64_t* tile_off, const int64_t* goff,
-             int32_t* list, int64_t* slot, S* feats, S* out, S* T_final, int32_t* last) {
+             int32_t* list, int64_t* slot, S* feats, Planes<S*> out, S* T_final, int32_t* last,
+             const int32_t* grp_in, int NG, int32_t* grp, S* T_grp) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   const std::vector<int> torder = busiest_first(tile_off, NT);
+  const int NC = n_chunks(nt);
 #pragma omp parallel num_threads(nt)
   {
-    const int th = omp_get_thread_num();
-    int64_t b, e;
-    chunk(nv, nt, th, b, e);
-    int64_t* cur = cursor + (int64_t)th * NT;
-    for (int64_t s = b; s < e; ++s) {
+    over_chunks(nv, NC, cursor, NT, [&](int64_t s, int64_t e, int64_t* cur) {
       if (s + 16 < e) __builtin_prefetch(feats_in + (int64_t)order[s + 16] * Cf);
       std::copy_n(feats_in + (int64_t)order[s] * Cf, Cf, feats + s * Cf);
+      if (GROUPS) grp[s] = grp_in[order[s]];
       const Rec<S>& r = recs[s];
-      if (r.u1 < r.u0 || r.v1 < r.v0) continue;
+      if (r.u1 < r.u0 || r.v1 < r.v0) return;
       int64_t k = goff[s];
       for (int ty = r.v0 / TILE; ty <= r.v1 / TILE; ++ty)
         for (int tx = r.u0 / TILE; tx <= r.u1 / TILE; ++tx) {
@@ -406,8 +445,7 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
           list[p] = (int32_t)s;
           slot[p] = k++;
         }
-    }
-#pragma omp barrier
+    });  // (over_chunks ends with a barrier: every list is filled before any tile blends)
     typedef typename VT<S>::V V;
     typedef typename VT<S>::I I;
     typedef typename std::remove_reference<decltype(I{}[0])>::type IS;
@@ -416,6 +454,8 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
     std::vector<V> T(NV);
     std::vector<I> done(NV), lst(NV);
     std::vector<V> acc((size_t)NV * Cf);
+    std::vector<V> TG(GROUPS ? (size_t)NG * NV : 0);  // per group and pixel: its own transmittance
+    std::vector<I> gdone(GROUPS ? (size_t)NG * NV : 0);
 #pragma omp for schedule(dynamic, 1)
     for (int it = 0; it < NT; ++it) {
       const int t = torder[it];
@@ -425,7 +465,8 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
           const int64_t p = (int64_t)y * W + ox, nx = ex - ox + 1;
           std::fill_n(T_final + p, nx, (S)1);
           std::fill_n(last + p, nx, 0);
-          std::fill_n(out + p * Cf, nx * Cf, (S)0);
+          for (int q = 0; q < out.n; ++q) std::fill_n(out.ptr[q] + p * out.size[q], nx * out.size[q], (S)0);
+          for (int q = 0; q < (GROUPS ? NG : 0); ++q) std::fill_n(T_grp + (int64_t)q * H * W + p, nx, (S)1);
         }
         continue;
       }
@@ -440,15 +481,27 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
           active += inside;
         }
       }
+      if (GROUPS)
+        for (int q = 0; q < NG; ++q)
+          for (int v = 0; v < NV; ++v) {
+            TG[(size_t)q * NV + v] = (V){} + (S)1;
+            gdone[(size_t)q * NV + v] = done[v];
+          }
       std::fill(acc.begin(), acc.end(), (V){});
       const int64_t t0 = tile_off[t], n = tile_off[t + 1] - t0;
-      for (int64_t k = 0; k < n && active > 0; ++k) {
+      // with groups the list is walked to its end: a group's pixels close only when its own
+      // transmittance runs out, and pixels that no Gaussian of a group reaches never do
+      for (int64_t k = 0; k < n && (GROUPS || active > 0); ++k) {
         if (k + PF < n) {
           __builtin_prefetch(recs + list[t0 + k + PF]);
           __builtin_prefetch(feats + (int64_t)list[t0 + k + PF] * Cf);
         }
         const int32_t sp = list[t0 + k];
         const Rec<S>& g = recs[sp];
+        const int q = GROUPS ? grp[sp] : -1;
+        if (GROUPS && q < 0 && active == 0) continue;
+        V* const Tq = q >= 0 ? TG.data() + (size_t)q * NV : nullptr;
+        I* const dq = q >= 0 ? gdone.data() + (size_t)q * NV : nullptr;
         const Entry<S> en(g, ox, oy, ex, ey, lane_xc.data());
         const S* f = feats + (int64_t)sp * Cf;
         const I kk = (I){} + (IS)(k + 1);
@@ -457,15 +510,24 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
           Entry<S>::row(g, y, by, cyy);
           for (int j = en.j0; j <= en.j1; ++j) {
             const int v = (y - oy) * NJ + j;
-            const I live = en.box[j] & ~done[v];
+            const I live = GROUPS && q >= 0 ? en.box[j] & ~(done[v] & dq[v]) : en.box[j] & ~done[v];
             if (!any(live)) continue;  // finished pixels: no sigma, no exp
             const V sigma = en.sigma(j, by, cyy);
             const I pre = live & (sigma <= g.tau);
             if (!any(pre)) continue;
             const V ar = Entry<S>::alpha_raw(g, sigma);
-            const I m = pre & (ar >= (S)ALPHA_MIN);
-            if (!any(m)) continue;
+            const I mg = pre & (ar >= (S)ALPHA_MIN);
+            if (!any(mg)) continue;
             const V al = ar < (S)ALPHA_MAX ? ar : (V){} + (S)ALPHA_MAX;
+            if (GROUPS && q >= 0) {  // the group alone: the same steps on its own transmittance
+              const I mq = mg & ~dq[v];
+              const V test_q = Tq[v] * ((S)1 - al);
+              const I term_q = mq & (test_q < (S)T_MIN);
+              dq[v] |= term_q;
+              Tq[v] = (mq & ~term_q) ? test_q : Tq[v];
+            }
+            const I m = GROUPS ? mg & ~done[v] : mg;  // without groups live already excludes done
+            if (GROUPS && !any(m)) continue;
             const V test_T = T[v] * ((S)1 - al);
             const I term = m & (test_T < (S)T_MIN);
             if (any(term)) {
@@ -485,6 +547,8 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
         for (int j = 0; j < NJ && ox + j * L <= ex; ++j) {
           const int v = (y - oy) * NJ + j, nl = std::min(L, ex - (ox + j * L) + 1);
           const int64_t p = (int64_t)y * W + ox + j * L;
+          for (int q = 0; q < (GROUPS ? NG : 0); ++q)
+            store_lanes(T_grp + (int64_t)q * H * W + p, TG[(size_t)q * NV + v], nl);
           store_lanes(T_final + p, T[v], nl);
           if (sizeof(IS) == 4) {
             store_lanes(last + p, lst[v], nl);
@@ -492,8 +556,16 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
             for (int l = 0; l < nl; ++l) last[p + l] = (int32_t)lst[v][l];
           }
           const V* a = acc.data() + (size_t)v * Cf;
-          for (int l = 0; l < nl; ++l)  // pixel-major (H, W, Cf): what the caller slices into images
-            for (int c = 0; c < Cf; ++c) out[(p + l) * Cf + c] = a[c][l];
+          for (int q = 0, c0 = 0; q < out.n; c0 += out.size[q++]) {  // pixel-major per plane
+            const int cq = out.size[q];
+            S* __restrict const o = out.ptr[q] + p * cq;
+            if (cq == 1) {  // one channel (depth): the lanes are the pixels
+              store_lanes(o, a[c0], nl);
+              continue;
+            }
+            for (int l = 0; l < nl; ++l)
+              for (int c = 0; c < cq; ++c) o[l * cq + c] = a[c0 + c][l];
+          }
         }
     }
   }
@@ -503,12 +575,13 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
 // dividing by (1 - alpha_k) (alpha <= 0.99). Per (tile, Gaussian) entry the sums over the tile's
 // pixels go to gbuf, at the entry's slot in Gaussian-major order (slot, from the fill); then per
 // Gaussian its contiguous slots are summed in a fixed order (deterministic, no atomics) and turned into gradients of means2d, conics, opacity and the Cf channels.
-// g_out (H x W x Cf): dL/d out; g_T (H x W): dL/d T_final; either may be null (no gradient). Gradient arrays are indexed like the
+// g_out: dL/d out, as the forward's Planes (a null plane: no gradient); g_T (H x W): dL/d
+// T_final, or null. Gradient arrays are indexed like the
 // inputs; entries of Gaussians that are not visible are left untouched (the caller zeroes them).
 template <typename S>
 void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, const Rec<S>* recs,
               const int64_t* tile_off, const int64_t* goff, const int32_t* list, const int64_t* slot,
-              const S* feats, const S* T_final, const int32_t* last, const S* g_out, const S* g_T,
+              const S* feats, const S* T_final, const int32_t* last, Planes<const S*> g_out, const S* g_T,
               S* g_means2d, S* g_conics, S* g_opac, S* g_feats) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   const std::vector<int> torder = busiest_first(tile_off, NT);
@@ -550,7 +623,11 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
             accum[v][l] = g_T ? T_final[p + l] * g_T[p + l] : (S)0;  // behind: S_k + T_final dL/dT_final
           }
           for (int l = 0; l < nl; ++l)
-            for (int c = 0; c < Cf; ++c) G[(size_t)v * Cf + c][l] = g_out ? g_out[(p + l) * Cf + c] : (S)0;
+            for (int q = 0, c0 = 0; q < g_out.n; c0 += g_out.size[q++]) {
+              const int cq = g_out.size[q];
+              const S* const go = g_out.ptr[q];
+              for (int c = 0; c < cq; ++c) G[(size_t)v * Cf + c0 + c][l] = go ? go[(p + l) * cq + c] : (S)0;
+            }
         }
       for (int k = kmax - 1; k >= 0; --k) {
         if (k >= PF) {
@@ -612,7 +689,7 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
       for (int64_t k = kmax; k < n; ++k) std::fill_n(gbuf + (size_t)slot[t0 + k] * NB, NB, (S)0);
     }
     std::vector<S> accv(NB);
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, GAUSS_BLOCK)
     for (int64_t s = 0; s < nv; ++s) {
       // summed locally, written once (read-modify-write of the output stalled on store forwarding)
       S* acc = accv.data();
@@ -641,6 +718,7 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
 extern "C" {
 
 int gs_tile_size() { return TILE; }
+int gs_chunks(int nt) { return n_chunks(nt); }
 int gs_rec_bytes_f32() { return (int)sizeof(Rec<float>); }
 int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
 
@@ -655,17 +733,26 @@ int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
   void gs_forward_##SUFFIX(int64_t nv, const int32_t* order, const S* feats, int Cf, int W, int H, \
                            int nt, const void* recs, int64_t* cursor, const int64_t* tile_off,     \
                            const int64_t* goff, int32_t* list, int64_t* slot, S* feats_sorted,    \
-                           S* out, S* T_final, int32_t* last) {                                    \
-    forward<S>(nv, order, feats, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off, goff, list,  \
-               slot, feats_sorted, out, T_final, last);                                            \
+                           int NO, const int* osz, S* const* outs, S* T_final, int32_t* last,     \
+                           const int32_t* grp_in, int NG, int32_t* grp, S* T_grp) {               \
+    const Planes<S*> out{NO, osz, outs};                                                           \
+    if (NG > 0)                                                                                    \
+      forward<S, true>(nv, order, feats, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off,      \
+                       goff, list, slot, feats_sorted, out, T_final, last, grp_in, NG, grp, T_grp); \
+    else                                                                                           \
+      forward<S, false>(nv, order, feats, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off,     \
+                        goff, list, slot, feats_sorted, out, T_final, last, nullptr, 0, nullptr,   \
+                        nullptr);                                                                  \
   }                                                                                                \
   void gs_backward_##SUFFIX(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt,        \
                             const void* recs, const int64_t* tile_off, const int64_t* goff,        \
                             const int32_t* list, const int64_t* slot, const S* feats,              \
-                            const S* T_final, const int32_t* last, const S* g_out, const S* g_T,   \
-                            S* g_means2d, S* g_conics, S* g_opac, S* g_feats) {                    \
+                            const S* T_final, const int32_t* last, int NO, const int* osz,         \
+                            const S* const* g_outs, const S* g_T, S* g_means2d, S* g_conics,       \
+                            S* g_opac, S* g_feats) {                                               \
     backward<S>(nv, order, Cf, W, H, nt, (const Rec<S>*)recs, tile_off, goff, list, slot, feats,   \
-                T_final, last, g_out, g_T, g_means2d, g_conics, g_opac, g_feats);                  \
+                T_final, last, Planes<const S*>{NO, osz, g_outs}, g_T, g_means2d, g_conics,        \
+                g_opac, g_feats);                                                                  \
   }
 
 GS_EXPORT(f32, float)

@@ -32,10 +32,25 @@ def pair_name(joint, target):
     return f"{joint}->{target}"
 
 
+def skeleton_key(rest):
+    """A hashable key of a rest skeleton's exact values: functions of the rest skeleton alone are
+    computed once per rider (a dataset poses the same few riders thousands of times)."""
+    return torch.as_tensor(rest, dtype=torch.float64).detach().contiguous().numpy().tobytes()
+
+
+_AXES = {}
+
+
 def hinge_axes(rest_joints):
     """Unit flexion axes (4, 3) of the hinge slots (knees, elbows) in the rest frame: positive
     rotation about it swings the child segment toward HINGE_FLEX_DIRECTION."""
-    rest = torch.as_tensor(rest_joints, dtype=torch.float64)
+    key = skeleton_key(rest_joints)
+    if key not in _AXES:
+        _AXES[key] = _hinge_axes(torch.as_tensor(rest_joints, dtype=torch.float64))
+    return _AXES[key].clone()
+
+
+def _hinge_axes(rest):
     axes = []
     for name in SLOT_JOINTS[HINGE_SLOTS]:
         j = JOINT_INDEX[name]

@@ -8,7 +8,7 @@ import numpy as np
 import roma
 import torch
 
-from splatting.rider.ik.slots import DEFAULT_PAIRS, HINGE_SLOTS, SLOT_JOINTS, hinge_axes
+from splatting.rider.ik.slots import DEFAULT_PAIRS, HINGE_SLOTS, SLOT_JOINTS, hinge_axes, skeleton_key
 from splatting.rider.kinematics import JOINT_INDEX
 from splatting.rotations import rotmat_to_axis_angle as _rotmat_to_aa
 
@@ -20,11 +20,21 @@ def _align(u, d):
     return ax / s * math.atan2(s, c) if s > 1e-9 else np.zeros(3)
 
 
+_CYCLING = {}
+
+
 def cycling_init_pose(rest_joints):
     """(24, 3) axis-angle: a generic seated pedalling pose for this rest skeleton (torso leaning
     ~30 deg forward, thighs forward, knees and elbows bent), the default IK start.  Bent hinges
-    matter: at a straight knee the gradient along the leg vanishes."""
-    rest = np.asarray(rest_joints, dtype=np.float64)
+    matter: at a straight knee the gradient along the leg vanishes.  Computed once per skeleton
+    (~4 ms of small-array work; the analytic start needs it for every dataset image)."""
+    key = skeleton_key(rest_joints)
+    if key not in _CYCLING:
+        _CYCLING[key] = _cycling_init_pose(np.asarray(rest_joints, dtype=np.float64))
+    return _CYCLING[key].copy()
+
+
+def _cycling_init_pose(rest):
     axes = hinge_axes(rest).numpy()
     aa = np.zeros((24, 3))
     lean = np.array([0.0, 0.0, -math.radians(30)])  # about -Z: the torso tips toward +X
@@ -93,7 +103,8 @@ def analytic_init_pose(rest_joints, targets, pairs=DEFAULT_PAIRS):
     the seat -> (aa (B, 24, 3), root_trans (B, 3))."""
     rest = torch.as_tensor(rest_joints, dtype=torch.float64)
     B = next(iter(targets.values())).shape[0]
-    aa = torch.as_tensor(cycling_init_pose(rest.numpy())).expand(B, 24, 3).clone()
+    generic = torch.as_tensor(cycling_init_pose(rest.numpy()))
+    aa = generic.expand(B, 24, 3).clone()
     of = {j: t for j, t in pairs}
     pelvis = targets[of["pelvis"]] if "pelvis" in of else rest[0].expand(B, 3)
     trans = pelvis - rest[0]
@@ -102,7 +113,7 @@ def analytic_init_pose(rest_joints, targets, pairs=DEFAULT_PAIRS):
     seg = lambda a, b: float(torch.linalg.vector_norm(J(b) - J(a)))  # noqa: E731
     # torso lean about the lateral axis, from a grid (vectorised over frames)
     hands = [(s, of[f"{s}_wrist"]) for s in ("left", "right") if f"{s}_wrist" in of]
-    R_lean = roma.rotvec_to_rotmat(torch.tensor(cycling_init_pose(rest.numpy())[JOINT_INDEX["spine1"]])).expand(B, 3, 3)
+    R_lean = roma.rotvec_to_rotmat(generic[JOINT_INDEX["spine1"]]).expand(B, 3, 3)
     if hands:
         phi = torch.linspace(0.0, math.radians(85), 35, dtype=torch.float64)
         R_grid = roma.rotvec_to_rotmat(phi[:, None] * torch.tensor([0.0, 0.0, -1.0], dtype=torch.float64))
@@ -114,7 +125,9 @@ def analytic_init_pose(rest_joints, targets, pairs=DEFAULT_PAIRS):
             err = err + (torch.linalg.vector_norm(targets[t][:, None] - sh, dim=-1) - reach).abs()
         best = err.argmin(1)
         R_lean = R_grid[best]
-        aa[:, JOINT_INDEX["spine1"]] = _rotmat_to_aa(R_lean)
+        local_R = {"spine1": R_lean}
+    else:
+        local_R = {}
     for s, sz in (("left", -1.0), ("right", 1.0)):
         for a, b, c, pole, parent_R, origin in (
                 (f"{s}_hip", f"{s}_knee", f"{s}_ankle", KNEE_POLE, None, trans),
@@ -129,8 +142,12 @@ def analytic_init_pose(rest_joints, targets, pairs=DEFAULT_PAIRS):
             u0 = _unit(J(b) - J(a))
             u1, axis_w, theta = _two_bone(start, targets[of[c]], seg(a, b), J(c) - J(b), u0, axes[b], pole_t)
             R_w = _frame(u1, axis_w) @ _frame(u0, axes[b]).T
-            aa[:, JOINT_INDEX[a]] = _rotmat_to_aa(R_w if parent_R is None else parent_R.transpose(-1, -2) @ R_w)
+            local_R[a] = R_w if parent_R is None else parent_R.transpose(-1, -2) @ R_w
             aa[:, JOINT_INDEX[b]] = theta[:, None] * axes[b]
+    if local_R:  # one conversion for every joint set above (per-matrix maths: the same values)
+        rv = _rotmat_to_aa(torch.cat(list(local_R.values()))).view(len(local_R), B, 3)
+        for name, v in zip(local_R, rv):
+            aa[:, JOINT_INDEX[name]] = v
     return aa, trans
 
 
