@@ -23,7 +23,7 @@ class Builder:
     def add(self, V, T, lab):
         self.V.append(np.asarray(V, float))
         self.T.append(np.asarray(T) + self.n)
-        self.lab += [lab] * len(T)
+        self.lab += list(np.broadcast_to(lab, (len(T),)))
         self.n += len(V)
 
     def torus(self, c, R, r, nseg, ntube, lab, normal_z=True):
@@ -69,7 +69,11 @@ class Builder:
 
 def synth_bike(nseg=24, tyre_r=0.022, rider=False, chainring=True, third_wheel=None, front_R=0.35,
                chain_guard=False, front_twin=None):
-    """A city bike from primitives in the canonical frame; (V, T, labels, truth keypoints)."""
+    """A city bike from primitives in the canonical frame; (V, T, labels, truth keypoints).
+
+    rider: False; True (torso, head, arms to the bar, thighs: separate pieces); "legs" (also
+    shins down to the pedals and a shoe on each pedal); "one_piece" (the same person fused into
+    one connected mesh)."""
     b = Builder()
     R = 0.35
     ra, fa, ca = np.array([-0.45, R, 0.0]), np.array([0.62 + max(front_R - R, 0), front_R, 0.0]), np.array([0.0, 0.29, 0.0])
@@ -122,11 +126,18 @@ def synth_bike(nseg=24, tyre_r=0.022, rider=False, chainring=True, third_wheel=N
     if chain_guard:   # a closed box over the ring and the chain's top run (a city bike's chain case)
         b.box([-0.16, 0.31, 0.05], [0.3, 0.13, 0.012], FRAME)
     if rider:                                                      # a blocky person
-        b.box([-0.1, 1.35, 0], [0.12, 0.3, 0.18], RIDER)            # torso
-        b.box([-0.02, 1.8, 0], [0.1, 0.12, 0.09], RIDER)            # head
+        p = Builder() if rider == "one_piece" else b
+        p.box([-0.1, 1.35, 0], [0.12, 0.3, 0.18], RIDER)            # torso
+        p.box([-0.02, 1.8, 0], [0.1, 0.12, 0.09], RIDER)            # head
         for s in (1, -1):
-            b.tube([-0.05, 1.55, s * 0.2], bar + [-0.08, 0.04, s * 0.27], 0.04, RIDER)   # arms
-            b.tube([-0.15, 1.08, s * 0.1], [0.1, 0.7, s * 0.12], 0.06, RIDER)             # thighs
+            p.tube([-0.05, 1.55, s * 0.2], bar + [-0.08, 0.04, s * 0.27], 0.04, RIDER)   # arms
+            p.tube([-0.15, 1.08, s * 0.1], [0.1, 0.7, s * 0.12], 0.06, RIDER)             # thighs
+        if rider in ("legs", "one_piece"):   # shins down to the pedals, a shoe on each
+            for s, ped in ((1, pr), (-1, pl)):
+                p.tube([0.1, 0.7, s * 0.12], ped + [-0.02, 0.09, 0.0], 0.045, RIDER)
+                p.box(ped + [0.03, 0.05, 0.0], [0.13, 0.038, 0.045], RIDER)
+        if p is not b:                       # one connected mesh, as a scanned or sculpted person
+            b.add(*fuse(*p.arrays())[:3])
     kp = {"front_axle": fa, "rear_axle": ra, "crank_axle": ca, "pedal_right": pr, "pedal_left": pl,
           "seat": seat_top - [0, 0.004, 0], "steer_bottom": hb, "steer_top": ht,
           "handle_right": bar + [-0.06, 0.017, 0.26], "handle_left": bar + [-0.06, 0.017, -0.26]}

@@ -79,6 +79,17 @@ def test_rider_is_removed():
     assert any("rider" in n for n in res.notes)
 
 
+@pytest.mark.parametrize("kind,seed", [("legs", 17), ("one_piece", 18)])
+def test_rider_with_legs_on_the_pedals_is_removed(kind, seed):
+    """A person whose shins reach the pedals and whose shoes rest on them (separate pieces, or
+    the whole person one connected mesh): the person goes, pedals and crank arms stay, the
+    crank is found."""
+    V, T, lab, kp = synth_bike(nseg=24, rider=kind)
+    res, _, _ = _check(V, T, lab, kp, seed=seed, min_part=0.9)
+    assert res.record["has_crank"] is True
+    assert any("rider" in n for n in res.notes)
+
+
 def test_refusals_name_the_failed_check():
     V, T, lab, _ = synth_bike(third_wheel=0.6)
     with pytest.raises(UserError, match="side by side on the rear axle"):

@@ -7,7 +7,8 @@ import numpy as np
 from ..contract import UserError
 from . import keypoints as kpmod
 from . import mesh, silhouette, split, wheels
-from .shape_fit import check_two_wheels, choose_keypoints, drop_rider, shape_samples
+from .rider_removal import drop_rider
+from .shape_fit import check_two_wheels, choose_keypoints, shape_samples
 from .pose import canonical_pose
 from .validate import validate
 

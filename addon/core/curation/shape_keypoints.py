@@ -106,18 +106,27 @@ def handles(X, steer_top, seat_x, R):
 
 
 def bulky(X, fa, ra, R, cell=0.02):
-    """Share of the side view between the wheels (axle height to wheel top) that is solid: a
-    motorcycle's engine and tank fill it, a bicycle's tubes do not."""
+    """Share of the side view between the wheels (axle height to wheel top) filled by a wide
+    body: cells with surface on both sides of the bike's plane, beyond 0.15 R.  A motorcycle's
+    engine and tank or a scooter's deck fill 0.46-0.8 of it; a bicycle's tubes, chainring and
+    crank arms (one side each) <= 0.1, even a toy bike's thick tubes, whose plain side-view
+    fill (0.66) is a motorcycle's."""
     x0, x1, y0, y1 = ra[0] + R, fa[0] - R, 0.5 * R + 0.5 * (fa[1] + ra[1]) - R, 2 * R
     if x1 - x0 < 2 * cell or y1 - y0 < 2 * cell:
         return 0.0
     m = (X[:, 0] > x0) & (X[:, 0] < x1) & (X[:, 1] > y0) & (X[:, 1] < y1)
-    ij = np.unique(np.floor((X[m][:, :2] - [x0, y0]) / cell).astype(int), axis=0)
-    return len(ij) / (np.ceil((x1 - x0) / cell) * np.ceil((y1 - y0) / cell))
+    t = 0.15 * R
+
+    def cells(Y):
+        ij = np.floor((Y[:, :2] - [x0, y0]) / cell).astype(np.int64)
+        return np.unique(ij[:, 0] * 100003 + ij[:, 1])
+
+    both = np.intersect1d(cells(X[m & (X[:, 2] > t)]), cells(X[m & (X[:, 2] < -t)]))
+    return len(both) / (np.ceil((x1 - x0) / cell) * np.ceil((y1 - y0) / cell))
 
 
 def pedals(X, fa, ra, R, tyre_half_width):
-    """(crank_axle, pedal_left, pedal_right, has_crank) or None.  A bulky body between the
+    """(crank_axle, pedal_left, pedal_right, has_crank) or None.  A wide body between the
     wheels (a motorcycle) has footrests, not a crank."""
     m = (X[:, 0] > ra[0] + 0.5 * R) & (X[:, 0] < fa[0] - 0.5 * R) & (X[:, 1] < max(fa[1], ra[1]) + 0.6 * R)
     B = X[m]
@@ -136,7 +145,7 @@ def pedals(X, fa, ra, R, tyre_half_width):
     pr, pl = ends
     sep = np.linalg.norm(pr[:2] - pl[:2])
     ca = np.array([0.5 * (pr[0] + pl[0]), 0.5 * (pr[1] + pl[1]), 0.0])
-    has_crank = 0.35 * R < sep < 1.6 * R and bulky(X, fa, ra, R) < 0.6
+    has_crank = 0.35 * R < sep < 1.6 * R and bulky(X, fa, ra, R) < 0.3
     if has_crank:  # exactly opposite about the axle (the rig rotates them as one)
         v = 0.5 * (pr[:2] - pl[:2])
         pr = np.array([ca[0] + v[0], ca[1] + v[1], pr[2]])
