@@ -126,10 +126,13 @@ def drop_rider(soup, pose):
     lo, hi = pc.lo, pc.hi
     # a handlebar may sit that high (a motorcycle's): wide across and thin, unlike a person
     bar_like = (hi[:, 2] - lo[:, 2] > 0.5 * D) & ((hi - lo).min(1) <= 0.1 * D)
-    high = ((lo[:, 1] > HIGH * D) & ~bar_like) \
+    # plates and rods up there (a triple clamp, bar risers, a windscreen) are not a head or torso
+    solid = (hi - lo).min(1) >= 0.06 * D
+    high = ((lo[:, 1] > HIGH * D) & ~bar_like & solid) \
         | np.array([h > HIGH * D and lw < HIGH * D and not b and _solid_top(pc.touch.samples[i], D)
                     for i, lw, h, b in zip(idx, lo[:, 1], hi[:, 1], bar_like)])
-    if not high.any() or (hi[high, 2] - lo[high, 2]).max() < 0.2 * D:
+    # a person shows a head and shoulders above HIGH*D: as wide as 0.2 D and reaching 0.25 D up
+    if not high.any() or (hi[high, 2] - lo[high, 2]).max() < 0.2 * D or hi[high, 1].max() < (HIGH + 0.25) * D:
         return out
     rider = _body(pc, high)
     rider |= _limbs(pc, rider)
