@@ -162,3 +162,33 @@ def test_rider_on_a_motorcycle_is_removed_not_its_body():
     V, T, lab, kp = synth_motorcycle(rider=True)
     res, _, right = _check(V, T, lab, kp, seed=16, wheel=0.6, min_area=0.95)
     assert any("rider" in n for n in res.notes)
+
+
+@pytest.mark.parametrize("extras,fused,seed", [(("kickstand",), False, 21), (("rack",), False, 22),
+                                               (("mudguards",), True, 23), (("stabilisers",), False, 24),
+                                               (("tall_post",), False, 25),
+                                               (("kickstand", "rack", "mudguards"), False, 26)])
+def test_city_and_child_bike_accessories(extras, fused, seed):
+    """What real city, utility and children's bikes carry: a kickstand down on the ground beside
+    the left pedal, a rear rack with panniers sticking out sideways, mudguards on the tyres (the
+    whole bike one fused mesh), a child's stabiliser wheels (curated as a two-wheeler: they are
+    frame), a very tall seat post.  None of them is taken for a pedal, a wheel or a rider."""
+    V, T, lab, kp = synth_bike(nseg=24, extras=extras)
+    if fused:
+        V, T, lab = fuse(V, T, lab)
+    res, _, _ = _check(V, T, lab, kp, seed=seed, min_part=0.9)
+    assert res.record["has_crank"] is True
+    assert not any("rider" in n for n in res.notes)
+
+
+@pytest.mark.parametrize("extras,rider,seed", [(("triple",), False, 31), (("exhaust",), False, 32),
+                                               (("pillion",), False, 33),
+                                               (("triple", "fairing", "exhaust", "pillion"), True, 34)])
+def test_motorcycle_variants(extras, rider, seed):
+    """Triple clamps with bar risers (the bar, not the head tube, tops the steering), a frame-
+    mounted fairing and windscreen (plates up where a rider's head would be: not a rider), a long
+    exhaust beside the right footpeg, pillion pegs, and a rider on all of it."""
+    V, T, lab, kp = synth_motorcycle(extras=extras, rider=rider)
+    res, _, _ = _check(V, T, lab, kp, seed=seed, wheel=0.6, scale=100.0, min_area=0.9, min_part=0.85)
+    assert res.record["has_crank"] is False
+    assert any("rider" in n for n in res.notes) == rider

@@ -200,12 +200,14 @@ def _limbs(pc, body):
 
 
 def _surrounded(pc, rider):
-    """Step 4: a piece above the wheel tops, away from the steering column, that touches three
+    """Step 4: a small piece above the wheel tops, away from the steering column, that touches three
     or more rider pieces and at least twice as many as bike pieces (those reached from the
     wheels without passing through such pieces) is the rider's: a robot's hip joint between its
     thighs and pelvis.  A saddle under a person touches one body or two thighs, and its post."""
     mid = 0.5 * (pc.lo[:, 1] + pc.hi[:, 1])
-    cand = (mid > 1.1 * pc.D) & ~pc.column & ~pc.on_column & ~rider & ~pc.wheel
+    # small: a saddle (25 cm and more), a tank or a motorcycle seat between the thighs is not
+    small = (pc.hi - pc.lo).max(1) < 0.3 * pc.D
+    cand = (mid > 1.1 * pc.D) & small & ~pc.column & ~pc.on_column & ~rider & ~pc.wheel
     reached = pc.wheel & ~rider
     frontier = pc.global_(reached)
     while frontier:
