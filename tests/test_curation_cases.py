@@ -49,7 +49,7 @@ def _check(V, T, lab, kp, scale=1.0, offset=0.0, seed=0, tol_kp=0.04, min_area=0
     return res, err, right
 
 
-@pytest.mark.parametrize("nseg", [10, 16, 33, 64])
+@pytest.mark.parametrize("nseg", [8, 9, 10, 16, 33, 64])
 def test_tyre_segment_counts(nseg):
     V, T, lab, kp = synth_bike(nseg=nseg)
     _check(V, T, lab, kp, seed=nseg)

@@ -98,6 +98,11 @@ class _Pieces:
         # be, and what is fastened to it (a toy bike's thick bar halves)
         self.column = lo[:, 0] > self.fa[0] - 0.4 * D
         self.on_column = self.mask(self.touch.touching(self.global_(self.column)))
+        # the frame's stays, the fork legs, axle nuts: lateral pieces reaching a wheel's hub
+        self.at_hub = np.zeros(len(idx), bool)
+        for c in (self.fa, self.ra):
+            near = np.maximum(lo[:, :2] - c[:2], np.maximum(c[:2] - hi[:, :2], 0.0))
+            self.at_hub |= self.lateral & (np.hypot(near[:, 0], near[:, 1]) < 0.3 * R)
 
     def global_(self, mask):
         return [self.idx[j] for j in np.nonzero(mask)[0]]
@@ -143,7 +148,8 @@ def drop_rider(soup, pose):
 
 
 def _body(pc, high):
-    """Step 2: the seeds grown through touching (bounding boxes) thick pieces."""
+    """Step 2: the seeds grown through touching (bounding boxes) thick pieces, not those on the
+    steering column."""
     lo, hi, D = pc.lo, pc.hi, pc.D
     mid = 0.5 * (lo[:, 1] + hi[:, 1])
     thick = (hi - lo).min(1) > 0.1 * D
@@ -192,7 +198,8 @@ def _limbs(pc, body):
     frontier, first = pc.global_(body), True
     while frontier:
         new = [pc.local[t] for t in pc.touch.touching(frontier)]
-        new = [j for j in new if cand[j] and not grown[j] and not (fastened[j] and (plate[j] or not first))]
+        new = [j for j in new if cand[j] and not grown[j] and not pc.at_hub[j]
+               and not (fastened[j] and (plate[j] or not first))]
         first = False
         grown[new] = True
         frontier = [pc.idx[j] for j in new]
