@@ -108,6 +108,9 @@ def test_refusals_name_the_failed_check():
     Vf = V * [1, 1, 0.001]
     with pytest.raises(UserError, match="flat"):
         pipeline.curate_arrays(Vf, T)
+    # every face degenerate (all vertices at one point): a refusal, not a linear-algebra error
+    with pytest.raises(UserError, match="no area"):
+        pipeline.curate_arrays(np.zeros((3, 3)), np.array([[0, 1, 2]]))
 
 
 def test_wheel_centres_given_by_the_annotator():
