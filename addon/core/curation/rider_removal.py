@@ -19,46 +19,9 @@ diameter D); object names are never looked at.
 """
 import numpy as np
 
-from .silhouette import surface_samples
+from .contacts import Touch
 
 HIGH = 1.75          # wheel diameters: wholly above this is head or torso
-_OFFS = np.array([[i, j, k] for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)], np.int64)
-
-
-def _pack(cells):
-    c = cells + (1 << 20)
-    return (c[:, 0] << 42) | (c[:, 1] << 21) | c[:, 2]
-
-
-class _Touch:
-    """Which components' surfaces come within ~cell of each other: surface samples hashed into
-    a voxel grid of that size, a piece touches what lies in its cells or their 26 neighbours."""
-
-    def __init__(self, P, soup, idx, cell):
-        self.cell = cell
-        self.cells, self.samples = {}, {}
-        keys, owner = [], []
-        for i in idx:
-            T = soup.TW[soup.comps[i].tris]
-            used = np.unique(T)
-            remap = np.full(len(P), -1)
-            remap[used] = np.arange(len(used))
-            X = surface_samples(P[used], remap[T], 0.5 * cell)
-            self.samples[i] = X
-            c = np.unique(np.floor(X / cell).astype(np.int64), axis=0)
-            self.cells[i] = c
-            keys.append(_pack(c))
-            owner.append(np.full(len(c), i))
-        self.keys = np.concatenate(keys) if keys else np.zeros(0, np.int64)
-        self.owner = np.concatenate(owner) if owner else np.zeros(0, int)
-
-    def touching(self, group):
-        """Component indices whose surface is near any of `group`'s."""
-        if not group:
-            return set()
-        c = np.concatenate([self.cells[i] for i in group])
-        near = np.unique(_pack((c[:, None, :] + _OFFS[None]).reshape(-1, 3)))
-        return set(np.unique(self.owner[np.isin(self.keys, near)]).tolist()) - set(group)
 
 
 def _solid_top(q, D):
@@ -87,7 +50,7 @@ class _Pieces:
         self.lo = np.array([q.min(0) for q in pts])
         self.hi = np.array([q.max(0) for q in pts])
         self.fa, self.ra = pose.apply(pose.front.centre), pose.apply(pose.rear.centre)
-        self.touch = _Touch(P, soup, idx, max(0.02, 0.025 * D))
+        self.touch = Touch(P, soup.TW, {i: soup.comps[i] for i in idx}, max(0.02, 0.025 * D))
         lo, hi, R = self.lo, self.hi, 0.5 * D
         self.lateral = (lo[:, 2] > 0.04 * D) | (hi[:, 2] < -0.04 * D)
         self.wheel = np.zeros(len(idx), bool)
