@@ -23,17 +23,19 @@ class Builder:
     def add(self, V, T, lab):
         self.V.append(np.asarray(V, float))
         self.T.append(np.asarray(T) + self.n)
-        self.lab += [lab] * len(T)
+        self.lab += list(np.broadcast_to(lab, (len(T),)))
         self.n += len(V)
 
-    def torus(self, c, R, r, nseg, ntube, lab, normal_z=True):
-        a = np.linspace(0, 2 * np.pi, nseg, endpoint=False)
+    def torus(self, c, R, r, nseg, ntube, lab, normal_z=True, arc=None, flat=1.0):
+        """A torus in the XY plane; arc=(a0, a1) radians: an open strip of it (a mudguard);
+        flat scales the tube's radial thickness."""
+        a = np.linspace(0, 2 * np.pi, nseg, endpoint=False) if arc is None else np.linspace(arc[0], arc[1], nseg)
         b = np.linspace(0, 2 * np.pi, ntube, endpoint=False)
         A, B = np.meshgrid(a, b, indexing="ij")
-        rr = R - r + r * np.cos(B)
+        rr = R - r + flat * r * np.cos(B)
         V = np.stack([rr * np.cos(A), rr * np.sin(A), r * np.sin(B)], -1).reshape(-1, 3) + c
         T = []
-        for i in range(nseg):
+        for i in range(nseg if arc is None else nseg - 1):
             for j in range(ntube):
                 p, q = i * ntube + j, ((i + 1) % nseg) * ntube + j
                 p2, q2 = i * ntube + (j + 1) % ntube, ((i + 1) % nseg) * ntube + (j + 1) % ntube
@@ -68,11 +70,21 @@ class Builder:
 
 
 def synth_bike(nseg=24, tyre_r=0.022, rider=False, chainring=True, third_wheel=None, front_R=0.35,
-               chain_guard=False, front_twin=None):
-    """A city bike from primitives in the canonical frame; (V, T, labels, truth keypoints)."""
+               chain_guard=False, front_twin=None, extras=(), wheelbase=1.07):
+    """A city bike from primitives in the canonical frame; (V, T, labels, truth keypoints).
+
+    rider: False; True (torso, head, arms to the bar, thighs: separate pieces); "legs" (also
+    shins down to the pedals and a shoe on each pedal); "one_piece" (the same person fused into
+    one connected mesh).
+    extras: what real city, utility and children's bikes carry: "kickstand" (down on the
+    ground), "basket" (wire basket on the bar, steers), "rack" (rear rack with two panniers),
+    "mudguards" (touching the tyres), "stabilisers" (a child's training wheels), "tall_post"
+    (saddle 30 cm higher), "cargo" (a long-john box between the saddle and the front wheel; with
+    wheelbase ~1.8 and a smaller front wheel)."""
     b = Builder()
     R = 0.35
-    ra, fa, ca = np.array([-0.45, R, 0.0]), np.array([0.62 + max(front_R - R, 0), front_R, 0.0]), np.array([0.0, 0.29, 0.0])
+    ra, ca = np.array([-0.45, R, 0.0]), np.array([0.0, 0.29, 0.0])
+    fa = np.array([wheelbase - 0.45 + max(front_R - R, 0), front_R, 0.0])
     for c, RR, lab in ((ra, R, FRAME), (fa, front_R, STEER)):
         b.torus(c, RR, tyre_r, nseg, 8, lab)
         b.torus(c, RR - tyre_r * 1.8, 0.008, nseg, 6, lab)           # rim
@@ -100,7 +112,7 @@ def synth_bike(nseg=24, tyre_r=0.022, rider=False, chainring=True, third_wheel=N
     for s in (1, -1):
         b.tube(bar, bar + [-0.02, 0.01, s * 0.2], 0.011, STEER)
         b.tube(bar + [-0.02, 0.01, s * 0.2], bar + [-0.08, 0.02, s * 0.31], 0.013, STEER)
-    seat_top = np.array([-0.2, 0.97, 0.0])
+    seat_top = np.array([-0.2, 0.97 + (0.3 if "tall_post" in extras else 0.0), 0.0])
     st = seat_top - [0, 0.06, 0]
     b.tube(ca, st, 0.016, FRAME)                                   # seat tube + post
     b.box(seat_top - [0, 0.03, 0], [0.12, 0.03, 0.07], FRAME)       # saddle
@@ -121,17 +133,60 @@ def synth_bike(nseg=24, tyre_r=0.022, rider=False, chainring=True, third_wheel=N
         b.torus(ca + [0, 0, 0.05], 0.1, 0.006, 32, 4, CRANK)
     if chain_guard:   # a closed box over the ring and the chain's top run (a city bike's chain case)
         b.box([-0.16, 0.31, 0.05], [0.3, 0.13, 0.012], FRAME)
+    _extras(b, extras, ra, fa, ca, R, front_R, tyre_r, bar, hb)
     if rider:                                                      # a blocky person
-        b.box([-0.1, 1.35, 0], [0.12, 0.3, 0.18], RIDER)            # torso
-        b.box([-0.02, 1.8, 0], [0.1, 0.12, 0.09], RIDER)            # head
+        p = Builder() if rider == "one_piece" else b
+        p.box([-0.1, 1.35, 0], [0.12, 0.3, 0.18], RIDER)            # torso
+        p.box([-0.02, 1.8, 0], [0.1, 0.12, 0.09], RIDER)            # head
         for s in (1, -1):
-            b.tube([-0.05, 1.55, s * 0.2], bar + [-0.08, 0.04, s * 0.27], 0.04, RIDER)   # arms
-            b.tube([-0.15, 1.08, s * 0.1], [0.1, 0.7, s * 0.12], 0.06, RIDER)             # thighs
+            p.tube([-0.05, 1.55, s * 0.2], bar + [-0.08, 0.04, s * 0.27], 0.04, RIDER)   # arms
+            p.tube([-0.15, 1.08, s * 0.1], [0.1, 0.7, s * 0.12], 0.06, RIDER)             # thighs
+        if rider in ("legs", "one_piece"):   # shins down to the pedals, a shoe on each
+            for s, ped in ((1, pr), (-1, pl)):
+                p.tube([0.1, 0.7, s * 0.12], ped + [-0.02, 0.09, 0.0], 0.045, RIDER)
+                p.box(ped + [0.03, 0.05, 0.0], [0.13, 0.038, 0.045], RIDER)
+        if p is not b:                       # one connected mesh, as a scanned or sculpted person
+            b.add(*fuse(*p.arrays())[:3])
     kp = {"front_axle": fa, "rear_axle": ra, "crank_axle": ca, "pedal_right": pr, "pedal_left": pl,
           "seat": seat_top - [0, 0.004, 0], "steer_bottom": hb, "steer_top": ht,
           "handle_right": bar + [-0.06, 0.017, 0.26], "handle_left": bar + [-0.06, 0.017, -0.26]}
     V, T, lab = b.arrays()
     return V, T, lab, kp
+
+
+def _extras(b, extras, ra, fa, ca, R, front_R, tyre_r, bar, hb):
+    if "kickstand" in extras:      # a side stand folded down onto the ground, left of the frame
+        b.tube(ca + [-0.1, 0.0, -0.04], [-0.2, 0.0, -0.18], 0.01, FRAME)
+        b.box([-0.2, 0.005, -0.18], [0.03, 0.005, 0.02], FRAME)
+    if "basket" in extras:         # wire-basket walls on the bar (turns with it)
+        c = bar + [0.2, -0.12, 0.0]
+        for off, h in (([0, -0.12, 0], [0.15, 0.005, 0.17]), ([0.15, 0, 0], [0.005, 0.12, 0.17]),
+                       ([-0.15, 0, 0], [0.005, 0.12, 0.17]), ([0, 0, 0.17], [0.15, 0.12, 0.005]),
+                       ([0, 0, -0.17], [0.15, 0.12, 0.005])):
+            b.box(c + off, h, STEER)
+        b.tube(bar, c + [-0.15, 0.05, 0.0], 0.008, STEER)
+    if "rack" in extras:           # rear rack over the tyre, two panniers hanging off it
+        top = R + R + 0.08
+        b.box([ra[0] + 0.05, top, 0.0], [0.22, 0.006, 0.07], FRAME)
+        for z in (-0.07, 0.07):
+            b.tube(ra + [0, 0, z], [ra[0] - 0.1, top, z], 0.006, FRAME)
+            b.tube([ra[0] + 0.25, top, z], [-0.2, 0.78, z * 0.5], 0.006, FRAME)
+        for z in (-0.19, 0.19):
+            b.box([ra[0] + 0.02, top - 0.17, z], [0.17, 0.16, 0.06], FRAME)
+    if "mudguards" in extras:      # strips over the tyres, touching them
+        for c, RR, lab in ((ra, R, FRAME), (fa, front_R, STEER)):
+            b.torus(c, RR + 0.012, 0.035, 20, 6, lab, arc=(np.radians(15), np.radians(165)), flat=0.3)
+    if "stabilisers" in extras:    # a child's training wheels beside the rear wheel
+        for z in (-0.22, 0.22):
+            c = np.array([ra[0], 0.09, z])
+            b.torus(c, 0.09, 0.015, 16, 6, FRAME)
+            b.tube(ra + [0, 0, np.sign(z) * 0.05], c, 0.008, FRAME)
+    if "cargo" in extras:          # a long-john cargo box low between the saddle and the front wheel
+        x0, x1 = 0.25, fa[0] - front_R - 0.05
+        b.box([(x0 + x1) / 2, 0.2, 0.0], [(x1 - x0) / 2, 0.01, 0.28], FRAME)
+        for z in (-0.28, 0.28):
+            b.box([(x0 + x1) / 2, 0.38, z], [(x1 - x0) / 2, 0.18, 0.008], FRAME)
+        b.tube(ca, [x0, 0.2, 0.0], 0.02, FRAME)
 
 
 def fuse(V, T, lab):
@@ -209,9 +264,13 @@ def synth_scooter(nseg=16, R=0.1, tyre_r=0.025):
     return V, T, lab, kp
 
 
-def synth_motorcycle(nseg=24, R=0.3, tyre_r=0.06, rider=False):
+def synth_motorcycle(nseg=24, R=0.3, tyre_r=0.06, rider=False, extras=()):
     """A motorcycle: fat tyres, a bulky engine/tank/seat body filling the side view between the
-    wheels, a swingarm, telescopic forks, a bar, footpegs."""
+    wheels, a swingarm, telescopic forks, a bar, footpegs.  extras: "triple" (triple-clamp plates
+    across the fork legs and bar risers 12 cm above the top clamp: the bar, not the head tube,
+    is the top of the steering), "fairing" (a frame-mounted nose fairing around the head and a
+    windscreen), "exhaust" (a long silencer low on the right), "pillion" (passenger pegs
+    behind the rider's)."""
     b = Builder()
     ra, fa = np.array([-0.7, R, 0.0]), np.array([0.75, R, 0.0])
     for c, lab in ((ra, FRAME), (fa, STEER)):
@@ -238,6 +297,21 @@ def synth_motorcycle(nseg=24, R=0.3, tyre_r=0.06, rider=False):
     b.tube(bar - [0, 0, 0.36], bar + [0, 0, 0.36], 0.014, STEER)          # one-piece bar
     for s in (1, -1):
         b.tube([0.0, 0.34, s * 0.14], [0.0, 0.34, s * 0.24], 0.012, FRAME)   # footpegs
+    if "triple" in extras:
+        for t in (hb, ht):
+            b.box(t + [0.03, 0.0, 0.0], [0.05, 0.015, 0.14], STEER)
+        for z in (-0.06, 0.06):
+            b.tube(ht + [0, 0, z], ht + 0.14 * u + [0, 0, z], 0.015, STEER)   # risers
+        b.tube(ht + 0.14 * u - [0, 0, 0.36], ht + 0.14 * u + [0, 0, 0.36], 0.014, STEER)
+    if "fairing" in extras:        # frame-mounted: it does not turn with the bar
+        b.box(hb + [0.12, 0.02, 0.0], [0.1, 0.14, 0.2], FRAME)
+        b.box(ht + [0.14, 0.2, 0.0], [0.01, 0.14, 0.18], FRAME)          # windscreen
+        b.tube(hb + [0.02, 0.0, 0.0], hb + [0.1, 0.0, 0.0], 0.02, FRAME)
+    if "exhaust" in extras:
+        b.tube([0.15, 0.3, 0.16], [-0.7, 0.42, 0.2], 0.05, FRAME)
+    if "pillion" in extras:
+        for s in (1, -1):
+            b.tube([-0.4, 0.5, s * 0.14], [-0.4, 0.5, s * 0.24], 0.012, FRAME)
     if rider:   # a blocky person on the seat: torso, head, arms to the grips, thighs over the tank
         b.box([-0.2, 1.25, 0], [0.15, 0.3, 0.18], RIDER)
         b.box([-0.1, 1.7, 0], [0.12, 0.13, 0.12], RIDER)

@@ -49,7 +49,7 @@ def _check(V, T, lab, kp, scale=1.0, offset=0.0, seed=0, tol_kp=0.04, min_area=0
     return res, err, right
 
 
-@pytest.mark.parametrize("nseg", [10, 16, 33, 64])
+@pytest.mark.parametrize("nseg", [8, 9, 10, 16, 33, 64])
 def test_tyre_segment_counts(nseg):
     V, T, lab, kp = synth_bike(nseg=nseg)
     _check(V, T, lab, kp, seed=nseg)
@@ -79,6 +79,17 @@ def test_rider_is_removed():
     assert any("rider" in n for n in res.notes)
 
 
+@pytest.mark.parametrize("kind,seed", [("legs", 17), ("one_piece", 18)])
+def test_rider_with_legs_on_the_pedals_is_removed(kind, seed):
+    """A person whose shins reach the pedals and whose shoes rest on them (separate pieces, or
+    the whole person one connected mesh): the person goes, pedals and crank arms stay, the
+    crank is found."""
+    V, T, lab, kp = synth_bike(nseg=24, rider=kind)
+    res, _, _ = _check(V, T, lab, kp, seed=seed, min_part=0.9)
+    assert res.record["has_crank"] is True
+    assert any("rider" in n for n in res.notes)
+
+
 def test_refusals_name_the_failed_check():
     V, T, lab, _ = synth_bike(third_wheel=0.6)
     with pytest.raises(UserError, match="side by side on the rear axle"):
@@ -97,6 +108,9 @@ def test_refusals_name_the_failed_check():
     Vf = V * [1, 1, 0.001]
     with pytest.raises(UserError, match="flat"):
         pipeline.curate_arrays(Vf, T)
+    # every face degenerate (all vertices at one point): a refusal, not a linear-algebra error
+    with pytest.raises(UserError, match="no area"):
+        pipeline.curate_arrays(np.zeros((3, 3)), np.array([[0, 1, 2]]))
 
 
 def test_wheel_centres_given_by_the_annotator():
@@ -151,3 +165,33 @@ def test_rider_on_a_motorcycle_is_removed_not_its_body():
     V, T, lab, kp = synth_motorcycle(rider=True)
     res, _, right = _check(V, T, lab, kp, seed=16, wheel=0.6, min_area=0.95)
     assert any("rider" in n for n in res.notes)
+
+
+@pytest.mark.parametrize("extras,fused,seed", [(("kickstand",), False, 21), (("rack",), False, 22),
+                                               (("mudguards",), True, 23), (("stabilisers",), False, 24),
+                                               (("tall_post",), False, 25),
+                                               (("kickstand", "rack", "mudguards"), False, 26)])
+def test_city_and_child_bike_accessories(extras, fused, seed):
+    """What real city, utility and children's bikes carry: a kickstand down on the ground beside
+    the left pedal, a rear rack with panniers sticking out sideways, mudguards on the tyres (the
+    whole bike one fused mesh), a child's stabiliser wheels (curated as a two-wheeler: they are
+    frame), a very tall seat post.  None of them is taken for a pedal, a wheel or a rider."""
+    V, T, lab, kp = synth_bike(nseg=24, extras=extras)
+    if fused:
+        V, T, lab = fuse(V, T, lab)
+    res, _, _ = _check(V, T, lab, kp, seed=seed, min_part=0.9)
+    assert res.record["has_crank"] is True
+    assert not any("rider" in n for n in res.notes)
+
+
+@pytest.mark.parametrize("extras,rider,seed", [(("triple",), False, 31), (("exhaust",), False, 32),
+                                               (("pillion",), False, 33),
+                                               (("triple", "fairing", "exhaust", "pillion"), True, 34)])
+def test_motorcycle_variants(extras, rider, seed):
+    """Triple clamps with bar risers (the bar, not the head tube, tops the steering), a frame-
+    mounted fairing and windscreen (plates up where a rider's head would be: not a rider), a long
+    exhaust beside the right footpeg, pillion pegs, and a rider on all of it."""
+    V, T, lab, kp = synth_motorcycle(extras=extras, rider=rider)
+    res, _, _ = _check(V, T, lab, kp, seed=seed, wheel=0.6, scale=100.0, min_area=0.9, min_part=0.85)
+    assert res.record["has_crank"] is False
+    assert any("rider" in n for n in res.notes) == rider

@@ -7,7 +7,8 @@ import numpy as np
 from ..contract import UserError
 from . import keypoints as kpmod
 from . import mesh, silhouette, split, wheels
-from .shape_fit import check_two_wheels, choose_keypoints, drop_rider, shape_samples
+from .rider_removal import drop_rider
+from .shape_fit import check_two_wheels, choose_keypoints, shape_samples
 from .pose import canonical_pose
 from .validate import validate
 
@@ -46,6 +47,8 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
     if not np.all(np.isfinite(V)):
         raise UserError("the model has non-finite vertex coordinates")
     soup = mesh.Soup(V, T)
+    if not soup.area.sum() > 0:
+        raise UserError("the model's faces have no area (all degenerate): nothing to curate")
     check_not_noisy(soup)
     rings = wheels.find_rings(soup)
     pair = wheels.wheel_pair(rings) if wheel_centres is None else None

@@ -1,6 +1,5 @@
 """The shape-based path of the curation, between the pose and the split (numpy, no bpy):
-surface samples of the kept bike, the two-wheeler checks that need the canonical frame, a
-rider's removal, and the choice between piece-based and shape-based keypoints."""
+surface samples of the kept bike, the two-wheeler checks that need the canonical frame, and the choice between piece-based and shape-based keypoints."""
 import numpy as np
 
 from ..contract import UserError
@@ -59,48 +58,6 @@ def check_two_wheels(X, pose):
         if len(full) >= 2:
             raise UserError(f"two wheels side by side on the {name} axle ({abs(full[-1] - full[0]) * 100:.0f} cm "
                             f"apart): a tricycle or quad, not a two-wheeler")
-
-
-def drop_rider(soup, pose):
-    """Bool per soup component: a rider.  A person on a bike reaches 2.1-3.5 wheel diameters
-    high (a bike alone stays below ~2, a kick scooter's stem is far taller and thin); the rider
-    is the pieces lying wholly above 1.75 wheel diameters (head, torso), grown through touching
-    thick pieces (arms, thighs: thicker than a tenth of a wheel, which no tube, saddle or bar
-    is) whose middle is above the wheel tops and which hang to one side of the bike."""
-    P = soup.transformed_points(pose.M)
-    D = 2 * 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale
-    out = np.zeros(len(soup.comps), bool)
-    idx = [i for i, k in enumerate(pose.keep) if k]
-    if not idx:
-        return out
-    lo = np.array([P[soup.comps[i].verts].min(0) for i in idx])
-    hi = np.array([P[soup.comps[i].verts].max(0) for i in idx])
-    top = hi[:, 1].max()
-    if not (2.1 * D < top < 3.5 * D):
-        return out
-    # a handlebar may sit that high (a motorcycle's): wide across and thin, unlike a person
-    bar_like = (hi[:, 2] - lo[:, 2] > 0.5 * D) & ((hi - lo).min(1) <= 0.1 * D)
-    high = (lo[:, 1] > 1.75 * D) & ~bar_like
-    if not high.any() or (hi[high, 2] - lo[high, 2]).max() < 0.2 * D:
-        return out
-    mid = 0.5 * (lo[:, 1] + hi[:, 1])
-    # limbs are thick: a bike's tubes, saddle and bar are thinner than a tenth of a wheel
-    thick = (hi - lo).min(1) > 0.1 * D
-    # limbs hang on one side of the bike; a motorcycle's tank, seat and body are as thick but
-    # centred on its plane of symmetry and longer than a person is deep
-    side = np.abs(0.5 * (lo[:, 2] + hi[:, 2])) > 0.25 * (hi[:, 2] - lo[:, 2])
-    short = (hi[:, 0] - lo[:, 0]) < 0.6 * D   # a torso or hip, not a tank or seat half a wheelbase long
-    grow = high.copy()
-    gap = 0.08 * D
-    frontier = list(np.nonzero(high)[0])
-    while frontier:
-        f = np.array(frontier)
-        ov = np.all((lo[None] <= hi[f][:, None] + gap) & (hi[None] >= lo[f][:, None] - gap), axis=2).any(0)
-        new = np.nonzero(ov & ~grow & (mid > 1.1 * D) & thick & (side | short))[0]
-        grow[new] = True
-        frontier = list(new)
-    out[np.array(idx)[grow]] = True
-    return out
 
 
 def _recentre(kp, view, X, pose, dx):

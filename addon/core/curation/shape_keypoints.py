@@ -106,37 +106,125 @@ def handles(X, steer_top, seat_x, R):
 
 
 def bulky(X, fa, ra, R, cell=0.02):
-    """Share of the side view between the wheels (axle height to wheel top) that is solid: a
-    motorcycle's engine and tank fill it, a bicycle's tubes do not."""
+    """Share of the side view between the wheels (axle height to wheel top) filled by a wide
+    body: cells with surface on both sides of the bike's plane, beyond 0.15 R.  A motorcycle's
+    engine and tank or a scooter's deck fill 0.46-0.8 of it; a bicycle's tubes, chainring and
+    crank arms (one side each) <= 0.1, even a toy bike's thick tubes, whose plain side-view
+    fill (0.66) is a motorcycle's."""
     x0, x1, y0, y1 = ra[0] + R, fa[0] - R, 0.5 * R + 0.5 * (fa[1] + ra[1]) - R, 2 * R
     if x1 - x0 < 2 * cell or y1 - y0 < 2 * cell:
         return 0.0
     m = (X[:, 0] > x0) & (X[:, 0] < x1) & (X[:, 1] > y0) & (X[:, 1] < y1)
-    ij = np.unique(np.floor((X[m][:, :2] - [x0, y0]) / cell).astype(int), axis=0)
-    return len(ij) / (np.ceil((x1 - x0) / cell) * np.ceil((y1 - y0) / cell))
+    t = 0.15 * R
+
+    def cells(Y):
+        ij = np.floor((Y[:, :2] - [x0, y0]) / cell).astype(np.int64)
+        return np.unique(ij[:, 0] * 100003 + ij[:, 1])
+
+    both = np.intersect1d(cells(X[m & (X[:, 2] > t)]), cells(X[m & (X[:, 2] < -t)]))
+    return len(both) / (np.ceil((x1 - x0) / cell) * np.ceil((y1 - y0) / cell))
+
+
+def _blobs(S, cell):
+    """Connected groups (26-neighbour cells of size `cell`) of the points S: list of index arrays."""
+    ij = np.floor(S / cell).astype(np.int64)
+    keys, inv = np.unique(ij, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    where = {tuple(k): n for n, k in enumerate(keys)}
+    group = -np.ones(len(keys), int)
+    offs = [(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)]
+    g = 0
+    for n in range(len(keys)):
+        if group[n] >= 0:
+            continue
+        group[n] = g
+        stack = [n]
+        while stack:
+            k = keys[stack.pop()]
+            for o in offs:
+                m = where.get((k[0] + o[0], k[1] + o[1], k[2] + o[2]))
+                if m is not None and group[m] < 0:
+                    group[m] = g
+                    stack.append(m)
+        g += 1
+    lab = group[inv]
+    return [np.nonzero(lab == k)[0] for k in range(g)]
+
+
+def _pedal_candidates(X, fa, ra, R, zmin, sg):
+    """Per side (sg +1 right, -1 left): the outer ends of the separate things sticking out
+    sideways (beyond zmin) around the crank: (x, y, outer |z|) of each outer end that is compact
+    (a pedal; not a kickstand's foot on the ground, a pannier, a cargo box's wall or a
+    stabiliser wheel) and lies between the wheels.  Each group's outer layer (0.12 R deep) is
+    split in the side view; a group whose layer holds nothing like a pedal is peeled and looked
+    at again (a kickstand touching a pedal)."""
+    m = (X[:, 0] > ra[0] - R) & (X[:, 0] < fa[0] + R) & (X[:, 1] < max(fa[1], ra[1]) + R) & (sg * X[:, 2] > zmin)
+    S = X[m]
+    out = []
+    if len(S) < 4:
+        return out
+    for g in _blobs(S, max(0.1 * R, 0.025)):
+        B = S[g]
+        for _ in range(4):   # peel the outer layer until it holds a pedal (a stand may touch one)
+            if len(B) == 0:
+                break
+            z = sg * B[:, 2]
+            in_cap = z > z.max() - 0.12 * R
+            found = False
+            for h in _blobs(B[in_cap] * [1.0, 1.0, 0.0], max(0.1 * R, 0.025)):
+                cap = B[in_cap][h]
+                lo, hi = cap.min(0), cap.max(0)
+                c = 0.5 * (lo + hi)
+                if np.hypot(*(hi - lo)[:2]) > R or c[1] < 0.25 * R:
+                    continue
+                if ra[0] + 0.5 * R < c[0] < fa[0] - 0.5 * R and c[1] < max(fa[1], ra[1]) + 0.6 * R:
+                    out.append((c[0], c[1], float((sg * cap[:, 2]).max())))
+                    found = True
+            if found:
+                break
+            B = B[~in_cap]
+    return out
 
 
 def pedals(X, fa, ra, R, tyre_half_width):
-    """(crank_axle, pedal_left, pedal_right, has_crank) or None.  A bulky body between the
+    """(crank_axle, pedal_left, pedal_right, has_crank) or None.  The pedals are the outermost
+    pair of compact things sticking out sideways between the wheels that sit point-symmetric
+    about a crank axle (apart in the side view, as far out on both sides); footrests (a
+    motorcycle's pegs, a scooter's deck) coincide in the side view.  A wide body between the
     wheels (a motorcycle) has footrests, not a crank."""
-    m = (X[:, 0] > ra[0] + 0.5 * R) & (X[:, 0] < fa[0] - 0.5 * R) & (X[:, 1] < max(fa[1], ra[1]) + 0.6 * R)
-    B = X[m]
-    if len(B) < 4:
-        return None
-    ends = []
-    for sg in (1, -1):
-        z = sg * B[:, 2]
-        zmax = z.max()
-        if zmax < tyre_half_width + 0.05 * R:
-            return None
-        c = B[z > zmax - 0.12 * R]
-        lo, hi = c.min(0), c.max(0)
+    zmin = tyre_half_width + 0.05 * R
+    right = _pedal_candidates(X, fa, ra, R, zmin, 1)
+    left = _pedal_candidates(X, fa, ra, R, zmin, -1)
+    pairs = [(min(r[2], l[2]), r, l) for r in right for l in left if abs(r[2] - l[2]) < 0.15 * R]
+    crank = [p for p in pairs if 0.35 * R < np.hypot(p[1][0] - p[2][0], p[1][1] - p[2][1]) < 1.6 * R]
+    pick = max(crank or pairs, key=lambda p: p[0], default=None)
+    if pick is None and bool(right) != bool(left):
+        # one side's pedal or peg is lost in something longer (an exhaust along it): mirror the
+        # other side's (a footrest pair; a crank needs both)
+        one = max(right or left, key=lambda c: c[2])
+        pick = (one[2], one, one)
+    if pick is not None:
+        (xr, yr, zr), (xl, yl, zl) = pick[1], pick[2]
         # the pedal body's centre: about 5 cm (0.14 R) in from its outer end
-        ends.append(np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), sg * (zmax - 0.14 * R)]))
+        ends = [np.array([xr, yr, zr - 0.14 * R]), np.array([xl, yl, -(zl - 0.14 * R)])]
+    else:   # nothing compact on both sides: the outermost surface per side
+        m = (X[:, 0] > ra[0] + 0.5 * R) & (X[:, 0] < fa[0] - 0.5 * R) & (X[:, 1] < max(fa[1], ra[1]) + 0.6 * R)
+        B = X[m]
+        if len(B) < 4:
+            return None
+        ends = []
+        for sg in (1, -1):
+            z = sg * B[:, 2]
+            zmax = z.max()
+            if zmax < zmin:
+                return None
+            c = B[z > zmax - 0.12 * R]
+            lo, hi = c.min(0), c.max(0)
+            ends.append(np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), sg * (zmax - 0.14 * R)]))
     pr, pl = ends
     sep = np.linalg.norm(pr[:2] - pl[:2])
     ca = np.array([0.5 * (pr[0] + pl[0]), 0.5 * (pr[1] + pl[1]), 0.0])
-    has_crank = 0.35 * R < sep < 1.6 * R and bulky(X, fa, ra, R) < 0.6
+    has_crank = 0.35 * R < sep < 1.6 * R and bulky(X, fa, ra, R) < 0.3
     if has_crank:  # exactly opposite about the axle (the rig rotates them as one)
         v = 0.5 * (pr[:2] - pl[:2])
         pr = np.array([ca[0] + v[0], ca[1] + v[1], pr[2]])

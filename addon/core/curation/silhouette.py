@@ -261,9 +261,12 @@ def _ransac_circle(xy, r0, tries=300, spread=0.15):
             continue
         res = np.hypot(*(xy - c).T) - r
         inl = np.abs(res) < tol
-        # the tyre is the outer outline: a candidate with most points outside it is a rim
-        # inside its tyre (a mudguard outside the tyre covers only part of the circle)
-        if (res > 0.02 * r0).mean() > 0.4:
+        # the tyre is the outer outline: a candidate with points outside it nearly all the way
+        # round (6 of 8 octants) is a rim or the spoke ends inside its tyre, however few the
+        # tyre's corners (a mudguard, a chainring or a pedal next to a tyre lies outside on one
+        # side only, however many points it has)
+        out = res > 0.02 * r0
+        if len(np.unique(np.floor(np.arctan2(*(xy[out] - c)[:, ::-1].T) / (np.pi / 4)))) >= 6:
             continue
         score = int(inl.sum())
         if score > best_n:
@@ -355,6 +358,14 @@ def wheel_rings(soup):
         for band in (np.concatenate(bands), bands[0], bands[1]):
             if len(band) >= 6:
                 _, ax, sd = principal_axes(P[band])
+                # without what crosses the band beside the tyre (a chainring next to a low-poly
+                # tyre's few corners tilts the plane by a degree): keep what lies within twice
+                # the tyre's own half width (80th percentile) of the plane
+                off = (P[band] - P[band].mean(0)) @ ax[0]
+                dev = np.abs(off - np.median(off))
+                keep = dev <= 2 * np.percentile(dev, 80) + 1e-12
+                if 6 <= keep.sum() < len(band):
+                    _, ax, sd = principal_axes(P[band][keep])
                 nn = ax[0] if ax[0] @ normal > 0 else -ax[0]
                 planes.append((abs(nn @ base) + sd[0] / max(sd[2], 1e-12), nn))
         if planes:

@@ -51,7 +51,9 @@ def regions(X, kp, head_radius=None, wheel_radius=None, head_span=None, with_hea
     rc = max(np.hypot(*(kp[p][:2] - ca[:2])) for p in ("pedal_left", "pedal_right")) + 0.07
     z = np.array([0, 0, 1.0])
     cz = np.array([ca[0], ca[1], 0.0])
-    crank = ((poly_radius(X, cz, z, 24) < rc) & (np.abs(X[:, 2]) > BB_HALF)) | \
+    # a point on the shell's end plane (a face lying in it: a shell modelled exactly 72 mm wide)
+    # is the shell's, within float noise, so all its corners fall on one side
+    crank = ((poly_radius(X, cz, z, 24) < rc) & (np.abs(X[:, 2]) > BB_HALF + 1e-7)) | \
         ((poly_radius(X, cz, z, 12) < 0.016) & (np.abs(X[:, 2]) < rc))
     # steering
     a = (st - sb) / np.linalg.norm(st - sb)

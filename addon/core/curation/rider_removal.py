@@ -1,0 +1,211 @@
+"""A rider (a person or a robot sitting on the bike) found by geometry and dropped before the
+keypoints (numpy, no bpy).  Works per mesh component in the canonical frame (metres, wheel
+diameter D); object names are never looked at.
+
+1. Seeds: a person reaches 2.1-3.5 D high (a bike alone stays below ~2 D; a kick scooter's stem
+   is far taller and thin).  The pieces wholly above 1.75 D (head, torso; not a handlebar: wide
+   across and thin) are the rider, and so is one piece reaching that high whose top is a solid
+   body (a one-mesh person: the part above 1.75 D is deep, wide and thick, unlike a windscreen
+   or high bars).
+2. Body: grown through touching thick pieces (arms, thighs, hips: thicker than a tenth of a
+   wheel, which no tube, saddle or bar is) whose middle is above the wheel tops and which hang to
+   one side or are short (a torso or hip; a motorcycle's tank, seat and body are as thick but
+   centred and long), and which are not wholly in the steering column ahead of the rider (a
+   stem, a basket or a headlamp the hands touch).
+3. Limbs: grown on from the body through pieces that touch it (surface within ~2 cm) and lie
+   wholly to one side of the bike's plane (shins, knees, feet, hands): not a piece fastened to
+   the bike's centre (a crank arm on its axle, a grip or lever on the bar, a footpeg, a stand),
+   not a wheel, and not a pedal (a small flat plate under the foot).
+"""
+import numpy as np
+
+from .contacts import Touch
+
+HIGH = 1.75          # wheel diameters: wholly above this is head or torso
+
+
+def _solid_top(q, D):
+    """A one-piece person (q: its surface samples): the part of the piece above HIGH*D is a
+    body (deep along the bike, wide across it and thick in every direction), not a windscreen,
+    a bar or a stem."""
+    top = q[q[:, 1] > HIGH * D]
+    if len(top) < 8:
+        return False
+    ext = top.max(0) - top.min(0)
+    if ext[0] < 0.2 * D or ext[2] < 0.2 * D:
+        return False
+    c = top - top.mean(0)
+    thin = np.ptp(c @ np.linalg.svd(c, full_matrices=False)[2][2])
+    return thin > 0.15 * D
+
+
+class _Pieces:
+    """The kept components in the canonical frame: bounding boxes, the surface contacts and the
+    bike's landmarks the steps share."""
+
+    def __init__(self, soup, pose, idx, P, D):
+        self.idx, self.D = idx, D
+        self.local = {i: j for j, i in enumerate(idx)}
+        pts = [P[soup.comps[i].verts] for i in idx]
+        self.lo = np.array([q.min(0) for q in pts])
+        self.hi = np.array([q.max(0) for q in pts])
+        self.fa, self.ra = pose.apply(pose.front.centre), pose.apply(pose.rear.centre)
+        self.touch = Touch(P, soup.TW, {i: soup.comps[i] for i in idx}, max(0.02, 0.025 * D))
+        lo, hi, R = self.lo, self.hi, 0.5 * D
+        self.lateral = (lo[:, 2] > 0.04 * D) | (hi[:, 2] < -0.04 * D)
+        self.wheel = np.zeros(len(idx), bool)
+        for c in (self.fa, self.ra):   # tyres, rims, spokes, hubs: within the wheel disc, near its plane
+            far = np.maximum(np.abs(lo[:, :2] - c[:2]), np.abs(hi[:, :2] - c[:2]))
+            self.wheel |= (np.hypot(far[:, 0], far[:, 1]) < 1.1 * R) & (np.maximum(-lo[:, 2], hi[:, 2]) < 0.2 * D)
+        # the steering column: a stem, basket or lamp wholly ahead of where a rider's body can
+        # be, and what is fastened to it (a toy bike's thick bar halves)
+        self.column = lo[:, 0] > self.fa[0] - 0.4 * D
+        self.on_column = self.mask(self.touch.touching(self.global_(self.column)))
+        # the frame's stays, the fork legs, axle nuts: lateral pieces reaching a wheel's hub
+        self.at_hub = np.zeros(len(idx), bool)
+        for c in (self.fa, self.ra):
+            near = np.maximum(lo[:, :2] - c[:2], np.maximum(c[:2] - hi[:, :2], 0.0))
+            self.at_hub |= self.lateral & (np.hypot(near[:, 0], near[:, 1]) < 0.3 * R)
+
+    def global_(self, mask):
+        return [self.idx[j] for j in np.nonzero(mask)[0]]
+
+    def mask(self, comps):
+        m = np.zeros(len(self.idx), bool)
+        m[[self.local[i] for i in comps]] = True
+        return m
+
+    def neighbours(self, j):
+        return [self.local[t] for t in self.touch.touching([self.idx[j]])]
+
+
+def drop_rider(soup, pose):
+    """Bool per soup component: the rider's pieces (all False when there is none)."""
+    P = soup.transformed_points(pose.M)
+    D = 2 * 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale
+    out = np.zeros(len(soup.comps), bool)
+    idx = [i for i, k in enumerate(pose.keep) if k]
+    if not idx:
+        return out
+    hi_all = np.array([P[soup.comps[i].verts][:, 1].max() for i in idx])
+    if not (2.1 * D < hi_all.max() < 3.5 * D):
+        return out
+    pc = _Pieces(soup, pose, idx, P, D)
+    lo, hi = pc.lo, pc.hi
+    # a handlebar may sit that high (a motorcycle's): wide across and thin, unlike a person
+    bar_like = (hi[:, 2] - lo[:, 2] > 0.5 * D) & ((hi - lo).min(1) <= 0.1 * D)
+    # plates and rods up there (a triple clamp, bar risers, a windscreen) are not a head or torso
+    solid = (hi - lo).min(1) >= 0.06 * D
+    high = ((lo[:, 1] > HIGH * D) & ~bar_like & solid) \
+        | np.array([h > HIGH * D and lw < HIGH * D and not b and _solid_top(pc.touch.samples[i], D)
+                    for i, lw, h, b in zip(idx, lo[:, 1], hi[:, 1], bar_like)])
+    # a person shows a head and shoulders above HIGH*D: as wide as 0.2 D and reaching 0.25 D up
+    if not high.any() or (hi[high, 2] - lo[high, 2]).max() < 0.2 * D or hi[high, 1].max() < (HIGH + 0.25) * D:
+        return out
+    rider = _body(pc, high)
+    rider |= _limbs(pc, rider)
+    rider |= _surrounded(pc, rider)
+    rider |= _hanging(pc, rider)
+    out[np.array(idx)[rider]] = True
+    return out
+
+
+def _body(pc, high):
+    """Step 2: the seeds grown through touching (bounding boxes) thick pieces, not those on the
+    steering column."""
+    lo, hi, D = pc.lo, pc.hi, pc.D
+    mid = 0.5 * (lo[:, 1] + hi[:, 1])
+    thick = (hi - lo).min(1) > 0.1 * D
+    side = np.abs(0.5 * (lo[:, 2] + hi[:, 2])) > 0.25 * (hi[:, 2] - lo[:, 2])
+    short = (hi[:, 0] - lo[:, 0]) < 0.6 * D
+    ok = (mid > 1.1 * D) & thick & (side | short) & ~pc.column & ~(pc.on_column & ~high)
+    grow = high.copy()
+    gap = 0.08 * D
+    frontier = list(np.nonzero(high)[0])
+    while frontier:
+        f = np.array(frontier)
+        ov = np.all((lo[None] <= hi[f][:, None] + gap) & (hi[None] >= lo[f][:, None] - gap), axis=2).any(0)
+        new = np.nonzero(ov & ~grow & ok)[0]
+        grow[new] = True
+        frontier = list(new)
+    return grow
+
+
+def _limbs(pc, body):
+    """Step 3: pieces wholly to one side of the bike's plane, touching the rider, not fastened
+    to the bike's centre, not a wheel, not a pedal."""
+    lo, hi, D, R = pc.lo, pc.hi, pc.D, 0.5 * pc.D
+    core = ~pc.lateral & ~pc.wheel & ~body
+    ext = hi - lo
+    # a pedal or a grip: small and thin against its size; a foot or a shoe is longer, a
+    # robot's foot piece thicker
+    pedal = (ext.max(1) < 0.2 * D) & (ext.min(1) < 0.3 * ext.max(1))
+    cand = pc.lateral & ~pc.wheel & ~body & ~pedal
+    grown = np.zeros(len(pc.idx), bool)
+    if not cand.any():
+        return grown
+    # fastened to the bike: touching its centre pieces, or a thin plate low down (a crank arm,
+    # a chainring) reached from them through other such plates; a foot on a crank arm is not
+    axle_y = max(pc.fa[1], pc.ra[1])
+    plate = pc.lateral & ~body & (ext[:, 2] < 0.08 * D) & (hi[:, 1] < axle_y + 0.6 * R)
+    fastened = np.zeros(len(pc.idx), bool)
+    frontier, first = pc.global_(core), True
+    while frontier:
+        new = [pc.local[t] for t in pc.touch.touching(frontier)]
+        new = [j for j in new if pc.lateral[j] and not fastened[j] and not body[j] and (first or plate[j])]
+        fastened[new] = True
+        frontier = [pc.idx[j] for j in new if plate[j]]
+        first = False
+    # a thigh on the body is the rider's even where it touches the saddle or the top tube (a
+    # crank arm under a one-piece person's shoe is not)
+    frontier, first = pc.global_(body), True
+    while frontier:
+        new = [pc.local[t] for t in pc.touch.touching(frontier)]
+        new = [j for j in new if cand[j] and not grown[j] and not pc.at_hub[j]
+               and not (fastened[j] and (plate[j] or not first))]
+        first = False
+        grown[new] = True
+        frontier = [pc.idx[j] for j in new]
+    return grown
+
+
+def _surrounded(pc, rider):
+    """Step 4: a small piece above the wheel tops, away from the steering column, that touches three
+    or more rider pieces and at least twice as many as bike pieces (those reached from the
+    wheels without passing through such pieces) is the rider's: a robot's hip joint between its
+    thighs and pelvis.  A saddle under a person touches one body or two thighs, and its post."""
+    mid = 0.5 * (pc.lo[:, 1] + pc.hi[:, 1])
+    # small: a saddle (25 cm and more), a tank or a motorcycle seat between the thighs is not
+    small = (pc.hi - pc.lo).max(1) < 0.3 * pc.D
+    cand = (mid > 1.1 * pc.D) & small & ~pc.column & ~pc.on_column & ~rider & ~pc.wheel
+    reached = pc.wheel & ~rider
+    frontier = pc.global_(reached)
+    while frontier:
+        new = [j for j in (pc.local[t] for t in pc.touch.touching(frontier)) if not reached[j] and not rider[j]]
+        reached[new] = True
+        frontier = [pc.idx[j] for j in new if not cand[j]]
+    out = rider.copy()
+    for j in np.nonzero(cand)[0]:
+        nb = pc.neighbours(j)
+        r = sum(bool(rider[k]) for k in nb)
+        b = sum(bool(reached[k]) for k in nb)
+        if r >= 3 and r >= 2 * b:
+            out[j] = True
+    return out
+
+
+def _hanging(pc, rider):
+    """Step 5: what the rider's removal left hanging.  Pieces reached from the wheels through
+    touching bike pieces are the bike; a group reached from neither but touching the rider is
+    the rider's (a robot's joints between its hips, something held in the hand)."""
+    rider = rider.copy()
+    bike = pc.wheel & ~rider
+    if not bike.any():
+        return rider
+    for seed, grow in ((bike, bike), (rider, rider)):
+        frontier = pc.global_(seed)
+        while frontier:
+            new = [j for j in (pc.local[t] for t in pc.touch.touching(frontier)) if not bike[j] and not rider[j]]
+            grow[new] = True
+            frontier = [pc.idx[j] for j in new]
+    return rider
