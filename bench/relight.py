@@ -8,7 +8,9 @@ mesh lit by that sun (render_pose with lights not following the bike) and the Ga
 twice: relit (albedo + normal shaded per pixel) and baked (today's colours, trained under the studio
 lights).  Keys: bike_relit = {box_psnr_mean, iou_mean, poses, baked_box_psnr_mean, baked_iou_mean},
 relight_render_overhead = relit / baked render time - 1 (median of interleaved repeats per pose).
-Box PSNR: RGB on black inside the union of both masks' box plus 8 px.
+Box PSNR: RGB on black inside the union of both masks' box plus 8 px.  blender_coverage_box_psnr_mean:
+the relit colour composited with Blender's alpha instead of the Gaussians' (what exact geometry
+would give the same colours; coverage_cost).
 """
 import argparse
 import json
@@ -153,6 +155,25 @@ def blender_worker(job_path):
         print(f"  blender pose {i + 1}/{len(job['poses'])}", flush=True)
 
 
+def coverage_cost(gt_png, rgb, alpha, box):
+    """How much of a render's error is its coverage (the Gaussians' geometry) rather than its colour:
+    (box PSNR of the render's straight colour composited with Blender's alpha instead of its own,
+    share of the box's squared error in the pixels whose masks (alpha > 0.5) disagree).  Pixels
+    the render leaves uncovered (alpha < 0.02) have no colour of their own and stay black."""
+    from PIL import Image
+
+    from bench.compare import load_rgba, psnr
+
+    gt_rgb, m_gt = load_rgba(gt_png)
+    ga = np.asarray(Image.open(gt_png).convert("RGBA"))[..., 3].astype(np.float64) / 255
+    straight = np.where(alpha[..., None] > 0.02, rgb / np.maximum(alpha, 0.02)[..., None], 0.0).clip(0, 1)
+    x0, y0, x1, y1 = box
+    err = ((rgb - gt_rgb) ** 2).sum(-1)[y0:y1, x0:x1]
+    disagree = ((alpha > 0.5) != m_gt)[y0:y1, x0:x1]
+    return (psnr((straight * ga[..., None])[y0:y1, x0:x1], gt_rgb[y0:y1, x0:x1]),
+            float(err[disagree].sum() / max(float(err.sum()), 1e-12)))
+
+
 def fit_missing(bike, progress=print):
     """Relight-fit the parts of a trained bike whose PART.relight.npz is missing; {part: fit metrics}."""
     from cyclist_formats import bike_folder
@@ -254,6 +275,8 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
                 row[f"{key}_iou"], row[f"{key}_box_psnr"] = iou, ps
                 if key == "relit":
                     shots.append((gt_rgb, rgb, box))
+                    row["relit_box_psnr_blender_coverage"], row["mask_disagreement_err_share"] = coverage_cost(
+                        os.path.join(gt_dir, f"gt_{i:03d}.png"), rgb, out["alpha"].numpy(), box)
             rows.append(row)
     mean = lambda k: float(np.mean([r[k] for r in rows]))  # noqa: E731
     worst = int(np.argmin([r["relit_box_psnr"] for r in rows]))
@@ -263,7 +286,10 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
     shadow_overhead = float(np.median(np.asarray(t_shadow) / np.asarray(t_baked)) - 1)
     results["bike_relit"] = {"poses": len(rows), "box_psnr_mean": mean("relit_box_psnr"), "iou_mean": mean("relit_iou"),
                              "baked_box_psnr_mean": mean("baked_box_psnr"), "baked_iou_mean": mean("baked_iou"),
-                             "noshadow_box_psnr_mean": mean("noshadow_box_psnr"), "size_px": size, "bike": os.path.basename(bike), "gaussians": len(rb.model),
+                             "noshadow_box_psnr_mean": mean("noshadow_box_psnr"),
+                             # the geometry's share: the relit colour under Blender's own coverage
+                             "blender_coverage_box_psnr_mean": mean("relit_box_psnr_blender_coverage"),
+                             "mask_disagreement_err_share_mean": mean("mask_disagreement_err_share"), "size_px": size, "bike": os.path.basename(bike), "gaussians": len(rb.model),
                              "prepare_s": round(prep_s, 1), "train": train_stats}
     results["relight_render_overhead"] = overhead
     results["relight_shadow_overhead"] = shadow_overhead

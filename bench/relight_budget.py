@@ -7,9 +7,12 @@ one measured term at a time for the shading model's prediction of it (splatting/
 sun E cos/pi + uniform sky, from the pixel's own albedo, gloss and normal) says how many dB each
 unmodelled effect costs: cast shadows and sky occlusion (diffuse direct), interreflection (diffuse
 indirect), highlights and reflections (glossy), emission.  The ceiling row is the model fed with
-perfect per-pixel passes: no Gaussian fit can beat it.
+perfect per-pixel passes: no Gaussian fit can beat it.  Cycles' AO pass prices the sky's occlusion
+by the object (model_sky_times_blender_ao: both sky terms scaled by it); --split renders each pose
+a second time under its sun alone, so the gloss splits into the sun's highlight and the sky's
+reflection (Cycles counts the world as a light: both land in Glossy Direct).
 
-    python bench/relight_budget.py --bike OUT/bikes/ID --out DIR [--size 256 --poses 6]
+    python bench/relight_budget.py --bike OUT/bikes/ID --out DIR [--size 256 --poses 6 --split]
 """
 import argparse
 import json
@@ -21,6 +24,7 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # Blender 3.4's pass names and 5.0's
+PASS_NAMES = {"AO": "Ambient Occlusion"}
 LIGHT_PASSES = {"DiffDir": "Diffuse Direct", "DiffInd": "Diffuse Indirect", "DiffCol": "Diffuse Color",
                 "GlossDir": "Glossy Direct", "GlossInd": "Glossy Indirect", "GlossCol": "Glossy Color",
                 "Emit": "Emission", "Normal": "Normal"}
@@ -41,8 +45,12 @@ def worker(job_path):
     with open(job_path) as f:
         job = json.load(f)
     s = replace(render.RenderSettings(), samples=job["samples"], threads=1, denoise="NONE")
-    for i, (pose, cam, light) in enumerate(zip(job["poses"], job["cameras"], job["lights"])):
-        exr = os.path.join(job["out"], f"passes_{i:03d}.exr")
+    runs = [(i, "", light) for i, light in enumerate(job["lights"])]
+    if job.get("split"):  # the same pose under its sun alone (sky black): the sky's share is the difference
+        runs += [(i, "_sun", dict(light, sky=[0.0, 0.0, 0.0])) for i, light in enumerate(job["lights"])]
+    for i, tag, light in runs:
+        pose, cam = job["poses"][i], job["cameras"][i]
+        exr = os.path.join(job["out"], f"passes_{i:03d}{tag}.exr")
         if os.path.isfile(exr):
             continue
         lighting = sun_and_sky(light)
@@ -51,17 +59,18 @@ def worker(job_path):
             lighting(scene)
             vl = bpy.context.view_layer
             for attr in ("diffuse_direct", "diffuse_indirect", "diffuse_color", "glossy_direct", "glossy_indirect",
-                         "glossy_color", "emit", "normal"):
+                         "glossy_color", "emit", "normal", "ambient_occlusion"):
                 setattr(vl, f"use_pass_{attr}", True)
         render.setup_lighting = setup
-        render_pose(job["bike"], pose, cam, os.path.join(job["out"], f"rgba_{i:03d}.png"), None, s, lights_follow=False)
+        render_pose(job["bike"], pose, cam, os.path.join(job["out"], f"rgba_{i:03d}{tag}.png"), None, s,
+                    lights_follow=False)
         passes.save_exr(bpy.context.scene, exr + ".tmp")
         os.replace(exr + ".tmp", exr)
-        print(f"  budget pose {i + 1}/{len(job['poses'])}", flush=True)
+        print(f"  budget pose {i + 1}/{len(job['poses'])}{tag}", flush=True)
 
 
 def _pass(ch, name, comps="RGB"):
-    names = (name, LIGHT_PASSES.get(name, name))
+    names = (name, LIGHT_PASSES.get(name, PASS_NAMES.get(name, name)))
     for key in ch:
         lp, _, c = key.rpartition(".")
         if lp.rpartition(".")[2] in names and c == comps[0]:
@@ -78,9 +87,11 @@ def display(lin, alpha):
     return s * a
 
 
-def analyse(exr_path, light, camera, grid=()):
+def analyse(exr_path, light, camera, grid=(), sun_exr=None):
     """One pose's EXR -> {row: box PSNR (dB) against Blender's Combined}.  `grid`: extra
-    (roughness, highlight) pairs to try for the gloss (how ROUGHNESS/HIGHLIGHT were chosen)."""
+    (roughness, highlight) pairs to try for the gloss (how ROUGHNESS/HIGHLIGHT were chosen).
+    sun_exr: the same pose under its sun alone (--split): the gloss then splits into what the sun
+    and what the sky put there (Cycles counts the world as a light, so both are Glossy Direct)."""
     import torch
 
     from addon.core import frames, passes
@@ -91,6 +102,7 @@ def analyse(exr_path, light, camera, grid=()):
 
     ch = passes.read_exr(exr_path)
     P = {k: _pass(ch, k, "XYZ" if k == "Normal" else "RGB") for k in LIGHT_PASSES}
+    ao = _pass(ch, "AO", "RGB").mean(-1)  # Cycles' ambient occlusion, premultiplied like the rest
     comb4 = _pass(ch, "Combined", "RGBA")
     alpha, comb = comb4[..., 3], comb4[..., :3]
     n = frames.to_canonical(P["Normal"].reshape(-1, 3)).reshape(P["Normal"].shape)
@@ -115,6 +127,22 @@ def analyse(exr_path, light, camera, grid=()):
            "model_gloss_sky_only": score(sum(model.values()) - model["gloss"] + gloss_model(view=view, highlight=0.0))}
     for k in truth:  # only term k modelled, the rest exact: the dB that term costs
         out[f"only_{k}_modelled"] = score(sum(model[j] if j == k else truth[j] for j in truth))
+    # the sky occluded by the object (what the model leaves out): both sky terms scaled by Blender's AO
+    occl = np.where(alpha > 1e-3, ao / np.maximum(alpha, 1e-3), 1.0).clip(0, 1)[..., None]
+    sky_d = P["DiffCol"] * alpha[..., None] * np.asarray(L.sky)
+    sky_g = P["GlossCol"] * alpha[..., None] * np.asarray(L.sky)
+    out["model_sky_times_blender_ao"] = score(sum(model.values()) - (1 - occl) * (sky_d + sky_g))
+    if sun_exr:
+        chs = passes.read_exr(sun_exr)
+        g_sun = _pass(chs, "GlossCol") * (_pass(chs, "GlossDir") + _pass(chs, "GlossInd"))
+        g_sky = truth["gloss"] - g_sun
+        sun_model = model["gloss"] - sky_g
+        rest = truth["diff_dir"] + truth["diff_ind"] + truth["emit"]
+        out["only_gloss_sky_modelled"] = score(rest + g_sun + sky_g)
+        out["only_gloss_sun_modelled"] = score(rest + g_sky + sun_model)
+        out["only_gloss_sun_dropped"] = score(rest + g_sky)
+        tot_g = float(truth["gloss"][y0:y1, x0:x1].sum())
+        out["sun_share_of_gloss"] = round(float(g_sun[y0:y1, x0:x1].sum()) / max(tot_g, 1e-12), 3)
     for r, h in grid:
         out[f"gloss_r{r}_h{h}"] = score(rest + gloss_model(view=view, roughness=r, highlight=h))
     tot = sum(float(v[y0:y1, x0:x1].sum()) for v in truth.values())
@@ -132,6 +160,8 @@ def main():
     ap.add_argument("--samples", type=int, default=32)
     ap.add_argument("--seed", type=int, default=0, help="poses sample_poses(n, seed), suns seeded seed + 16 (as bike_relit)")
     ap.add_argument("--grid", action="store_true", help="also try a grid of gloss roughness x highlight")
+    ap.add_argument("--split", action="store_true", help="also render each pose under its sun alone (sky black) to "
+                    "split the gloss into its sun and sky parts")
     a = ap.parse_args()
     if a.worker:
         return worker(a.worker)
@@ -151,7 +181,7 @@ def main():
     rng = np.random.default_rng(a.seed + 16)
     lights = [light_json(random_light(rng)) for _ in range(a.poses)]
     job = {"bike": os.path.abspath(a.bike), "poses": poses.tolist(), "out": os.path.abspath(a.out), "samples": a.samples,
-           "cameras": ring_camera_files(a.bike, cams, a.size, a.out), "lights": lights}
+           "cameras": ring_camera_files(a.bike, cams, a.size, a.out), "lights": lights, "split": a.split}
     jp = os.path.join(a.out, "budget_job.json")
     with open(jp, "w") as f:
         json.dump(job, f)
@@ -164,7 +194,8 @@ def main():
     for p in job["cameras"]:
         with open(p) as f:
             cams_json.append(json.load(f))
-    rows = [analyse(os.path.join(a.out, f"passes_{i:03d}.exr"), lights[i], cams_json[i], grid) for i in range(a.poses)]
+    rows = [analyse(os.path.join(a.out, f"passes_{i:03d}.exr"), lights[i], cams_json[i], grid,
+                    os.path.join(a.out, f"passes_{i:03d}_sun.exr") if a.split else None) for i in range(a.poses)]
     keys = [k for k in rows[0] if k != "share"]
     summary = {k: round(float(np.mean([r[k] for r in rows])), 2) for k in keys}
     summary["share"] = {k: round(float(np.mean([r["share"][k] for r in rows])), 3) for k in rows[0]["share"]}
