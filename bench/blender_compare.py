@@ -255,12 +255,12 @@ def run_compare(bike_dir, out_dir, n_poses=12, size=512, seed=0, spp=SPP, refere
 
 
 def trained_antialiased(bike_dir):
-    """Whether the bike's parts were trained with antialiased splatting (their training JSON)."""
-    p = os.path.join(bike_dir, "gaussians", "frame.json")
-    if not os.path.isfile(p):
-        return False
-    with open(p) as f:
-        return bool(json.load(f).get("config", {}).get("antialiased", False))
+    """Whether the bike's parts were trained with antialiased splatting (BikeModel's rule: their
+    training JSONs; parts that disagree are an error)."""
+    from splatting.bike.model import MAIN_PARTS, SUB_PARTS, trained_antialiased as parts_antialiased
+
+    gdir = os.path.join(bike_dir, "gaussians")
+    return parts_antialiased(gdir, [p for p in MAIN_PARTS + SUB_PARTS if os.path.isfile(os.path.join(gdir, p + ".ply"))])
 
 
 # -- outputs ---------------------------------------------------------------------------------------

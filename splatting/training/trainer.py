@@ -224,7 +224,7 @@ def train_views(views: Views, cfg: TrainConfig):
         "densify": dens.stats,
         "psnr_history": history,
         "psnr_history_fields": ["iteration", "wall_s", "psnr_crop", "gaussians"],
-        "config": _config_dict(cfg),
+        "config": config_dict(cfg),
     }
     if ho is not None:
         metrics["psnr"], metrics["ssim"] = [round(x, 4) for x in evaluate(g, ho, antialiased=cfg.antialiased)]
@@ -233,7 +233,8 @@ def train_views(views: Views, cfg: TrainConfig):
     return g, metrics
 
 
-def _config_dict(cfg):
+def config_dict(cfg):
+    """A TrainConfig as the JSON object PART.json's "config" holds."""
     d = dataclasses.asdict(cfg)
     d["holdout"] = list(d["holdout"])
     d["resolution_schedule"] = [list(x) for x in d["resolution_schedule"]]
