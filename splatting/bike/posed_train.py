@@ -11,7 +11,7 @@ flows back into each part's canonical means, rotations, scales, opacities and co
 splatting/rider/posed_train.py does for riders).  The whole bike's rest-pose ring (views/whole)
 stays in the mix.  No densification: the per-part training placed the Gaussians.
 
-    python -m splatting bike-posed-train --bike OUT/bikes/ID [--poses 48 --iterations 1500]
+    python -m splatting bike-posed-train --bike OUT/bikes/ID [--poses 48 --iterations 1000]
 
 writes OUT/bikes/ID/gaussians/<part>.ply in place (the rest-trained ones kept as <part>_rest.ply)
 and gaussians/posed_train.json (config, held-out-pose scores before/after).  Training poses come
@@ -41,7 +41,7 @@ HELD_OUT = 4  # the last posed views: scored before and after, never trained on
 @dataclass
 class PosedTrainConfig:
     poses: int = 48              # posed whole-bike renders (one random ring camera each)
-    iterations: int = 1500
+    iterations: int = 1000
     rest_fraction: float = 0.25  # share of steps on the rest-pose whole-bike ring (views/whole)
     samples: int = 128           # Cycles samples of the posed renders (the training views' default)
     denoise: str = "FAST"
@@ -240,21 +240,25 @@ def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print):
     torch.set_num_threads(1)
     gdir = os.path.join(bike_dir, "gaussians")
     model = BikeModel.load(bike_dir)
-    # fine-tuning starts from the rest-trained parts: the copies kept from an earlier run, if any
-    if all(os.path.isfile(os.path.join(gdir, p + "_rest.ply")) for p in model.part_names):
+    meta = os.path.join(gdir, "posed_train.json")
+    rest = {p: os.path.join(gdir, p + "_rest.ply") for p in model.part_names}
+    # a part file no newer than posed_train.json is this stage's own output: start again from the
+    # rest-trained copy kept beside it; a newer one was retrained since and is the new start
+    again = os.path.isfile(meta) and all(os.path.isfile(rest[p]) and os.path.getmtime(os.path.join(gdir, p + ".ply"))
+                                         <= os.path.getmtime(meta) for p in model.part_names)
+    if again:
         from splatting.gaussians.container import read_ply
 
-        model = BikeModel({p: read_ply(os.path.join(gdir, p + "_rest.ply")) for p in model.part_names},
-                          model_keypoints_doc(bike_dir), model.meta, source=bike_dir, antialiased=model.antialiased)
+        model = BikeModel({p: read_ply(rest[p]) for p in model.part_names}, model_keypoints_doc(bike_dir), model.meta,
+                          source=bike_dir, antialiased=model.antialiased)
+    else:
+        for p in model.part_names:
+            shutil.copyfile(os.path.join(gdir, p + ".ply"), rest[p])
     jobs = render_posed_views(bike_dir, os.path.join(bike_dir, "views", "posed"), cfg, log)
     parts, metrics = fine_tune(model, os.path.join(bike_dir, "views", "whole"), jobs, cfg)
     for p, g in parts.items():
-        ply = os.path.join(gdir, p + ".ply")
-        rest_copy = os.path.join(gdir, p + "_rest.ply")
-        if not os.path.isfile(rest_copy):
-            shutil.copyfile(ply, rest_copy)
-        write_ply(g, ply)  # same Gaussians, same order
-    write_json(os.path.join(gdir, "posed_train.json"), metrics)
+        write_ply(g, os.path.join(gdir, p + ".ply"))  # same Gaussians, same order
+    write_json(meta, metrics)  # written last: its time marks the part files as this stage's
     log(f"bike-posed-train: held-out poses box PSNR {metrics['held_out_box_psnr_before']:.2f} -> "
         f"{metrics['held_out_box_psnr_after']:.2f} dB, IoU {metrics['held_out_iou_before']:.4f} -> "
         f"{metrics['held_out_iou_after']:.4f}, {metrics['wall_s']:.0f} s")
