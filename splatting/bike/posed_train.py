@@ -32,6 +32,7 @@ import torch
 from cyclist_formats.errors import UserError
 from splatting import paths
 from splatting.progress import Progress
+from splatting.training.trainer import FineTuneRates
 
 RENDER_SCRIPT = paths.blender_script("render_pose.py")
 POSE_SEED = 1000
@@ -39,19 +40,13 @@ HELD_OUT = 4  # the last posed views: scored before and after, never trained on
 
 
 @dataclass
-class PosedTrainConfig:
+class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (training/trainer.py)
     poses: int = 48              # posed whole-bike renders (one random ring camera each)
     iterations: int = 1000
     rest_fraction: float = 0.25  # share of steps on the rest-pose whole-bike ring (views/whole)
     samples: int = 128           # Cycles samples of the posed renders (the training views' default)
     denoise: str = "FAST"
     seed: int = 0
-    lr_means: float = 1.6e-5     # x extent; a tenth of the trainer's start: the geometry is already close
-    lr_sh0: float = 2.5e-3
-    lr_opacity: float = 0.02
-    lr_scales: float = 2.5e-3
-    lr_quats: float = 1e-3
-    lambda_dssim: float = 0.2
     crop_margin_px: int = 8
     progress: bool = True
 

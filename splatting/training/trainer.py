@@ -65,6 +65,18 @@ class TrainConfig:
     densify: DensifyConfig = field(default_factory=DensifyConfig)
 
 
+@dataclass
+class FineTuneRates:
+    """Adam rates and loss weight for fine-tuning Gaussians a full training already placed (the posed
+    fine-tunes of riders and bikes): the means' rate (x extent) a tenth of the trainer's start."""
+    lr_means: float = 1.6e-5
+    lr_sh0: float = 2.5e-3
+    lr_opacity: float = 0.02
+    lr_scales: float = 2.5e-3
+    lr_quats: float = 1e-3
+    lambda_dssim: float = 0.2
+
+
 # -- training ------------------------------------------------------------------------------------
 
 def _params_from(g: Gaussians):
