@@ -95,6 +95,10 @@ def test_done_with_reads_the_config(tmp_path):
         json.dump({"config": c}, f)
     assert done_with(d, PosedTrainConfig(progress=False)) is not None
     assert done_with(d, PosedTrainConfig(iterations=cfg.iterations + 1)) is None
+    # a part retrained after the fine-tune (its file newer than posed_train.json): fine-tune again
+    t = os.path.getmtime(os.path.join(d, "gaussians", "posed_train.json"))
+    os.utime(os.path.join(d, "gaussians", "steering.ply"), (t + 5, t + 5))
+    assert done_with(d, PosedTrainConfig()) is None
 
 
 def test_sh_degree_above_zero_is_refused(tmp_path):
@@ -111,3 +115,34 @@ def test_cli_refuses_bad_input(tmp_path):
         r = subprocess.run([sys.executable, "-m", "splatting", "bike-posed-train"] + [a.strip() for a in args],
                            capture_output=True, text=True, env=env, cwd=ROOT)
         assert r.returncode == 2 and msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_reruns_start_from_the_rest_trained_parts(scene, tmp_path):
+    """train_bike_posed keeps the rest-trained parts as <part>_rest.ply; a rerun (another config)
+    starts from those, and a part retrained since the fine-tune becomes the new start."""
+    import filecmp
+    import shutil
+
+    from splatting.bike.posed_train import train_bike_posed
+
+    d = str(tmp_path / "bike")
+    shutil.copytree(scene[0], d)
+    g = os.path.join(d, "gaussians")
+    orig = {p: open(os.path.join(g, p + ".ply"), "rb").read() for p in ("frame", "steering", "crank")}
+    quiet = dict(poses=12, progress=False)  # the fixture rendered these 12 posed views: no Blender
+    train_bike_posed(d, PosedTrainConfig(iterations=3, **quiet), log=lambda s: None)
+    for p, data in orig.items():
+        assert open(os.path.join(g, p + "_rest.ply"), "rb").read() == data
+        assert open(os.path.join(g, p + ".ply"), "rb").read() != data  # fine-tuned
+    assert done_with(d, PosedTrainConfig(iterations=3, **quiet)) is not None
+    train_bike_posed(d, PosedTrainConfig(iterations=4, **quiet), log=lambda s: None)
+    for p, data in orig.items():  # the second run started from the same rest copies
+        assert open(os.path.join(g, p + "_rest.ply"), "rb").read() == data
+    # steering retrained after the fine-tune: it is the new start, the others keep theirs
+    shutil.copyfile(os.path.join(g, "frame_rest.ply"), os.path.join(g, "steering.ply"))
+    t = os.path.getmtime(os.path.join(g, "posed_train.json"))
+    os.utime(os.path.join(g, "steering.ply"), (t + 5, t + 5))
+    assert done_with(d, PosedTrainConfig(iterations=4, **quiet)) is None
+    train_bike_posed(d, PosedTrainConfig(iterations=4, **quiet), log=lambda s: None)
+    assert filecmp.cmp(os.path.join(g, "steering_rest.ply"), os.path.join(g, "frame_rest.ply"), shallow=False)
+    assert open(os.path.join(g, "crank_rest.ply"), "rb").read() == orig["crank"]

@@ -222,7 +222,11 @@ def done_with(bike_dir, cfg: PosedTrainConfig):
         return None
     want = dataclasses.asdict(cfg)
     want.pop("progress")
-    return m if isinstance(m, dict) and m.get("config") == want else None
+    gdir = os.path.dirname(p)
+    # a part retrained since (its file newer than posed_train.json) needs the fine-tune again
+    newer = any(f.endswith(".ply") and not f.endswith("_rest.ply")
+                and os.path.getmtime(os.path.join(gdir, f)) > os.path.getmtime(p) for f in os.listdir(gdir))
+    return m if isinstance(m, dict) and m.get("config") == want and not newer else None
 
 
 def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print):
@@ -236,19 +240,19 @@ def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print):
     gdir = os.path.join(bike_dir, "gaussians")
     model = BikeModel.load(bike_dir)
     meta = os.path.join(gdir, "posed_train.json")
-    rest = {p: os.path.join(gdir, p + "_rest.ply") for p in model.part_names}
     # a part file no newer than posed_train.json is this stage's own output: start again from the
-    # rest-trained copy kept beside it; a newer one was retrained since and is the new start
-    again = os.path.isfile(meta) and all(os.path.isfile(rest[p]) and os.path.getmtime(os.path.join(gdir, p + ".ply"))
-                                         <= os.path.getmtime(meta) for p in model.part_names)
-    if again:
-        from splatting.gaussians.container import read_ply
+    # rest-trained copy kept beside it; a newer one (or one never fine-tuned) is the new start
+    t_meta = os.path.getmtime(meta) if os.path.isfile(meta) else None
+    start = {}
+    for p in model.part_names:
+        ply, rest = os.path.join(gdir, p + ".ply"), os.path.join(gdir, p + "_rest.ply")
+        if t_meta is None or not os.path.isfile(rest) or os.path.getmtime(ply) > t_meta:
+            shutil.copyfile(ply, rest)
+        start[p] = rest
+    from splatting.gaussians.container import read_ply
 
-        model = BikeModel({p: read_ply(rest[p]) for p in model.part_names}, model_keypoints_doc(bike_dir), model.meta,
-                          source=bike_dir, antialiased=model.antialiased)
-    else:
-        for p in model.part_names:
-            shutil.copyfile(os.path.join(gdir, p + ".ply"), rest[p])
+    model = BikeModel({p: read_ply(f) for p, f in start.items()}, model_keypoints_doc(bike_dir), model.meta,
+                      source=bike_dir, antialiased=model.antialiased)
     jobs = render_posed_views(bike_dir, os.path.join(bike_dir, "views", "posed"), cfg, log)
     parts, metrics = fine_tune(model, os.path.join(bike_dir, "views", "whole"), jobs, cfg)
     for p, g in parts.items():
