@@ -48,6 +48,7 @@ class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (trai
     denoise: str = "FAST"
     seed: int = 0
     crop_margin_px: int = 8
+    sh_degree: int = 0           # 1: the fine-tune adds degree-1 SH (view-dependent colour), rotated with each part
     progress: bool = True
 
 
@@ -123,6 +124,8 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
 
     if model.sh_degree != 0:
         raise UserError(f"bike-posed-train handles SH degree 0 parts (the training default), got {model.sh_degree}")
+    if cfg.sh_degree not in (0, 1):
+        raise UserError(f"bike-posed-train: sh_degree must be 0 or 1, got {cfg.sh_degree}")
     t0 = time.time()
     gen = torch.Generator().manual_seed(cfg.seed)
     torch.manual_seed(cfg.seed)
@@ -136,23 +139,33 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
     ext = float((c.means.max(0).values - c.means.min(0).values).norm())
     lrs = {"means": cfg.lr_means * ext, "quats": cfg.lr_quats, "log_scales": cfg.lr_scales,
            "opacity_logits": cfg.lr_opacity, "sh0": cfg.lr_sh0}
+    if cfg.sh_degree:  # starts view-independent; INRIA's rate for the higher bands
+        params["shN"] = torch.nn.Parameter(torch.zeros(len(c), 3, 3, dtype=c.sh.dtype))
+        lrs["shN"] = cfg.lr_sh0 / 20
     opt = torch.optim.Adam([{"params": [params[k]], "lr": lrs[k]} for k in params], lr=0.0, eps=1e-15)
     aa = model.antialiased
 
+    from splatting.gaussians.sh_rotation import sh_band_matrices
+
     def world(rig):
-        """The canonical parameters moved by one pose's per-part rigid transforms (differentiable)."""
+        """The canonical parameters moved by one pose's per-part rigid transforms (differentiable):
+        means, rotations and, with degree 1, the band-1 SH coefficients (c' = D_1 c per part)."""
+        sh1 = params.get("shN")
         if rig is None:
-            return params["means"], params["quats"]
-        ms, qs = [], []
+            return params["means"], params["quats"], sh1
+        ms, qs, ss = [], [], []
         for name, (a, e) in zip(model.part_names, model.ranges):
             R, t, L = (x[0].to(params["means"].dtype) for x in rig[name])
             ms.append(params["means"][a:e] @ R.T + t)
             qs.append(params["quats"][a:e] @ L.T)
-        return torch.cat(ms), torch.cat(qs)
+            if sh1 is not None:
+                ss.append(torch.einsum("ij,njc->nic", sh_band_matrices(R, 1)[0], sh1[a:e]))
+        return torch.cat(ms), torch.cat(qs), (torch.cat(ss) if ss else None)
 
     def render(rig, cam, bg):
-        m, q = world(rig)
-        return rasterize(m, q, torch.exp(params["log_scales"]), torch.sigmoid(params["opacity_logits"]), params["sh0"],
+        m, q, sh1 = world(rig)
+        sh = params["sh0"] if sh1 is None else torch.cat([params["sh0"], sh1], 1)
+        return rasterize(m, q, torch.exp(params["log_scales"]), torch.sigmoid(params["opacity_logits"]), sh,
                          cam, background=bg, antialiased=aa)
 
     n_train = len(jobs) - HELD_OUT
@@ -200,8 +213,9 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
     wall = time.time() - t0
     after = held_out()
     d = {k: p.detach() for k, p in params.items()}
+    sh = d["sh0"] if "shN" not in d else torch.cat([d["sh0"], d["shN"]], 1)
     parts = {name: Gaussians(d["means"][a:e], d["quats"][a:e], d["log_scales"][a:e], d["opacity_logits"][a:e],
-                             d["sh0"][a:e]) for name, (a, e) in zip(model.part_names, model.ranges)}
+                             sh[a:e]) for name, (a, e) in zip(model.part_names, model.ranges)}
     cfg_d = dataclasses.asdict(cfg)
     cfg_d.pop("progress")
     return parts, {"config": cfg_d, "poses": len(jobs), "held_out_poses": HELD_OUT,
@@ -276,6 +290,8 @@ def add_arguments(p):
     p.add_argument("--poses", type=int, default=d.poses, help="posed whole-bike renders (default %(default)s)")
     p.add_argument("--iterations", type=int, default=d.iterations, help="fine-tuning steps (default %(default)s)")
     p.add_argument("--samples", type=int, default=d.samples, help="Cycles samples of the posed renders (default %(default)s)")
+    p.add_argument("--sh-degree", type=int, choices=(0, 1), default=d.sh_degree,
+                   help="1: add view-dependent (degree-1 SH) colour in the fine-tune (default %(default)s)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
 
 
@@ -292,6 +308,7 @@ def check_args(args):
 
 
 def run(args):
-    cfg = PosedTrainConfig(poses=args.poses, iterations=args.iterations, samples=args.samples, progress=not args.quiet)
+    cfg = PosedTrainConfig(poses=args.poses, iterations=args.iterations, samples=args.samples, sh_degree=args.sh_degree,
+                           progress=not args.quiet)
     train_bike_posed(args.bike, cfg)
     return 0
