@@ -49,6 +49,7 @@ class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (trai
     seed: int = 0
     crop_margin_px: int = 8
     sh_degree: int = 0           # 1: the fine-tune adds degree-1 SH (view-dependent colour), rotated with each part
+    lr_shN: float = 2.5e-3 / 20  # the band-1 coefficients' rate (INRIA's for the higher bands)
     progress: bool = True
 
 
@@ -139,9 +140,9 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
     ext = float((c.means.max(0).values - c.means.min(0).values).norm())
     lrs = {"means": cfg.lr_means * ext, "quats": cfg.lr_quats, "log_scales": cfg.lr_scales,
            "opacity_logits": cfg.lr_opacity, "sh0": cfg.lr_sh0}
-    if cfg.sh_degree:  # starts view-independent; INRIA's rate for the higher bands
+    if cfg.sh_degree:  # starts view-independent
         params["shN"] = torch.nn.Parameter(torch.zeros(len(c), 3, 3, dtype=c.sh.dtype))
-        lrs["shN"] = cfg.lr_sh0 / 20
+        lrs["shN"] = cfg.lr_shN
     opt = torch.optim.Adam([{"params": [params[k]], "lr": lrs[k]} for k in params], lr=0.0, eps=1e-15)
     aa = model.antialiased
 
