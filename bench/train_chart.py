@@ -203,6 +203,86 @@ def draw_fidelity(runs, png, title=""):
     plt.close(fig)
 
 
+# -- whole bikes at random poses ---------------------------------------------------------------------
+
+def bike_fidelity(bike_dir, reference_dir):
+    """Box PSNR and mask IoU (means) of a bike's composed parts at the poses of a blender_compare
+    reference folder (ref_NNN.png + job.json), scored as blender_compare scores its Gaussians (8-bit
+    straight-alpha PNG, union box + 8 px), and the bike's one-time training wall time (parts +
+    bike-posed-train, from their JSONs)."""
+    import numpy as np
+    import torch
+
+    from bench.blender_compare import cameras, fidelity
+    from cyclist_formats.atomic import atomic_path
+    from splatting.bike.model import BikeModel
+    from splatting.raster.camera import from_numpy
+    from splatting.raster.sparse import render_gaussians
+
+    with open(os.path.join(reference_dir, "job.json")) as f:
+        job = json.load(f)
+    model = BikeModel.load(bike_dir)
+    cams = cameras(bike_dir, job["cameras"], job["size"])
+    ps, ious = [], []
+    import tempfile
+
+    tmpdir = tempfile.mkdtemp(prefix="bike_fidelity_")
+    for i, pose in enumerate(job["poses"]):
+        with torch.no_grad():
+            o = render_gaussians(model.pose(torch.tensor(pose, dtype=torch.float64)).gaussians, from_numpy(*cams[i]),
+                                 antialiased=model.antialiased)
+        a = o["alpha"].clamp(0, 1)
+        rgba = torch.cat([(o["rgb"] / a.clamp_min(1e-6)[..., None]).clamp(0, 1), a[..., None]], -1)
+        from PIL import Image
+        png = os.path.join(tmpdir, f"{i:03d}.png")  # the PNG blender_compare's gauss worker writes
+        with atomic_path(png) as tmp:
+            Image.fromarray((rgba.numpy() * 255).round().astype(np.uint8), "RGBA").save(tmp, format="PNG")
+        p, iou = fidelity(os.path.join(reference_dir, f"ref_{i:03d}.png"), png)
+        os.remove(png)
+        ps.append(p)
+        ious.append(iou)
+    os.rmdir(tmpdir)
+    wall = 0.0
+    gdir = os.path.join(bike_dir, "gaussians")
+    for name in model.part_names + ["posed_train"]:
+        js = os.path.join(gdir, name + ".json")
+        if os.path.isfile(js):
+            with open(js) as f:
+                wall += float(json.load(f).get("wall_s", 0.0))
+    return {"box_psnr": float(np.mean(ps)), "iou": float(np.mean(ious)), "poses": len(ps), "train_wall_s": wall,
+            "gaussians": len(model)}
+
+
+def draw_bike_fidelity(rows, png, title=""):
+    """Whole-bike box PSNR and IoU at random poses against the one-time training wall time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from cyclist_formats.atomic import atomic_path
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for i, r in enumerate(rows):
+        mk = "os^Dv<>p*h"[i % 10]
+        line, = a.plot([r["train_wall_s"]], [r["box_psnr"]], marker=mk, ms=9, ls="",
+                       label=f"{r['label']}: {r['box_psnr']:.2f} dB, IoU {r['iou']:.3f}")
+        b.plot([r["train_wall_s"]], [r["iou"]], marker=mk, ms=9, ls="", color=line.get_color())
+    a.axhline(32, color="grey", lw=0.8, ls="--")
+    b.axhline(0.97, color="grey", lw=0.8, ls="--")
+    a.set_ylabel("box PSNR vs 512-spp Cycles (dB)")
+    b.set_ylabel("mask IoU")
+    for ax in (a, b):
+        ax.set_xlabel("training wall time, all parts (s, shared machine)")
+        ax.grid(alpha=0.3)
+    a.legend(fontsize=7, loc="best")
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    with atomic_path(png) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+
 if __name__ == "__main__":
     from bench.train_parts import training_args
     ap = training_args(__doc__)
@@ -211,8 +291,27 @@ if __name__ == "__main__":
     ap.add_argument("--png", default="out/bench/train_chart.png")
     ap.add_argument("--runs", help="JSON list of run specs (fidelity mode, see above)")
     ap.add_argument("--reference", help="views folder with clean renders of the held-out cameras (fidelity mode)")
+    ap.add_argument("--bike-fidelity", metavar="LABEL=BIKE,...",
+                    help="whole trained bikes scored at the poses of --bike-reference (blender_compare's reference folder)")
+    ap.add_argument("--bike-reference", help="a blender_compare reference folder (ref_NNN.png, job.json)")
     a = ap.parse_args()
     sys.path.insert(0, os.getcwd())
+    if a.bike_fidelity or a.bike_reference:
+        specs = [x.split("=", 1) for x in (a.bike_fidelity or "").split(",") if x]
+        if not (a.bike_fidelity and a.bike_reference) or any(len(x) != 2 or not os.path.isdir(x[1]) for x in specs) \
+                or not os.path.isfile(os.path.join(a.bike_reference, "job.json")):
+            sys.stderr.write("train_chart: error: --bike-fidelity LABEL=BIKE_DIR,... needs existing bike folders and "
+                             "--bike-reference a folder with job.json\n")
+            raise SystemExit(2)
+        rows = []
+        for label, d in specs:
+            rows.append(dict(bike_fidelity(d, a.bike_reference), label=label, bike=d))
+            print(json.dumps(rows[-1]), flush=True)
+        from cyclist_formats.atomic import write_json
+        write_json(os.path.splitext(a.png)[0] + ".json", {"reference": os.path.abspath(a.bike_reference), "rows": rows})
+        draw_bike_fidelity(rows, a.png, f"whole bike at {rows[0]['poses']} random 8-DoF poses vs 512-spp Cycles "
+                                        f"({os.path.basename(os.path.normpath(specs[0][1]))}); shared 2-core machine")
+        raise SystemExit(0)
     if bool(a.runs) != bool(a.reference):
         sys.stderr.write("train_chart: error: --runs and --reference go together\n")
         raise SystemExit(2)

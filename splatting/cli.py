@@ -15,6 +15,7 @@ COMMANDS = {
     "demo": ("splatting.demo", "the whole pipeline from nothing on a reduced budget, with a report"),
     "train": ("splatting.training.command", "train one part's Gaussians on its 36 rendered views"),
     "pose-bike": ("splatting.bike.command", "re-pose a bike's part Gaussians with the 8-DoF pose"),
+    "bike-posed-train": ("splatting.bike.posed_train", "fine-tune a bike's part Gaussians together on renders of the posed bike"),
     "contact-sheet": ("splatting.bike.contact_sheet", "one view of every bike in a library on one PNG"),
     "rider": ("splatting.rider.command", "list the rider roster; export a rider mesh (rest or posed)"),
     "rider-avatar": ("splatting.rider.avatar_build", "build a rider's Gaussian avatar (render, train, skin)"),

@@ -121,6 +121,8 @@ SPLATTING_CASES = [
     ["dataset merge", "--out", "no_such_dataset"],
     ["demo", "--out", "a_file.txt"],
     ["library build", "--out", "a_file.txt"],
+    ["bike-posed-train", "--bike", "a_folder"],  # no trained parts
+    ["bike-posed-train", "--bike", "a_file.txt"],
     # views folders whose cameras.json and images disagree
     ["train", "--views", f"{V}/extra", "--out", "o.ply"],
     ["train", "--views", f"{V}/missing", "--out", "o.ply"],
@@ -168,6 +170,9 @@ SCRIPT_CASES = [
     ["render_views.py", "--bike", "a_file.txt"],
     ["render_pose.py", "--bike", "a_folder", "--pose", "0,0,0,0,0,0,0,0", "--camera", "c.json:camera0000", "--out", "a_folder"],
     ["render_pose.py", "--bike", "a_folder", "--pose", "0,0,0,0,0,0,0,0", "--camera", "c.json:camera0000", "--out", "g.png", "--samples", "-4"],
+    ["render_pose.py", "--bike", "a_folder", "--batch", "a_file.txt"],  # not a JSON list of jobs
+    ["render_pose.py", "--bike", "a_folder", "--batch", "empty.yaml", "--out", "g.png"],
+    ["render_pose.py", "--bike", "a_folder"],  # neither --pose/--camera/--out nor --batch
     ["render_rider.py", "--mesh", "mesh.ply", "--out", "a_file.txt"],
     ["render_rider.py", "--mesh", "mesh.ply", "--out", "rv", "--threads", "0"],
     ["import_splats.py", "--ply", "mesh.ply", "--size", "100000"],

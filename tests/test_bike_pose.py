@@ -322,3 +322,30 @@ def test_global_pose_with_camera_keeps_the_render(model):
     after = rast.render_gaussians(posed, moved_cam)["rgb"]
     assert before.std() > 0.02
     assert (before - after).abs().max() < 2e-3
+
+
+def _write_metrics(d, part, antialiased):
+    import json
+    with open(os.path.join(d, "gaussians", part + ".json"), "w") as f:
+        json.dump({"psnr": 30.0, "config": {"antialiased": antialiased}}, f)
+
+
+def test_antialiased_flag_comes_from_the_parts_training(tmp_path):
+    # no metrics (imported parts): plain splatting
+    assert BikeModel.load(make_bike(tmp_path, "plain")).antialiased is False
+    d = make_bike(tmp_path, "aa")
+    for p in ("frame", "steering", "crank"):
+        _write_metrics(d, p, True)
+    assert BikeModel.load(d).antialiased is True
+    d = make_bike(tmp_path, "off")
+    for p in ("frame", "steering", "crank"):
+        _write_metrics(d, p, False)
+    assert BikeModel.load(d).antialiased is False
+
+
+def test_parts_trained_with_and_without_antialiasing_are_refused(tmp_path):
+    d = make_bike(tmp_path, "mixed")
+    _write_metrics(d, "frame", True)
+    _write_metrics(d, "steering", False)  # crank has none: plain
+    with pytest.raises(UserError, match="with and without antialiasing"):
+        BikeModel.load(d)

@@ -65,11 +65,15 @@ class BikeModel:
                                 + (" (meta.json has_crank is true)" if p == "crank" else ""))
         names += [p for p in SUB_PARTS if os.path.isfile(os.path.join(gdir, p + ".ply"))]
         parts = {p: read_ply(os.path.join(gdir, p + ".ply")) for p in names}
-        return cls(parts, kp_doc, meta, sh_degree=sh_degree, source=bike_dir)
+        return cls(parts, kp_doc, meta, sh_degree=sh_degree, source=bike_dir,
+                   antialiased=trained_antialiased(gdir, names))
 
-    def __init__(self, parts, keypoints_doc, meta, sh_degree=None, source="<memory>"):
-        """parts: {part name: Gaussians}; keypoints_doc: the keypoints.json object; meta: meta.json."""
+    def __init__(self, parts, keypoints_doc, meta, sh_degree=None, source="<memory>", antialiased=False):
+        """parts: {part name: Gaussians}; keypoints_doc: the keypoints.json object; meta: meta.json.
+        antialiased: the parts were trained with antialiased splatting, so they must be rendered
+        with it (rasterize(antialiased=model.antialiased)); load() reads it from the parts' metrics."""
         self.source = source
+        self.antialiased = bool(antialiased)
         self.meta = meta
         self.bike_id = str(meta.get("bike_id", ""))
         self.has_crank = "crank" in parts
@@ -215,6 +219,25 @@ class BikeModel:
         out = self.pose_tensors(poses)
         res = [posed_from_tensors(out, b) for b in range(out["poses"].shape[0])]
         return res[0] if single else res
+
+
+def trained_antialiased(gdir, names):
+    """Whether the parts in gdir were trained with antialiased splatting: their <part>.json
+    "config" (a part without metrics, e.g. imported, counts as plain). Parts that disagree are an
+    error: one renderer setting cannot draw both right (a mixed bike lost ~2 dB, docs/training.md)."""
+    flags = {}
+    for p in names:
+        js = os.path.join(gdir, p + ".json")
+        if os.path.isfile(js):
+            doc = bike_folder.read_json(js, f"{p}.json")
+            cfg = doc.get("config") if isinstance(doc, dict) else None
+            flags[p] = bool(cfg.get("antialiased", False)) if isinstance(cfg, dict) else False
+        else:
+            flags[p] = False
+    if len(set(flags.values())) > 1:
+        raise UserError(f"{gdir}: parts trained with and without antialiasing "
+                        f"({', '.join(f'{p}: {v}' for p, v in flags.items())}); retrain them with one setting")
+    return any(flags.values())
 
 
 def posed_from_tensors(out, b):

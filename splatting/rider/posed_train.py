@@ -30,12 +30,13 @@ import torch
 from cyclist_formats.errors import UserError
 from splatting import paths
 from splatting.progress import Progress
+from splatting.training.trainer import FineTuneRates
 
 RENDER_SCRIPT = paths.blender_script("render_rider.py")
 
 
 @dataclass
-class PosedTrainConfig:
+class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (training/trainer.py)
     poses: int = 4              # pedalling poses rendered
     cameras: int = 8            # ring cameras per pose (evenly spaced, offset per pose)
     iterations: int = 600
@@ -43,12 +44,6 @@ class PosedTrainConfig:
     rest_fraction: float = 0.25  # share of steps on the rest-pose views
     samples: int = None         # Cycles samples (default: the renderer's)
     seed: int = 0
-    lr_means: float = 1.6e-5    # x extent; a tenth of the trainer's start: the geometry is already close
-    lr_sh0: float = 2.5e-3
-    lr_opacity: float = 0.02
-    lr_scales: float = 2.5e-3
-    lr_quats: float = 1e-3
-    lambda_dssim: float = 0.2
     progress: bool = True
 
 

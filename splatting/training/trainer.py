@@ -65,6 +65,18 @@ class TrainConfig:
     densify: DensifyConfig = field(default_factory=DensifyConfig)
 
 
+@dataclass
+class FineTuneRates:
+    """Adam rates and loss weight for fine-tuning Gaussians a full training already placed (the posed
+    fine-tunes of riders and bikes): the means' rate (x extent) a tenth of the trainer's start."""
+    lr_means: float = 1.6e-5
+    lr_sh0: float = 2.5e-3
+    lr_opacity: float = 0.02
+    lr_scales: float = 2.5e-3
+    lr_quats: float = 1e-3
+    lambda_dssim: float = 0.2
+
+
 # -- training ------------------------------------------------------------------------------------
 
 def _params_from(g: Gaussians):
@@ -224,7 +236,7 @@ def train_views(views: Views, cfg: TrainConfig):
         "densify": dens.stats,
         "psnr_history": history,
         "psnr_history_fields": ["iteration", "wall_s", "psnr_crop", "gaussians"],
-        "config": _config_dict(cfg),
+        "config": config_dict(cfg),
     }
     if ho is not None:
         metrics["psnr"], metrics["ssim"] = [round(x, 4) for x in evaluate(g, ho, antialiased=cfg.antialiased)]
@@ -233,7 +245,8 @@ def train_views(views: Views, cfg: TrainConfig):
     return g, metrics
 
 
-def _config_dict(cfg):
+def config_dict(cfg):
+    """A TrainConfig as the JSON object PART.json's "config" holds."""
     d = dataclasses.asdict(cfg)
     d["holdout"] = list(d["holdout"])
     d["resolution_schedule"] = [list(x) for x in d["resolution_schedule"]]

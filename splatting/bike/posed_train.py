@@ -1,0 +1,315 @@
+"""Fine-tune a bike's part Gaussians together, through the 8-DoF pose, on Blender renders of the posed bike.
+
+Each part is first trained alone at rest on its ring (training/trainer.py): 36 horizontal views of
+that part, lit as it sits in the canonical bike.  A random pose changes what those parts never saw:
+the crank and steering turn under the suns (a pedal at 90 degrees shows its face to the key light),
+the other parts shadow and hide them, and roll/pitch look at the bike from above or below the ring.
+Here the whole bike's mesh is rendered by Blender at random 8-DoF poses from random ring cameras
+(blender_scripts/render_pose.py --batch, suns following the global pose as in the ground truth),
+and every step renders the composed parts re-posed by BikeModel's rigid part transforms; the loss
+flows back into each part's canonical means, rotations, scales, opacities and colours (as
+splatting/rider/posed_train.py does for riders).  The whole bike's rest-pose ring (views/whole)
+stays in the mix.  No densification: the per-part training placed the Gaussians.
+
+    python -m splatting bike-posed-train --bike OUT/bikes/ID [--poses 48 --iterations 1000]
+
+writes OUT/bikes/ID/gaussians/<part>.ply in place (the rest-trained ones kept as <part>_rest.ply)
+and gaussians/posed_train.json (config, held-out-pose scores before/after).  Training poses come
+from seed 1000 of splatting.library.gt.sample_poses: never the checks' poses (seed 0).
+"""
+import dataclasses
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from cyclist_formats.errors import UserError
+from splatting import paths
+from splatting.progress import Progress
+from splatting.training.trainer import FineTuneRates
+
+RENDER_SCRIPT = paths.blender_script("render_pose.py")
+POSE_SEED = 1000
+HELD_OUT = 4  # the last posed views: scored before and after, never trained on
+
+
+@dataclass
+class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (training/trainer.py)
+    poses: int = 48              # posed whole-bike renders (one random ring camera each)
+    iterations: int = 1000
+    rest_fraction: float = 0.25  # share of steps on the rest-pose whole-bike ring (views/whole)
+    samples: int = 128           # Cycles samples of the posed renders (the training views' default)
+    denoise: str = "FAST"
+    seed: int = 0
+    crop_margin_px: int = 8
+    sh_degree: int = 0           # 1: the fine-tune adds degree-1 SH (view-dependent colour), rotated with each part
+    lr_shN: float = 2.5e-3 / 20  # the band-1 coefficients' rate (INRIA's for the higher bands)
+    progress: bool = True
+
+
+def training_poses(n):
+    """n random 8-DoF poses and ring-camera indices (the ground-truth check's ranges, another seed)."""
+    from splatting.library.gt import sample_poses
+
+    return sample_poses(n, POSE_SEED)
+
+
+def render_posed_views(bike_dir, out_dir, cfg: PosedTrainConfig, log=print):
+    """out_dir/posed_NNN.png for every training pose (resumable) and out_dir/poses.json. Returns the jobs."""
+    poses, cams = training_poses(cfg.poses)
+    cam_file = os.path.abspath(os.path.join(bike_dir, "views", "whole", "cameras.json"))
+    if not os.path.isfile(cam_file):
+        raise UserError(f"{bike_dir} has no views/whole/cameras.json (render_views.py --parts whole)")
+    os.makedirs(out_dir, exist_ok=True)
+    jobs = [{"pose": [float(v) for v in p], "camera": f"{cam_file}:camera{int(c):04d}",
+             "out": os.path.abspath(os.path.join(out_dir, f"posed_{k:03d}.png"))} for k, (p, c) in enumerate(zip(poses, cams))]
+    settings = {"samples": cfg.samples, "denoise": cfg.denoise}
+    from cyclist_formats.atomic import write_json
+
+    meta = os.path.join(out_dir, "poses.json")
+    if os.path.isfile(meta):
+        with open(meta) as f:
+            old = json.load(f)
+        if old.get("settings") != settings:  # renders of other settings: start again
+            for j in old.get("jobs", []):
+                if os.path.isfile(j["out"]):
+                    os.remove(j["out"])
+    write_json(meta, {"settings": settings, "jobs": jobs})
+    todo = [j for j in jobs if not os.path.isfile(j["out"])]
+    if todo:
+        job_file = os.path.join(out_dir, "jobs.json")
+        write_json(job_file, todo)
+        cmd = [sys.executable, RENDER_SCRIPT, "--bike", bike_dir, "--batch", job_file, "--samples", str(cfg.samples),
+               "--denoise", cfg.denoise]
+        log(f"bike-posed-train: rendering {len(todo)} posed views ({cfg.samples} spp)")
+        env = dict(os.environ, PYTHONPATH=str(paths.ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+        r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+        if r.returncode != 0:
+            raise UserError(f"Blender rendering of the posed bike failed: {r.stdout.strip().splitlines()[-3:]}")
+    return jobs
+
+
+def _load_posed(jobs, margin):
+    """The posed renders as premultiplied RGBA (V, 4, H, W), their cameras and crop boxes."""
+    from PIL import Image
+
+    from cyclist_formats import ring
+    from splatting.raster.camera import from_numpy
+    from splatting.training.targets import crop_box
+
+    imgs, cams = [], []
+    for j in jobs:
+        im = torch.from_numpy(np.asarray(Image.open(j["out"]).convert("RGBA")).astype(np.float32) / 255)
+        imgs.append(torch.cat([im[..., :3] * im[..., 3:], im[..., 3:]], -1).permute(2, 0, 1))
+        path, _, name = j["camera"].rpartition(":")
+        K, R, T = ring.camera_entry(path, name)
+        cams.append(from_numpy(K, R, T))
+    img = torch.stack(imgs)
+    return img, cams, [crop_box(img[i, 3], margin) for i in range(len(cams))]
+
+
+def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
+    """model (BikeModel, parts trained at rest) -> ({part: Gaussians}, metrics)."""
+    from splatting.bike.pose import check_poses
+    from splatting.gaussians.container import Gaussians
+    from splatting.raster.sparse import rasterize
+    from splatting.training.metrics import box_psnr, mask_iou, ssim
+    from splatting.training.targets import Targets, crop_camera
+    from splatting.training.views import load_views
+
+    if model.sh_degree != 0:
+        raise UserError(f"bike-posed-train handles SH degree 0 parts (the training default), got {model.sh_degree}")
+    if cfg.sh_degree not in (0, 1):
+        raise UserError(f"bike-posed-train: sh_degree must be 0 or 1, got {cfg.sh_degree}")
+    t0 = time.time()
+    gen = torch.Generator().manual_seed(cfg.seed)
+    torch.manual_seed(cfg.seed)
+    rest = Targets(load_views(rest_views_dir), cfg.crop_margin_px).at(1.0)
+    posed = _load_posed(jobs, cfg.crop_margin_px)
+    rigs = [model._part_rigids(check_poses(torch.tensor(j["pose"], dtype=torch.float64)[None])) for j in jobs]
+    c = model.canonical
+    params = {k: torch.nn.Parameter(v.detach().clone().contiguous()) for k, v in
+              {"means": c.means, "quats": c.quats, "log_scales": c.log_scales, "opacity_logits": c.opacity_logits,
+               "sh0": c.sh}.items()}
+    ext = float((c.means.max(0).values - c.means.min(0).values).norm())
+    lrs = {"means": cfg.lr_means * ext, "quats": cfg.lr_quats, "log_scales": cfg.lr_scales,
+           "opacity_logits": cfg.lr_opacity, "sh0": cfg.lr_sh0}
+    if cfg.sh_degree:  # starts view-independent
+        params["shN"] = torch.nn.Parameter(torch.zeros(len(c), 3, 3, dtype=c.sh.dtype))
+        lrs["shN"] = cfg.lr_shN
+    opt = torch.optim.Adam([{"params": [params[k]], "lr": lrs[k]} for k in params], lr=0.0, eps=1e-15)
+    aa = model.antialiased
+
+    from splatting.gaussians.sh_rotation import sh_band_matrices
+
+    def world(rig):
+        """The canonical parameters moved by one pose's per-part rigid transforms (differentiable):
+        means, rotations and, with degree 1, the band-1 SH coefficients (c' = D_1 c per part)."""
+        sh1 = params.get("shN")
+        if rig is None:
+            return params["means"], params["quats"], sh1
+        ms, qs, ss = [], [], []
+        for name, (a, e) in zip(model.part_names, model.ranges):
+            R, t, L = (x[0].to(params["means"].dtype) for x in rig[name])
+            ms.append(params["means"][a:e] @ R.T + t)
+            qs.append(params["quats"][a:e] @ L.T)
+            if sh1 is not None:
+                ss.append(torch.einsum("ij,njc->nic", sh_band_matrices(R, 1)[0], sh1[a:e]))
+        return torch.cat(ms), torch.cat(qs), (torch.cat(ss) if ss else None)
+
+    def render(rig, cam, bg):
+        m, q, sh1 = world(rig)
+        sh = params["sh0"] if sh1 is None else torch.cat([params["sh0"], sh1], 1)
+        return rasterize(m, q, torch.exp(params["log_scales"]), torch.sigmoid(params["opacity_logits"]), sh,
+                         cam, background=bg, antialiased=aa)
+
+    n_train = len(jobs) - HELD_OUT
+
+    def held_out():
+        """Box PSNR (RGB on black, union box + 8 px) and IoU on the held-out posed views, full frame."""
+        ps, ious = [], []
+        with torch.no_grad():
+            img, cams, _ = posed
+            for v in range(n_train, len(jobs)):
+                o = render(rigs[v], cams[v], None)
+                gt = img[v].permute(1, 2, 0).double().numpy()
+                m, m_gt = o["alpha"].numpy() > 0.5, gt[..., 3] > 0.5
+                ps.append(box_psnr(o["rgb"].clamp(0, 1).double().numpy(), gt[..., :3], m, m_gt, pad=8))
+                ious.append(mask_iou(m, m_gt))
+        return round(float(np.mean(ps)), 3), round(float(np.mean(ious)), 4)
+
+    before = held_out()
+    prog = Progress(cfg.progress)
+    loss_v = float("nan")
+    for it in range(1, cfg.iterations + 1):
+        if float(torch.rand(1, generator=gen)) < cfg.rest_fraction:
+            (img, cams, boxes), rig = rest, None
+            v = int(torch.randint(len(cams), (1,), generator=gen))
+        else:
+            img, cams, boxes = posed
+            v = int(torch.randint(n_train, (1,), generator=gen))
+            rig = rigs[v]
+        x0, y0, x1, y1 = boxes[v]
+        out = render(rig, crop_camera(cams[v], boxes[v]), None)
+        gt = img[v, :, y0:y1, x0:x1].permute(1, 2, 0)
+        bg = torch.rand(3, generator=gen)  # random background: colour and alpha are both pinned down
+        pred = torch.cat([out["rgb"] + (1 - out["alpha"])[..., None] * bg, out["alpha"][..., None]], -1)
+        target = torch.cat([gt[..., :3] + (1 - gt[..., 3:]) * bg, gt[..., 3:]], -1)
+        loss = (1 - cfg.lambda_dssim) * (pred - target).abs().mean() + cfg.lambda_dssim * (1 - ssim(pred, target))
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        if bool(torch.isfinite(loss)) and all(p.grad is None or bool(torch.isfinite(p.grad).all()) for p in params.values()):
+            opt.step()
+        with torch.no_grad():
+            params["quats"] /= params["quats"].norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        loss_v = float(loss.detach())
+        prog.line(f"bike posed train {it}/{cfg.iterations} loss {loss_v:.4f} {time.time() - t0:6.1f}s")
+    prog.close()
+    wall = time.time() - t0
+    after = held_out()
+    d = {k: p.detach() for k, p in params.items()}
+    sh = d["sh0"] if "shN" not in d else torch.cat([d["sh0"], d["shN"]], 1)
+    parts = {name: Gaussians(d["means"][a:e], d["quats"][a:e], d["log_scales"][a:e], d["opacity_logits"][a:e],
+                             sh[a:e]) for name, (a, e) in zip(model.part_names, model.ranges)}
+    cfg_d = dataclasses.asdict(cfg)
+    cfg_d.pop("progress")
+    return parts, {"config": cfg_d, "poses": len(jobs), "held_out_poses": HELD_OUT,
+                   "held_out_box_psnr_before": before[0], "held_out_iou_before": before[1],
+                   "held_out_box_psnr_after": after[0], "held_out_iou_after": after[1],
+                   "loss": round(loss_v, 5), "wall_s": round(wall, 1), "antialiased": aa}
+
+
+def done_with(bike_dir, cfg: PosedTrainConfig):
+    """The bike's posed_train.json when its parts were fine-tuned with this config, else None."""
+    p = os.path.join(bike_dir, "gaussians", "posed_train.json")
+    if not os.path.isfile(p):
+        return None
+    try:
+        with open(p) as f:
+            m = json.load(f)
+    except (OSError, ValueError):
+        return None
+    want = dataclasses.asdict(cfg)
+    want.pop("progress")
+    gdir = os.path.dirname(p)
+    # a part retrained since (its file newer than posed_train.json) needs the fine-tune again
+    newer = any(f.endswith(".ply") and not f.endswith("_rest.ply")
+                and os.path.getmtime(os.path.join(gdir, f)) > os.path.getmtime(p) for f in os.listdir(gdir))
+    return m if isinstance(m, dict) and m.get("config") == want and not newer else None
+
+
+def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print):
+    """Render the posed views, fine-tune, write the parts (rest-trained copies kept). Returns the metrics."""
+    from cyclist_formats.atomic import write_json
+    from splatting.bike.model import BikeModel
+    from splatting.gaussians.container import write_ply
+
+    cfg = cfg or PosedTrainConfig()
+    torch.set_num_threads(1)
+    gdir = os.path.join(bike_dir, "gaussians")
+    model = BikeModel.load(bike_dir)
+    meta = os.path.join(gdir, "posed_train.json")
+    # a part file no newer than posed_train.json is this stage's own output: start again from the
+    # rest-trained copy kept beside it; a newer one (or one never fine-tuned) is the new start
+    t_meta = os.path.getmtime(meta) if os.path.isfile(meta) else None
+    start = {}
+    for p in model.part_names:
+        ply, rest = os.path.join(gdir, p + ".ply"), os.path.join(gdir, p + "_rest.ply")
+        if t_meta is None or not os.path.isfile(rest) or os.path.getmtime(ply) > t_meta:
+            shutil.copyfile(ply, rest)
+        start[p] = rest
+    from splatting.gaussians.container import read_ply
+
+    model = BikeModel({p: read_ply(f) for p, f in start.items()}, model_keypoints_doc(bike_dir), model.meta,
+                      source=bike_dir, antialiased=model.antialiased)
+    jobs = render_posed_views(bike_dir, os.path.join(bike_dir, "views", "posed"), cfg, log)
+    parts, metrics = fine_tune(model, os.path.join(bike_dir, "views", "whole"), jobs, cfg)
+    for p, g in parts.items():
+        write_ply(g, os.path.join(gdir, p + ".ply"))  # same Gaussians, same order
+    write_json(meta, metrics)  # written last: its time marks the part files as this stage's
+    log(f"bike-posed-train: held-out poses box PSNR {metrics['held_out_box_psnr_before']:.2f} -> "
+        f"{metrics['held_out_box_psnr_after']:.2f} dB, IoU {metrics['held_out_iou_before']:.4f} -> "
+        f"{metrics['held_out_iou_after']:.4f}, {metrics['wall_s']:.0f} s")
+    return metrics
+
+
+def model_keypoints_doc(bike_dir):
+    from cyclist_formats import bike_folder
+
+    return bike_folder.read_json(os.path.join(bike_dir, "keypoints.json"), "keypoints.json")
+
+
+def add_arguments(p):
+    d = PosedTrainConfig()
+    p.add_argument("--bike", required=True, help="a bike folder with trained parts (gaussians/) and views/whole")
+    p.add_argument("--poses", type=int, default=d.poses, help="posed whole-bike renders (default %(default)s)")
+    p.add_argument("--iterations", type=int, default=d.iterations, help="fine-tuning steps (default %(default)s)")
+    p.add_argument("--samples", type=int, default=d.samples, help="Cycles samples of the posed renders (default %(default)s)")
+    p.add_argument("--sh-degree", type=int, choices=(0, 1), default=d.sh_degree,
+                   help="1: add view-dependent (degree-1 SH) colour in the fine-tune (default %(default)s)")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+
+
+def check_args(args):
+    from cyclist_formats import checks
+
+    checks.input_dir("bike", args.bike)
+    checks.integer("poses", args.poses, HELD_OUT + 1, 10_000)
+    checks.count("iterations", args.iterations, hi=10_000_000)
+    checks.count("samples", args.samples, hi=1 << 16)
+    for p in ("frame", "steering"):
+        if not os.path.isfile(os.path.join(args.bike, "gaussians", p + ".ply")):
+            raise UserError(f"{args.bike} has no trained gaussians/{p}.ply (python -m splatting train first)")
+
+
+def run(args):
+    cfg = PosedTrainConfig(poses=args.poses, iterations=args.iterations, samples=args.samples, sh_degree=args.sh_degree,
+                           progress=not args.quiet)
+    train_bike_posed(args.bike, cfg)
+    return 0
