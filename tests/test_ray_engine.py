@@ -38,6 +38,21 @@ def reference(tmp_path_factory):
     return root, cfg, out
 
 
+@pytest.fixture(scope="module")
+def reference_long(tmp_path_factory):
+    """As `reference`, with enough samples that a Ray worker is still busy after the first shard is
+    written: 6 bike-only 64 px samples took the whole Ray run under 0.2 s on a quiet machine, so
+    the kill tests found no busy worker to kill, or a driver killed after it had finished."""
+    from splatting.dataset.command import generate
+    from splatting.dataset.config import validate
+    root = tmp_path_factory.mktemp("ray_ds_long")
+    write_test_bike(str(root))
+    cfg = small_config(str(root), count=120, mode="bike-only")
+    out = str(root / "one_process")
+    generate(validate(cfg), out, log=lambda m: None, progress=False)
+    return root, cfg, out
+
+
 def same_dataset(a, b):
     with open(os.path.join(a, "annotations.json"), "rb") as fa, open(os.path.join(b, "annotations.json"), "rb") as fb:
         assert fa.read() == fb.read(), "annotations differ"
@@ -117,12 +132,12 @@ def _shards(out):
     return len([f for f in os.listdir(d) if f.endswith(".json") and not f.startswith(".")]) if os.path.isdir(d) else 0
 
 
-def test_killed_ray_worker_is_retried(reference, ray_cluster, tmp_path):
+def test_killed_ray_worker_is_retried(reference_long, ray_cluster, tmp_path):
     import threading
 
     from splatting.dataset.command import generate
     from splatting.dataset.config import validate
-    _, cfg, ref = reference
+    _, cfg, ref = reference_long
     out = str(tmp_path / "worker_killed")
     res = {}
     th = threading.Thread(target=lambda: res.update(generate(validate(cfg), out, log=lambda m: None, progress=False,
@@ -134,15 +149,15 @@ def test_killed_ray_worker_is_retried(reference, ray_cluster, tmp_path):
         if pids and _shards(out) >= 1:
             os.kill(pids[0], signal.SIGKILL)
             killed.append(pids[0])
-        time.sleep(0.05)
+        time.sleep(0.01)
     th.join(600)
     assert killed, "no busy Ray worker was found to kill"
     assert _shards(out) == cfg["count"] and res.get("annotations")
     same_dataset(ref, out)
 
 
-def test_killed_driver_then_rerun(reference, ray_cluster, tmp_path):
-    _, cfg, ref = reference
+def test_killed_driver_then_rerun(reference_long, ray_cluster, tmp_path):
+    _, cfg, ref = reference_long
     path = write_yaml(str(tmp_path / "c.yaml"), cfg)
     out = str(tmp_path / "driver_killed")
     argv = [sys.executable, "-m", "splatting", "dataset", "--config", path, "--out", out, "--engine", "ray",
