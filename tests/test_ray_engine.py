@@ -24,33 +24,31 @@ def ray_cluster():
     ray.shutdown()
 
 
-@pytest.fixture(scope="module")
-def reference(tmp_path_factory):
-    """The one-process dataset every other way of running must reproduce byte for byte."""
+def _one_process_dataset(tmp_path_factory, count):
+    """(root, config, out) of a one-process bike-only dataset of `count` samples: the reference
+    every other way of running must reproduce byte for byte."""
     from splatting.dataset.command import generate
     from splatting.dataset.config import validate
     root = tmp_path_factory.mktemp("ray_ds")
     write_test_bike(str(root))
     # bike-only: no rider body to build in every worker process, so the tests stay short
-    cfg = small_config(str(root), count=6, mode="bike-only")
+    cfg = small_config(str(root), count=count, mode="bike-only")
     out = str(root / "one_process")
     generate(validate(cfg), out, log=lambda m: None, progress=False)
     return root, cfg, out
 
 
 @pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    return _one_process_dataset(tmp_path_factory, 6)
+
+
+@pytest.fixture(scope="module")
 def reference_long(tmp_path_factory):
-    """As `reference`, with enough samples that a Ray worker is still busy after the first shard is
-    written: 6 bike-only 64 px samples took the whole Ray run under 0.2 s on a quiet machine, so
-    the kill tests found no busy worker to kill, or a driver killed after it had finished."""
-    from splatting.dataset.command import generate
-    from splatting.dataset.config import validate
-    root = tmp_path_factory.mktemp("ray_ds_long")
-    write_test_bike(str(root))
-    cfg = small_config(str(root), count=120, mode="bike-only")
-    out = str(root / "one_process")
-    generate(validate(cfg), out, log=lambda m: None, progress=False)
-    return root, cfg, out
+    """Enough samples that a Ray worker is still busy after the first shard is written: 6 bike-only
+    64 px samples took the whole Ray run under 0.2 s on a quiet machine, so the kill tests found no
+    busy worker to kill, or a driver killed after it had finished."""
+    return _one_process_dataset(tmp_path_factory, 120)
 
 
 def same_dataset(a, b):
