@@ -22,7 +22,6 @@ from cyclist_formats.errors import UserError
 
 MODES = ("baked", "relit")
 TAG = 0x5A11  # separates the light's draws from the sample's other streams
-SKY_TINT = (0.92, 0.96, 1.0)  # the sky's colour per unit of `sky` (grey-blue; bench/relight.py's)
 DEFAULTS = {"mode": "baked", "elevation_deg": [15, 75], "azimuth_deg": [-180, 180], "strength": [2, 5],
             "sky": [0.1, 0.6], "sun_tint": 0.15, "shadows": True}
 
@@ -98,7 +97,7 @@ def check_assets(cfg):
 
 def draw_light(lc, seed, index):
     """The sun and sky of sample `index`: (Light, its record without the camera frame)."""
-    from splatting.relight.shading import Light, sun_direction
+    from splatting.relight.shading import SKY_TINT, Light, sun_direction
     rng = np.random.default_rng([int(seed), int(index), TAG])
     el, az = rng.uniform(*lc["elevation_deg"]), rng.uniform(*lc["azimuth_deg"])
     strength, s = rng.uniform(*lc["strength"]), rng.uniform(*lc["sky"])

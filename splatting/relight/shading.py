@@ -34,6 +34,9 @@ class Light:
         return d / d.norm().clamp_min(1e-12)
 
 
+SKY_TINT = (0.92, 0.96, 1.0)  # the sky's colour per unit of strength (grey-blue), random_light's and datasets'
+
+
 def sun_direction(elevation_deg, azimuth_deg):
     """Towards a sun at this elevation above the ground and azimuth, canonical world frame (Y up;
     azimuth 0 = towards +X, 90 = towards +Z)."""
@@ -45,12 +48,12 @@ def random_light(rng, min_elevation_deg=15.0, strength=(2.0, 5.0), sky=(0.1, 0.6
     """A sun somewhere above the horizon (uniform azimuth, elevation in [min, 90]) with a random warm/cool
     tint and a grey-blue sky; rng: numpy Generator.  What bench/relight.py uses against Blender."""
     az = rng.uniform(0.0, 2 * math.pi)
-    el = math.radians(rng.uniform(min_elevation_deg, 90.0))
-    d = (math.cos(el) * math.cos(az), math.sin(el), math.cos(el) * math.sin(az))  # canonical: Y up
+    el = rng.uniform(min_elevation_deg, 90.0)
+    d = sun_direction(el, math.degrees(az))
     tint = rng.uniform(0.85, 1.0, 3)
     s = rng.uniform(*sky)
     return Light(sun_direction=d, sun_colour=tuple(float(x) for x in tint / tint.max()),
-                 sun_strength=float(rng.uniform(*strength)), sky=(0.92 * s, 0.96 * s, s))
+                 sun_strength=float(rng.uniform(*strength)), sky=tuple(c * s for c in SKY_TINT))
 
 
 def srgb_encode(x):
