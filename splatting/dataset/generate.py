@@ -285,7 +285,8 @@ def make_sample(cfg, index, assets):
         parts.append(g)
         slots.append(slot)
     b = cfg["backgrounds"]
-    if b["shadow"] and bg_kind in ("images", "scene") and frames:
+    ground_shadows = bool(b["shadow"] and bg_kind in ("images", "scene") and frames)  # the contact shadow, and relit the sun's
+    if ground_shadows:
         feet = [(inst["pose"][5], inst["pose"][7], inst["pose"][3], bx["l"], bx["w"]) for (inst, _, _), bx in zip(frames, boxes)]
         sh = contact_shadows(feet, b["shadow_opacity"])
         parts.append(sh)
@@ -313,7 +314,7 @@ def make_sample(cfg, index, assets):
     else:
         bg = generated(bg_kind, d["background"]["seed"], W, H)
     rgb = over_in_box(L, bg, union(L.get("boxes", [])))
-    if relit is not None and b["shadow"] and bg_kind in ("images", "scene") and frames:
+    if relit is not None and ground_shadows:
         rgb = relit.cast_shadows(rgb, L, cam, feet, [bx["h"] for bx in boxes], b["shadow_opacity"])
 
     K, R, T = cam.K.double().numpy(), cam.R.double().numpy(), cam.T.double().numpy()
