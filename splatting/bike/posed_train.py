@@ -119,8 +119,9 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
     from splatting.bike.pose import check_poses
     from splatting.gaussians.container import Gaussians
     from splatting.raster.sparse import rasterize
-    from splatting.training.metrics import box_psnr, mask_iou, ssim
+    from splatting.training.metrics import box_psnr, mask_iou
     from splatting.training.targets import Targets, crop_camera
+    from splatting.training.trainer import finite_grads, rgba_loss
     from splatting.training.views import load_views
 
     if model.sh_degree != 0:
@@ -138,8 +139,7 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
               {"means": c.means, "quats": c.quats, "log_scales": c.log_scales, "opacity_logits": c.opacity_logits,
                "sh0": c.sh}.items()}
     ext = float((c.means.max(0).values - c.means.min(0).values).norm())
-    lrs = {"means": cfg.lr_means * ext, "quats": cfg.lr_quats, "log_scales": cfg.lr_scales,
-           "opacity_logits": cfg.lr_opacity, "sh0": cfg.lr_sh0}
+    lrs = cfg.rates(ext)
     if cfg.sh_degree:  # starts view-independent
         params["shN"] = torch.nn.Parameter(torch.zeros(len(c), 3, 3, dtype=c.sh.dtype))
         lrs["shN"] = cfg.lr_shN
@@ -198,13 +198,10 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
         x0, y0, x1, y1 = boxes[v]
         out = render(rig, crop_camera(cams[v], boxes[v]), None)
         gt = img[v, :, y0:y1, x0:x1].permute(1, 2, 0)
-        bg = torch.rand(3, generator=gen)  # random background: colour and alpha are both pinned down
-        pred = torch.cat([out["rgb"] + (1 - out["alpha"])[..., None] * bg, out["alpha"][..., None]], -1)
-        target = torch.cat([gt[..., :3] + (1 - gt[..., 3:]) * bg, gt[..., 3:]], -1)
-        loss = (1 - cfg.lambda_dssim) * (pred - target).abs().mean() + cfg.lambda_dssim * (1 - ssim(pred, target))
+        loss = rgba_loss(out, gt, torch.rand(3, generator=gen), cfg.lambda_dssim)  # a random background
         opt.zero_grad(set_to_none=True)
         loss.backward()
-        if bool(torch.isfinite(loss)) and all(p.grad is None or bool(torch.isfinite(p.grad).all()) for p in params.values()):
+        if bool(torch.isfinite(loss)) and finite_grads(params):
             opt.step()
         with torch.no_grad():
             params["quats"] /= params["quats"].norm(dim=-1, keepdim=True).clamp_min(1e-12)

@@ -113,9 +113,9 @@ def _posed_set(folder, scale, margin):
 def fine_tune(avatar, rest_views_dir, posed_folders, cfg: PosedTrainConfig):
     """avatar (RiderAvatar, trained at rest) -> (Gaussians fine-tuned through the skinning, metrics)."""
     from splatting.raster.sparse import rasterize
-    from splatting.training.metrics import psnr, ssim
+    from splatting.training.metrics import psnr
     from splatting.training.targets import Targets, crop_camera
-    from splatting.training.trainer import _params_from, gaussians_of
+    from splatting.training.trainer import _params_from, finite_grads, gaussians_of, rgba_loss
     from splatting.training.views import load_views
 
     t0 = time.time()
@@ -125,8 +125,7 @@ def fine_tune(avatar, rest_views_dir, posed_folders, cfg: PosedTrainConfig):
     sets = [_posed_set(f, cfg.scale, 8) for f in posed_folders]
     params = _params_from(avatar.gaussians)
     ext = float((params["means"].detach().max(0).values - params["means"].detach().min(0).values).norm())
-    lrs = {"means": cfg.lr_means * ext, "quats": cfg.lr_quats, "log_scales": cfg.lr_scales,
-           "opacity_logits": cfg.lr_opacity, "sh0": cfg.lr_sh0, "shN": cfg.lr_sh0 / 20}
+    lrs = dict(cfg.rates(ext), shN=cfg.lr_sh0 / 20)
     opt = torch.optim.Adam([{"params": [params[k]], "lr": lrs[k]} for k in params], lr=0.0, eps=1e-15)
 
     def posed(s):
@@ -167,12 +166,10 @@ def fine_tune(avatar, rest_views_dir, posed_folders, cfg: PosedTrainConfig):
         v = int(torch.randint(n_views, (1,), generator=gen))
         bg = torch.rand(3, generator=gen)
         out, gt = render(s, v, None)
-        pred = torch.cat([out["rgb"] + (1 - out["alpha"])[..., None] * bg, out["alpha"][..., None]], -1)
-        target = torch.cat([gt[..., :3] + (1 - gt[..., 3:]) * bg, gt[..., 3:]], -1)
-        loss = (1 - cfg.lambda_dssim) * (pred - target).abs().mean() + cfg.lambda_dssim * (1 - ssim(pred, target))
+        loss = rgba_loss(out, gt, bg, cfg.lambda_dssim)
         opt.zero_grad(set_to_none=True)
         loss.backward()
-        if all(p.grad is None or bool(torch.isfinite(p.grad).all()) for p in params.values()):
+        if finite_grads(params):
             opt.step()
         loss_v = float(loss.detach())
         prog.line(f"posed train {it}/{cfg.iterations} loss {loss_v:.4f} {time.time() - t0:6.1f}s")

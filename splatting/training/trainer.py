@@ -76,6 +76,11 @@ class FineTuneRates:
     lr_quats: float = 1e-3
     lambda_dssim: float = 0.2
 
+    def rates(self, extent):
+        """Adam learning rates per parameter group (the means' scaled by the object's extent)."""
+        return {"means": self.lr_means * extent, "quats": self.lr_quats, "log_scales": self.lr_scales,
+                "opacity_logits": self.lr_opacity, "sh0": self.lr_sh0}
+
 
 # -- training ------------------------------------------------------------------------------------
 
@@ -125,8 +130,17 @@ def _adam(params, cfg, extent):
     return torch.optim.Adam(groups, lr=0.0, eps=1e-15)
 
 
-def _finite_grads(params):
+def finite_grads(params):
     return all(p.grad is None or bool(torch.isfinite(p.grad).all()) for p in params.values())
+
+
+def rgba_loss(out, gt, bg, lambda_dssim):
+    """(1 - lambda) L1 + lambda (1 - SSIM) on RGBA: a render `out` and its premultiplied target gt
+    (h, w, 4), both RGB over the background colour bg (3,) (random per step: colour and alpha are
+    both pinned down), plus alpha against the mask."""
+    pred = torch.cat([out["rgb"] + (1 - out["alpha"])[..., None] * bg, out["alpha"][..., None]], -1)
+    target = torch.cat([gt[..., :3] + (1 - gt[..., 3:]) * bg, gt[..., 3:]], -1)
+    return (1 - lambda_dssim) * (pred - target).abs().mean() + lambda_dssim * (1 - ssim(pred, target))
 
 
 class TrainProgress(Progress):
@@ -178,15 +192,12 @@ def train_views(views: Views, cfg: TrainConfig):
         cam = crop_camera(cams[v], boxes[v])
         gt = img[v, :, y0:y1, x0:x1].permute(1, 2, 0)
         out = _render(params, cam, sh_degree=cfg.sh_degree, antialiased=cfg.antialiased)
-        bg = torch.rand(3, generator=gen)  # random background: colour and alpha are both pinned down
-        pred = torch.cat([out["rgb"] + (1 - out["alpha"])[..., None] * bg, out["alpha"][..., None]], -1)
-        target = torch.cat([gt[..., :3] + (1 - gt[..., 3:]) * bg, gt[..., 3:]], -1)
-        loss = (1 - cfg.lambda_dssim) * (pred - target).abs().mean() + cfg.lambda_dssim * (1 - ssim(pred, target))
+        loss = rgba_loss(out, gt, torch.rand(3, generator=gen), cfg.lambda_dssim)  # a random background
 
         ok = bool(torch.isfinite(loss))
         if ok:
             loss.backward()
-            ok = _finite_grads(params) and (out["means2d"].grad is None or bool(torch.isfinite(out["means2d"].grad).all()))
+            ok = finite_grads(params) and (out["means2d"].grad is None or bool(torch.isfinite(out["means2d"].grad).all()))
         if not ok:  # reject the step: no parameter or Adam moment is touched
             opt.zero_grad(set_to_none=True)
             rejected.append(it)
