@@ -10,7 +10,6 @@ message when they are missing. Run alone: `python -m bench.train_parts --bikes o
 """
 import argparse
 import glob
-import json
 import os
 import sys
 
@@ -45,16 +44,11 @@ def same_recipe(a, b):
 def trained_with(ply, cfg):
     """The metrics of <part>.ply when it exists, was trained with cfg and was not cut short by the
     time cap (a capped run's learning rate never finished decaying); else None."""
+    from cyclist_formats.atomic import read_json_or_none
     from splatting.training.trainer import config_dict
 
     js = os.path.splitext(ply)[0] + ".json"
-    if not (os.path.isfile(ply) and os.path.isfile(js)):
-        return None
-    try:
-        with open(js) as f:
-            m = json.load(f)
-    except (OSError, ValueError):
-        return None
+    m = read_json_or_none(js) if os.path.isfile(ply) else None
     if not isinstance(m, dict) or not isinstance(m.get("config"), dict) or m.get("stopped") == "time_budget":
         return None
     return m if same_recipe(m["config"], config_dict(cfg)) else None

@@ -62,6 +62,16 @@ def write_json(path, obj, indent=1):
             f.write(text + "\n")
 
 
+def read_json_or_none(path):
+    """A JSON record that decides whether work is done (resume markers, metrics, reports): None when
+    it is missing or unreadable, so the work is simply redone."""
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return None
+
+
 def write_bytes(path, data):
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as f:

@@ -7,7 +7,6 @@ into Blender with one Cycles render -> OUT/report.md.  Each step is skipped when
 interrupted demo resumes.  Blender steps run as subprocesses (this package never imports bpy).
 """
 import glob
-import json
 import os
 import subprocess
 import sys
@@ -15,7 +14,7 @@ import time
 
 import yaml
 
-from cyclist_formats.atomic import atomic_path
+from cyclist_formats.atomic import atomic_path, read_json_or_none
 from cyclist_formats.errors import UserError
 from splatting import paths
 
@@ -163,14 +162,6 @@ def run(args):
     print(f"demo: finished; see {os.path.join(out, 'report.md')}")
 
 
-def _json(path):
-    try:
-        with open(path) as f:
-            return json.load(f)
-    except (OSError, ValueError):
-        return None
-
-
 def report(out, bike, args, times, wall):
     rel = lambda p: os.path.relpath(p, out)  # noqa: E731
     lines = ["# Demo report", "", f"Generated {time.strftime('%Y-%m-%d %H:%M')} on {os.cpu_count()} cores; "
@@ -180,27 +171,27 @@ def report(out, bike, args, times, wall):
     lines += ["", f"## Part Gaussians of {os.path.basename(bike)} (held-out views)", "",
               "| part | PSNR dB | PSNR object box dB | SSIM | Gaussians | wall s |", "| --- | --- | --- | --- | --- | --- |"]
     for part in PARTS:
-        m = _json(os.path.join(bike, "gaussians", f"{part}.json"))
+        m = read_json_or_none(os.path.join(bike, "gaussians", f"{part}.json"))
         if m:
             lines.append(f"| {part} | {m['psnr']:.2f} | {m.get('psnr_crop', float('nan')):.2f} | {m['ssim']:.4f} | "
                          f"{m['gaussians']} | {m['wall_s']:.0f} |")
     frames = sorted(glob.glob(os.path.join(out, "cyclist", "frame_*.json")))
     if frames:
-        res = [max(_json(f)["ik"]["residual_m"].values()) for f in frames]
-        flagged = sum(any(_json(f)["ik"]["flagged"].values()) for f in frames)
+        res = [max(read_json_or_none(f)["ik"]["residual_m"].values()) for f in frames]
+        flagged = sum(any(read_json_or_none(f)["ik"]["flagged"].values()) for f in frames)
         lines += ["", "## Cyclist sequence", "", f"{len(frames)} frames; IK worst residual per frame: median "
                   f"{sorted(res)[len(res) // 2] * 1000:.1f} mm, max {max(res) * 1000:.1f} mm; frames with a flagged target: {flagged}."]
-    ann = _json(os.path.join(out, "coco", "annotations.json"))
+    ann = read_json_or_none(os.path.join(out, "coco", "annotations.json"))
     if ann:
         lines += ["", "## COCO set", "", f"{len(ann['images'])} images, {len(ann['annotations'])} annotations "
                   f"({', '.join(c['name'] for c in ann['categories'])}) in `coco/`."]
-    ann = _json(os.path.join(out, "relit", "annotations.json"))
+    ann = read_json_or_none(os.path.join(out, "relit", "annotations.json"))
     if ann:
         suns = ", ".join(f"{im['lighting']['elevation_deg']:.0f}/{im['lighting']['azimuth_deg']:.0f}" for im in ann["images"])
         lines += ["", "## Relit images", "", f"The first {len(ann['images'])} COCO samples rendered again with "
                   f"`lighting: {{mode: relit}}` in `relit/`: a sun per image (elevation/azimuth in degrees: {suns}), "
                   "recorded in each image record's `lighting`; same masks, boxes and keypoints."]
-    ann = _json(os.path.join(out, "street", "annotations.json"))
+    ann = read_json_or_none(os.path.join(out, "street", "annotations.json"))
     if ann:
         lines += ["", "## Street images", "", f"{len(ann['images'])} images "
                   f"({ann['images'][0]['width']}x{ann['images'][0]['height']}), {len(ann['annotations'])} annotations "

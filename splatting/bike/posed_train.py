@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from cyclist_formats.atomic import read_json_or_none
 from cyclist_formats.errors import UserError
 from splatting import paths
 from splatting.progress import Progress
@@ -225,12 +226,8 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
 def done_with(bike_dir, cfg: PosedTrainConfig):
     """The bike's posed_train.json when its parts were fine-tuned with this config, else None."""
     p = os.path.join(bike_dir, "gaussians", "posed_train.json")
-    if not os.path.isfile(p):
-        return None
-    try:
-        with open(p) as f:
-            m = json.load(f)
-    except (OSError, ValueError):
+    m = read_json_or_none(p)
+    if m is None:
         return None
     want = dataclasses.asdict(cfg)
     want.pop("progress")

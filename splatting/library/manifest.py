@@ -15,7 +15,7 @@ import json
 import os
 import time
 
-from cyclist_formats.atomic import write_json
+from cyclist_formats.atomic import read_json_or_none, write_json
 from cyclist_formats.errors import UserError
 
 MANIFEST = "library.json"
@@ -51,14 +51,7 @@ def task_file(root, task_id):
 
 
 def read_record(root, task_id):
-    p = task_file(root, task_id)
-    if not os.path.isfile(p):
-        return None
-    try:
-        with open(p) as f:
-            return json.load(f)
-    except (OSError, ValueError):
-        return None  # unreadable record: the task is redone
+    return read_json_or_none(task_file(root, task_id))  # missing or unreadable: the task is redone
 
 
 def files_record(root, paths):
