@@ -1,5 +1,6 @@
 """The shape-based path of the curation, between the pose and the split (numpy, no bpy):
-surface samples of the kept bike, the two-wheeler checks that need the canonical frame, and the choice between piece-based and shape-based keypoints."""
+surface samples of the kept bike, the two-wheeler checks that need the canonical frame, and the
+choice between piece-based and shape-based keypoints (a rider's removal: rider_removal.py)."""
 import numpy as np
 
 from ..contract import UserError
