@@ -1,12 +1,14 @@
 """Tiled multi-threaded CPU compositing (csrc/tiles.cpp) as a torch autograd Function.
 
-composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, W, split=(Cf,)) ->
-(one contiguous (H, W, c) image per entry c of split (c == 1: (H, W)), T_final (H, W)): the Cf
-channels of sum_k w_k feats_k over the Gaussians at each pixel front to back, w_k = alpha_k T_k,
-T_final the transmittance left (alpha = 1 - T_final), cut into consecutive channel groups (colour,
-extra features, depth) that the C++ writes and reads as separate images. Differentiable in
-means2d, conics, opacities and feats (any number Cf of channels). Same image formation as
-splatting/raster/sparse.py's torch path; see docs/rasterizer.md.
+composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H, W) ->
+(one contiguous image per plane (H, W, c), or (H, W) for a 1-channel plane, alpha (H, W),
+T_final (H, W)): for each plane (N, c) or (N,) of per-Gaussian channels (colour, extra features,
+depth), sum_k w_k plane_k over the Gaussians at each pixel front to back, w_k = alpha_k T_k;
+T_final the transmittance left and alpha = 1 - T_final (both written by the C++, both
+differentiable). The planes are read and their gradients written in place by the C++: no
+concatenated (N, Cf) table and no slicing of its gradient. Differentiable in means2d, conics,
+opacities and the planes. Same image formation as splatting/raster/sparse.py's torch path; see
+docs/rasterizer.md.
 
 Steps (all threads: torch.get_num_threads()):
   1. gs_bin: one record per Gaussian, its pixel rectangle (3-sigma box clipped to where alpha can
@@ -17,6 +19,11 @@ Steps (all threads: torch.get_num_threads()):
   3. gs_backward: per tile back to front, per-(tile, Gaussian) sums, then per Gaussian.
 Optionally (groups, forward only) each group's transmittance as if it were rendered alone, from
 the same pass (csrc/tiles.cpp, forward<S, GROUPS>): what amodal instance masks need.
+
+Glue kept small on purpose: every torch op here runs between the parallel C calls on one thread
+(and a parallel one, >= 32k elements, first wakes the other thread: ~50-100 us under
+OMP_WAIT_POLICY=PASSIVE). Gradients are not materialised (an unused output's gradient is a null
+pointer), the gradient buffers are allocated uninitialised (the C++ writes every entry).
 """
 import ctypes
 
@@ -41,23 +48,25 @@ def _ptrs(ts):
 
 
 class _TileComposite(torch.autograd.Function):
-    """The split's images, T_final (H, W), T_groups. A gradient that autograd hands over as None
-    (an output nobody used, e.g. alpha under an RGB loss) goes to the C++ as a null pointer
-    rather than as a zero image."""
+    """The planes' images, alpha (H, W), T_final (H, W), T_groups. A gradient that autograd hands
+    over as None (an output nobody used, e.g. alpha under an RGB loss) goes to the C++ as a null
+    pointer rather than as a zero image; a plane whose image got no gradient gets None back."""
 
     @staticmethod
-    def forward(ctx, means2d, conics, opacities, feats, depths, radii, boxes, H, W, groups, n_groups, split):
+    def forward(ctx, means2d, conics, opacities, depths, radii, boxes, H, W, groups, n_groups, *planes):
         lib = build.load()
         dt = means2d.dtype
         if dt not in _SUFFIX:
             raise TypeError(f"tiled rasterizer: float32 or float64 tensors, got {dt}")
         sfx = _SUFFIX[dt]
         nt = max(1, torch.get_num_threads())
-        n, cf = feats.shape
+        n = means2d.shape[0]
+        split = [1 if p.dim() == 1 else p.shape[1] for p in planes]
+        cf = sum(split)
         m2 = means2d.detach().contiguous()
         cn = conics.detach().to(dt).contiguous()
         op = opacities.detach().to(dt).contiguous()
-        fe = feats.detach().to(dt).contiguous()
+        fe = [p.detach().to(dt).contiguous() for p in planes]
         z = depths.detach().to(dt).contiguous()
         rd = radii.to(torch.int64).contiguous()
         bx = boxes.to(torch.int64).contiguous()
@@ -65,18 +74,20 @@ class _TileComposite(torch.autograd.Function):
         ntiles = -(-W // tile) * -(-H // tile)
         recs = torch.empty(max(n, 1) * getattr(lib, f"gs_rec_bytes_{sfx}")(), dtype=torch.uint8)
         order = torch.empty(max(n, 1), dtype=torch.int32)
+        rank = torch.empty(max(n, 1), dtype=torch.int32)
         cursor = torch.empty(lib.gs_chunks(nt) * ntiles, dtype=torch.int64)
         tile_off = torch.empty(ntiles + 1, dtype=torch.int64)
         goff = torch.empty(n + 1, dtype=torch.int64)
-        sizes = torch.zeros(2, dtype=torch.int64)
+        sizes = torch.empty(2, dtype=torch.int64)
         getattr(lib, f"gs_bin_{sfx}")(n, _ptr(m2), _ptr(cn), _ptr(op), _ptr(z), _ptr(rd), _ptr(bx), W, H, nt,
-                                      _ptr(recs), _ptr(order), _ptr(cursor), _ptr(tile_off), _ptr(goff),
-                                      _ptr(sizes))
+                                      _ptr(recs), _ptr(order), _ptr(rank), _ptr(cursor), _ptr(tile_off),
+                                      _ptr(goff), _ptr(sizes))
         nv, total = sizes.tolist()
         lst = torch.empty(max(total, 1), dtype=torch.int32)
         slot = torch.empty(max(total, 1), dtype=torch.int64)
         fs = torch.empty(max(nv, 1), cf, dtype=dt)
         outs = [torch.empty((H, W, c) if c > 1 else (H, W), dtype=dt) for c in split]
+        alpha = torch.empty(H, W, dtype=dt)
         T_final = torch.empty(H, W, dtype=dt)
         last = torch.empty(H, W, dtype=torch.int32)
         ng = int(n_groups) if groups is not None else 0
@@ -84,56 +95,62 @@ class _TileComposite(torch.autograd.Function):
         g_sorted = torch.empty(max(nv, 1), dtype=torch.int32) if ng else None
         T_groups = torch.empty(ng, H, W, dtype=dt)
         osz = (ctypes.c_int * len(split))(*split)
-        getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), _ptr(fe), cf, W, H, nt, _ptr(recs), _ptr(cursor),
+        getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), _ptrs(fe), cf, W, H, nt, _ptr(recs), _ptr(cursor),
                                           _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(slot), _ptr(fs),
-                                          len(split), osz, _ptrs(outs), _ptr(T_final), _ptr(last), _nptr(gr), ng,
-                                          _nptr(g_sorted), _ptr(T_groups) if ng else None)
+                                          len(split), osz, _ptrs(outs), _ptr(T_final), _ptr(alpha), _ptr(last),
+                                          _nptr(gr), ng, _nptr(g_sorted), _ptr(T_groups) if ng else None)
         ctx.mark_non_differentiable(T_groups)
-        ctx.geom = (n, cf, H, W, nv, order, recs, tile_off, goff, lst, slot, fs, last, split)
+        ctx.set_materialize_grads(False)
+        ctx.geom = (n, cf, H, W, nv, rank, recs, tile_off, goff, lst, slot, fs, last, split)
         ctx.save_for_backward(T_final)
-        ctx.dtypes = (conics.dtype, opacities.dtype, feats.dtype)
-        return (*outs, T_final, T_groups)
+        ctx.dtypes = (conics.dtype, opacities.dtype, [p.dtype for p in planes])
+        return (*outs, alpha, T_final, T_groups)
 
     @staticmethod
     def backward(ctx, *grads):
-        n, cf, H, W, nv, order, recs, tile_off, goff, lst, slot, fs, last, split = ctx.geom
+        n, cf, H, W, nv, rank, recs, tile_off, goff, lst, slot, fs, last, split = ctx.geom
         (T_final,) = ctx.saved_tensors
         dt = T_final.dtype
         sfx = _SUFFIX[dt]
-        g_outs = [None if g is None else g.to(dt).contiguous() for g in grads[:len(split)]]
-        g_T = grads[len(split)]
-        g_T = None if g_T is None else g_T.to(dt).contiguous()
-        g_m2 = torch.zeros(n, 2, dtype=dt)
-        g_cn = torch.zeros(n, 3, dtype=dt)
-        g_op = torch.zeros(n, dtype=dt)
-        g_fe = torch.zeros(n, cf, dtype=dt)
+        np_ = len(split)
+        g_outs = [None if g is None else g.to(dt).contiguous() for g in grads[:np_]]
+        g_alpha, g_T = (None if g is None else g.to(dt).contiguous() for g in grads[np_:np_ + 2])
+        g_m2 = torch.empty(n, 2, dtype=dt)
+        g_cn = torch.empty(n, 3, dtype=dt)
+        g_op = torch.empty(n, dtype=dt)
+        dc, do, dps = ctx.dtypes
+        # a plane's gradient is w-weighted dL/d(its image): none without one
+        g_planes = [None if g is None else torch.empty((n, c) if c > 1 else (n,), dtype=dt)
+                    for g, c in zip(g_outs, split)]
         lib = build.load()
-        getattr(lib, f"gs_backward_{sfx}")(nv, _ptr(order), cf, W, H, max(1, torch.get_num_threads()), _ptr(recs),
+        getattr(lib, f"gs_backward_{sfx}")(n, nv, _ptr(rank), cf, W, H, max(1, torch.get_num_threads()), _ptr(recs),
                                            _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(slot), _ptr(fs),
-                                           _ptr(T_final), _ptr(last), len(split), (ctypes.c_int * len(split))(*split),
-                                           _ptrs(g_outs), _nptr(g_T), _ptr(g_m2), _ptr(g_cn), _ptr(g_op), _ptr(g_fe))
-        dc, do, df = ctx.dtypes
-        return g_m2, g_cn.to(dc), g_op.to(do), g_fe.to(df), None, None, None, None, None, None, None, None
+                                           _ptr(T_final), _ptr(last), np_, (ctypes.c_int * np_)(*split),
+                                           _ptrs(g_outs), _nptr(g_T), _nptr(g_alpha), _ptr(g_m2), _ptr(g_cn),
+                                           _ptr(g_op), _ptrs(g_planes))
+        g_planes = [None if g is None else g.to(d) for g, d in zip(g_planes, dps)]
+        return (g_m2, g_cn.to(dc), g_op.to(do), None, None, None, None, None, None, None, *g_planes)
 
 
-def composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, W, groups=None, n_groups=0,
-                    split=None):
+def composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H, W, groups=None, n_groups=0):
     """See the module docstring. CPU tensors only; float32 or float64 (means2d's dtype).
-    split: channel counts (each >= 1) summing to feats.shape[1]; None: one (H, W, Cf) image.
+    planes: a list of (N, c) or (N,) tensors (at least one; the caller's colour, features, depth).
+    depths (N,): the depth-sort key (not differentiated here).
     groups (N,) int in [-1, n_groups) (-1: in no group), n_groups >= 1: also returns T_groups
     (n_groups, H, W), each group's transmittance rendered alone (not differentiable).
-    -> (*images, T_final) or (*images, T_final, T_groups) with groups."""
+    -> (*images, alpha, T_final) or (*images, alpha, T_final, T_groups) with groups."""
     if means2d.device.type != "cpu":
         raise ValueError("the tiled rasterizer runs on CPU tensors; use backend='torch' for "
                          f"{means2d.device.type} tensors")
-    split = (feats.shape[1],) if split is None else tuple(int(c) for c in split)
-    if not split or min(split) < 1 or sum(split) != feats.shape[1]:
-        raise ValueError(f"composite_tiles: split {split} must be channel counts >= 1 summing to {feats.shape[1]}")
+    n = means2d.shape[0]
+    if not planes or any(p.dim() not in (1, 2) or p.shape[0] != n or (p.dim() == 2 and p.shape[1] < 1)
+                         for p in planes):
+        raise ValueError(f"composite_tiles: planes must be one or more (N,) or (N, c >= 1) tensors, N = {n}; got "
+                         f"{[tuple(p.shape) for p in planes]}")
     if groups is not None:
-        if n_groups < 1 or groups.shape != (means2d.shape[0],):
-            raise ValueError(f"composite_tiles: groups must be ({means2d.shape[0]},) with n_groups >= 1")
+        if n_groups < 1 or groups.shape != (n,):
+            raise ValueError(f"composite_tiles: groups must be ({n},) with n_groups >= 1")
         if len(groups) and not (int(groups.min()) >= -1 and int(groups.max()) < n_groups):
             raise ValueError(f"composite_tiles: group ids must lie in [-1, {n_groups})")
-        return _TileComposite.apply(means2d, conics, opacities, feats, depths, radii, boxes, H, W, groups, n_groups,
-                                    split)
-    return _TileComposite.apply(means2d, conics, opacities, feats, depths, radii, boxes, H, W, None, 0, split)[:-1]
+        return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, H, W, groups, n_groups, *planes)
+    return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, H, W, None, 0, *planes)[:-1]

@@ -297,14 +297,15 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
     if backend == "tiles":  # projection + SH fused in C++ (splatting/raster/cpu_project.py)
         from splatting.raster.cpu_project import preprocess
 
-        means2d, conics, depths, colors, radii, boxes = preprocess(means, quats, scales, sh, camera, sh_degree,
-                                                                   near, eps2d)
+        means2d, conics, depths, colors, radii, boxes, visible = preprocess(means, quats, scales, sh, camera,
+                                                                            sh_degree, near, eps2d)
     else:
         means2d, conics, depths, radii, boxes = project(means, quats, scales, camera, near, eps2d)
         centre = camera.centre.to(means.device, means.dtype)
         dirs = means - centre
         dirs = dirs / dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12)
         colors = eval_sh(sh, dirs, sh_degree)
+        visible = radii > 0
     if means2d.requires_grad:
         means2d.retain_grad()
     if antialiased:
@@ -323,7 +324,7 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
         if groups is not None:
             group_alpha = _group_alpha_torch(means2d, conics, opacities, depths, radii, boxes, groups, H, W)
     out = {"rgb": rgb, "alpha": alpha, "depth": depth, "means2d": means2d, "radii": radii,
-           "visible": radii > 0, "backend": backend}
+           "visible": visible, "backend": backend}
     if nf:
         out["features"] = feats
     if groups is not None:
@@ -375,20 +376,20 @@ def _composite_tiles(means2d, conics, opacities, colors, features, depths, radii
                      groups=None):
     """The tiled C++ compositor with the torch path's outputs: rgb (H,W,3) over the background,
     alpha, depth (camera z composited as the last channel), features (H,W,F) or None. Colour,
-    features and depth ride in one (N, 3 + F + 1) table; the compositor writes each as its own
-    contiguous image (and takes their gradients back the same way)."""
+    features and depth are handed over as separate planes; the compositor reads them in place,
+    writes each as its own contiguous image (and alpha), and takes their gradients back the same
+    way (no concatenation, no slicing)."""
     from splatting.raster.cpu_tiles import composite_tiles
 
     has_f = features is not None and features.shape[1] > 0
-    parts = [colors] + ([features.to(colors)] if has_f else []) + [depths[:, None]]
-    split = [p.shape[1] for p in parts]
-    res = composite_tiles(means2d, conics, opacities, torch.cat(parts, 1), depths.detach(), radii, boxes, H, W,
-                          *(() if groups is None else groups), split=split)
-    rgb, depth, T_final = res[0], res[len(parts) - 1], res[len(parts)]
+    parts = [colors] + ([features.to(colors)] if has_f else []) + [depths]
+    res = composite_tiles(means2d, conics, opacities, parts, depths.detach(), radii, boxes, H, W,
+                          *(() if groups is None else groups))
+    rgb, depth, alpha, T_final = res[0], res[len(parts) - 1], res[len(parts)], res[len(parts) + 1]
     if background is not None:
         rgb = rgb + T_final[..., None] * background.to(rgb)
     feats = res[1] if has_f else None if features is None else features.new_zeros(H, W, 0)
-    return rgb, 1.0 - T_final, depth, feats, None if groups is None else 1.0 - res[-1]
+    return rgb, alpha, depth, feats, None if groups is None else 1.0 - res[-1]
 
 
 def render_gaussians(g, camera, **kw):

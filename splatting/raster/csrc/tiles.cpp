@@ -312,14 +312,14 @@ void radix_sort(std::vector<K>& key, std::vector<int32_t>& idx) {
 }
 
 // Phase 1: the visible Gaussians (radii > 0) sorted by depth into order, their records in that
-// order (recs[s] for Gaussian order[s]);
+// order (recs[s] for Gaussian order[s]), rank (N) the inverse (rank[order[s]] = s; -1: not visible);
 // tile counts per chunk of that order, tile offsets, per-Gaussian entry offsets (goff, in depth
 // order). cursor (n_chunks(nt) x ntiles) becomes each chunk's first write position per tile.
 // sizes[0] = visible count nv, sizes[1] = number of (tile, Gaussian) entries.
 template <typename S>
 void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* depths,
          const int64_t* radii, const int64_t* boxes, int W, int H, int nt, Rec<S>* recs,
-         int32_t* order, int64_t* cursor, int64_t* tile_off, int64_t* goff, int64_t* sizes) {
+         int32_t* order, int32_t* rank, int64_t* cursor, int64_t* tile_off, int64_t* goff, int64_t* sizes) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   typedef decltype(fkey(S())) K;
   std::vector<K> key;
@@ -346,9 +346,13 @@ void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* d
 #pragma omp parallel num_threads(nt)
   {
 #pragma omp for schedule(dynamic, GAUSS_BLOCK)
-    for (int64_t i = 0; i < N; ++i) make_rec(by_index[i], i, means2d, conics, opac, radii, boxes, W, H);
+    for (int64_t i = 0; i < N; ++i) {
+      make_rec(by_index[i], i, means2d, conics, opac, radii, boxes, W, H);
+      if (radii[i] <= 0) rank[i] = -1;
+    }
     over_chunks(nv, NC, cursor, NT, [&](int64_t s, int64_t e, int64_t* cnt) {
       if (s + 16 < e) __builtin_prefetch(by_index + order[s + 16]);  // the gather's misses overlap
+      rank[order[s]] = (int32_t)s;
       const Rec<S>& r = recs[s] = by_index[order[s]];
       if (r.u1 < r.u0 || r.v1 < r.v0) {
         goff[s + 1] = 0;
@@ -412,9 +416,10 @@ struct Planes {
 
 // Phase 2: fill the tile lists with depth-order positions (depth order kept: each thread writes
 // its depth-ordered chunk after the chunks in front of it), gather the Cf channels into depth
-// order (feats), then blend every tile front to back.
-// out: the Cf channels as Planes, T_final (H x W), last (H x W): per pixel 1 + the tile-list
-// position of its last contributor (0: none).
+// order (feats, from the input Planes in: plane q holds size[q] channels per Gaussian, so the
+// caller's colour, features and depth need no concatenation), then blend every tile front to back.
+// out: the Cf channels as Planes, T_final and alpha = 1 - T_final (H x W), last (H x W): per
+// pixel 1 + the tile-list position of its last contributor (0: none).
 // GROUPS (forward only, no backward): every Gaussian also belongs to one of NG groups (grp_in,
 // per input Gaussian; -1: none), and T_grp (NG x H x W) gets each group's transmittance as if
 // its Gaussians were rendered alone (no occlusion by the others: the amodal alpha of an instance
@@ -423,9 +428,9 @@ struct Planes {
 // image and its group, and a pixel's list is walked past the image's own cut-off only while
 // some group at that pixel is still open. grp (nv): the groups gathered into depth order.
 template <typename S, bool GROUPS>
-void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W, int H, int nt,
+void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int W, int H, int nt,
              const Rec<S>* recs, int64_t* cursor, const int64_t* tile_off, const int64_t* goff,
-             int32_t* list, int64_t* slot, S* feats, Planes<S*> out, S* T_final, int32_t* last,
+             int32_t* list, int64_t* slot, S* feats, Planes<S*> out, S* T_final, S* alpha, int32_t* last,
              const int32_t* grp_in, int NG, int32_t* grp, S* T_grp) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   const std::vector<int> torder = busiest_first(tile_off, NT);
@@ -433,8 +438,12 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
 #pragma omp parallel num_threads(nt)
   {
     over_chunks(nv, NC, cursor, NT, [&](int64_t s, int64_t e, int64_t* cur) {
-      if (s + 16 < e) __builtin_prefetch(feats_in + (int64_t)order[s + 16] * Cf);
-      std::copy_n(feats_in + (int64_t)order[s] * Cf, Cf, feats + s * Cf);
+      const int64_t gi = order[s], gn = s + 16 < e ? order[s + 16] : gi;
+      for (int q = 0, c0 = 0; q < in.n; c0 += in.size[q++]) {
+        const int cq = in.size[q];
+        __builtin_prefetch(in.ptr[q] + gn * cq);
+        std::copy_n(in.ptr[q] + gi * cq, cq, feats + s * Cf + c0);
+      }
       if (GROUPS) grp[s] = grp_in[order[s]];
       const Rec<S>& r = recs[s];
       if (r.u1 < r.u0 || r.v1 < r.v0) return;
@@ -464,6 +473,7 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
         for (int y = oy; y <= ey; ++y) {
           const int64_t p = (int64_t)y * W + ox, nx = ex - ox + 1;
           std::fill_n(T_final + p, nx, (S)1);
+          std::fill_n(alpha + p, nx, (S)0);
           std::fill_n(last + p, nx, 0);
           for (int q = 0; q < out.n; ++q) std::fill_n(out.ptr[q] + p * out.size[q], nx * out.size[q], (S)0);
           for (int q = 0; q < (GROUPS ? NG : 0); ++q) std::fill_n(T_grp + (int64_t)q * H * W + p, nx, (S)1);
@@ -550,6 +560,7 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
           for (int q = 0; q < (GROUPS ? NG : 0); ++q)
             store_lanes(T_grp + (int64_t)q * H * W + p, TG[(size_t)q * NV + v], nl);
           store_lanes(T_final + p, T[v], nl);
+          store_lanes(alpha + p, (S)1 - T[v], nl);
           if (sizeof(IS) == 4) {
             store_lanes(last + p, lst[v], nl);
           } else {
@@ -575,14 +586,16 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
 // dividing by (1 - alpha_k) (alpha <= 0.99). Per (tile, Gaussian) entry the sums over the tile's
 // pixels go to gbuf, at the entry's slot in Gaussian-major order (slot, from the fill); then per
 // Gaussian its contiguous slots are summed in a fixed order (deterministic, no atomics) and turned into gradients of means2d, conics, opacity and the Cf channels.
-// g_out: dL/d out, as the forward's Planes (a null plane: no gradient); g_T (H x W): dL/d
-// T_final, or null. Gradient arrays are indexed like the
-// inputs; entries of Gaussians that are not visible are left untouched (the caller zeroes them).
+// g_out: dL/d out, as the forward's Planes (a null plane: no gradient); g_T, g_alpha (H x W):
+// dL/d T_final and dL/d alpha, each or both null. Gradient arrays are indexed like the inputs
+// (N of them, rank: bin's inverse of the depth order) and written whole: zero for the Gaussians
+// that are not visible, so the caller allocates them uninitialised. g_feats: the input Planes'
+// gradients (a null plane: not wanted).
 template <typename S>
-void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, const Rec<S>* recs,
+void backward(int64_t N, int64_t nv, const int32_t* rank, int Cf, int W, int H, int nt, const Rec<S>* recs,
               const int64_t* tile_off, const int64_t* goff, const int32_t* list, const int64_t* slot,
               const S* feats, const S* T_final, const int32_t* last, Planes<const S*> g_out, const S* g_T,
-              S* g_means2d, S* g_conics, S* g_opac, S* g_feats) {
+              const S* g_alpha, S* g_means2d, S* g_conics, S* g_opac, Planes<S*> g_feats) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   const std::vector<int> torder = busiest_first(tile_off, NT);
   const int NB = 6 + Cf;  // q, q dx, q dy, q dx dx, q dx dy, q dy dy, w g_c
@@ -620,7 +633,9 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
             T[v][l] = T_final[p + l];
             lst[v][l] = last[p + l];
             kmax = std::max(kmax, (int)last[p + l]);
-            accum[v][l] = g_T ? T_final[p + l] * g_T[p + l] : (S)0;  // behind: S_k + T_final dL/dT_final
+            // behind: S_k + T_final dL/dT_final (alpha = 1 - T_final)
+            const S gt = (g_T ? g_T[p + l] : (S)0) - (g_alpha ? g_alpha[p + l] : (S)0);
+            accum[v][l] = T_final[p + l] * gt;
           }
           for (int l = 0; l < nl; ++l)
             for (int q = 0, c0 = 0; q < g_out.n; c0 += g_out.size[q++]) {
@@ -689,8 +704,18 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
       for (int64_t k = kmax; k < n; ++k) std::fill_n(gbuf + (size_t)slot[t0 + k] * NB, NB, (S)0);
     }
     std::vector<S> accv(NB);
+    // in index order: sequential writes, and the invisible Gaussians' zeros in the same pass
 #pragma omp for schedule(dynamic, GAUSS_BLOCK)
-    for (int64_t s = 0; s < nv; ++s) {
+    for (int64_t gi = 0; gi < N; ++gi) {
+      const int64_t s = rank[gi];
+      if (s < 0) {
+        g_means2d[2 * gi] = g_means2d[2 * gi + 1] = 0;
+        g_conics[3 * gi] = g_conics[3 * gi + 1] = g_conics[3 * gi + 2] = 0;
+        g_opac[gi] = 0;
+        for (int q = 0; q < g_feats.n; ++q)
+          if (g_feats.ptr[q]) std::fill_n(g_feats.ptr[q] + gi * g_feats.size[q], g_feats.size[q], (S)0);
+        continue;
+      }
       // summed locally, written once (read-modify-write of the output stalled on store forwarding)
       S* acc = accv.data();
       const S* e0 = gbuf + (size_t)goff[s] * NB;
@@ -700,8 +725,8 @@ void backward(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt, co
         for (int64_t k = 0; k < ne; ++k) h += e0[k * NB + j];
         acc[j] = h;
       }
-      const int64_t gi = order[s];
-      std::copy_n(acc + 6, Cf, g_feats + gi * Cf);
+      for (int q = 0, c0 = 0; q < g_feats.n; c0 += g_feats.size[q++])
+        if (g_feats.ptr[q]) std::copy_n(acc + 6 + c0, g_feats.size[q], g_feats.ptr[q] + gi * g_feats.size[q]);
       const Rec<S>& g = recs[s];
       g_means2d[2 * gi] = g.a * acc[1] + g.b * acc[2];
       g_means2d[2 * gi + 1] = g.b * acc[1] + g.c * acc[2];
@@ -725,34 +750,35 @@ int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
 #define GS_EXPORT(SUFFIX, S)                                                                       \
   void gs_bin_##SUFFIX(int64_t N, const S* means2d, const S* conics, const S* opac,                \
                        const S* depths, const int64_t* radii, const int64_t* boxes, int W, int H,  \
-                       int nt, void* recs, int32_t* order, int64_t* cursor, int64_t* tile_off,     \
-                       int64_t* goff, int64_t* sizes) {                                            \
-    bin<S>(N, means2d, conics, opac, depths, radii, boxes, W, H, nt, (Rec<S>*)recs, order, cursor, \
-           tile_off, goff, sizes);                                                                 \
+                       int nt, void* recs, int32_t* order, int32_t* rank, int64_t* cursor,        \
+                       int64_t* tile_off, int64_t* goff, int64_t* sizes) {                         \
+    bin<S>(N, means2d, conics, opac, depths, radii, boxes, W, H, nt, (Rec<S>*)recs, order, rank,   \
+           cursor, tile_off, goff, sizes);                                                         \
   }                                                                                                \
-  void gs_forward_##SUFFIX(int64_t nv, const int32_t* order, const S* feats, int Cf, int W, int H, \
-                           int nt, const void* recs, int64_t* cursor, const int64_t* tile_off,     \
+  void gs_forward_##SUFFIX(int64_t nv, const int32_t* order, const S* const* feats, int Cf, int W, \
+                           int H, int nt, const void* recs, int64_t* cursor, const int64_t* tile_off, \
                            const int64_t* goff, int32_t* list, int64_t* slot, S* feats_sorted,    \
-                           int NO, const int* osz, S* const* outs, S* T_final, int32_t* last,     \
-                           const int32_t* grp_in, int NG, int32_t* grp, S* T_grp) {               \
+                           int NO, const int* osz, S* const* outs, S* T_final, S* alpha,          \
+                           int32_t* last, const int32_t* grp_in, int NG, int32_t* grp, S* T_grp) { \
     const Planes<S*> out{NO, osz, outs};                                                           \
+    const Planes<const S*> in{NO, osz, feats};                                                     \
     if (NG > 0)                                                                                    \
-      forward<S, true>(nv, order, feats, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off,      \
-                       goff, list, slot, feats_sorted, out, T_final, last, grp_in, NG, grp, T_grp); \
+      forward<S, true>(nv, order, in, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off, goff,   \
+                       list, slot, feats_sorted, out, T_final, alpha, last, grp_in, NG, grp, T_grp); \
     else                                                                                           \
-      forward<S, false>(nv, order, feats, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off,     \
-                        goff, list, slot, feats_sorted, out, T_final, last, nullptr, 0, nullptr,   \
+      forward<S, false>(nv, order, in, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off, goff,  \
+                        list, slot, feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr,  \
                         nullptr);                                                                  \
   }                                                                                                \
-  void gs_backward_##SUFFIX(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt,        \
-                            const void* recs, const int64_t* tile_off, const int64_t* goff,        \
+  void gs_backward_##SUFFIX(int64_t N, int64_t nv, const int32_t* rank, int Cf, int W, int H,      \
+                            int nt, const void* recs, const int64_t* tile_off, const int64_t* goff, \
                             const int32_t* list, const int64_t* slot, const S* feats,              \
                             const S* T_final, const int32_t* last, int NO, const int* osz,         \
-                            const S* const* g_outs, const S* g_T, S* g_means2d, S* g_conics,       \
-                            S* g_opac, S* g_feats) {                                               \
-    backward<S>(nv, order, Cf, W, H, nt, (const Rec<S>*)recs, tile_off, goff, list, slot, feats,   \
-                T_final, last, Planes<const S*>{NO, osz, g_outs}, g_T, g_means2d, g_conics,        \
-                g_opac, g_feats);                                                                  \
+                            const S* const* g_outs, const S* g_T, const S* g_alpha, S* g_means2d,  \
+                            S* g_conics, S* g_opac, S* const* g_feats) {                           \
+    backward<S>(N, nv, rank, Cf, W, H, nt, (const Rec<S>*)recs, tile_off, goff, list, slot, feats, \
+                T_final, last, Planes<const S*>{NO, osz, g_outs}, g_T, g_alpha, g_means2d,         \
+                g_conics, g_opac, Planes<S*>{NO, osz, g_feats});                                   \
   }
 
 GS_EXPORT(f32, float)
