@@ -284,30 +284,32 @@ inline uint64_t fkey(double x) {
   return (u & 0x8000000000000000ull) ? ~u : (u | 0x8000000000000000ull);
 }
 
-// Stable LSD radix sort of idx by key, 11-bit digits. Stable + indices entering in increasing
-// order = ties in index order, like torch.argsort(stable=True) in the torch path.
+// Stable LSD radix sort of (key, idx)[0, n) by key, 11-bit digits, using k2 / i2 as scratch; the
+// result ends in key / idx. The histograms of every digit come from one pass, and a digit that all
+// keys share is skipped (no scatter). Stable + indices entering in increasing order = ties in
+// index order, like torch.argsort(stable=True) in the torch path.
 template <typename K>
-void radix_sort(std::vector<K>& key, std::vector<int32_t>& idx) {
-  const size_t n = key.size();
-  std::vector<K> k2(n);
-  std::vector<int32_t> i2(n);
-  std::vector<int64_t> cnt(1 << 11);
-  for (int shift = 0; shift < (int)(8 * sizeof(K)); shift += 11) {
-    std::fill(cnt.begin(), cnt.end(), 0);
-    for (size_t i = 0; i < n; ++i) cnt[(key[i] >> shift) & 2047]++;
-    int64_t pos = 0;
-    for (auto& c : cnt) {
-      int64_t t = c;
-      c = pos;
+void radix_sort(int64_t n, K* key, int32_t* idx, K* k2, int32_t* i2) {
+  constexpr int D = (8 * sizeof(K) + 10) / 11;
+  std::vector<int32_t> cnt((size_t)D << 11, 0);
+  for (int64_t i = 0; i < n; ++i)
+    for (int d = 0; d < D; ++d) cnt[((size_t)d << 11) + ((key[i] >> (11 * d)) & 2047)]++;
+  for (int d = 0; d < D; ++d) {
+    int32_t* const c = cnt.data() + ((size_t)d << 11);
+    if (n == 0 || c[(key[0] >> (11 * d)) & 2047] == n) continue;  // one bucket: already in order
+    int32_t pos = 0;
+    for (int b = 0; b < 2048; ++b) {
+      const int32_t t = c[b];
+      c[b] = pos;
       pos += t;
     }
-    for (size_t i = 0; i < n; ++i) {
-      const int64_t d = cnt[(key[i] >> shift) & 2047]++;
-      k2[d] = key[i];
-      i2[d] = idx[i];
+    for (int64_t i = 0; i < n; ++i) {
+      const int32_t at = c[(key[i] >> (11 * d)) & 2047]++;
+      k2[at] = key[i];
+      i2[at] = idx[i];
     }
-    key.swap(k2);
-    idx.swap(i2);
+    std::copy_n(k2, n, key);  // keep the run in place (a few us; simpler than tracking the swaps)
+    std::copy_n(i2, n, idx);
   }
 }
 
@@ -316,40 +318,54 @@ void radix_sort(std::vector<K>& key, std::vector<int32_t>& idx) {
 // tile counts per chunk of that order, tile offsets, per-Gaussian entry offsets (goff, in depth
 // order). cursor (n_chunks(nt) x ntiles) becomes each chunk's first write position per tile.
 // sizes[0] = visible count nv, sizes[1] = number of (tile, Gaussian) entries.
+// The depth sort is serial (a parallel LSD sort with a barrier per digit lost: ~12 sleeps and
+// wake-ups under OMP_WAIT_POLICY=PASSIVE; per-thread sorts and a merge lost too, docs/rasterizer.md)
+// but it needs only radii and depths, so one thread sorts while the others start on the records,
+// and it joins them (dynamic blocks) when it is done: no extra barrier, the same order.
 template <typename S>
 void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* depths,
          const int64_t* radii, const int64_t* boxes, int W, int H, int nt, Rec<S>* recs,
          int32_t* order, int32_t* rank, int64_t* cursor, int64_t* tile_off, int64_t* goff, int64_t* sizes) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   typedef decltype(fkey(S())) K;
-  std::vector<K> key;
-  std::vector<int32_t> idx;
-  key.reserve(N);
-  idx.reserve(N);
-  for (int64_t i = 0; i < N; ++i)
-    if (radii[i] > 0) {
-      key.push_back(fkey(depths[i]));
-      idx.push_back((int32_t)i);
-    }
-  radix_sort(key, idx);
-  const int64_t nv = (int64_t)idx.size();
-  std::copy(idx.begin(), idx.end(), order);
   const int NC = n_chunks(nt);
-  std::fill(cursor, cursor + (int64_t)NC * NT, 0);
   // records computed in index order (sequential reads), then gathered into depth order: one
   // random read per Gaussian here, and sequential or monotonic reads everywhere after
   // reused across calls (no page faults per frame); thread_local is the calling thread's, so the
-  // OpenMP threads use it through a plain pointer
+  // OpenMP threads use it through plain pointers
   static thread_local std::vector<Rec<S>> by_index_buf;
-  if ((int64_t)by_index_buf.size() < N) by_index_buf.resize(N);
+  static thread_local std::vector<K> key_buf;
+  static thread_local std::vector<int32_t> idx_buf;
+  if ((int64_t)by_index_buf.size() < N) {
+    by_index_buf.resize(N);
+    key_buf.resize(2 * N);
+    idx_buf.resize(2 * N);
+  }
   Rec<S>* const by_index = by_index_buf.data();
+  K* const key = key_buf.data();
+  int32_t* const idx = idx_buf.data();
+  int64_t nv = 0;
+  std::fill(cursor, cursor + (int64_t)NC * NT, 0);
 #pragma omp parallel num_threads(nt)
   {
+#pragma omp single nowait
+    {
+      int64_t m = 0;
+      for (int64_t i = 0; i < N; ++i)
+        if (radii[i] > 0) {
+          key[m] = fkey(depths[i]);
+          idx[m++] = (int32_t)i;
+        }
+      radix_sort(m, key, idx, key + N, idx + N);
+      std::copy_n(idx, m, order);
+      nv = m;
+    }
 #pragma omp for schedule(dynamic, GAUSS_BLOCK)
     for (int64_t i = 0; i < N; ++i) {
       make_rec(by_index[i], i, means2d, conics, opac, radii, boxes, W, H);
       if (radii[i] <= 0) rank[i] = -1;
     }
+    // (the loop's barrier also waits for the sort: order and nv are complete after it)
     over_chunks(nv, NC, cursor, NT, [&](int64_t s, int64_t e, int64_t* cnt) {
       if (s + 16 < e) __builtin_prefetch(by_index + order[s + 16]);  // the gather's misses overlap
       rank[order[s]] = (int32_t)s;
