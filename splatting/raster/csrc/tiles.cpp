@@ -260,15 +260,23 @@ constexpr int64_t GAUSS_BLOCK = 2048;
 
 // body(s, e, cur) for every position s of the depth order [0, nv), chunk by chunk: the chunks are
 // shared out among the threads of the enclosing parallel region (an orphaned omp for, with its
-// barrier at the end); e is the chunk's end, cur its tile cursors (cursor + chunk * NT).
-template <typename F>
+// barrier at the end unless LAST: the end of the parallel region waits anyway, and under
+// OMP_WAIT_POLICY=PASSIVE every extra barrier is a sleep and a wake-up, ~50 us each on this VM);
+// e is the chunk's end, cur its tile cursors (cursor + chunk * NT).
+template <bool LAST = false, typename F>
 inline void over_chunks(int64_t nv, int NC, int64_t* cursor, int NT, F&& body) {
-#pragma omp for schedule(dynamic, 1)
-  for (int c = 0; c < NC; ++c) {
+  auto one = [&](int c) {
     int64_t b, e;
     chunk(nv, NC, c, b, e);
     int64_t* const cur = cursor + (int64_t)c * NT;
     for (int64_t s = b; s < e; ++s) body(s, e, cur);
+  };
+  if (LAST) {
+#pragma omp for schedule(dynamic, 1) nowait
+    for (int c = 0; c < NC; ++c) one(c);
+  } else {
+#pragma omp for schedule(dynamic, 1)
+    for (int c = 0; c < NC; ++c) one(c);
   }
 }
 
@@ -366,7 +374,7 @@ void bin(int64_t N, const S* means2d, const S* conics, const S* opac, const S* d
       if (radii[i] <= 0) rank[i] = -1;
     }
     // (the loop's barrier also waits for the sort: order and nv are complete after it)
-    over_chunks(nv, NC, cursor, NT, [&](int64_t s, int64_t e, int64_t* cnt) {
+    over_chunks<true>(nv, NC, cursor, NT, [&](int64_t s, int64_t e, int64_t* cnt) {
       if (s + 16 < e) __builtin_prefetch(by_index + order[s + 16]);  // the gather's misses overlap
       rank[order[s]] = (int32_t)s;
       const Rec<S>& r = recs[s] = by_index[order[s]];
@@ -481,7 +489,7 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
     std::vector<V> acc((size_t)NV * Cf);
     std::vector<V> TG(GROUPS ? (size_t)NG * NV : 0);  // per group and pixel: its own transmittance
     std::vector<I> gdone(GROUPS ? (size_t)NG * NV : 0);
-#pragma omp for schedule(dynamic, 1)
+#pragma omp for schedule(dynamic, 1) nowait  // the region's end is the barrier
     for (int it = 0; it < NT; ++it) {
       const int t = torder[it];
       const auto [ox, oy, ex, ey] = TileRect(t, TX, W, H);
@@ -721,7 +729,7 @@ void backward(int64_t N, int64_t nv, const int32_t* rank, int Cf, int W, int H, 
     }
     std::vector<S> accv(NB);
     // in index order: sequential writes, and the invisible Gaussians' zeros in the same pass
-#pragma omp for schedule(dynamic, GAUSS_BLOCK)
+#pragma omp for schedule(dynamic, GAUSS_BLOCK) nowait  // the region's end is the barrier
     for (int64_t gi = 0; gi < N; ++gi) {
       const int64_t s = rank[gi];
       if (s < 0) {
