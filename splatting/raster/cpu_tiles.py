@@ -1,11 +1,12 @@
 """Tiled multi-threaded CPU compositing (csrc/tiles.cpp) as a torch autograd Function.
 
-composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H, W) ->
+composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H, W, background=None) ->
 (one contiguous image per plane (H, W, c), or (H, W) for a 1-channel plane, alpha (H, W),
 T_final (H, W)): for each plane (N, c) or (N,) of per-Gaussian channels (colour, extra features,
 depth), sum_k w_k plane_k over the Gaussians at each pixel front to back, w_k = alpha_k T_k;
 T_final the transmittance left and alpha = 1 - T_final (both written by the C++, both
-differentiable). The planes are read and their gradients written in place by the C++: no
+differentiable). background (c,) for the first plane: its image is composited over it
+(+ T_final * background) in the same pass, and its gradient summed there too. The planes are read and their gradients written in place by the C++: no
 concatenated (N, Cf) table and no slicing of its gradient. Differentiable in means2d, conics,
 opacities and the planes. Same image formation as splatting/raster/sparse.py's torch path; see
 docs/rasterizer.md.
@@ -17,7 +18,7 @@ Steps (all threads: torch.get_num_threads()):
   2. gs_forward: tile lists filled in depth order, then per 16x16 tile front-to-back blending with
      early termination;
   3. gs_backward: per tile back to front, per-(tile, Gaussian) sums, then per Gaussian.
-Optionally (groups, forward only) each group's transmittance as if it were rendered alone, from
+Optionally (groups, forward only) each group's alpha as if it were rendered alone, from
 the same pass (csrc/tiles.cpp, forward<S, GROUPS>): what amodal instance masks need.
 
 Glue kept small on purpose: every torch op here runs between the parallel C calls on one thread
@@ -48,12 +49,12 @@ def _ptrs(ts):
 
 
 class _TileComposite(torch.autograd.Function):
-    """The planes' images, alpha (H, W), T_final (H, W), T_groups. A gradient that autograd hands
+    """The planes' images, alpha (H, W), T_final (H, W), A_groups. A gradient that autograd hands
     over as None (an output nobody used, e.g. alpha under an RGB loss) goes to the C++ as a null
     pointer rather than as a zero image; a plane whose image got no gradient gets None back."""
 
     @staticmethod
-    def forward(ctx, means2d, conics, opacities, depths, radii, boxes, H, W, groups, n_groups, *planes):
+    def forward(ctx, means2d, conics, opacities, depths, radii, boxes, background, H, W, groups, n_groups, *planes):
         lib = build.load()
         dt = means2d.dtype
         if dt not in _SUFFIX:
@@ -70,6 +71,7 @@ class _TileComposite(torch.autograd.Function):
         z = depths.detach().to(dt).contiguous()
         rd = radii.to(torch.int64).contiguous()
         bx = boxes.to(torch.int64).contiguous()
+        bg = None if background is None else background.detach().to(dt).contiguous()
         tile = lib.gs_tile_size()
         ntiles = -(-W // tile) * -(-H // tile)
         recs = torch.empty(max(n, 1) * getattr(lib, f"gs_rec_bytes_{sfx}")(), dtype=torch.uint8)
@@ -93,22 +95,23 @@ class _TileComposite(torch.autograd.Function):
         ng = int(n_groups) if groups is not None else 0
         gr = groups.to(torch.int32).contiguous() if ng else None
         g_sorted = torch.empty(max(nv, 1), dtype=torch.int32) if ng else None
-        T_groups = torch.empty(ng, H, W, dtype=dt)
+        A_groups = torch.empty(ng, H, W, dtype=dt)
         osz = (ctypes.c_int * len(split))(*split)
         getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), _ptrs(fe), cf, W, H, nt, _ptr(recs), _ptr(cursor),
                                           _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(slot), _ptr(fs),
                                           len(split), osz, _ptrs(outs), _ptr(T_final), _ptr(alpha), _ptr(last),
-                                          _nptr(gr), ng, _nptr(g_sorted), _ptr(T_groups) if ng else None)
-        ctx.mark_non_differentiable(T_groups)
+                                          _nptr(gr), ng, _nptr(g_sorted), _ptr(A_groups) if ng else None, _nptr(bg))
+        ctx.mark_non_differentiable(A_groups)
         ctx.set_materialize_grads(False)
-        ctx.geom = (n, cf, H, W, nv, rank, recs, tile_off, goff, lst, slot, fs, last, split)
+        ctx.geom = (n, cf, H, W, nv, rank, recs, tile_off, goff, lst, slot, fs, last, split, bg)
         ctx.save_for_backward(T_final)
         ctx.dtypes = (conics.dtype, opacities.dtype, [p.dtype for p in planes])
-        return (*outs, alpha, T_final, T_groups)
+        ctx.bg_dtype = None if background is None else background.dtype
+        return (*outs, alpha, T_final, A_groups)
 
     @staticmethod
     def backward(ctx, *grads):
-        n, cf, H, W, nv, rank, recs, tile_off, goff, lst, slot, fs, last, split = ctx.geom
+        n, cf, H, W, nv, rank, recs, tile_off, goff, lst, slot, fs, last, split, bg = ctx.geom
         (T_final,) = ctx.saved_tensors
         dt = T_final.dtype
         sfx = _SUFFIX[dt]
@@ -122,23 +125,28 @@ class _TileComposite(torch.autograd.Function):
         # a plane's gradient is w-weighted dL/d(its image): none without one
         g_planes = [None if g is None else torch.empty((n, c) if c > 1 else (n,), dtype=dt)
                     for g, c in zip(g_outs, split)]
+        g_bg = torch.empty(split[0], dtype=dt) if bg is not None and ctx.needs_input_grad[6] and g_outs[0] is not None \
+            else None
         lib = build.load()
         getattr(lib, f"gs_backward_{sfx}")(n, nv, _ptr(rank), cf, W, H, max(1, torch.get_num_threads()), _ptr(recs),
                                            _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(slot), _ptr(fs),
                                            _ptr(T_final), _ptr(last), np_, (ctypes.c_int * np_)(*split),
                                            _ptrs(g_outs), _nptr(g_T), _nptr(g_alpha), _ptr(g_m2), _ptr(g_cn),
-                                           _ptr(g_op), _ptrs(g_planes))
+                                           _ptr(g_op), _ptrs(g_planes), _nptr(bg), _nptr(g_bg))
         g_planes = [None if g is None else g.to(d) for g, d in zip(g_planes, dps)]
-        return (g_m2, g_cn.to(dc), g_op.to(do), None, None, None, None, None, None, None, *g_planes)
+        g_bg = None if g_bg is None else g_bg.to(ctx.bg_dtype)
+        return (g_m2, g_cn.to(dc), g_op.to(do), None, None, None, g_bg, None, None, None, None, *g_planes)
 
 
-def composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H, W, groups=None, n_groups=0):
+def composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H, W, groups=None, n_groups=0,
+                    background=None):
     """See the module docstring. CPU tensors only; float32 or float64 (means2d's dtype).
     planes: a list of (N, c) or (N,) tensors (at least one; the caller's colour, features, depth).
     depths (N,): the depth-sort key (not differentiated here).
-    groups (N,) int in [-1, n_groups) (-1: in no group), n_groups >= 1: also returns T_groups
-    (n_groups, H, W), each group's transmittance rendered alone (not differentiable).
-    -> (*images, alpha, T_final) or (*images, alpha, T_final, T_groups) with groups."""
+    groups (N,) int in [-1, n_groups) (-1: in no group), n_groups >= 1: also returns A_groups
+    (n_groups, H, W), each group's alpha rendered alone (not differentiable).
+    background: None or one value per channel of the first plane (differentiable).
+    -> (*images, alpha, T_final) or (*images, alpha, T_final, A_groups) with groups."""
     if means2d.device.type != "cpu":
         raise ValueError("the tiled rasterizer runs on CPU tensors; use backend='torch' for "
                          f"{means2d.device.type} tensors")
@@ -147,10 +155,15 @@ def composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H,
                          for p in planes):
         raise ValueError(f"composite_tiles: planes must be one or more (N,) or (N, c >= 1) tensors, N = {n}; got "
                          f"{[tuple(p.shape) for p in planes]}")
+    c0 = 1 if planes[0].dim() == 1 else planes[0].shape[1]
+    if background is not None and background.shape != (c0,):
+        raise ValueError(f"composite_tiles: background must be ({c0},) for the first plane, got {tuple(background.shape)}")
     if groups is not None:
         if n_groups < 1 or groups.shape != (n,):
             raise ValueError(f"composite_tiles: groups must be ({n},) with n_groups >= 1")
         if len(groups) and not (int(groups.min()) >= -1 and int(groups.max()) < n_groups):
             raise ValueError(f"composite_tiles: group ids must lie in [-1, {n_groups})")
-        return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, H, W, groups, n_groups, *planes)
-    return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, H, W, None, 0, *planes)[:-1]
+        return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, background, H, W, groups,
+                                    n_groups, *planes)
+    return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, background, H, W, None, 0,
+                                *planes)[:-1]

@@ -377,19 +377,18 @@ def _composite_tiles(means2d, conics, opacities, colors, features, depths, radii
     """The tiled C++ compositor with the torch path's outputs: rgb (H,W,3) over the background,
     alpha, depth (camera z composited as the last channel), features (H,W,F) or None. Colour,
     features and depth are handed over as separate planes; the compositor reads them in place,
-    writes each as its own contiguous image (and alpha), and takes their gradients back the same
-    way (no concatenation, no slicing)."""
+    writes each as its own contiguous image (colour already over the background, alpha, the
+    group alphas), and takes their gradients back the same way (no concatenation, no slicing, no
+    torch op on a full image)."""
     from splatting.raster.cpu_tiles import composite_tiles
 
     has_f = features is not None and features.shape[1] > 0
     parts = [colors] + ([features.to(colors)] if has_f else []) + [depths]
     res = composite_tiles(means2d, conics, opacities, parts, depths.detach(), radii, boxes, H, W,
-                          *(() if groups is None else groups))
-    rgb, depth, alpha, T_final = res[0], res[len(parts) - 1], res[len(parts)], res[len(parts) + 1]
-    if background is not None:
-        rgb = rgb + T_final[..., None] * background.to(rgb)
+                          *(() if groups is None else groups), background=background)
+    rgb, depth, alpha = res[0], res[len(parts) - 1], res[len(parts)]
     feats = res[1] if has_f else None if features is None else features.new_zeros(H, W, 0)
-    return rgb, alpha, depth, feats, None if groups is None else 1.0 - res[-1]
+    return rgb, alpha, depth, feats, None if groups is None else res[-1]
 
 
 def render_gaussians(g, camera, **kw):

@@ -445,9 +445,9 @@ struct Planes {
 // out: the Cf channels as Planes, T_final and alpha = 1 - T_final (H x W), last (H x W): per
 // pixel 1 + the tile-list position of its last contributor (0: none).
 // GROUPS (forward only, no backward): every Gaussian also belongs to one of NG groups (grp_in,
-// per input Gaussian; -1: none), and T_grp (NG x H x W) gets each group's transmittance as if
-// its Gaussians were rendered alone (no occlusion by the others: the amodal alpha of an instance
-// is 1 - T_grp), with the same per-pixel rules (alpha test, clamp, the step that would take T
+// per input Gaussian; -1: none), and A_grp (NG x H x W) gets each group's alpha (1 - its
+// transmittance) as if its Gaussians were rendered alone (no occlusion by the others: the amodal
+// alpha of an instance), with the same per-pixel rules (alpha test, clamp, the step that would take T
 // below 1e-4 not taken). One pass: the alpha a Gaussian has at a pixel is computed once for the
 // image and its group, and a pixel's list is walked past the image's own cut-off only while
 // some group at that pixel is still open. grp (nv): the groups gathered into depth order.
@@ -455,7 +455,7 @@ template <typename S, bool GROUPS>
 void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int W, int H, int nt,
              const Rec<S>* recs, int64_t* cursor, const int64_t* tile_off, const int64_t* goff,
              int32_t* list, int64_t* slot, S* feats, Planes<S*> out, S* T_final, S* alpha, int32_t* last,
-             const int32_t* grp_in, int NG, int32_t* grp, S* T_grp) {
+             const int32_t* grp_in, int NG, int32_t* grp, S* A_grp, const S* bg) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   const std::vector<int> torder = busiest_first(tile_off, NT);
   const int NC = n_chunks(nt);
@@ -500,7 +500,10 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
           std::fill_n(alpha + p, nx, (S)0);
           std::fill_n(last + p, nx, 0);
           for (int q = 0; q < out.n; ++q) std::fill_n(out.ptr[q] + p * out.size[q], nx * out.size[q], (S)0);
-          for (int q = 0; q < (GROUPS ? NG : 0); ++q) std::fill_n(T_grp + (int64_t)q * H * W + p, nx, (S)1);
+          if (bg)
+            for (int64_t i = 0; i < nx; ++i)
+              for (int c = 0; c < out.size[0]; ++c) out.ptr[0][(p + i) * out.size[0] + c] = (S)0 + (S)1 * bg[c];
+          for (int q = 0; q < (GROUPS ? NG : 0); ++q) std::fill_n(A_grp + (int64_t)q * H * W + p, nx, (S)0);
         }
         continue;
       }
@@ -582,7 +585,7 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
           const int v = (y - oy) * NJ + j, nl = std::min(L, ex - (ox + j * L) + 1);
           const int64_t p = (int64_t)y * W + ox + j * L;
           for (int q = 0; q < (GROUPS ? NG : 0); ++q)
-            store_lanes(T_grp + (int64_t)q * H * W + p, TG[(size_t)q * NV + v], nl);
+            store_lanes(A_grp + (int64_t)q * H * W + p, (S)1 - TG[(size_t)q * NV + v], nl);
           store_lanes(T_final + p, T[v], nl);
           store_lanes(alpha + p, (S)1 - T[v], nl);
           if (sizeof(IS) == 4) {
@@ -594,6 +597,11 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
           for (int q = 0, c0 = 0; q < out.n; c0 += out.size[q++]) {  // pixel-major per plane
             const int cq = out.size[q];
             S* __restrict const o = out.ptr[q] + p * cq;
+            if (q == 0 && bg) {  // over the background: c + T_final bg (as rgb + T_final * bg in torch)
+              for (int l = 0; l < nl; ++l)
+                for (int c = 0; c < cq; ++c) o[l * cq + c] = a[c][l] + T[v][l] * bg[c];
+              continue;
+            }
             if (cq == 1) {  // one channel (depth): the lanes are the pixels
               store_lanes(o, a[c0], nl);
               continue;
@@ -614,12 +622,15 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
 // dL/d T_final and dL/d alpha, each or both null. Gradient arrays are indexed like the inputs
 // (N of them, rank: bin's inverse of the depth order) and written whole: zero for the Gaussians
 // that are not visible, so the caller allocates them uninitialised. g_feats: the input Planes'
-// gradients (a null plane: not wanted).
+// gradients (a null plane: not wanted). bg: the forward's background under plane 0 (or null);
+// g_bg (plane 0's channel count): its gradient, sum over pixels of T_final dL/d out_0, summed per
+// tile and then over tiles in tile order (the same bits for any thread count), or null.
 template <typename S>
 void backward(int64_t N, int64_t nv, const int32_t* rank, int Cf, int W, int H, int nt, const Rec<S>* recs,
               const int64_t* tile_off, const int64_t* goff, const int32_t* list, const int64_t* slot,
               const S* feats, const S* T_final, const int32_t* last, Planes<const S*> g_out, const S* g_T,
-              const S* g_alpha, S* g_means2d, S* g_conics, S* g_opac, Planes<S*> g_feats) {
+              const S* g_alpha, S* g_means2d, S* g_conics, S* g_opac, Planes<S*> g_feats, const S* bg,
+              S* g_bg) {
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   const std::vector<int> torder = busiest_first(tile_off, NT);
   const int NB = 6 + Cf;  // q, q dx, q dy, q dx dx, q dx dy, q dy dy, w g_c
@@ -629,6 +640,10 @@ void backward(int64_t N, int64_t nv, const int32_t* rank, int Cf, int W, int H, 
   static thread_local std::vector<S> gbuf_vec;
   if (gbuf_vec.size() < (size_t)total * NB) gbuf_vec.resize((size_t)total * NB);
   S* const gbuf = gbuf_vec.data();
+  const int C0 = g_out.size[0];
+  const S* const g0 = g_out.ptr[0];
+  const bool want_bg = bg && g_bg && g0;
+  std::vector<double> bg_part(want_bg ? (size_t)NT * C0 : 0);  // per tile: sum of T_final dL/d out_0
 #pragma omp parallel num_threads(nt)
   {
     typedef typename VT<S>::V V;
@@ -643,6 +658,16 @@ void backward(int64_t N, int64_t nv, const int32_t* rank, int Cf, int W, int H, 
       const int t = torder[it];
       const auto [ox, oy, ex, ey] = TileRect(t, TX, W, H);
       const int64_t t0 = tile_off[t];
+      if (want_bg)
+        for (int c = 0; c < C0; ++c) {
+          double h = 0;
+          for (int y = oy; y <= ey; ++y)
+            for (int x = ox; x <= ex; ++x) {
+              const int64_t p = (int64_t)y * W + x;
+              h += (double)g0[p * C0 + c] * (double)T_final[p];
+            }
+          bg_part[(size_t)t * C0 + c] = h;
+        }
       if (tile_off[t + 1] == t0) continue;  // most tiles of a bike image are empty
       int kmax = 0;
       std::fill(T.begin(), T.end(), (V){} + (S)1);
@@ -657,8 +682,10 @@ void backward(int64_t N, int64_t nv, const int32_t* rank, int Cf, int W, int H, 
             T[v][l] = T_final[p + l];
             lst[v][l] = last[p + l];
             kmax = std::max(kmax, (int)last[p + l]);
-            // behind: S_k + T_final dL/dT_final (alpha = 1 - T_final)
-            const S gt = (g_T ? g_T[p + l] : (S)0) - (g_alpha ? g_alpha[p + l] : (S)0);
+            // behind: S_k + T_final dL/dT_final (alpha = 1 - T_final; out_0 + T_final bg)
+            S gt = (g_T ? g_T[p + l] : (S)0) - (g_alpha ? g_alpha[p + l] : (S)0);
+            if (bg && g0)
+              for (int c = 0; c < C0; ++c) gt += g0[(p + l) * C0 + c] * bg[c];
             accum[v][l] = T_final[p + l] * gt;
           }
           for (int l = 0; l < nl; ++l)
@@ -727,6 +754,14 @@ void backward(int64_t N, int64_t nv, const int32_t* rank, int Cf, int W, int H, 
       const int64_t n = tile_off[t + 1] - t0;
       for (int64_t k = kmax; k < n; ++k) std::fill_n(gbuf + (size_t)slot[t0 + k] * NB, NB, (S)0);
     }
+    if (want_bg) {
+#pragma omp single nowait  // while the others start on the per-Gaussian sums
+      for (int c = 0; c < C0; ++c) {
+        double h = 0;
+        for (int t = 0; t < NT; ++t) h += bg_part[(size_t)t * C0 + c];
+        g_bg[c] = (S)h;
+      }
+    }
     std::vector<S> accv(NB);
     // in index order: sequential writes, and the invisible Gaussians' zeros in the same pass
 #pragma omp for schedule(dynamic, GAUSS_BLOCK) nowait  // the region's end is the barrier
@@ -783,26 +818,28 @@ int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
                            int H, int nt, const void* recs, int64_t* cursor, const int64_t* tile_off, \
                            const int64_t* goff, int32_t* list, int64_t* slot, S* feats_sorted,    \
                            int NO, const int* osz, S* const* outs, S* T_final, S* alpha,          \
-                           int32_t* last, const int32_t* grp_in, int NG, int32_t* grp, S* T_grp) { \
+                           int32_t* last, const int32_t* grp_in, int NG, int32_t* grp, S* A_grp,  \
+                           const S* bg) {                                                         \
     const Planes<S*> out{NO, osz, outs};                                                           \
     const Planes<const S*> in{NO, osz, feats};                                                     \
     if (NG > 0)                                                                                    \
       forward<S, true>(nv, order, in, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off, goff,   \
-                       list, slot, feats_sorted, out, T_final, alpha, last, grp_in, NG, grp, T_grp); \
+                       list, slot, feats_sorted, out, T_final, alpha, last, grp_in, NG, grp, A_grp, \
+                       bg);                                                                        \
     else                                                                                           \
       forward<S, false>(nv, order, in, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off, goff,  \
                         list, slot, feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr,  \
-                        nullptr);                                                                  \
+                        nullptr, bg);                                                              \
   }                                                                                                \
   void gs_backward_##SUFFIX(int64_t N, int64_t nv, const int32_t* rank, int Cf, int W, int H,      \
                             int nt, const void* recs, const int64_t* tile_off, const int64_t* goff, \
                             const int32_t* list, const int64_t* slot, const S* feats,              \
                             const S* T_final, const int32_t* last, int NO, const int* osz,         \
                             const S* const* g_outs, const S* g_T, const S* g_alpha, S* g_means2d,  \
-                            S* g_conics, S* g_opac, S* const* g_feats) {                           \
+                            S* g_conics, S* g_opac, S* const* g_feats, const S* bg, S* g_bg) {     \
     backward<S>(N, nv, rank, Cf, W, H, nt, (const Rec<S>*)recs, tile_off, goff, list, slot, feats, \
                 T_final, last, Planes<const S*>{NO, osz, g_outs}, g_T, g_alpha, g_means2d,         \
-                g_conics, g_opac, Planes<S*>{NO, osz, g_feats});                                   \
+                g_conics, g_opac, Planes<S*>{NO, osz, g_feats}, bg, g_bg);                         \
   }
 
 GS_EXPORT(f32, float)
