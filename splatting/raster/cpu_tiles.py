@@ -5,10 +5,11 @@ composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H, W, 
 T_final (H, W)): for each plane (N, c) or (N,) of per-Gaussian channels (colour, extra features,
 depth), sum_k w_k plane_k over the Gaussians at each pixel front to back, w_k = alpha_k T_k;
 T_final the transmittance left and alpha = 1 - T_final (both written by the C++, both
-differentiable). background (c,) for the first plane: its image is composited over it
-(+ T_final * background) in the same pass, and its gradient summed there too. The planes are read and their gradients written in place by the C++: no
+differentiable; T_final is None when no gradient can flow). background (c,) for the first plane:
+its image is composited over it (+ T_final * background) in the same pass, and its gradient
+summed there too. The planes are read and their gradients written in place by the C++: no
 concatenated (N, Cf) table and no slicing of its gradient. Differentiable in means2d, conics,
-opacities and the planes. Same image formation as splatting/raster/sparse.py's torch path; see
+opacities, the planes and the background. Same image formation as splatting/raster/sparse.py's torch path; see
 docs/rasterizer.md.
 
 Steps (all threads: torch.get_num_threads()):
@@ -54,7 +55,8 @@ class _TileComposite(torch.autograd.Function):
     pointer rather than as a zero image; a plane whose image got no gradient gets None back."""
 
     @staticmethod
-    def forward(ctx, means2d, conics, opacities, depths, radii, boxes, background, H, W, groups, n_groups, *planes):
+    def forward(ctx, means2d, conics, opacities, depths, radii, boxes, background, H, W, groups, n_groups, keep,
+                *planes):
         lib = build.load()
         dt = means2d.dtype
         if dt not in _SUFFIX:
@@ -86,32 +88,34 @@ class _TileComposite(torch.autograd.Function):
                                       _ptr(goff), _ptr(sizes))
         nv, total = sizes.tolist()
         lst = torch.empty(max(total, 1), dtype=torch.int32)
-        slot = torch.empty(max(total, 1), dtype=torch.int64)
+        slot = torch.empty(max(total, 1), dtype=torch.int64) if keep else None
         fs = torch.empty(max(nv, 1), cf, dtype=dt)
         outs = [torch.empty((H, W, c) if c > 1 else (H, W), dtype=dt) for c in split]
         alpha = torch.empty(H, W, dtype=dt)
-        T_final = torch.empty(H, W, dtype=dt)
-        last = torch.empty(H, W, dtype=torch.int32)
+        # T_final, last and slot only for a backward (a no-grad render skips their ~3 MB of stores)
+        T_final = torch.empty(H, W, dtype=dt) if keep else None
+        last = torch.empty(H, W, dtype=torch.int32) if keep else None
         ng = int(n_groups) if groups is not None else 0
         gr = groups.to(torch.int32).contiguous() if ng else None
         g_sorted = torch.empty(max(nv, 1), dtype=torch.int32) if ng else None
         A_groups = torch.empty(ng, H, W, dtype=dt)
         osz = (ctypes.c_int * len(split))(*split)
         getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), _ptrs(fe), cf, W, H, nt, _ptr(recs), _ptr(cursor),
-                                          _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(slot), _ptr(fs),
-                                          len(split), osz, _ptrs(outs), _ptr(T_final), _ptr(alpha), _ptr(last),
+                                          _ptr(tile_off), _ptr(goff), _ptr(lst), _nptr(slot), _ptr(fs),
+                                          len(split), osz, _ptrs(outs), _nptr(T_final), _ptr(alpha), _nptr(last),
                                           _nptr(gr), ng, _nptr(g_sorted), _ptr(A_groups) if ng else None, _nptr(bg))
         ctx.mark_non_differentiable(A_groups)
         ctx.set_materialize_grads(False)
-        ctx.geom = (n, cf, H, W, nv, rank, recs, tile_off, goff, lst, slot, fs, last, split, bg)
-        ctx.save_for_backward(T_final)
+        ctx.geom = (n, cf, H, W, nv, order, rank, recs, tile_off, goff, lst, slot, fs, last, split, bg)
+        if T_final is not None:
+            ctx.save_for_backward(T_final)
         ctx.dtypes = (conics.dtype, opacities.dtype, [p.dtype for p in planes])
         ctx.bg_dtype = None if background is None else background.dtype
         return (*outs, alpha, T_final, A_groups)
 
     @staticmethod
     def backward(ctx, *grads):
-        n, cf, H, W, nv, rank, recs, tile_off, goff, lst, slot, fs, last, split, bg = ctx.geom
+        n, cf, H, W, nv, order, rank, recs, tile_off, goff, lst, slot, fs, last, split, bg = ctx.geom
         (T_final,) = ctx.saved_tensors
         dt = T_final.dtype
         sfx = _SUFFIX[dt]
@@ -128,14 +132,14 @@ class _TileComposite(torch.autograd.Function):
         g_bg = torch.empty(split[0], dtype=dt) if bg is not None and ctx.needs_input_grad[6] and g_outs[0] is not None \
             else None
         lib = build.load()
-        getattr(lib, f"gs_backward_{sfx}")(n, nv, _ptr(rank), cf, W, H, max(1, torch.get_num_threads()), _ptr(recs),
+        getattr(lib, f"gs_backward_{sfx}")(n, nv, _ptr(order), _ptr(rank), cf, W, H, max(1, torch.get_num_threads()), _ptr(recs),
                                            _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(slot), _ptr(fs),
                                            _ptr(T_final), _ptr(last), np_, (ctypes.c_int * np_)(*split),
                                            _ptrs(g_outs), _nptr(g_T), _nptr(g_alpha), _ptr(g_m2), _ptr(g_cn),
                                            _ptr(g_op), _ptrs(g_planes), _nptr(bg), _nptr(g_bg))
         g_planes = [None if g is None else g.to(d) for g, d in zip(g_planes, dps)]
         g_bg = None if g_bg is None else g_bg.to(ctx.bg_dtype)
-        return (g_m2, g_cn.to(dc), g_op.to(do), None, None, None, g_bg, None, None, None, None, *g_planes)
+        return (g_m2, g_cn.to(dc), g_op.to(do), None, None, None, g_bg, None, None, None, None, None, *g_planes)
 
 
 def composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H, W, groups=None, n_groups=0,
@@ -146,7 +150,8 @@ def composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H,
     groups (N,) int in [-1, n_groups) (-1: in no group), n_groups >= 1: also returns A_groups
     (n_groups, H, W), each group's alpha rendered alone (not differentiable).
     background: None or one value per channel of the first plane (differentiable).
-    -> (*images, alpha, T_final) or (*images, alpha, T_final, A_groups) with groups."""
+    -> (*images, alpha, T_final) or (*images, alpha, T_final, A_groups) with groups; T_final is None when
+    no gradient can flow (grad mode off or no input requiring one)."""
     if means2d.device.type != "cpu":
         raise ValueError("the tiled rasterizer runs on CPU tensors; use backend='torch' for "
                          f"{means2d.device.type} tensors")
@@ -158,12 +163,15 @@ def composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H,
     c0 = 1 if planes[0].dim() == 1 else planes[0].shape[1]
     if background is not None and background.shape != (c0,):
         raise ValueError(f"composite_tiles: background must be ({c0},) for the first plane, got {tuple(background.shape)}")
+    # what only a backward reads is kept only when one can follow
+    keep = torch.is_grad_enabled() and any(t is not None and t.requires_grad
+                                           for t in (means2d, conics, opacities, background, *planes))
     if groups is not None:
         if n_groups < 1 or groups.shape != (n,):
             raise ValueError(f"composite_tiles: groups must be ({n},) with n_groups >= 1")
         if len(groups) and not (int(groups.min()) >= -1 and int(groups.max()) < n_groups):
             raise ValueError(f"composite_tiles: group ids must lie in [-1, {n_groups})")
         return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, background, H, W, groups,
-                                    n_groups, *planes)
-    return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, background, H, W, None, 0,
+                                    n_groups, keep, *planes)
+    return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, background, H, W, None, 0, keep,
                                 *planes)[:-1]

@@ -443,7 +443,8 @@ struct Planes {
 // order (feats, from the input Planes in: plane q holds size[q] channels per Gaussian, so the
 // caller's colour, features and depth need no concatenation), then blend every tile front to back.
 // out: the Cf channels as Planes, T_final and alpha = 1 - T_final (H x W), last (H x W): per
-// pixel 1 + the tile-list position of its last contributor (0: none).
+// pixel 1 + the tile-list position of its last contributor (0: none). T_final, last and slot
+// may be null: only the backward reads them (a no-grad render skips ~3 MB of cold stores).
 // GROUPS (forward only, no backward): every Gaussian also belongs to one of NG groups (grp_in,
 // per input Gaussian; -1: none), and A_grp (NG x H x W) gets each group's alpha (1 - its
 // transmittance) as if its Gaussians were rendered alone (no occlusion by the others: the amodal
@@ -476,7 +477,7 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
         for (int tx = r.u0 / TILE; tx <= r.u1 / TILE; ++tx) {
           const int64_t p = cur[ty * TX + tx]++;
           list[p] = (int32_t)s;
-          slot[p] = k++;
+          if (slot) slot[p] = k++;
         }
     });  // (over_chunks ends with a barrier: every list is filled before any tile blends)
     typedef typename VT<S>::V V;
@@ -496,9 +497,9 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
       if (tile_off[t + 1] == tile_off[t]) {  // empty (most tiles of a bike image): nothing to blend
         for (int y = oy; y <= ey; ++y) {
           const int64_t p = (int64_t)y * W + ox, nx = ex - ox + 1;
-          std::fill_n(T_final + p, nx, (S)1);
+          if (T_final) std::fill_n(T_final + p, nx, (S)1);
           std::fill_n(alpha + p, nx, (S)0);
-          std::fill_n(last + p, nx, 0);
+          if (last) std::fill_n(last + p, nx, 0);
           for (int q = 0; q < out.n; ++q) std::fill_n(out.ptr[q] + p * out.size[q], nx * out.size[q], (S)0);
           if (bg)
             for (int64_t i = 0; i < nx; ++i)
@@ -586,9 +587,10 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
           const int64_t p = (int64_t)y * W + ox + j * L;
           for (int q = 0; q < (GROUPS ? NG : 0); ++q)
             store_lanes(A_grp + (int64_t)q * H * W + p, (S)1 - TG[(size_t)q * NV + v], nl);
-          store_lanes(T_final + p, T[v], nl);
+          if (T_final) store_lanes(T_final + p, T[v], nl);
           store_lanes(alpha + p, (S)1 - T[v], nl);
-          if (sizeof(IS) == 4) {
+          if (!last) {
+          } else if (sizeof(IS) == 4) {
             store_lanes(last + p, lst[v], nl);
           } else {
             for (int l = 0; l < nl; ++l) last[p + l] = (int32_t)lst[v][l];
@@ -626,7 +628,7 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
 // g_bg (plane 0's channel count): its gradient, sum over pixels of T_final dL/d out_0, summed per
 // tile and then over tiles in tile order (the same bits for any thread count), or null.
 template <typename S>
-void backward(int64_t N, int64_t nv, const int32_t* rank, int Cf, int W, int H, int nt, const Rec<S>* recs,
+void backward(int64_t N, int64_t nv, const int32_t* order, const int32_t* rank, int Cf, int W, int H, int nt, const Rec<S>* recs,
               const int64_t* tile_off, const int64_t* goff, const int32_t* list, const int64_t* slot,
               const S* feats, const S* T_final, const int32_t* last, Planes<const S*> g_out, const S* g_T,
               const S* g_alpha, S* g_means2d, S* g_conics, S* g_opac, Planes<S*> g_feats, const S* bg,
@@ -762,19 +764,22 @@ void backward(int64_t N, int64_t nv, const int32_t* rank, int Cf, int W, int H, 
         g_bg[c] = (S)h;
       }
     }
-    std::vector<S> accv(NB);
-    // in index order: sequential writes, and the invisible Gaussians' zeros in the same pass
-#pragma omp for schedule(dynamic, GAUSS_BLOCK) nowait  // the region's end is the barrier
+    // the Gaussians that are not visible: zeros (the caller's buffers are uninitialised)
+#pragma omp for schedule(dynamic, GAUSS_BLOCK) nowait
     for (int64_t gi = 0; gi < N; ++gi) {
-      const int64_t s = rank[gi];
-      if (s < 0) {
-        g_means2d[2 * gi] = g_means2d[2 * gi + 1] = 0;
-        g_conics[3 * gi] = g_conics[3 * gi + 1] = g_conics[3 * gi + 2] = 0;
-        g_opac[gi] = 0;
-        for (int q = 0; q < g_feats.n; ++q)
-          if (g_feats.ptr[q]) std::fill_n(g_feats.ptr[q] + gi * g_feats.size[q], g_feats.size[q], (S)0);
-        continue;
-      }
+      if (rank[gi] >= 0) continue;
+      g_means2d[2 * gi] = g_means2d[2 * gi + 1] = 0;
+      g_conics[3 * gi] = g_conics[3 * gi + 1] = g_conics[3 * gi + 2] = 0;
+      g_opac[gi] = 0;
+      for (int q = 0; q < g_feats.n; ++q)
+        if (g_feats.ptr[q]) std::fill_n(g_feats.ptr[q] + gi * g_feats.size[q], g_feats.size[q], (S)0);
+    }
+    std::vector<S> accv(NB);
+    // the visible ones in depth order: their slots and records are read sequentially (in index
+    // order those reads were random: +0.5 ms at one thread, measured)
+#pragma omp for schedule(dynamic, GAUSS_BLOCK) nowait  // the region's end is the barrier
+    for (int64_t s = 0; s < nv; ++s) {
+      const int64_t gi = order[s];
       // summed locally, written once (read-modify-write of the output stalled on store forwarding)
       S* acc = accv.data();
       const S* e0 = gbuf + (size_t)goff[s] * NB;
@@ -831,13 +836,14 @@ int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
                         list, slot, feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr,  \
                         nullptr, bg);                                                              \
   }                                                                                                \
-  void gs_backward_##SUFFIX(int64_t N, int64_t nv, const int32_t* rank, int Cf, int W, int H,      \
+  void gs_backward_##SUFFIX(int64_t N, int64_t nv, const int32_t* order, const int32_t* rank,      \
+                            int Cf, int W, int H,                                                  \
                             int nt, const void* recs, const int64_t* tile_off, const int64_t* goff, \
                             const int32_t* list, const int64_t* slot, const S* feats,              \
                             const S* T_final, const int32_t* last, int NO, const int* osz,         \
                             const S* const* g_outs, const S* g_T, const S* g_alpha, S* g_means2d,  \
                             S* g_conics, S* g_opac, S* const* g_feats, const S* bg, S* g_bg) {     \
-    backward<S>(N, nv, rank, Cf, W, H, nt, (const Rec<S>*)recs, tile_off, goff, list, slot, feats, \
+    backward<S>(N, nv, order, rank, Cf, W, H, nt, (const Rec<S>*)recs, tile_off, goff, list, slot, feats, \
                 T_final, last, Planes<const S*>{NO, osz, g_outs}, g_T, g_alpha, g_means2d,         \
                 g_conics, g_opac, Planes<S*>{NO, osz, g_feats}, bg, g_bg);                         \
   }
