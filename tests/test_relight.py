@@ -307,3 +307,17 @@ def test_sky_visibility_under_a_roof():
     assert float(vis[: len(floor)][r < 0.05].max()) < 0.3
     assert float(vis[: len(floor)][r > 0.45].min()) > 0.85
     assert float(vis[len(floor):].min()) > 0.9
+
+
+def test_shading_loss_sees_the_direction_of_the_composited_normal():
+    from splatting.relight.fit import shading_loss
+    gen = torch.Generator().manual_seed(3)
+    target = torch.nn.functional.normalize(torch.randn(6, 7, 3, generator=gen), dim=-1) * 0.9  # premultiplied
+    alpha = torch.full((6, 7), 0.9)
+    dirs = torch.nn.functional.normalize(torch.randn(8, 3, generator=gen), dim=-1)
+    # the same direction at another length (Gaussians disagreeing inside the pixel) shades the same
+    assert float(shading_loss(target * 0.6, alpha, target, dirs)) < 1e-6
+    turned = torch.nn.functional.normalize(target + 0.5 * torch.randn(6, 7, 3, generator=gen), dim=-1) * 0.9
+    assert float(shading_loss(turned, alpha, target, dirs)) > 0.05
+    # half the coverage: the shading of what is there is half as bright
+    assert float(shading_loss(target, alpha * 0.5, target, dirs)) > 0.05
