@@ -98,11 +98,12 @@ def shading_loss(n, alpha, target, dirs):
     """How differently the composited normals n (H, W, 3, premultiplied) and the target normal pass
     (premultiplied) shade: L1 of max(0, n^.d) and of its SHADING_LOBE-th power, times coverage,
     over the light directions dirs (K, 3).  The shading uses only the direction of the composited
-    normal (shading.py normalises it), which the L1 on the vectors does not single out; on the demo's
-    city bike (3 parts refitted, bench/relight.py's and seed 1's poses, 512 px) this term took the
-    held-out normal error 26.7 -> 24.2 deg (frame) and the relit box PSNR +0.20 / +0.07 dB against
-    the same fit without it (docs/relighting.md).  A lobe power of 32: +0.16 / +0.06; the Lambert
-    probe alone: +0.11 / +0.03."""
+    normal (shading.py normalises it), which the L1 on the vectors does not single out.  On the
+    demo's city bike (3 parts refitted, 150 steps, 512 px) it took the held-out normal error
+    26.9 -> 24.5 deg (frame) and bike_relit 28.52 -> 28.62 dB (seed 1's poses +0.03 dB); the
+    avatar 31.32 -> 31.39 dB (docs/relighting.md).  With the directions drawn from the view-order
+    stream (a different draw) the power 8 gave +0.20 / +0.07 dB, power 32 +0.16 / +0.06, the Lambert
+    probe alone +0.11 / +0.03, each against the same fit without the term."""
     ta = target.norm(dim=-1, keepdim=True)
     nu = n / n.norm(dim=-1, keepdim=True).clamp_min(1e-6)
     tu = target / ta.clamp_min(1e-6)
