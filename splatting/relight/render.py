@@ -123,7 +123,7 @@ def _shade_c(box, R, feats, alpha, out, camera, light, gloss, rough_channel, sha
                         *camera.R.to(torch.float64).reshape(-1).tolist(),
                         0.0 if torch.is_tensor(roughness) else float(roughness), float(highlight)], dtype=torch.float32)
     _C(W, *box, R.data_ptr(), R.stride(1), feats.data_ptr(), feats.stride(1), alpha.data_ptr(), out.data_ptr(),
-       prm.data_ptr(), int(gloss) | 2 * int(rough_channel) | 4 * int(shadows) | 8 * int(sky_channel))
+       prm.data_ptr(), int(gloss) | 2 * int(rough_channel) | 4 * int(shadows) | 16 * int(sky_channel))
 
 
 @torch.no_grad()

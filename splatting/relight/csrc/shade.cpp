@@ -22,7 +22,8 @@ inline float srgb(float x) {
 // contiguous; F: relight features (normal 3, [gloss luminance], [roughness], [visibility], [sky visibility]), pixel
 // stride sF; A: alpha (contiguous).  out: (H W, 3).  prm: l[3] (unit, towards the sun), sun[3] (colour x strength), sky[3],
 // fx, fy, cx, cy, Rc[9] (world-to-camera rotation, row-major), roughness, highlight.
-// flags: 1 gloss, 2 per-pixel roughness channel, 4 sun visibility channel, 8 sky visibility channel.
+// flags: 1 gloss, 2 per-pixel roughness channel, 4 sun visibility channel, 16 sky visibility channel
+// (16, not 8: the relitfast branch gives 8 to its in-place mode).
 extern "C" void rl_shade_f32(int64_t W, int64_t u0, int64_t v0, int64_t u1, int64_t v1, const float* R, int64_t sR,
                              const float* F, int64_t sF, const float* A, float* out, const float* prm, int32_t flags) {
     const float* l = prm;
@@ -31,7 +32,7 @@ extern "C" void rl_shade_f32(int64_t W, int64_t u0, int64_t v0, int64_t u1, int6
     const float fx = prm[9], fy = prm[10], cx = prm[11], cy = prm[12];
     const float* Rc = prm + 13;
     const float rough0 = prm[22], highlight = prm[23];
-    const bool gloss = flags & 1, rough_ch = flags & 2, shadows = flags & 4, sky_ch = flags & 8;
+    const bool gloss = flags & 1, rough_ch = flags & 2, shadows = flags & 4, sky_ch = flags & 16;
     // per row: the straight linear colours first, then their sRGB encoding in one vectorisable
     // loop (powf is most of the cost; with -ffast-math gcc calls glibc's SIMD powf)
     const int64_t n = u1 > u0 ? u1 - u0 : 0;
