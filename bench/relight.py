@@ -246,6 +246,9 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
     ring, _ = load_cameras(os.path.join(bike_folder.views_dir(bike, "frame"), "cameras.json"))
     # the mip filter is for rendering below the training resolution (at 512 px it cost IoU 0.952 -> 0.889)
     aa = size < ring[0].width
+    t = time.time()
+    sky = rb.sky_visibility()  # once per bike (the sky's occlusion; shadow.sky_visibility), not timed per render
+    sky_s = time.time() - t
     rows, shots, t_baked, t_relit, t_shadow = [], [], [], [], []
     with torch.no_grad():
         for i, (pose, c, light) in enumerate(zip(poses, cams, lights)):
@@ -258,9 +261,9 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
                 a = time.perf_counter()
                 baked = render_gaussians(g, cam)
                 b = time.perf_counter()
-                flat = render_relit(g, albedo, normals, cam, light, gloss, antialiased=aa)
+                flat = render_relit(g, albedo, normals, cam, light, gloss, antialiased=aa, sky_visibility=sky)
                 c2 = time.perf_counter()
-                relit = render_relit(g, albedo, normals, cam, light, gloss, shadows=True, antialiased=aa)
+                relit = render_relit(g, albedo, normals, cam, light, gloss, shadows=True, antialiased=aa, sky_visibility=sky)
                 ts.append(time.perf_counter() - c2)
                 tr.append(c2 - b)
                 tb.append(b - a)
@@ -290,7 +293,8 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
                              # the geometry's share: the relit colour under Blender's own coverage
                              "blender_coverage_box_psnr_mean": mean("relit_box_psnr_blender_coverage"),
                              "mask_disagreement_err_share_mean": mean("mask_disagreement_err_share"), "size_px": size, "bike": os.path.basename(bike), "gaussians": len(rb.model),
-                             "prepare_s": round(prep_s, 1), "train": train_stats}
+                             "prepare_s": round(prep_s, 1), "sky_visibility_s": round(sky_s, 1),
+                             "train": train_stats}
     results["relight_render_overhead"] = overhead
     results["relight_shadow_overhead"] = shadow_overhead
     results["relight_render_ms"] = {"baked_median": 1000 * float(np.median(t_baked)),

@@ -87,11 +87,14 @@ def display(lin, alpha):
     return s * a
 
 
-def analyse(exr_path, light, camera, grid=(), sun_exr=None):
+def analyse(exr_path, light, camera, grid=(), sun_exr=None, gauss_vis=None):
     """One pose's EXR -> {row: box PSNR (dB) against Blender's Combined}.  `grid`: extra
     (roughness, highlight) pairs to try for the gloss (how ROUGHNESS/HIGHLIGHT were chosen).
     sun_exr: the same pose under its sun alone (--split): the gloss then splits into what the sun
-    and what the sky put there (Cycles counts the world as a light, so both are Glossy Direct)."""
+    and what the sky put there (Cycles counts the world as a light, so both are Glossy Direct).
+    gauss_vis: (sun visibility, sky visibility) (H, W) straight, composited from the bike's
+    Gaussians in this pose and view (--gaussians): the ceiling with the model's own cast shadows
+    and sky occlusion."""
     import torch
 
     from addon.core import frames, passes
@@ -129,8 +132,8 @@ def analyse(exr_path, light, camera, grid=(), sun_exr=None):
         out[f"only_{k}_modelled"] = score(sum(model[j] if j == k else truth[j] for j in truth))
     # the sky occluded by the object (what the model leaves out): both sky terms scaled by Blender's AO
     occl = np.where(alpha > 1e-3, ao / np.maximum(alpha, 1e-3), 1.0).clip(0, 1)[..., None]
-    sky_d = P["DiffCol"] * alpha[..., None] * np.asarray(L.sky)
-    sky_g = P["GlossCol"] * alpha[..., None] * np.asarray(L.sky)
+    sky_d = P["DiffCol"] * np.asarray(L.sky)  # the passes are premultiplied already
+    sky_g = P["GlossCol"] * np.asarray(L.sky)
     out["model_sky_times_blender_ao"] = score(sum(model.values()) - (1 - occl) * (sky_d + sky_g))
     if sun_exr:
         chs = passes.read_exr(sun_exr)
@@ -143,10 +146,42 @@ def analyse(exr_path, light, camera, grid=(), sun_exr=None):
         out["only_gloss_sun_dropped"] = score(rest + g_sky)
         tot_g = float(truth["gloss"][y0:y1, x0:x1].sum())
         out["sun_share_of_gloss"] = round(float(g_sun[y0:y1, x0:x1].sum()) / max(tot_g, 1e-12), 3)
+    if gauss_vis is not None:
+        V, S = (t(x[..., None]) for x in gauss_vis)
+        with_vis = lambda **kw: (shade_linear(t(P["DiffCol"]), t(n), L, **kw)  # noqa: E731
+                                 + shade_linear(zero, t(n), L, t(P["GlossCol"]), view=view, **kw)).numpy()
+        out["model_gauss_shadows"] = score(with_vis(sun_visibility=V))
+        out["model_gauss_shadows_sky"] = score(with_vis(sun_visibility=V, sky_visibility=S))
     for r, h in grid:
         out[f"gloss_r{r}_h{h}"] = score(rest + gloss_model(view=view, roughness=r, highlight=h))
     tot = sum(float(v[y0:y1, x0:x1].sum()) for v in truth.values())
     out["share"] = {k: round(float(v[y0:y1, x0:x1].sum()) / tot, 3) for k, v in truth.items()}
+    return out
+
+
+def gaussian_visibility(bike, poses, cams_json, lights):
+    """Per pose: the bike's Gaussians' sun visibility (cast shadows) and sky visibility (its
+    RelightableBike.sky_visibility), composited in that pose and view, straight (H, W) numpy."""
+    import torch
+
+    from splatting.raster.camera import from_numpy
+    from splatting.raster.sparse import render_gaussians
+    from splatting.relight.bike import RelightableBike
+    from splatting.relight.shading import Light
+    from splatting.relight.shadow import sun_visibility
+
+    rb = RelightableBike.load(bike)
+    sky = rb.sky_visibility()
+    out = []
+    with torch.no_grad():
+        for pose, cam, light in zip(poses, cams_json, lights):
+            g = rb.model.pose(torch.as_tensor(pose, dtype=torch.float64)).gaussians.map(lambda x: x.contiguous())
+            f = torch.stack([sun_visibility(g, Light(**light)), sky], 1).contiguous()
+            r = render_gaussians(g, from_numpy(cam["K"], cam["R"], cam["T"]), features=f, sh_degree=0)
+            a = r["alpha"].numpy()[..., None].astype(np.float64)
+            # where the Gaussians do not cover Blender's pixel they say nothing: unoccluded
+            st = np.where(a > 0.02, r["features"].numpy() / np.maximum(a, 0.02), 1.0).clip(0, 1)
+            out.append((st[..., 0], st[..., 1]))
     return out
 
 
@@ -160,6 +195,8 @@ def main():
     ap.add_argument("--samples", type=int, default=32)
     ap.add_argument("--seed", type=int, default=0, help="poses sample_poses(n, seed), suns seeded seed + 16 (as bike_relit)")
     ap.add_argument("--grid", action="store_true", help="also try a grid of gloss roughness x highlight")
+    ap.add_argument("--gaussians", action="store_true", help="also price the model with the bike's Gaussians' own "
+                    "sun visibility and sky visibility (its trained gaussians/ and relight fits)")
     ap.add_argument("--split", action="store_true", help="also render each pose under its sun alone (sky black) to "
                     "split the gloss into its sun and sky parts")
     a = ap.parse_args()
@@ -169,6 +206,8 @@ def main():
         ap.error("--bike and --out are required")
     if not os.path.isfile(os.path.join(a.bike, "bike.blend")):
         sys.exit(f"error: no bike.blend in {a.bike}")
+    if a.gaussians and not os.path.isfile(os.path.join(a.bike, "gaussians", "frame.relight.npz")):
+        sys.exit(f"error: --gaussians: no relight fits in {a.bike}/gaussians (run relight-fit first)")
     sys.path.insert(0, ROOT)
     import torch
 
@@ -194,8 +233,9 @@ def main():
     for p in job["cameras"]:
         with open(p) as f:
             cams_json.append(json.load(f))
+    vis = gaussian_visibility(a.bike, poses, cams_json, lights) if a.gaussians else [None] * a.poses
     rows = [analyse(os.path.join(a.out, f"passes_{i:03d}.exr"), lights[i], cams_json[i], grid,
-                    os.path.join(a.out, f"passes_{i:03d}_sun.exr") if a.split else None) for i in range(a.poses)]
+                    os.path.join(a.out, f"passes_{i:03d}_sun.exr") if a.split else None, vis[i]) for i in range(a.poses)]
     keys = [k for k in rows[0] if k != "share"]
     summary = {k: round(float(np.mean([r[k] for r in rows])), 2) for k in keys}
     summary["share"] = {k: round(float(np.mean([r["share"][k] for r in rows])), 3) for k in rows[0]["share"]}

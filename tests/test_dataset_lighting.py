@@ -132,6 +132,20 @@ def test_relit_is_deterministic_and_records_the_sun_it_renders(assets, monkeypat
     assert img2["lighting"]["sun_direction_world"] != rec["sun_direction_world"]
 
 
+def test_relit_bikes_carry_their_sky_visibility(assets, monkeypatch):
+    # the bike's self-occlusion rides as the last relight channel (riders: 1), and is shaded
+    from splatting.relight import scene
+    seen = []
+    real = scene.shade_composited
+    monkeypatch.setattr(scene, "shade_composited", lambda *a, **k: seen.append((a, k)) or real(*a, **k))
+    _sample(_cfg(assets), 1)
+    (R, F, cover, *_), kw = seen[0]
+    assert kw["sky_channel"] and kw["shadows"] and F.shape[-1] == 3 + 1 + 1 + 1 + 1  # normal, gloss, rough, sun, sky
+    m = cover > 0.5
+    sky = F[..., -1][m] / cover[m]
+    assert int(m.sum()) > 20 and float(sky.max()) <= 1 + 1e-4 and float(sky.min()) < 0.95
+
+
 @pytest.mark.parametrize("extra", [{}, {"appearance": {"enabled": True}, "lod": {"enabled": True}}])
 def test_relit_and_baked_differ_in_rgb_only(assets, extra):
     relit = _cfg(assets, **extra)

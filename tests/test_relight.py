@@ -237,26 +237,27 @@ def test_cast_shadow_of_a_blob_on_a_plane():
         assert float(vis[len(plane) + top]) > 0.9  # 3 cm footprint are, rightly, in its shadow)
 
 
-@pytest.mark.parametrize("gloss, rough, shadows", [(True, False, False), (True, True, True), (False, False, True)])
-def test_fused_shading_equals_the_torch_formula(gloss, rough, shadows):
+@pytest.mark.parametrize("gloss, rough, shadows, sky", [(True, False, False, False), (True, True, True, True),
+                                                       (False, False, True, False), (True, False, False, True)])
+def test_fused_shading_equals_the_torch_formula(gloss, rough, shadows, sky):
     # shade_composited's C loop (csrc/shade.cpp) against its torch reference, on channels as the
     # compositor leaves them: strided (H, W, C) views of one table, partly covered pixels
     from splatting.relight.render import shade_composited
     gen = torch.Generator().manual_seed(5)
     H, W = 24, 40
-    C = 3 + 3 + int(gloss) + int(rough) + int(shadows)
+    C = 3 + 3 + int(gloss) + int(rough) + int(shadows) + int(sky)
     table = torch.rand(H, W, C + 2, generator=gen)
     alpha = torch.rand(H, W, generator=gen) * (torch.rand(H, W, generator=gen) > 0.3)
     alpha[0, :5] = torch.tensor([0.0, 1e-6, 2e-5, 0.5, 1.0])
     R = table[..., 1:4] * alpha[..., None]
     feats = table[..., 4:4 + C - 3].clone()
     feats[..., :3] = torch.randn(H, W, 3, generator=gen)  # composited normals: any length, any sign
-    table[..., 4:4 + C - 3] = feats * alpha[..., None] if (rough or shadows) else feats
+    table[..., 4:4 + C - 3] = feats * alpha[..., None] if (rough or shadows or sky) else feats
     feats = table[..., 4:4 + C - 3]
     cam = ring_camera(35, orbit_centre=(0, 1, 0), size=W, focal=50.0)
     cam = type(cam)(cam.R, cam.T, cam.K, W, H, "c")
     light = Light(sun_direction=(0.3, 0.8, -0.5), sun_colour=(1.0, 0.9, 0.8), sun_strength=4.0, sky=(0.2, 0.25, 0.3))
-    kw = dict(gloss=gloss, rough_channel=rough, shadows=shadows, roughness=0.4, highlight=0.25)
+    kw = dict(gloss=gloss, rough_channel=rough, shadows=shadows, roughness=0.4, highlight=0.25, sky_channel=sky)
     c = shade_composited(R, feats, alpha, cam, light, backend="c", **kw)
     t = shade_composited(R, feats, alpha, cam, light, backend="torch", **kw)
     assert float(t.abs().max()) > 0.1 and int((t.sum(-1) > 0).sum()) > 0.5 * H * W
@@ -267,3 +268,56 @@ def test_fused_shading_equals_the_torch_formula(gloss, rough, shadows):
                                atol=2e-5, rtol=1e-4)
     torch.testing.assert_close(cb[3:20, 5:30], c[3:20, 5:30])
     assert float(cb.sum()) < float(c.sum()) and float(cb[:3].abs().sum() + cb[:, :5].abs().sum()) == 0
+    if sky:  # the sky channel darkens: without it every pixel sees the whole sky
+        kw0 = dict(kw, sky_channel=False)
+        t0 = shade_composited(R, feats[..., :-1], alpha, cam, light, backend="torch", **kw0)
+        assert float((t0 - t).min()) >= -1e-6 and float((t0 - t).max()) > 0.01
+
+
+def test_sky_term_scaled_by_the_sky_visibility():
+    # by hand: albedo a, sun behind the surface, so only the sky lights it: a * sky * V
+    light = Light(sun_direction=(0.0, -1.0, 0.0), sun_strength=3.0, sky=(0.2, 0.3, 0.4))
+    a = torch.tensor([[[0.5, 0.6, 0.7]]])
+    n = torch.tensor([[[0.0, 1.0, 0.0]]])
+    out = shade_linear(a, n, light, sky_visibility=torch.tensor([[[0.25]]]))
+    torch.testing.assert_close(out, a * torch.tensor([0.2, 0.3, 0.4]) * 0.25)
+    torch.testing.assert_close(shade_linear(a, n, light), a * torch.tensor([0.2, 0.3, 0.4]))
+
+
+def test_sky_visibility_under_a_roof():
+    from splatting.relight.shadow import sky_visibility
+
+    # a 1 m floor of flat Gaussians facing up and a 0.4 m roof 0.1 m above its centre: under the
+    # roof's middle it hides ~sin^2(63 deg) = 0.8 of the cosine-weighted sky; far from it, nothing;
+    # the roof's top sees the whole sky
+    xs = torch.linspace(-0.5, 0.5, 41)
+    X, Z = torch.meshgrid(xs, xs, indexing="ij")
+    floor = torch.stack([X.reshape(-1), torch.zeros(X.numel()), Z.reshape(-1)], 1)
+    rs = torch.linspace(-0.2, 0.2, 17)
+    X, Z = torch.meshgrid(rs, rs, indexing="ij")
+    roof = torch.stack([X.reshape(-1), torch.full((X.numel(),), 0.1), Z.reshape(-1)], 1)
+    means = torch.cat([floor, roof])
+    n = len(means)
+    scales = torch.tensor([[0.02, 0.002, 0.02]]).expand(n, 3)
+    g = Gaussians(means, torch.tensor([[1.0, 0.0, 0.0, 0.0]]).expand(n, 4).contiguous(), torch.log(scales),
+                  torch.full((n,), 4.0), torch.zeros(n, 1, 3))
+    up = torch.tensor([[0.0, 1.0, 0.0]]).expand(n, 3)
+    vis = sky_visibility(g, up)
+    r = floor[:, [0, 2]].norm(dim=-1)
+    assert float(vis[: len(floor)][r < 0.05].max()) < 0.3
+    assert float(vis[: len(floor)][r > 0.45].min()) > 0.85
+    assert float(vis[len(floor):].min()) > 0.9
+
+
+def test_shading_loss_sees_the_direction_of_the_composited_normal():
+    from splatting.relight.fit import shading_loss
+    gen = torch.Generator().manual_seed(3)
+    target = torch.nn.functional.normalize(torch.randn(6, 7, 3, generator=gen), dim=-1) * 0.9  # premultiplied
+    alpha = torch.full((6, 7), 0.9)
+    dirs = torch.nn.functional.normalize(torch.randn(8, 3, generator=gen), dim=-1)
+    # the same direction at another length (Gaussians disagreeing inside the pixel) shades the same
+    assert float(shading_loss(target * 0.6, alpha, target, dirs)) < 1e-6
+    turned = torch.nn.functional.normalize(target + 0.5 * torch.randn(6, 7, 3, generator=gen), dim=-1) * 0.9
+    assert float(shading_loss(turned, alpha, target, dirs)) > 0.05
+    # half the coverage: the shading of what is there is half as bright
+    assert float(shading_loss(target, alpha * 0.5, target, dirs)) > 0.05

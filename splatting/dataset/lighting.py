@@ -177,23 +177,25 @@ class RelitSample:
         rb = self.ch.bike(self.assets, bike)
         alb, gl = [rb.albedo], [rb.gloss]
         rough = [torch.full((len(rb.albedo),), ROUGHNESS)]
+        sky = [rb.sky_visibility()]  # the bike's self-occlusion (once per bike and process)
         if rider is not None:
             ra = self.ch.rider(self.assets, rider)
             alb.append(ra.albedo)
             gl.append(ra.gloss)
             rough.append(torch.full((len(ra.albedo),), float(RIDER_ROUGHNESS)))
-        alb, gl, rough, nrm = torch.cat(alb), torch.cat(gl), torch.cat(rough), self.normals[k]
+            sky.append(torch.ones(len(ra.albedo)))  # riders: the whole sky (rider_relit's model)
+        alb, gl, rough, sky, nrm = torch.cat(alb), torch.cat(gl), torch.cat(rough), torch.cat(sky), self.normals[k]
         if looked is not trained:
             before = _srgb_decode((C0 * trained.sh[:, 0] + 0.5).float()).clamp_min(1e-3)
             after = _srgb_decode((C0 * looked.sh[:, 0] + 0.5).float())
             alb = (alb * (after / before).clamp(0, 20)).clamp(0, 1)
         if idx is not None:
-            alb, gl, rough, nrm = (x.index_select(0, idx) for x in (alb, gl, rough, nrm))
+            alb, gl, rough, sky, nrm = (x.index_select(0, idx) for x in (alb, gl, rough, sky, nrm))
         vis = None
         if self.shadows:
             from splatting.relight.shadow import sun_visibility
             vis = sun_visibility(g, self.light)
-        self.channels[k] = (alb + gl, relight_features(nrm, gl, rough, vis))
+        self.channels[k] = (alb + gl, relight_features(nrm, gl, rough, vis, sky))
 
     def cast_shadows(self, rgb, L, camera, footprints, heights, opacity):
         """The final image (H, W, 3) uint8 with the instances' shadows cast on the ground away from the

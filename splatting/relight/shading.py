@@ -4,8 +4,9 @@ Units follow Blender's Cycles so that a light set up here and in Blender renders
 strength E (W/m^2) lights a Lambertian surface of albedo a, normal n with outgoing radiance
 a E max(0, n.l) / pi (measured: a 0.5-albedo plane facing a strength-1 sun renders 0.163 in the
 Combined pass, 1/pi = 0.318 per unit albedo plus a little specular); a uniform world colour of
-radiance L (Blender's background colour x strength) adds a L whatever the normal (the whole sphere
-lights the surface; self-occlusion is not modelled).  Shading happens in linear light; the
+radiance L (Blender's background colour x strength) adds a L V_sky whatever the normal, V_sky the
+share of the sky the surface sees (1 without a sky visibility: the whole sphere lights it;
+shadow.sky_visibility for a bike's self-occlusion).  Shading happens in linear light; the
 display image is the sRGB encoding of the straight colour, as Blender's "Standard" view transform.
 
 The glossy colour (Cycles' Glossy Color pass) is shaded like the albedo: exact for the uniform sky
@@ -121,14 +122,16 @@ def ggx_sun(normal, view, light: Light, roughness=ROUGHNESS):
     return _ggx_cm(n, _cm(view), l, _flat(roughness), cos).reshape(normal.shape[:-1])
 
 
-def _shade_linear_cm(albedo, normal, light, gloss, view, roughness, highlight, vis):
-    """shade_linear on (3, P) albedo, normal, gloss, view and (P,) visibility -> (3, P)."""
+def _shade_linear_cm(albedo, normal, light, gloss, view, roughness, highlight, vis, sky_vis=None):
+    """shade_linear on (3, P) albedo, normal, gloss, view and (P,) sun and sky visibility -> (3, P)."""
     dt = albedo.dtype
     n = _unit(normal)
     l = light.direction(dt)
     cos = (n[0] * float(l[0])).add_(n[1], alpha=float(l[1])).add_(n[2], alpha=float(l[2])).clamp_min_(0.0)
     sun = (torch.as_tensor(light.sun_colour, dtype=dt) * light.sun_strength)[:, None]
     sky = torch.as_tensor(light.sky, dtype=dt)[:, None]
+    if sky_vis is not None:
+        sky = sky * sky_vis
     k = cos / math.pi  # the sun's diffuse irradiance / pi
     if vis is not None:
         k.mul_(vis)
@@ -144,15 +147,17 @@ def _shade_linear_cm(albedo, normal, light, gloss, view, roughness, highlight, v
 
 
 def shade_linear(albedo, normal, light: Light, gloss=None, view=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
-                 sun_visibility=None):
+                 sun_visibility=None, sky_visibility=None):
     """Premultiplied linear radiance (H, W, 3) of premultiplied albedo and composited normals.
 
     gloss (premultiplied glossy colour) reflects the sky like the albedo (exact for a uniform sky)
     and the sun as a GGX highlight seen along `view` ((H, W, 3) unit, towards the camera); without
     a view it is shaded like the albedo (the diffuse-like approximation).  sun_visibility (H, W, 1)
-    in [0, 1] scales the sun (cast shadows, splatting/relight/shadow.py); the sky is not occluded."""
+    in [0, 1] scales the sun (cast shadows, splatting/relight/shadow.py), sky_visibility (H, W, 1) the
+    sky, diffuse and glossy alike (self-occlusion, shadow.sky_visibility); None: unoccluded."""
     out = _shade_linear_cm(_cm(albedo), _cm(normal), light, None if gloss is None else _cm(gloss),
-                           None if view is None else _cm(view), _flat(roughness), highlight, _flat(sun_visibility))
+                           None if view is None else _cm(view), _flat(roughness), highlight, _flat(sun_visibility),
+                           _flat(sky_visibility))
     return out.T.reshape(albedo.shape)
 
 
@@ -178,19 +183,20 @@ def view_directions(camera, dtype=torch.float32, pixels=None):
     return _view_directions_cm(camera, pixels // W, pixels % W, dtype).T
 
 
-def _shade_cm(albedo, normal, alpha, light, gloss, view, roughness, highlight, vis):
+def _shade_cm(albedo, normal, alpha, light, gloss, view, roughness, highlight, vis, sky_vis=None):
     """shade on (3, P) inputs and (P,) alpha -> (3, P)."""
-    lin = _shade_linear_cm(albedo, normal, light, gloss, view, roughness, highlight, vis)
+    lin = _shade_linear_cm(albedo, normal, light, gloss, view, roughness, highlight, vis, sky_vis)
     lin.div_(alpha.clamp_min(1e-6)).masked_fill_(alpha <= 1e-6, 0.0)  # the straight colour
     return srgb_encode_(lin).mul_(alpha)
 
 
 def shade(albedo, normal, alpha, light: Light, gloss=None, view=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
-          sun_visibility=None):
+          sun_visibility=None, sky_visibility=None):
     """Display colour premultiplied by alpha (H, W, 3) in [0, 1]: the sRGB encoding of the straight
     linear colour, times coverage (what an RGBA render composited over black shows)."""
     out = _shade_cm(_cm(albedo), _cm(normal), alpha.reshape(-1), light, None if gloss is None else _cm(gloss),
-                    None if view is None else _cm(view), _flat(roughness), highlight, _flat(sun_visibility))
+                    None if view is None else _cm(view), _flat(roughness), highlight, _flat(sun_visibility),
+                    _flat(sky_visibility))
     return out.T.reshape(albedo.shape)
 
 

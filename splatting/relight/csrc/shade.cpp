@@ -19,10 +19,11 @@ inline float srgb(float x) {
 
 // The pixels of rows v0..v1-1, columns u0..u1-1 of a W-wide image whose alpha exceeds 1e-5 (the
 // others are left as they are).  R: reflectance (albedo + gloss), pixel stride sR, channels
-// contiguous; F: relight features (normal 3, [gloss luminance], [roughness], [visibility]), pixel
+// contiguous; F: relight features (normal 3, [gloss luminance], [roughness], [visibility], [sky visibility]), pixel
 // stride sF; A: alpha (contiguous).  out: (H W, 3).  prm: l[3] (unit, towards the sun), sun[3] (colour x strength), sky[3],
 // fx, fy, cx, cy, Rc[9] (world-to-camera rotation, row-major), roughness, highlight.
-// flags: 1 gloss, 2 per-pixel roughness channel, 4 sun visibility channel.
+// flags: 1 gloss, 2 per-pixel roughness channel, 4 sun visibility channel, 16 sky visibility channel
+// (16, not 8: the relitfast branch gives 8 to its in-place mode).
 extern "C" void rl_shade_f32(int64_t W, int64_t u0, int64_t v0, int64_t u1, int64_t v1, const float* R, int64_t sR,
                              const float* F, int64_t sF, const float* A, float* out, const float* prm, int32_t flags) {
     const float* l = prm;
@@ -31,7 +32,7 @@ extern "C" void rl_shade_f32(int64_t W, int64_t u0, int64_t v0, int64_t u1, int6
     const float fx = prm[9], fy = prm[10], cx = prm[11], cy = prm[12];
     const float* Rc = prm + 13;
     const float rough0 = prm[22], highlight = prm[23];
-    const bool gloss = flags & 1, rough_ch = flags & 2, shadows = flags & 4;
+    const bool gloss = flags & 1, rough_ch = flags & 2, shadows = flags & 4, sky_ch = flags & 16;
     // per row: the straight linear colours first, then their sRGB encoding in one vectorisable
     // loop (powf is most of the cost; with -ffast-math gcc calls glibc's SIMD powf)
     const int64_t n = u1 > u0 ? u1 - u0 : 0;
@@ -59,7 +60,9 @@ extern "C" void rl_shade_f32(int64_t W, int64_t u0, int64_t v0, int64_t u1, int6
         }
         float rough = rough0;
         if (rough_ch) rough = clampf(f[c++] / ac, 0.05f, 1.0f);
-        const float vis = shadows ? clampf(f[c] / ac, 0.0f, 1.0f) : 1.0f;
+        const float vis = shadows ? clampf(f[c++] / ac, 0.0f, 1.0f) : 1.0f;
+        const float skv = sky_ch ? clampf(f[c] / ac, 0.0f, 1.0f) : 1.0f;  // the sky's share (self-occlusion)
+        const float skyv[3] = {sky[0] * skv, sky[1] * skv, sky[2] * skv};
         float n[3] = {f[0], f[1], f[2]};
         float nn = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
         nn = nn > 1e-6f ? nn : 1e-6f;
@@ -68,7 +71,7 @@ extern "C" void rl_shade_f32(int64_t W, int64_t u0, int64_t v0, int64_t u1, int6
         cosl = cosl > 0.0f ? cosl : 0.0f;
         const float k = cosl / kPi * vis;
         float lin[3];
-        for (int j = 0; j < 3; ++j) lin[j] = (sun[j] * k + sky[j]) * alb[j];
+        for (int j = 0; j < 3; ++j) lin[j] = (sun[j] * k + skyv[j]) * alb[j];
         if (gloss) {
             // the view direction: from the pixel's surface towards the camera, in the world
             const float x = (float(q % W) + 0.5f - cx) / fx, y = (float(q / W) + 0.5f - cy) / fy;
@@ -87,7 +90,7 @@ extern "C" void rl_shade_f32(int64_t W, int64_t u0, int64_t v0, int64_t u1, int6
             const float t = nh * nh * (a2 - 1.0f) + 1.0f;
             const float D = cosl > 0.0f ? a2 / (t * t * (4.0f * kPi) * nv) : 0.0f;
             const float spec = D * highlight * vis;
-            for (int j = 0; j < 3; ++j) lin[j] += (sun[j] * spec + sky[j]) * gl[j];
+            for (int j = 0; j < 3; ++j) lin[j] += (sun[j] * spec + skyv[j]) * gl[j];
         }
         for (int j = 0; j < 3; ++j) sbuf[3 * m + j] = clampf(lin[j] / ac, 0.0f, 1.0f);  // a > 1e-5 here
         abuf[m] = a;
