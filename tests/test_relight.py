@@ -12,7 +12,7 @@ from cyclist_formats import bike_folder
 from splatting.gaussians.container import Gaussians
 from splatting.raster.camera import ring_camera
 from splatting.relight.bike import RelightableBike
-from splatting.relight.render import composite_features, prepare, render_relit
+from splatting.relight.render import composite_features, prepare, relit_static, render_relit
 from splatting.relight.shading import Light, ggx_sun, lambert_reference, shade, shade_linear, srgb_encode, view_directions
 from helpers import make_bike, mat_vec, random_pose, ref_part_R
 
@@ -196,6 +196,12 @@ def test_relit_channels_equal_the_pair_list_compositing():
     torch.testing.assert_close(out["alpha"], alpha, atol=2e-4, rtol=1e-3)
     torch.testing.assert_close(out["reflectance"], R, atol=2e-4, rtol=1e-3)
     torch.testing.assert_close(out["normal"], n, atol=2e-4, rtol=1e-3)
+    # the pose-invariant channels kept by the caller (RelightableBike.static) render the same, bit for bit
+    kept = render_relit(g, None, nrm, cam, Light(), None, antialiased=False, static=relit_static(alb, gl))
+    for k in ("rgb", "alpha", "reflectance", "normal"):
+        assert torch.equal(kept[k], out[k]), k
+    with pytest.raises(ValueError, match="static channels for 99 Gaussians"):
+        render_relit(g, alb, nrm, cam, Light(), gl, static=relit_static(alb[:99], gl[:99]))
 
 
 def test_relight_fit_command_bad_input(tmp_path):

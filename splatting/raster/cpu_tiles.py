@@ -3,6 +3,8 @@
 composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, W, split=(Cf,)) ->
 (one contiguous (H, W, c) image per entry c of split (c == 1: (H, W)), T_final (H, W)): the Cf
 channels of sum_k w_k feats_k over the Gaussians at each pixel front to back, w_k = alpha_k T_k,
+feats (N, Cf) or a list of (N, c_i) parts whose columns are the Cf channels in that order (the
+C++ gathers each Gaussian's channels from the parts: no concatenated (N, Cf) table is built),
 T_final the transmittance left (alpha = 1 - T_final), cut into consecutive channel groups (colour,
 extra features, depth) that the C++ writes and reads as separate images. Differentiable in
 means2d, conics, opacities and feats (any number Cf of channels). Same image formation as
@@ -46,18 +48,20 @@ class _TileComposite(torch.autograd.Function):
     rather than as a zero image."""
 
     @staticmethod
-    def forward(ctx, means2d, conics, opacities, feats, depths, radii, boxes, H, W, groups, n_groups, split):
+    def forward(ctx, means2d, conics, opacities, depths, radii, boxes, H, W, groups, n_groups, split, *parts):
         lib = build.load()
         dt = means2d.dtype
         if dt not in _SUFFIX:
             raise TypeError(f"tiled rasterizer: float32 or float64 tensors, got {dt}")
         sfx = _SUFFIX[dt]
         nt = max(1, torch.get_num_threads())
-        n, cf = feats.shape
+        n = means2d.shape[0]
         m2 = means2d.detach().contiguous()
         cn = conics.detach().to(dt).contiguous()
         op = opacities.detach().to(dt).contiguous()
-        fe = feats.detach().to(dt).contiguous()
+        fe = [p.detach().to(dt).contiguous() for p in parts]
+        isz = [p.shape[1] for p in fe]
+        cf = sum(isz)
         z = depths.detach().to(dt).contiguous()
         rd = radii.to(torch.int64).contiguous()
         bx = boxes.to(torch.int64).contiguous()
@@ -84,14 +88,16 @@ class _TileComposite(torch.autograd.Function):
         g_sorted = torch.empty(max(nv, 1), dtype=torch.int32) if ng else None
         T_groups = torch.empty(ng, H, W, dtype=dt)
         osz = (ctypes.c_int * len(split))(*split)
-        getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), _ptr(fe), cf, W, H, nt, _ptr(recs), _ptr(cursor),
+        getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), len(fe), (ctypes.c_int * len(fe))(*isz), _ptrs(fe), cf,
+                                          W, H, nt, _ptr(recs), _ptr(cursor),
                                           _ptr(tile_off), _ptr(goff), _ptr(lst), _ptr(slot), _ptr(fs),
                                           len(split), osz, _ptrs(outs), _ptr(T_final), _ptr(last), _nptr(gr), ng,
                                           _nptr(g_sorted), _ptr(T_groups) if ng else None)
         ctx.mark_non_differentiable(T_groups)
         ctx.geom = (n, cf, H, W, nv, order, recs, tile_off, goff, lst, slot, fs, last, split)
         ctx.save_for_backward(T_final)
-        ctx.dtypes = (conics.dtype, opacities.dtype, feats.dtype)
+        ctx.dtypes = (conics.dtype, opacities.dtype, [p.dtype for p in parts])
+        ctx.isz = isz
         return (*outs, T_final, T_groups)
 
     @staticmethod
@@ -113,27 +119,35 @@ class _TileComposite(torch.autograd.Function):
                                            _ptr(T_final), _ptr(last), len(split), (ctypes.c_int * len(split))(*split),
                                            _ptrs(g_outs), _nptr(g_T), _ptr(g_m2), _ptr(g_cn), _ptr(g_op), _ptr(g_fe))
         dc, do, df = ctx.dtypes
-        return g_m2, g_cn.to(dc), g_op.to(do), g_fe.to(df), None, None, None, None, None, None, None, None
+        g_parts = [g.to(d) for g, d in zip(g_fe.split(ctx.isz, 1), df)]
+        return (g_m2, g_cn.to(dc), g_op.to(do), None, None, None, None, None, None, None, None, *g_parts)
 
 
 def composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, W, groups=None, n_groups=0,
                     split=None):
     """See the module docstring. CPU tensors only; float32 or float64 (means2d's dtype).
-    split: channel counts (each >= 1) summing to feats.shape[1]; None: one (H, W, Cf) image.
+    feats: (N, Cf), or a list of (N, c_i) parts (Cf = sum c_i).
+    split: channel counts (each >= 1) summing to Cf; None: one (H, W, Cf) image.
     groups (N,) int in [-1, n_groups) (-1: in no group), n_groups >= 1: also returns T_groups
     (n_groups, H, W), each group's transmittance rendered alone (not differentiable).
     -> (*images, T_final) or (*images, T_final, T_groups) with groups."""
     if means2d.device.type != "cpu":
         raise ValueError("the tiled rasterizer runs on CPU tensors; use backend='torch' for "
                          f"{means2d.device.type} tensors")
-    split = (feats.shape[1],) if split is None else tuple(int(c) for c in split)
-    if not split or min(split) < 1 or sum(split) != feats.shape[1]:
-        raise ValueError(f"composite_tiles: split {split} must be channel counts >= 1 summing to {feats.shape[1]}")
+    parts = (feats,) if torch.is_tensor(feats) else tuple(feats)
+    n = means2d.shape[0]
+    if not parts or any(p.dim() != 2 or p.shape[0] != n or p.shape[1] < 1 for p in parts):
+        raise ValueError(f"composite_tiles: feats must be ({n}, C) tensors with C >= 1, got "
+                         f"{[tuple(p.shape) for p in parts]}")
+    cf = sum(p.shape[1] for p in parts)
+    split = (cf,) if split is None else tuple(int(c) for c in split)
+    if not split or min(split) < 1 or sum(split) != cf:
+        raise ValueError(f"composite_tiles: split {split} must be channel counts >= 1 summing to {cf}")
     if groups is not None:
-        if n_groups < 1 or groups.shape != (means2d.shape[0],):
-            raise ValueError(f"composite_tiles: groups must be ({means2d.shape[0]},) with n_groups >= 1")
+        if n_groups < 1 or groups.shape != (n,):
+            raise ValueError(f"composite_tiles: groups must be ({n},) with n_groups >= 1")
         if len(groups) and not (int(groups.min()) >= -1 and int(groups.max()) < n_groups):
             raise ValueError(f"composite_tiles: group ids must lie in [-1, {n_groups})")
-        return _TileComposite.apply(means2d, conics, opacities, feats, depths, radii, boxes, H, W, groups, n_groups,
-                                    split)
-    return _TileComposite.apply(means2d, conics, opacities, feats, depths, radii, boxes, H, W, None, 0, split)[:-1]
+        return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, H, W, groups, n_groups, split,
+                                    *parts)
+    return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, H, W, None, 0, split, *parts)[:-1]

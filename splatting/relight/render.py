@@ -4,8 +4,11 @@
 `prepare` / `composite_features` keep the pure-torch pair list for the relight fit, which needs the
 backward of the features with the geometry fixed (one projection per view, reused every step).
 """
+from typing import NamedTuple, Optional
+
 import torch
 
+from splatting.gaussians.sh import rgb_to_sh0
 from splatting.raster.sparse import composite, intersect, project
 from splatting.relight.shading import HIGHLIGHT, ROUGHNESS, Light, _shade_cm, _view_directions_cm
 
@@ -34,19 +37,43 @@ def composite_features(prep, features):
     return outs, alpha
 
 
+def gloss_luma(gloss):
+    """(N, 3) gloss -> (N, 1) its Rec. 709 luminance (the channel shade_composited reads)."""
+    return (gloss.float() @ LUMA)[:, None]
+
+
+def relight_feature_parts(normals, luma=None, roughness=None, visibility=None):
+    """relight_features' columns as a list of (N, c) float32 parts (luma: gloss_luma(gloss)), for
+    rasterize(features=[...]), which composites them without concatenating them."""
+    cols = [normals.float()]
+    if luma is not None:
+        cols.append(luma.float())
+    for x in (roughness, visibility):
+        if x is not None:
+            cols.append(x.float().reshape(-1, 1))
+    return cols
+
+
 def relight_features(normals, gloss=None, roughness=None, visibility=None):
     """The per-Gaussian channels shade_composited reads, as one (N, C) float32 table: the world
     normal (3), then the gloss's luminance (1) when there is a gloss, a per-Gaussian roughness (1)
     when given (scenes mixing materials: a bike's 0.4, a rider's 1.0), the sun visibility (1) when
     given (cast shadows).  The reflectance albedo + gloss is composited through the colour
     channels (or its own 3 features, splatting/relight/scene.py)."""
-    cols = [normals.float()]
-    if gloss is not None:
-        cols.append((gloss.float() @ LUMA)[:, None])
-    for x in (roughness, visibility):
-        if x is not None:
-            cols.append(x.float().reshape(-1, 1))
-    return torch.cat(cols, 1).contiguous()
+    luma = None if gloss is None else gloss_luma(gloss)
+    return torch.cat(relight_feature_parts(normals, luma, roughness, visibility), 1).contiguous()
+
+
+class RelitStatic(NamedTuple):
+    """What render_relit derives from the pose-invariant albedo and gloss (relit_static): a
+    relightable bike or avatar keeps it (RelightableBike.static), so no render rebuilds it."""
+    sh: torch.Tensor                      # (N, 1, 3) the reflectance albedo + gloss as degree-0 SH
+    gloss_luma: Optional[torch.Tensor]    # (N, 1) gloss_luma(gloss), None without a gloss
+
+
+def relit_static(albedo, gloss=None):
+    refl = albedo.float() if gloss is None else albedo.float() + gloss.float()
+    return RelitStatic(rgb_to_sh0(refl)[:, None, :].contiguous(), None if gloss is None else gloss_luma(gloss))
 
 
 def shade_composited(R, feats, alpha, camera, light: Light, gloss=True, rough_channel=False, shadows=False,
@@ -62,9 +89,11 @@ def shade_composited(R, feats, alpha, camera, light: Light, gloss=True, rough_ch
     hold the C to); None: "c" for float32 CPU tensors, else "torch"."""
     H, W = alpha.shape
     u0, v0, u1, v1 = box if box is not None else (0, 0, W, H)
-    rgb = torch.zeros(H * W, 3, dtype=feats.dtype)
     if backend is None:
         backend = "c" if feats.dtype == torch.float32 and feats.device.type == "cpu" else "torch"
+    # the C loop writes every pixel of its box (zeros where uncovered): no zero fill for the whole image
+    whole = backend == "c" and (u0, v0, u1, v1) == (0, 0, W, H)
+    rgb = (torch.empty if whole else torch.zeros)(H * W, 3, dtype=feats.dtype)
     if backend == "c":
         _shade_c((u0, v0, u1, v1), R, feats, alpha, rgb, camera, light, gloss, rough_channel, shadows, roughness,
                  highlight)
@@ -125,7 +154,7 @@ def _shade_c(box, R, feats, alpha, out, camera, light, gloss, rough_channel, sha
 
 @torch.no_grad()
 def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
-                 shadows=False, antialiased=True):
+                 shadows=False, antialiased=True, static=None):
     """Gaussians g with per-Gaussian linear albedo (N, 3), world-frame unit normals (N, 3) and optionally
     a linear glossy colour (N, 3) under a light -> dict rgb (H, W, 3) display colour premultiplied
     (over black), alpha, reflectance (albedo + gloss) and normal (composited).  One rasterizer call composites
@@ -134,22 +163,25 @@ def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness
     others (splatting/relight/shadow.py: one more render, from the sun).  antialiased: the
     rasterizer's mip filter (keeps sub-pixel Gaussians -- spokes, cables -- their true coverage
     when rendered below their training resolution; mask IoU 0.795 -> 0.892 for a 512 px-trained
-    bike at 256 px, bench/relight.py)."""
+    bike at 256 px, bench/relight.py).  static: relit_static(albedo, gloss) kept by the caller
+    (RelightableBike.static): albedo and gloss are then not read; None derives it here."""
     from splatting.gaussians.container import Gaussians
-    from splatting.gaussians.sh import C0
     from splatting.raster.sparse import render_gaussians
 
-    # Channel budget (each composited channel costs the tiled compositor ~4-5 % of a render): the
+    # Channel budget (each composited channel costs the tiled compositor ~3-5 % of a render): the
     # reflectance albedo + gloss rides in the colour channels (degree-0 SH whose colour is it), the
-    # normal and the gloss's luminance are the features (relight_features).
-    refl = albedo if gloss is None else albedo + gloss
+    # normal and the gloss's luminance are the features (relight_features), handed over as parts
+    # (no table built per render), and no depth is composited.
+    static = relit_static(albedo, gloss) if static is None else static
+    if static.sh.shape != (len(g), 1, 3):
+        raise ValueError(f"render_relit: static channels for {static.sh.shape[0]} Gaussians, not {len(g)}")
     vis = None
     if shadows:
         from splatting.relight.shadow import sun_visibility
         vis = sun_visibility(g, light)
-    feats = relight_features(normals, gloss, visibility=vis)
-    gr = Gaussians(g.means, g.quats, g.log_scales, g.opacity_logits, ((refl.float() - 0.5) / C0)[:, None, :].contiguous())
-    r = render_gaussians(gr, camera, features=feats, sh_degree=0, antialiased=antialiased)
-    rgb = shade_composited(r["rgb"], r["features"], r["alpha"], camera, light, gloss is not None, False, shadows,
-                           roughness, highlight)
+    gr = Gaussians(g.means, g.quats, g.log_scales, g.opacity_logits, static.sh)
+    r = render_gaussians(gr, camera, features=relight_feature_parts(normals, static.gloss_luma, visibility=vis),
+                         sh_degree=0, antialiased=antialiased, depth=False)
+    rgb = shade_composited(r["rgb"], r["features"], r["alpha"], camera, light, static.gloss_luma is not None, False,
+                           shadows, roughness, highlight)
     return {"rgb": rgb, "alpha": r["alpha"], "reflectance": r["rgb"], "normal": r["features"][..., :3]}

@@ -402,7 +402,8 @@ inline void store_lanes(T* dst, const V& v, int n) {
 // pixel-major (H x W x size[q]), so each output the caller wants apart (colour, extra features,
 // depth) is its own contiguous image and its gradient comes back the same way: no strided slicing
 // of one interleaved image (and no zero-filled full-size gradient for the channels nobody used).
-// P: S* for the outputs, const S* for their gradients (a null plane: no gradient).
+// P: S* for the outputs, const S* for their gradients (a null plane: no gradient). The forward's
+// inputs are Planes too, per Gaussian (N x size[i]).
 template <typename P>
 struct Planes {
   int n;
@@ -412,7 +413,9 @@ struct Planes {
 
 // Phase 2: fill the tile lists with depth-order positions (depth order kept: each thread writes
 // its depth-ordered chunk after the chunks in front of it), gather the Cf channels into depth
-// order (feats), then blend every tile front to back.
+// order (feats) from the input Planes (per Gaussian, not per pixel: plane i holds size[i]
+// channels of every Gaussian, so colour, extra features and depth need no concatenated table),
+// then blend every tile front to back.
 // out: the Cf channels as Planes, T_final (H x W), last (H x W): per pixel 1 + the tile-list
 // position of its last contributor (0: none).
 // GROUPS (forward only, no backward): every Gaussian also belongs to one of NG groups (grp_in,
@@ -423,7 +426,7 @@ struct Planes {
 // image and its group, and a pixel's list is walked past the image's own cut-off only while
 // some group at that pixel is still open. grp (nv): the groups gathered into depth order.
 template <typename S, bool GROUPS>
-void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W, int H, int nt,
+void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int W, int H, int nt,
              const Rec<S>* recs, int64_t* cursor, const int64_t* tile_off, const int64_t* goff,
              int32_t* list, int64_t* slot, S* feats, Planes<S*> out, S* T_final, int32_t* last,
              const int32_t* grp_in, int NG, int32_t* grp, S* T_grp) {
@@ -433,8 +436,13 @@ void forward(int64_t nv, const int32_t* order, const S* feats_in, int Cf, int W,
 #pragma omp parallel num_threads(nt)
   {
     over_chunks(nv, NC, cursor, NT, [&](int64_t s, int64_t e, int64_t* cur) {
-      if (s + 16 < e) __builtin_prefetch(feats_in + (int64_t)order[s + 16] * Cf);
-      std::copy_n(feats_in + (int64_t)order[s] * Cf, Cf, feats + s * Cf);
+      S* dst = feats + s * Cf;
+      for (int i = 0; i < in.n; ++i) {
+        const int ci = in.size[i];
+        if (s + 16 < e) __builtin_prefetch(in.ptr[i] + (int64_t)order[s + 16] * ci);
+        std::copy_n(in.ptr[i] + (int64_t)order[s] * ci, ci, dst);
+        dst += ci;
+      }
       if (GROUPS) grp[s] = grp_in[order[s]];
       const Rec<S>& r = recs[s];
       if (r.u1 < r.u0 || r.v1 < r.v0) return;
@@ -730,12 +738,14 @@ int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
     bin<S>(N, means2d, conics, opac, depths, radii, boxes, W, H, nt, (Rec<S>*)recs, order, cursor, \
            tile_off, goff, sizes);                                                                 \
   }                                                                                                \
-  void gs_forward_##SUFFIX(int64_t nv, const int32_t* order, const S* feats, int Cf, int W, int H, \
+  void gs_forward_##SUFFIX(int64_t nv, const int32_t* order, int NI, const int* isz,              \
+                           const S* const* ins, int Cf, int W, int H,                             \
                            int nt, const void* recs, int64_t* cursor, const int64_t* tile_off,     \
                            const int64_t* goff, int32_t* list, int64_t* slot, S* feats_sorted,    \
                            int NO, const int* osz, S* const* outs, S* T_final, int32_t* last,     \
                            const int32_t* grp_in, int NG, int32_t* grp, S* T_grp) {               \
     const Planes<S*> out{NO, osz, outs};                                                           \
+    const Planes<const S*> feats{NI, isz, ins};                                                    \
     if (NG > 0)                                                                                    \
       forward<S, true>(nv, order, feats, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off,      \
                        goff, list, slot, feats_sorted, out, T_final, last, grp_in, NG, grp, T_grp); \

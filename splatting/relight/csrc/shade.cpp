@@ -17,8 +17,9 @@ inline float srgb(float x) {
 }
 }  // namespace
 
-// The pixels of rows v0..v1-1, columns u0..u1-1 of a W-wide image whose alpha exceeds 1e-5 (the
-// others are left as they are).  R: reflectance (albedo + gloss), pixel stride sR, channels
+// The pixels of rows v0..v1-1, columns u0..u1-1 of a W-wide image whose alpha exceeds 1e-5; the
+// box's others are set to 0 (so a caller shading the whole image needs no zero-filled output: one
+// pass instead of two over it), pixels outside the box are left as they are.  R: reflectance (albedo + gloss), pixel stride sR, channels
 // contiguous; F: relight features (normal 3, [gloss luminance], [roughness], [visibility]), pixel
 // stride sF; A: alpha (contiguous).  out: (H W, 3).  prm: l[3] (unit, towards the sun), sun[3] (colour x strength), sky[3],
 // fx, fy, cx, cy, Rc[9] (world-to-camera rotation, row-major), roughness, highlight.
@@ -41,7 +42,10 @@ extern "C" void rl_shade_f32(int64_t W, int64_t u0, int64_t v0, int64_t u1, int6
     int64_t m = 0;
     for (int64_t q = q0 + u0; q < q0 + u1; ++q) {
         const float a = A[q];
-        if (!(a > 1e-5f)) continue;  // uncovered: nothing to shade (the torch path's threshold)
+        if (!(a > 1e-5f)) {  // uncovered: nothing to shade (the torch path's threshold)
+            out[3 * q] = out[3 * q + 1] = out[3 * q + 2] = 0.0f;
+            continue;
+        }
         const float* r = R + q * sR;
         const float* f = F + q * sF;
         const float ac = a > 1e-6f ? a : 1e-6f;
