@@ -425,11 +425,14 @@ struct Planes {
 // below 1e-4 not taken). One pass: the alpha a Gaussian has at a pixel is computed once for the
 // image and its group, and a pixel's list is walked past the image's own cut-off only while
 // some group at that pixel is still open. grp (nv): the groups gathered into depth order.
-template <typename S, bool GROUPS>
-void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int W, int H, int nt,
+// CF > 0: the channel count as a compile-time constant (the per-pixel channel loop unrolls, its
+// per-Gaussian broadcasts stay in registers); CF == 0: any Cf.
+template <typename S, bool GROUPS, int CF>
+void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf_, int W, int H, int nt,
              const Rec<S>* recs, int64_t* cursor, const int64_t* tile_off, const int64_t* goff,
              int32_t* list, int64_t* slot, S* feats, Planes<S*> out, S* T_final, int32_t* last,
              const int32_t* grp_in, int NG, int32_t* grp, S* T_grp) {
+  const int Cf = CF > 0 ? CF : Cf_;
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   const std::vector<int> torder = busiest_first(tile_off, NT);
   const int NC = n_chunks(nt);
@@ -461,7 +464,7 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
     const std::vector<V> lane_xc = Entry<S>::lane_centres();
     std::vector<V> T(NV);
     std::vector<I> done(NV), lst(NV);
-    std::vector<V> acc((size_t)NV * Cf);
+    std::vector<V> acc((size_t)NV * Cf), fv(Cf);
     std::vector<V> TG(GROUPS ? (size_t)NG * NV : 0);  // per group and pixel: its own transmittance
     std::vector<I> gdone(GROUPS ? (size_t)NG * NV : 0);
 #pragma omp for schedule(dynamic, 1)
@@ -512,6 +515,7 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
         I* const dq = q >= 0 ? gdone.data() + (size_t)q * NV : nullptr;
         const Entry<S> en(g, ox, oy, ex, ey, lane_xc.data());
         const S* f = feats + (int64_t)sp * Cf;
+        for (int c = 0; c < Cf; ++c) fv[c] = (V){} + f[c];  // broadcast once per entry, not per chunk
         const I kk = (I){} + (IS)(k + 1);
         for (int y = en.y0; y <= en.y1; ++y) {
           V by, cyy;
@@ -545,7 +549,7 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
             const I ok = m & ~term;
             const V w = ok ? al * T[v] : (V){};
             V* a = acc.data() + (size_t)v * Cf;
-            for (int c = 0; c < Cf; ++c) a[c] = vfma(w, (V){} + f[c], a[c]);
+            for (int c = 0; c < Cf; ++c) a[c] = vfma(w, fv[c], a[c]);
             T[v] = ok ? test_T : T[v];
             lst[v] = ok ? kk : lst[v];
           }
@@ -746,13 +750,19 @@ int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
                            const int32_t* grp_in, int NG, int32_t* grp, S* T_grp) {               \
     const Planes<S*> out{NO, osz, outs};                                                           \
     const Planes<const S*> feats{NI, isz, ins};                                                    \
+    const Rec<S>* r = (const Rec<S>*)recs;                                                         \
     if (NG > 0)                                                                                    \
-      forward<S, true>(nv, order, feats, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off,      \
-                       goff, list, slot, feats_sorted, out, T_final, last, grp_in, NG, grp, T_grp); \
+      forward<S, true, 0>(nv, order, feats, Cf, W, H, nt, r, cursor, tile_off, goff, list, slot,    \
+                          feats_sorted, out, T_final, last, grp_in, NG, grp, T_grp);              \
+    else if (Cf == 4) /* colour + depth: a plain render */                                         \
+      forward<S, false, 4>(nv, order, feats, Cf, W, H, nt, r, cursor, tile_off, goff, list, slot,   \
+                           feats_sorted, out, T_final, last, nullptr, 0, nullptr, nullptr);       \
+    else if (Cf == 7) /* colour + relight features (splatting/relight/render.py) */                \
+      forward<S, false, 7>(nv, order, feats, Cf, W, H, nt, r, cursor, tile_off, goff, list, slot,   \
+                           feats_sorted, out, T_final, last, nullptr, 0, nullptr, nullptr);       \
     else                                                                                           \
-      forward<S, false>(nv, order, feats, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off,     \
-                        goff, list, slot, feats_sorted, out, T_final, last, nullptr, 0, nullptr,   \
-                        nullptr);                                                                  \
+      forward<S, false, 0>(nv, order, feats, Cf, W, H, nt, r, cursor, tile_off, goff, list, slot,   \
+                           feats_sorted, out, T_final, last, nullptr, 0, nullptr, nullptr);       \
   }                                                                                                \
   void gs_backward_##SUFFIX(int64_t nv, const int32_t* order, int Cf, int W, int H, int nt,        \
                             const void* recs, const int64_t* tile_off, const int64_t* goff,        \
