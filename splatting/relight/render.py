@@ -77,7 +77,7 @@ def relit_static(albedo, gloss=None):
 
 
 def shade_composited(R, feats, alpha, camera, light: Light, gloss=True, rough_channel=False, shadows=False,
-                     roughness=ROUGHNESS, highlight=HIGHLIGHT, box=None, backend=None):
+                     roughness=ROUGHNESS, highlight=HIGHLIGHT, box=None, backend=None, in_place=False):
     """Display colour of composited relight channels: R (H, W, 3) the premultiplied reflectance
     albedo + gloss, feats (H, W, C) the composited relight_features (same flags), alpha (H, W) the
     coverage of what they came from, camera the view they were rendered in (for the highlight's
@@ -86,18 +86,24 @@ def shade_composited(R, feats, alpha, camera, light: Light, gloss=True, rough_ch
     when given.  backend "c": the fused per-pixel loop of csrc/shade.cpp (float32 CPU; one pass
     instead of ~80 torch operations: 0.2 vs 4-9 ms for a bike's 22k pixels at 512 px), "torch":
     the same formula as torch operations (splatting/relight/shading.py, the reference the tests
-    hold the C to); None: "c" for float32 CPU tensors, else "torch"."""
+    hold the C to); None: "c" for float32 CPU tensors, else "torch".
+    in_place: the colour overwrites R (a contiguous image, 0 wherever alpha is 0, as the
+    compositor leaves it; no box) and R is returned: no image to allocate and fill, and the C loop
+    writes only the covered pixels (at 512 px a bike covers ~10 % of them)."""
     H, W = alpha.shape
     u0, v0, u1, v1 = box if box is not None else (0, 0, W, H)
     if backend is None:
         backend = "c" if feats.dtype == torch.float32 and feats.device.type == "cpu" else "torch"
+    if in_place and (box is not None or not R.is_contiguous()):
+        raise ValueError("shade_composited: in_place needs a contiguous R and no box")
     # the C loop writes every pixel of its box (zeros where uncovered): no zero fill for the whole image
     whole = backend == "c" and (u0, v0, u1, v1) == (0, 0, W, H)
-    rgb = (torch.empty if whole else torch.zeros)(H * W, 3, dtype=feats.dtype)
     if backend == "c":
+        rgb = R.view(H * W, 3) if in_place else (torch.empty if whole else torch.zeros)(H * W, 3, dtype=feats.dtype)
         _shade_c((u0, v0, u1, v1), R, feats, alpha, rgb, camera, light, gloss, rough_channel, shadows, roughness,
-                 highlight)
+                 highlight, in_place)
         return rgb.reshape(H, W, 3)
+    rgb = torch.zeros(H * W, 3, dtype=feats.dtype)
     if backend != "torch":
         raise ValueError(f"shade_composited: backend must be 'c', 'torch' or None, got {backend!r}")
     ys, xs = torch.nonzero(alpha[v0:v1, u0:u1] > 1e-5, as_tuple=True)
@@ -121,13 +127,14 @@ def shade_composited(R, feats, alpha, camera, light: Light, gloss=True, rough_ch
     vis = (f[c] / a.clamp_min(1e-6)).clamp_(0, 1) if shadows else None
     view = _view_directions_cm(camera, ys, xs, f.dtype) if gloss else None
     rgb.index_copy_(0, pix, _shade_cm(alb, nrm, a, light, gl, view, roughness, highlight, vis).T)
-    return rgb.reshape(H, W, 3)
+    return R.copy_(rgb.reshape(H, W, 3)) if in_place else rgb.reshape(H, W, 3)
 
 
 _C = None
 
 
-def _shade_c(box, R, feats, alpha, out, camera, light, gloss, rough_channel, shadows, roughness, highlight):
+def _shade_c(box, R, feats, alpha, out, camera, light, gloss, rough_channel, shadows, roughness, highlight,
+             in_place=False):
     """csrc/shade.cpp's rl_shade_f32 on the rasterizer's pixel-major views (no gathers, no copies)."""
     import ctypes
 
@@ -149,15 +156,16 @@ def _shade_c(box, R, feats, alpha, out, camera, light, gloss, rough_channel, sha
                         *camera.R.to(torch.float64).reshape(-1).tolist(),
                         0.0 if torch.is_tensor(roughness) else float(roughness), float(highlight)], dtype=torch.float32)
     _C(W, *box, R.data_ptr(), R.stride(1), feats.data_ptr(), feats.stride(1), alpha.data_ptr(), out.data_ptr(),
-       prm.data_ptr(), int(gloss) | 2 * int(rough_channel) | 4 * int(shadows))
+       prm.data_ptr(), int(gloss) | 2 * int(rough_channel) | 4 * int(shadows) | 8 * int(in_place))
 
 
 @torch.no_grad()
 def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
-                 shadows=False, antialiased=True, static=None):
+                 shadows=False, antialiased=True, static=None, reflectance=False):
     """Gaussians g with per-Gaussian linear albedo (N, 3), world-frame unit normals (N, 3) and optionally
     a linear glossy colour (N, 3) under a light -> dict rgb (H, W, 3) display colour premultiplied
-    (over black), alpha, reflectance (albedo + gloss) and normal (composited).  One rasterizer call composites
+    (over black), alpha, normal (composited) and with reflectance=True the composited reflectance
+    albedo + gloss (else the shading overwrites it in place).  One rasterizer call composites
     every channel (rasterize(features=...)); the gloss reflects the sky and shows the sun's
     highlight (splatting/relight/shading.py).  shadows: the sun is blocked per Gaussian by the
     others (splatting/relight/shadow.py: one more render, from the sun).  antialiased: the
@@ -183,5 +191,8 @@ def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness
     r = render_gaussians(gr, camera, features=relight_feature_parts(normals, static.gloss_luma, visibility=vis),
                          sh_degree=0, antialiased=antialiased, depth=False)
     rgb = shade_composited(r["rgb"], r["features"], r["alpha"], camera, light, static.gloss_luma is not None, False,
-                           shadows, roughness, highlight)
-    return {"rgb": rgb, "alpha": r["alpha"], "reflectance": r["rgb"], "normal": r["features"][..., :3]}
+                           shadows, roughness, highlight, in_place=not reflectance)
+    out = {"rgb": rgb, "alpha": r["alpha"], "normal": r["features"][..., :3]}
+    if reflectance:
+        out["reflectance"] = r["rgb"]
+    return out

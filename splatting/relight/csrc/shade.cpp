@@ -23,7 +23,9 @@ inline float srgb(float x) {
 // contiguous; F: relight features (normal 3, [gloss luminance], [roughness], [visibility]), pixel
 // stride sF; A: alpha (contiguous).  out: (H W, 3).  prm: l[3] (unit, towards the sun), sun[3] (colour x strength), sky[3],
 // fx, fy, cx, cy, Rc[9] (world-to-camera rotation, row-major), roughness, highlight.
-// flags: 1 gloss, 2 per-pixel roughness channel, 4 sun visibility channel.
+// flags: 1 gloss, 2 per-pixel roughness channel, 4 sun visibility channel, 8 in place (out is R,
+// pixel stride 3): pixels whose alpha is exactly 0 are left as they are (the compositor's R is 0
+// there: no Gaussian reached them), so only covered pixels are written.
 extern "C" void rl_shade_f32(int64_t W, int64_t u0, int64_t v0, int64_t u1, int64_t v1, const float* R, int64_t sR,
                              const float* F, int64_t sF, const float* A, float* out, const float* prm, int32_t flags) {
     const float* l = prm;
@@ -32,7 +34,7 @@ extern "C" void rl_shade_f32(int64_t W, int64_t u0, int64_t v0, int64_t u1, int6
     const float fx = prm[9], fy = prm[10], cx = prm[11], cy = prm[12];
     const float* Rc = prm + 13;
     const float rough0 = prm[22], highlight = prm[23];
-    const bool gloss = flags & 1, rough_ch = flags & 2, shadows = flags & 4;
+    const bool gloss = flags & 1, rough_ch = flags & 2, shadows = flags & 4, in_place = flags & 8;
     // per row: the straight linear colours first, then their sRGB encoding in one vectorisable
     // loop (powf is most of the cost; with -ffast-math gcc calls glibc's SIMD powf)
     const int64_t n = u1 > u0 ? u1 - u0 : 0;
@@ -43,7 +45,7 @@ extern "C" void rl_shade_f32(int64_t W, int64_t u0, int64_t v0, int64_t u1, int6
     for (int64_t q = q0 + u0; q < q0 + u1; ++q) {
         const float a = A[q];
         if (!(a > 1e-5f)) {  // uncovered: nothing to shade (the torch path's threshold)
-            out[3 * q] = out[3 * q + 1] = out[3 * q + 2] = 0.0f;
+            if (!in_place || a != 0.0f) out[3 * q] = out[3 * q + 1] = out[3 * q + 2] = 0.0f;
             continue;
         }
         const float* r = R + q * sR;
