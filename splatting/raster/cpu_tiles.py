@@ -21,6 +21,7 @@ Optionally (groups, forward only) each group's transmittance as if it were rende
 the same pass (csrc/tiles.cpp, forward<S, GROUPS>): what amodal instance masks need.
 """
 import ctypes
+import threading
 
 import torch
 
@@ -37,6 +38,26 @@ def _nptr(t):
     return None if t is None else t.data_ptr()
 
 
+_scratch = threading.local()
+
+
+def _buffer(name, numel, dtype, reuse):
+    """torch.empty(numel) of dtype; with reuse, a view of this thread's buffer `name`, kept (and
+    grown) across calls: the scratch of a render that no backward will read (records, tile lists,
+    sorted channels), so a forward-only render gets no fresh pages to fault in for it (at 512 px
+    and 45k Gaussians ~7 MB, and page faults were most of what a relit render paid over a baked
+    one, docs/relighting.md)."""
+    if not reuse:
+        return torch.empty(numel, dtype=dtype)
+    pool = getattr(_scratch, "pool", None)
+    if pool is None:
+        pool = _scratch.pool = {}
+    b = pool.get(name)
+    if b is None or b.dtype != dtype or b.numel() < numel:
+        b = pool[name] = torch.empty(max(numel, 1), dtype=dtype)
+    return b[:numel]
+
+
 def _ptrs(ts):
     """A C array of the tensors' data pointers (null for None)."""
     return (ctypes.c_void_p * len(ts))(*[None if t is None else t.data_ptr() for t in ts])
@@ -48,7 +69,7 @@ class _TileComposite(torch.autograd.Function):
     rather than as a zero image."""
 
     @staticmethod
-    def forward(ctx, means2d, conics, opacities, depths, radii, boxes, H, W, groups, n_groups, split, *parts):
+    def forward(ctx, means2d, conics, opacities, depths, radii, boxes, H, W, groups, n_groups, split, reuse, *parts):
         lib = build.load()
         dt = means2d.dtype
         if dt not in _SUFFIX:
@@ -67,25 +88,26 @@ class _TileComposite(torch.autograd.Function):
         bx = boxes.to(torch.int64).contiguous()
         tile = lib.gs_tile_size()
         ntiles = -(-W // tile) * -(-H // tile)
-        recs = torch.empty(max(n, 1) * getattr(lib, f"gs_rec_bytes_{sfx}")(), dtype=torch.uint8)
-        order = torch.empty(max(n, 1), dtype=torch.int32)
-        cursor = torch.empty(lib.gs_chunks(nt) * ntiles, dtype=torch.int64)
-        tile_off = torch.empty(ntiles + 1, dtype=torch.int64)
-        goff = torch.empty(n + 1, dtype=torch.int64)
+        # the binning's and blending's scratch: kept for the backward, or reused when there is none
+        recs = _buffer("recs", max(n, 1) * getattr(lib, f"gs_rec_bytes_{sfx}")(), torch.uint8, reuse)
+        order = _buffer("order", max(n, 1), torch.int32, reuse)
+        cursor = _buffer("cursor", lib.gs_chunks(nt) * ntiles, torch.int64, reuse)
+        tile_off = _buffer("tile_off", ntiles + 1, torch.int64, reuse)
+        goff = _buffer("goff", n + 1, torch.int64, reuse)
         sizes = torch.zeros(2, dtype=torch.int64)
         getattr(lib, f"gs_bin_{sfx}")(n, _ptr(m2), _ptr(cn), _ptr(op), _ptr(z), _ptr(rd), _ptr(bx), W, H, nt,
                                       _ptr(recs), _ptr(order), _ptr(cursor), _ptr(tile_off), _ptr(goff),
                                       _ptr(sizes))
         nv, total = sizes.tolist()
-        lst = torch.empty(max(total, 1), dtype=torch.int32)
-        slot = torch.empty(max(total, 1), dtype=torch.int64)
-        fs = torch.empty(max(nv, 1), cf, dtype=dt)
+        lst = _buffer("lst", max(total, 1), torch.int32, reuse)
+        slot = _buffer("slot", max(total, 1), torch.int64, reuse)
+        fs = _buffer("fs", max(nv, 1) * cf, dt, reuse).view(max(nv, 1), cf)
         outs = [torch.empty((H, W, c) if c > 1 else (H, W), dtype=dt) for c in split]
         T_final = torch.empty(H, W, dtype=dt)
-        last = torch.empty(H, W, dtype=torch.int32)
+        last = _buffer("last", H * W, torch.int32, reuse).view(H, W)
         ng = int(n_groups) if groups is not None else 0
         gr = groups.to(torch.int32).contiguous() if ng else None
-        g_sorted = torch.empty(max(nv, 1), dtype=torch.int32) if ng else None
+        g_sorted = _buffer("g_sorted", max(nv, 1), torch.int32, reuse) if ng else None
         T_groups = torch.empty(ng, H, W, dtype=dt)
         osz = (ctypes.c_int * len(split))(*split)
         getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), len(fe), (ctypes.c_int * len(fe))(*isz), _ptrs(fe), cf,
@@ -120,7 +142,7 @@ class _TileComposite(torch.autograd.Function):
                                            _ptrs(g_outs), _nptr(g_T), _ptr(g_m2), _ptr(g_cn), _ptr(g_op), _ptr(g_fe))
         dc, do, df = ctx.dtypes
         g_parts = [g.to(d) for g, d in zip(g_fe.split(ctx.isz, 1), df)]
-        return (g_m2, g_cn.to(dc), g_op.to(do), None, None, None, None, None, None, None, None, *g_parts)
+        return (g_m2, g_cn.to(dc), g_op.to(do), None, None, None, None, None, None, None, None, None, *g_parts)
 
 
 def composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, W, groups=None, n_groups=0,
@@ -143,11 +165,14 @@ def composite_tiles(means2d, conics, opacities, feats, depths, radii, boxes, H, 
     split = (cf,) if split is None else tuple(int(c) for c in split)
     if not split or min(split) < 1 or sum(split) != cf:
         raise ValueError(f"composite_tiles: split {split} must be channel counts >= 1 summing to {cf}")
+    # no backward can follow: the scratch is reused across calls (_buffer)
+    reuse = not (torch.is_grad_enabled() and any(t.requires_grad for t in (means2d, conics, opacities, *parts)))
     if groups is not None:
         if n_groups < 1 or groups.shape != (n,):
             raise ValueError(f"composite_tiles: groups must be ({n},) with n_groups >= 1")
         if len(groups) and not (int(groups.min()) >= -1 and int(groups.max()) < n_groups):
             raise ValueError(f"composite_tiles: group ids must lie in [-1, {n_groups})")
         return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, H, W, groups, n_groups, split,
-                                    *parts)
-    return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, H, W, None, 0, split, *parts)[:-1]
+                                    reuse, *parts)
+    return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, H, W, None, 0, split, reuse,
+                                *parts)[:-1]

@@ -443,7 +443,11 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf_, int
       for (int i = 0; i < in.n; ++i) {
         const int ci = in.size[i];
         if (s + 16 < e) __builtin_prefetch(in.ptr[i] + (int64_t)order[s + 16] * ci);
-        std::copy_n(in.ptr[i] + (int64_t)order[s] * ci, ci, dst);
+        const S* src = in.ptr[i] + (int64_t)order[s] * ci;
+        // a few channels: plain moves (std::copy_n was a memmove call per Gaussian and part)
+        int c = 0;
+        for (; c + 4 <= ci; c += 4) dst[c] = src[c], dst[c + 1] = src[c + 1], dst[c + 2] = src[c + 2], dst[c + 3] = src[c + 3];
+        for (; c < ci; ++c) dst[c] = src[c];
         dst += ci;
       }
       if (GROUPS) grp[s] = grp_in[order[s]];
