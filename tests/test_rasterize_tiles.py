@@ -148,6 +148,22 @@ def test_feature_parts_and_no_depth_equal_one_table(backend):
     assert torch.equal(outs[1]["depth"], outs[0]["depth"])
 
 
+def test_forward_only_renders_reusing_scratch_match_fresh_ones():
+    """Without grad the compositor's scratch is a per-thread buffer kept across calls
+    (cpu_tiles._buffer): renders of growing and shrinking sizes in a row equal renders that
+    allocate afresh (with grad), bit for bit."""
+    gen = torch.Generator().manual_seed(44)
+    scenes = [(random_scene(gen, n, 1), random_camera(gen)) for n in (30, 200, 30)]
+    feats = [torch.rand(len(sc[0]), 4, generator=gen, dtype=F64) for sc, _ in scenes]
+    with torch.no_grad():
+        kept = [rasterize(*sc, cam, features=f, backend="tiles") for (sc, cam), f in zip(scenes, feats)]
+    for (sc, cam), f, k in zip(scenes, feats, kept):
+        fresh = rasterize(*[t.clone().requires_grad_(True) for t in sc], cam, features=f, backend="tiles")
+        assert float(fresh["alpha"].detach().max()) > 0.1
+        for key in ("rgb", "alpha", "depth", "features"):
+            assert torch.equal(k[key], fresh[key].detach()), key
+
+
 def test_tiles_gradcheck_with_features():
     gen = torch.Generator().manual_seed(5)
     means, quats, scales, opac, sh = random_scene(gen, 7, 1, spread=0.5)
