@@ -316,6 +316,29 @@ def test_threads_do_not_change_a_bit_with_features_background_antialiased():
             assert torch.equal(x, y)
 
 
+def test_no_grad_render_equals_the_differentiable_one():
+    """Without a gradient to follow the tiled pass skips what only the backward reads (T_final,
+    the last contributors, the entries' slots); the images must not change a bit."""
+    from bench.raster import bike_like_gaussians
+    from splatting.raster.camera import ring_camera
+
+    params = bike_like_gaussians(3000, sh_degree=1)
+    feats = torch.rand(3000, 2, generator=torch.Generator().manual_seed(5))
+    ids = torch.arange(3000) % 3 - 1
+    bg = torch.tensor([0.3, 0.1, 0.7])
+    cam = ring_camera(30.0, size=128, focal=520.0)
+    kw = dict(background=bg, features=feats, groups=(ids, 2), backend="tiles")
+    ps = [p.clone().requires_grad_(True) for p in params]
+    with_grad = rasterize(*ps, cam, **kw)
+    with torch.no_grad():
+        no_grad = rasterize(*params, cam, **kw)
+    plain = rasterize(*params, cam, **kw)  # grad mode on, but nothing requires one
+    assert with_grad["alpha"].max() > 0.9
+    for key in ("rgb", "alpha", "depth", "features", "group_alpha"):
+        assert torch.equal(with_grad[key].detach(), no_grad[key]), key
+        assert torch.equal(with_grad[key].detach(), plain[key]), key
+
+
 def test_antialiased_tiles_match_torch_gradients():
     """antialiased=True scales opacities before compositing: both back ends, all gradients."""
     gen = torch.Generator().manual_seed(23)

@@ -84,13 +84,13 @@ def load():
         i64, i32, p = ctypes.c_int64, ctypes.c_int, ctypes.c_void_p
         for sfx in ("f32", "f64"):
             f = getattr(lib, f"gs_bin_{sfx}")
-            f.argtypes, f.restype = [i64, p, p, p, p, p, p, i32, i32, i32, p, p, p, p, p, p], None
+            f.argtypes, f.restype = [i64, p, p, p, p, p, p, i32, i32, i32, p, p, p, p, p, p, p], None
             f = getattr(lib, f"gs_forward_{sfx}")
-            f.argtypes, f.restype = [i64, p, i32, p, p, i32, i32, i32, i32, p, p, p, p, p, p, p, i32, p, p, p, p, p, i32, p, p], None
+            f.argtypes, f.restype = [i64, p, i32, p, p, i32, i32, i32, i32, p, p, p, p, p, p, p, i32, p, p, p, p, p, p, i32, p, p, p], None
             f = getattr(lib, f"gs_backward_{sfx}")
-            f.argtypes, f.restype = [i64, p, i32, i32, i32, i32, p, p, p, p, p, p, p, p, i32, p, p, p, p, p, p, p], None
+            f.argtypes, f.restype = [i64, i64, p, p, i32, i32, i32, i32, p, p, p, p, p, p, p, p, i32, p, p, p, p, p, p, p, p, p, p], None
             f = getattr(lib, f"gs_preprocess_fwd_{sfx}")
-            f.argtypes, f.restype = [i64, p, p, p, i32, i32, p, p, p, p, i32, i32, i32, p, p, p, p, p, p], None
+            f.argtypes, f.restype = [i64, p, p, p, i32, i32, p, p, p, p, i32, i32, i32, p, p, p, p, p, p, p], None
             f = getattr(lib, f"gs_preprocess_bwd_{sfx}")
             f.argtypes, f.restype = [i64, p, p, p, i32, i32, p, p, p, p, i32, i32, i32, p, p, p, p, p, p, p, p, p], None
         _lib = lib

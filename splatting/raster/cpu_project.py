@@ -3,8 +3,12 @@ of splatting/raster/sparse.py's project() and the SH colour of splatting/gaussia
 OpenMP pass forward and one backward, instead of ~60 small torch autograd ops.
 
 preprocess(means, quats, scales, sh, camera, sh_degree, near, eps2d) -> means2d (N,2),
-conics (N,3), depths (N,), colors (N,3), radii (N,) long, boxes (N,4) long; differentiable in
-means, quats, scales and sh. Culled Gaussians (radius 0) get no gradient (they are never drawn).
+conics (N,3), depths (N,), colors (N,3), radii (N,) long, boxes (N,4) long, visible (N,) bool
+(radii > 0); differentiable in means, quats, scales and sh. Culled Gaussians (radius 0) get no
+gradient (they are never drawn). Gradients of outputs nobody used reach the C++ as null pointers
+(set_materialize_grads(False)), not as zero tensors: each torch op between the C calls is a
+serial step, and at 2 threads under OMP_WAIT_POLICY=PASSIVE a parallel one also wakes the other
+thread (docs/rasterizer.md).
 """
 import torch
 
@@ -17,11 +21,15 @@ def _ptr(t):
     return t.data_ptr()
 
 
+def _nptr(t):
+    return None if t is None else t.data_ptr()
+
+
 def _camera_args(camera, near, eps2d):
     R = camera.R.detach().to("cpu", torch.float64).contiguous()
     T = camera.T.detach().to("cpu", torch.float64).contiguous()
-    K = camera.K.detach().to("cpu", torch.float64)
-    intr = torch.tensor([K[0, 0], K[1, 1], K[0, 2], K[1, 2], near, eps2d], dtype=torch.float64)
+    (fx, _, cx), (_, fy, cy) = camera.K.detach().to("cpu", torch.float64).tolist()[:2]
+    intr = torch.tensor([fx, fy, cx, cy, near, eps2d], dtype=torch.float64)
     return R, T, intr
 
 
@@ -38,29 +46,29 @@ class _Preprocess(torch.autograd.Function):
         means2d, conics = torch.empty(n, 2, dtype=dt), torch.empty(n, 3, dtype=dt)
         depths, colors = torch.empty(n, dtype=dt), torch.empty(n, 3, dtype=dt)
         radii, boxes = torch.empty(n, dtype=torch.int64), torch.empty(n, 4, dtype=torch.int64)
+        visible = torch.empty(n, dtype=torch.bool)
         getattr(lib, f"gs_preprocess_fwd_{sfx}")(n, _ptr(R), _ptr(T), _ptr(intr), camera.width, camera.height,
                                                  _ptr(m), _ptr(q), _ptr(s), _ptr(f), f.shape[1], nb, nt,
                                                  _ptr(means2d), _ptr(conics), _ptr(depths), _ptr(colors),
-                                                 _ptr(radii), _ptr(boxes))
-        ctx.mark_non_differentiable(radii, boxes)
+                                                 _ptr(radii), _ptr(boxes), _ptr(visible))
+        ctx.mark_non_differentiable(radii, boxes, visible)
+        ctx.set_materialize_grads(False)
         ctx.save_for_backward(m, q, s, f, radii)
         ctx.cam = (R, T, intr, camera.width, camera.height, nb)
         ctx.dtypes = (means.dtype, quats.dtype, scales.dtype, sh.dtype)
-        return means2d, conics, depths, colors, radii, boxes
+        return means2d, conics, depths, colors, radii, boxes, visible
 
     @staticmethod
-    def backward(ctx, g_m2, g_cn, g_z, g_col, _r, _b):
+    def backward(ctx, g_m2, g_cn, g_z, g_col, _r, _b, _v):
         m, q, s, f, radii = ctx.saved_tensors
         R, T, intr, W, H, nb = ctx.cam
         dt = m.dtype
         n = m.shape[0]
-        z = lambda *shape: torch.zeros(*shape, dtype=dt)
-        g = [z(n, 2) if g_m2 is None else g_m2.to(dt).contiguous(), z(n, 3) if g_cn is None else g_cn.to(dt).contiguous(),
-             z(n) if g_z is None else g_z.to(dt).contiguous(), z(n, 3) if g_col is None else g_col.to(dt).contiguous()]
+        g = [None if t is None else t.to(dt).contiguous() for t in (g_m2, g_cn, g_z, g_col)]
         gm, gq, gs, gf = torch.empty_like(m), torch.empty_like(q), torch.empty_like(s), torch.empty_like(f)
         getattr(build.load(), f"gs_preprocess_bwd_{_SUFFIX[dt]}")(
             n, _ptr(R), _ptr(T), _ptr(intr), W, H, _ptr(m), _ptr(q), _ptr(s), _ptr(f), f.shape[1], nb,
-            max(1, torch.get_num_threads()), _ptr(radii), *map(_ptr, g), _ptr(gm), _ptr(gq), _ptr(gs), _ptr(gf))
+            max(1, torch.get_num_threads()), _ptr(radii), *map(_nptr, g), _ptr(gm), _ptr(gq), _ptr(gs), _ptr(gf))
         dm, dq, ds, df = ctx.dtypes
         return gm.to(dm), gq.to(dq), gs.to(ds), gf.to(df), None, None, None, None
 

@@ -301,14 +301,15 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
     if backend == "tiles":  # projection + SH fused in C++ (splatting/raster/cpu_project.py)
         from splatting.raster.cpu_project import preprocess
 
-        means2d, conics, depths, colors, radii, boxes = preprocess(means, quats, scales, sh, camera, sh_degree,
-                                                                   near, eps2d)
+        means2d, conics, depths, colors, radii, boxes, visible = preprocess(means, quats, scales, sh, camera,
+                                                                            sh_degree, near, eps2d)
     else:
         means2d, conics, depths, radii, boxes = project(means, quats, scales, camera, near, eps2d)
         centre = camera.centre.to(means.device, means.dtype)
         dirs = means - centre
         dirs = dirs / dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12)
         colors = eval_sh(sh, dirs, sh_degree)
+        visible = radii > 0
     if means2d.requires_grad:
         means2d.retain_grad()
     if antialiased:
@@ -334,7 +335,7 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
         if groups is not None:
             group_alpha = _group_alpha_torch(means2d, conics, opacities, depths, radii, boxes, groups, H, W)
     out = {"rgb": rgb, "alpha": alpha, "depth": depth, "means2d": means2d, "radii": radii,
-           "visible": radii > 0, "backend": backend}
+           "visible": visible, "backend": backend}
     if not want_depth:
         del out["depth"]
     if nf:
@@ -387,24 +388,22 @@ def resolve_backend(backend, means):
 def _composite_tiles(means2d, conics, opacities, colors, features, depths, radii, boxes, background, H, W,
                      groups=None, depth=True):
     """The tiled C++ compositor with the torch path's outputs: rgb (H,W,3) over the background,
-    alpha, depth (camera z composited as the last channel; None when not depth), features
-    (H,W,F) or None; features a tensor or a list of parts. Colour, features and depth are the
-    compositor's input parts as they are (no (N, 3 + F + 1) table); it writes each output as its
-    own contiguous image (and takes their gradients back the same way)."""
+    alpha, depth (camera z composited as the last channel; None when not depth), features (H,W,F)
+    or None, features a tensor or a list of parts (one plane). Colour,
+    features and depth are handed over as separate planes; the compositor reads them in place,
+    writes each as its own contiguous image (colour already over the background, alpha, the
+    group alphas), and takes their gradients back the same way (no concatenation, no slicing, no
+    torch op on a full image)."""
     from splatting.raster.cpu_tiles import composite_tiles
 
     fparts = [] if features is None else [features] if torch.is_tensor(features) else list(features)
     fparts = [f.to(colors) for f in fparts if f.shape[1] > 0]
-    nf = sum(f.shape[1] for f in fparts)
-    parts = [colors] + fparts + ([depths[:, None]] if depth else [])
-    split = [3] + ([nf] if nf else []) + ([1] if depth else [])
-    res = composite_tiles(means2d, conics, opacities, parts, depths.detach(), radii, boxes, H, W,
-                          *(() if groups is None else groups), split=split)
-    rgb, T_final = res[0], res[len(split)]
-    if background is not None:
-        rgb = rgb + T_final[..., None] * background.to(rgb)
-    feats = res[1] if nf else None
-    return rgb, 1.0 - T_final, res[len(split) - 1] if depth else None, feats, None if groups is None else 1.0 - res[-1]
+    planes = [colors] + ([fparts[0] if len(fparts) == 1 else fparts] if fparts else []) + ([depths] if depth else [])
+    res = composite_tiles(means2d, conics, opacities, planes, depths.detach(), radii, boxes, H, W,
+                          *(() if groups is None else groups), background=background)
+    rgb, alpha = res[0], res[len(planes)]
+    feats = res[1] if fparts else None
+    return rgb, alpha, res[len(planes) - 1] if depth else None, feats, None if groups is None else res[-1]
 
 
 def render_gaussians(g, camera, **kw):

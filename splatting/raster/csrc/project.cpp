@@ -158,7 +158,7 @@ inline void direction(const Cam& cam, const S* mean, S* d, S& n) {
 template <typename S, int nb>
 void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, const S* scales, const S* sh,
                     int K, int nt, S* means2d, S* conics, S* depths, S* colors, int64_t* radii,
-                    int64_t* boxes) {
+                    int64_t* boxes, bool* visible) {
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 2048)  // a late thread delays by one block
   for (int64_t n = 0; n < N; ++n) {
     Geo<S> g;
@@ -185,6 +185,7 @@ void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, c
     int64_t* bx = boxes + 4 * n;
     bx[0] = (int64_t)u0, bx[1] = (int64_t)u1, bx[2] = (int64_t)v0, bx[3] = (int64_t)v1;
     radii[n] = (ok && bx[1] >= bx[0] && bx[3] >= bx[2]) ? (int64_t)r : 0;
+    visible[n] = radii[n] > 0;
     S d[3], dn, Y[16];
     direction(cam, means + 3 * n, d, dn);
     sh_basis<S>(d[0], d[1], d[2], nb, Y, nullptr);
@@ -198,6 +199,7 @@ void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, c
 }
 
 // nb (the number of SH coefficients used) is a template constant: the SH loops unroll.
+// A null incoming gradient (an output nobody used) counts as zeros.
 template <typename S, int nb>
 void preprocess_bwd(int64_t N, const Cam& cam, const S* means, const S* quats, const S* scales, const S* sh,
                     int K, int nt, const int64_t* radii, const S* g_means2d, const S* g_conics,
@@ -212,9 +214,14 @@ void preprocess_bwd(int64_t N, const Cam& cam, const S* means, const S* quats, c
     if (radii[n] <= 0) continue;  // never composited: nothing flows back
     // hidden behind other Gaussians' cut-off or too faint everywhere: every incoming gradient is
     // zero, and so is every outgoing one (about half of a dense bike part's Gaussians)
-    bool any_grad = g_depths[n] != (S)0;
-    for (int i = 0; i < 2; ++i) any_grad |= g_means2d[2 * n + i] != (S)0;
-    for (int i = 0; i < 3; ++i) any_grad |= (g_conics[3 * n + i] != (S)0) | (g_colors[3 * n + i] != (S)0);
+    const S zero3[3] = {0, 0, 0};
+    const S* const gm2 = g_means2d ? g_means2d + 2 * n : zero3;
+    const S* const gcn = g_conics ? g_conics + 3 * n : zero3;
+    const S* const gcol = g_colors ? g_colors + 3 * n : zero3;
+    const S gdep = g_depths ? g_depths[n] : (S)0;
+    bool any_grad = gdep != (S)0;
+    for (int i = 0; i < 2; ++i) any_grad |= gm2[i] != (S)0;
+    for (int i = 0; i < 3; ++i) any_grad |= (gcn[i] != (S)0) | (gcol[i] != (S)0);
     if (!any_grad) continue;
     // ---- colour: rgb = max(0, sum_k Y_k sh_k + 0.5)
     S d[3], dn, Y[16], dY[16][3];
@@ -226,7 +233,7 @@ void preprocess_bwd(int64_t N, const Cam& cam, const S* means, const S* quats, c
     for (int ch = 0; ch < 3; ++ch) {
       S acc = 0;
       for (int k = 0; k < nb; ++k) acc += Y[k] * f[3 * k + ch];
-      const S gc = (acc + (S)0.5 >= (S)0) ? g_colors[3 * n + ch] : (S)0;
+      const S gc = (acc + (S)0.5 >= (S)0) ? gcol[ch] : (S)0;
       if (gc == (S)0) continue;
       for (int k = 0; k < nb; ++k) {
         gf[3 * k + ch] = Y[k] * gc;
@@ -243,14 +250,14 @@ void preprocess_bwd(int64_t N, const Cam& cam, const S* means, const S* quats, c
     const S fx = (S)cam.fx, fy = (S)cam.fy, iz = g.iz, iz2 = iz * iz;
     S gp[3] = {0, 0, 0}, g_iz = 0, g_tx = 0, g_ty = 0;
     // means2d = (fx x / zs + cx, fy y / zs + cy)
-    const S gu = g_means2d[2 * n], gv = g_means2d[2 * n + 1];
+    const S gu = gm2[0], gv = gm2[1];
     gp[0] += fx * iz * gu;
     gp[1] += fy * iz * gv;
     g_iz += fx * g.p[0] * gu + fy * g.p[1] * gv;
-    gp[2] += g_depths[n];
+    gp[2] += gdep;
     // conic = (c, -b, a) / det
     const S det = g.det, id = (S)1 / det, id2 = id * id;
-    const S gA = g_conics[3 * n], gB = g_conics[3 * n + 1], gC = g_conics[3 * n + 2];
+    const S gA = gcn[0], gB = gcn[1], gC = gcn[2];
     const S a = g.a, b = g.b, c = g.c;
     const S ga = gA * (-c * c * id2) + gB * (b * c * id2) + gC * (id - a * c * id2);
     const S gb = gA * ((S)2 * b * c * id2) + gB * (-id - (S)2 * b * b * id2) + gC * ((S)2 * a * b * id2);
@@ -332,10 +339,11 @@ extern "C" {
   void gs_preprocess_fwd_##SUFFIX(int64_t N, const double* R, const double* T, const double* intr, \
                                   int W, int H, const S* means, const S* quats, const S* scales,    \
                                   const S* sh, int K, int nb, int nt, S* means2d, S* conics,        \
-                                  S* depths, S* colors, int64_t* radii, int64_t* boxes) {           \
+                                  S* depths, S* colors, int64_t* radii, int64_t* boxes,             \
+                                  bool* visible) {                                                  \
     const Cam cam = make_cam(R, T, intr, W, H);                                                     \
     SH_DISPATCH(nb, preprocess_fwd, S, N, cam, means, quats, scales, sh, K, nt, means2d, conics,      \
-                depths, colors, radii, boxes);                                                      \
+                depths, colors, radii, boxes, visible);                                             \
   }                                                                                                 \
   void gs_preprocess_bwd_##SUFFIX(int64_t N, const double* R, const double* T, const double* intr, \
                                   int W, int H, const S* means, const S* quats, const S* scales,    \
