@@ -261,9 +261,11 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
                 a = time.perf_counter()
                 baked = render_gaussians(g, cam)
                 b = time.perf_counter()
-                flat = render_relit(g, albedo, normals, cam, light, gloss, antialiased=aa, sky_visibility=sky)
+                flat = render_relit(g, albedo, normals, cam, light, gloss, antialiased=aa, static=rb.static,
+                                    sky_visibility=sky)
                 c2 = time.perf_counter()
-                relit = render_relit(g, albedo, normals, cam, light, gloss, shadows=True, antialiased=aa, sky_visibility=sky)
+                relit = render_relit(g, albedo, normals, cam, light, gloss, shadows=True, antialiased=aa,
+                                     static=rb.static, sky_visibility=sky)
                 ts.append(time.perf_counter() - c2)
                 tr.append(c2 - b)
                 tb.append(b - a)

@@ -117,6 +117,53 @@ def test_features_ride_along_with_the_colour():
     assert ga[-1].abs().sum() > 0
 
 
+@pytest.mark.parametrize("backend", ["tiles", "torch"])
+def test_feature_parts_and_no_depth_equal_one_table(backend):
+    """features as a list of parts composite as their concatenation (the tiled back end gathers
+    them without building the table), each part gets its own columns' gradient; depth=False
+    leaves the depth out and changes nothing else, bit for bit (3 + 4 channels: the compositor's
+    compile-time 7-channel path against its any-count path for 3 + 4 + 1)."""
+    gen = torch.Generator().manual_seed(43)
+    scene = random_scene(gen, 60, 0)
+    cam = random_camera(gen)
+    table = torch.rand(60, 4, generator=gen, dtype=F64)
+    w = torch.rand(cam.height, cam.width, 4, generator=gen, dtype=F64)
+    outs, grads = [], []
+    for parts, depth in ((None, True), ((3, 1), True), ((1, 3), False)):
+        if parts is None:
+            f = table.clone().requires_grad_(True)
+            feats = f
+        else:
+            feats = [t.clone().requires_grad_(True) for t in table.split(parts, 1)]
+        out = rasterize(*scene, cam, features=feats, backend=backend, depth=depth)
+        assert ("depth" in out) == depth
+        (out["features"] * w).sum().backward()
+        outs.append(out)
+        grads.append(f.grad if parts is None else torch.cat([t.grad for t in feats], 1))
+    assert float(outs[0]["alpha"].detach().max()) > 0.3 and float(grads[0].abs().sum()) > 0
+    for o, g in zip(outs[1:], grads[1:]):
+        for k in ("rgb", "alpha", "features"):
+            assert torch.equal(o[k], outs[0][k]), k
+        assert torch.equal(g, grads[0])
+    assert torch.equal(outs[1]["depth"], outs[0]["depth"])
+
+
+def test_forward_only_renders_reusing_scratch_match_fresh_ones():
+    """Without grad the compositor's scratch is a per-thread buffer kept across calls
+    (cpu_tiles._buffer): renders of growing and shrinking sizes in a row equal renders that
+    allocate afresh (with grad), bit for bit."""
+    gen = torch.Generator().manual_seed(44)
+    scenes = [(random_scene(gen, n, 1), random_camera(gen)) for n in (30, 200, 30)]
+    feats = [torch.rand(len(sc[0]), 4, generator=gen, dtype=F64) for sc, _ in scenes]
+    with torch.no_grad():
+        kept = [rasterize(*sc, cam, features=f, backend="tiles") for (sc, cam), f in zip(scenes, feats)]
+    for (sc, cam), f, k in zip(scenes, feats, kept):
+        fresh = rasterize(*[t.clone().requires_grad_(True) for t in sc], cam, features=f, backend="tiles")
+        assert float(fresh["alpha"].detach().max()) > 0.1
+        for key in ("rgb", "alpha", "depth", "features"):
+            assert torch.equal(k[key], fresh[key].detach()), key
+
+
 def test_tiles_gradcheck_with_features():
     gen = torch.Generator().manual_seed(5)
     means, quats, scales, opac, sh = random_scene(gen, 7, 1, spread=0.5)

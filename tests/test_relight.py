@@ -12,7 +12,7 @@ from cyclist_formats import bike_folder
 from splatting.gaussians.container import Gaussians
 from splatting.raster.camera import ring_camera
 from splatting.relight.bike import RelightableBike
-from splatting.relight.render import composite_features, prepare, render_relit
+from splatting.relight.render import composite_features, prepare, relit_static, render_relit
 from splatting.relight.shading import Light, ggx_sun, lambert_reference, shade, shade_linear, srgb_encode, view_directions
 from helpers import make_bike, mat_vec, random_pose, ref_part_R
 
@@ -190,12 +190,18 @@ def test_relit_channels_equal_the_pair_list_compositing():
     cam = ring_camera(20, orbit_centre=(0, 1, 0), size=48, focal=2084.97 * 48 / 512 * 2)
     alb, gl = torch.rand(len(g), 3, generator=gen) * 0.8, torch.rand(len(g), 3, generator=gen) * 0.1
     nrm = torch.nn.functional.normalize(torch.randn(len(g), 3, generator=gen), dim=-1)
-    out = render_relit(g, alb, nrm, cam, Light(), gl, antialiased=False)
+    out = render_relit(g, alb, nrm, cam, Light(), gl, antialiased=False, reflectance=True)
     (R, n), alpha = composite_features(prepare(g, cam), [alb + gl, nrm])
     assert float(alpha.max()) > 0.5
     torch.testing.assert_close(out["alpha"], alpha, atol=2e-4, rtol=1e-3)
     torch.testing.assert_close(out["reflectance"], R, atol=2e-4, rtol=1e-3)
     torch.testing.assert_close(out["normal"], n, atol=2e-4, rtol=1e-3)
+    # the pose-invariant channels kept by the caller (RelightableBike.static) render the same, bit for bit
+    kept = render_relit(g, None, nrm, cam, Light(), None, antialiased=False, static=relit_static(alb, gl))
+    for k in ("rgb", "alpha", "normal"):  # (and the shading in place over the reflectance: the same colours)
+        assert torch.equal(kept[k], out[k]), k
+    with pytest.raises(ValueError, match="static channels for 99 Gaussians"):
+        render_relit(g, alb, nrm, cam, Light(), gl, static=relit_static(alb[:99], gl[:99]))
 
 
 def test_relight_fit_command_bad_input(tmp_path):
@@ -268,6 +274,13 @@ def test_fused_shading_equals_the_torch_formula(gloss, rough, shadows, sky):
                                atol=2e-5, rtol=1e-4)
     torch.testing.assert_close(cb[3:20, 5:30], c[3:20, 5:30])
     assert float(cb.sum()) < float(c.sum()) and float(cb[:3].abs().sum() + cb[:, :5].abs().sum()) == 0
+    # in place over the reflectance (render_relit's default): the same colours, in R's own memory
+    for backend, want in (("c", c), ("torch", t)):
+        Rc = R.clone()
+        got = shade_composited(Rc, feats, alpha, cam, light, backend=backend, in_place=True, **kw)
+        assert got.data_ptr() == Rc.data_ptr() and torch.equal(got, want), backend
+    with pytest.raises(ValueError, match="in_place"):
+        shade_composited(table[..., 1:4], feats, alpha, cam, light, in_place=True, **kw)  # a strided view
     if sky:  # the sky channel darkens: without it every pixel sees the whole sky
         kw0 = dict(kw, sky_channel=False)
         t0 = shade_composited(R, feats[..., :-1], alpha, cam, light, backend="torch", **kw0)

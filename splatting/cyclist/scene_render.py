@@ -149,8 +149,8 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None,
         u0, v0, w, h = crop
         onehot = torch.zeros(len(g), n_slots)
         onehot[torch.arange(len(g)), slots.long()] = 1.0
-        if features is not None:
-            onehot = torch.cat([onehot, features.float()], 1)
+        if features is not None:  # as parts: the compositor reads both without a concatenated table
+            onehot = [onehot, features.float()]
         # the amodal alphas from the same pass, except for parts larger than amodal_max_px (those
         # are rendered alone at reduced resolution, _subset_alpha)
         one_pass = [s for s in amodal_slots if boxes[s] is not None

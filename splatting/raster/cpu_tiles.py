@@ -28,6 +28,7 @@ OMP_WAIT_POLICY=PASSIVE). Gradients are not materialised (an unused output's gra
 pointer), the gradient buffers are allocated uninitialised (the C++ writes every entry).
 """
 import ctypes
+import threading
 
 import torch
 
@@ -44,6 +45,25 @@ def _nptr(t):
     return None if t is None else t.data_ptr()
 
 
+_scratch = threading.local()
+
+
+def _buffer(name, numel, dtype, reuse):
+    """torch.empty(numel) of dtype; with reuse, a view of this thread's buffer `name`, kept (and
+    grown) across calls: the scratch of a render that no backward will read (records, tile lists,
+    sorted channels), so a forward-only render gets no fresh pages to fault in for it (at 512 px
+    and 45k Gaussians ~7 MB; docs/relighting.md)."""
+    if not reuse:
+        return torch.empty(numel, dtype=dtype)
+    pool = getattr(_scratch, "pool", None)
+    if pool is None:
+        pool = _scratch.pool = {}
+    b = pool.get(name)
+    if b is None or b.dtype != dtype or b.numel() < numel:
+        b = pool[name] = torch.empty(max(numel, 1), dtype=dtype)
+    return b[:numel]
+
+
 def _ptrs(ts):
     """A C array of the tensors' data pointers (null for None)."""
     return (ctypes.c_void_p * len(ts))(*[None if t is None else t.data_ptr() for t in ts])
@@ -56,7 +76,7 @@ class _TileComposite(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, means2d, conics, opacities, depths, radii, boxes, background, H, W, groups, n_groups, keep,
-                *planes):
+                nparts, *parts):
         lib = build.load()
         dt = means2d.dtype
         if dt not in _SUFFIX:
@@ -64,32 +84,36 @@ class _TileComposite(torch.autograd.Function):
         sfx = _SUFFIX[dt]
         nt = max(1, torch.get_num_threads())
         n = means2d.shape[0]
-        split = [1 if p.dim() == 1 else p.shape[1] for p in planes]
+        isz = [1 if p.dim() == 1 else p.shape[1] for p in parts]
+        cuts = [sum(nparts[:i]) for i in range(len(nparts) + 1)]  # plane i: parts cuts[i]..cuts[i+1]-1
+        split = [sum(isz[cuts[i]:cuts[i + 1]]) for i in range(len(nparts))]
         cf = sum(split)
         m2 = means2d.detach().contiguous()
         cn = conics.detach().to(dt).contiguous()
         op = opacities.detach().to(dt).contiguous()
-        fe = [p.detach().to(dt).contiguous() for p in planes]
+        fe = [p.detach().to(dt).contiguous() for p in parts]
         z = depths.detach().to(dt).contiguous()
         rd = radii.to(torch.int64).contiguous()
         bx = boxes.to(torch.int64).contiguous()
         bg = None if background is None else background.detach().to(dt).contiguous()
         tile = lib.gs_tile_size()
         ntiles = -(-W // tile) * -(-H // tile)
-        recs = torch.empty(max(n, 1) * getattr(lib, f"gs_rec_bytes_{sfx}")(), dtype=torch.uint8)
-        order = torch.empty(max(n, 1), dtype=torch.int32)
-        rank = torch.empty(max(n, 1), dtype=torch.int32)
-        cursor = torch.empty(lib.gs_chunks(nt) * ntiles, dtype=torch.int64)
-        tile_off = torch.empty(ntiles + 1, dtype=torch.int64)
-        goff = torch.empty(n + 1, dtype=torch.int64)
+        # the binning's and blending's scratch: kept for the backward, or reused when there is none
+        reuse = not keep
+        recs = _buffer("recs", max(n, 1) * getattr(lib, f"gs_rec_bytes_{sfx}")(), torch.uint8, reuse)
+        order = _buffer("order", max(n, 1), torch.int32, reuse)
+        rank = _buffer("rank", max(n, 1), torch.int32, reuse)
+        cursor = _buffer("cursor", lib.gs_chunks(nt) * ntiles, torch.int64, reuse)
+        tile_off = _buffer("tile_off", ntiles + 1, torch.int64, reuse)
+        goff = _buffer("goff", n + 1, torch.int64, reuse)
         sizes = torch.empty(2, dtype=torch.int64)
         getattr(lib, f"gs_bin_{sfx}")(n, _ptr(m2), _ptr(cn), _ptr(op), _ptr(z), _ptr(rd), _ptr(bx), W, H, nt,
                                       _ptr(recs), _ptr(order), _ptr(rank), _ptr(cursor), _ptr(tile_off),
                                       _ptr(goff), _ptr(sizes))
         nv, total = sizes.tolist()
-        lst = torch.empty(max(total, 1), dtype=torch.int32)
+        lst = _buffer("lst", max(total, 1), torch.int32, reuse)
         slot = torch.empty(max(total, 1), dtype=torch.int64) if keep else None
-        fs = torch.empty(max(nv, 1), cf, dtype=dt)
+        fs = _buffer("fs", max(nv, 1) * cf, dt, reuse).view(max(nv, 1), cf)
         outs = [torch.empty((H, W, c) if c > 1 else (H, W), dtype=dt) for c in split]
         alpha = torch.empty(H, W, dtype=dt)
         # T_final, last and slot only for a backward (a no-grad render skips their ~3 MB of stores)
@@ -97,10 +121,11 @@ class _TileComposite(torch.autograd.Function):
         last = torch.empty(H, W, dtype=torch.int32) if keep else None
         ng = int(n_groups) if groups is not None else 0
         gr = groups.to(torch.int32).contiguous() if ng else None
-        g_sorted = torch.empty(max(nv, 1), dtype=torch.int32) if ng else None
+        g_sorted = _buffer("g_sorted", max(nv, 1), torch.int32, reuse) if ng else None
         A_groups = torch.empty(ng, H, W, dtype=dt)
         osz = (ctypes.c_int * len(split))(*split)
-        getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), _ptrs(fe), cf, W, H, nt, _ptr(recs), _ptr(cursor),
+        getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), len(fe), (ctypes.c_int * len(fe))(*isz), _ptrs(fe), cf,
+                                          W, H, nt, _ptr(recs), _ptr(cursor),
                                           _ptr(tile_off), _ptr(goff), _ptr(lst), _nptr(slot), _ptr(fs),
                                           len(split), osz, _ptrs(outs), _nptr(T_final), _ptr(alpha), _nptr(last),
                                           _nptr(gr), ng, _nptr(g_sorted), _ptr(A_groups) if ng else None, _nptr(bg))
@@ -109,7 +134,8 @@ class _TileComposite(torch.autograd.Function):
         ctx.geom = (n, cf, H, W, nv, order, rank, recs, tile_off, goff, lst, slot, fs, last, split, bg)
         if T_final is not None:
             ctx.save_for_backward(T_final)
-        ctx.dtypes = (conics.dtype, opacities.dtype, [p.dtype for p in planes])
+        ctx.dtypes = (conics.dtype, opacities.dtype, [p.dtype for p in parts])
+        ctx.parts = (cuts, [p.dim() for p in parts], isz)
         ctx.bg_dtype = None if background is None else background.dtype
         return (*outs, alpha, T_final, A_groups)
 
@@ -137,15 +163,25 @@ class _TileComposite(torch.autograd.Function):
                                            _ptr(T_final), _ptr(last), np_, (ctypes.c_int * np_)(*split),
                                            _ptrs(g_outs), _nptr(g_T), _nptr(g_alpha), _ptr(g_m2), _ptr(g_cn),
                                            _ptr(g_op), _ptrs(g_planes), _nptr(bg), _nptr(g_bg))
-        g_planes = [None if g is None else g.to(d) for g, d in zip(g_planes, dps)]
+        cuts, dims, isz = ctx.parts
+        g_parts = []
+        for i, g in enumerate(g_planes):  # each plane's gradient cut back into its parts' columns
+            g2 = None if g is None else g.reshape(n, sum(isz[cuts[i]:cuts[i + 1]]))
+            for j in range(cuts[i], cuts[i + 1]):
+                c0 = sum(isz[cuts[i]:j])
+                gj = None if g2 is None else g2[:, c0:c0 + isz[j]]
+                g_parts.append(None if gj is None else (gj if dims[j] == 2 else gj[:, 0]).to(dps[j]))
+        g_planes = g_parts
         g_bg = None if g_bg is None else g_bg.to(ctx.bg_dtype)
-        return (g_m2, g_cn.to(dc), g_op.to(do), None, None, None, g_bg, None, None, None, None, None, *g_planes)
+        return (g_m2, g_cn.to(dc), g_op.to(do), None, None, None, g_bg, None, None, None, None, None, None, *g_planes)
 
 
 def composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H, W, groups=None, n_groups=0,
                     background=None):
     """See the module docstring. CPU tensors only; float32 or float64 (means2d's dtype).
-    planes: a list of (N, c) or (N,) tensors (at least one; the caller's colour, features, depth).
+    planes: a list of (N, c) or (N,) tensors (at least one; the caller's colour, features, depth);
+    a plane may also be a list of such parts (its channels in that order, e.g. relit normals and
+    gloss luminance): the C++ gathers them without a concatenated table.
     depths (N,): the depth-sort key (not differentiated here).
     groups (N,) int in [-1, n_groups) (-1: in no group), n_groups >= 1: also returns A_groups
     (n_groups, H, W), each group's alpha rendered alone (not differentiable).
@@ -156,22 +192,25 @@ def composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H,
         raise ValueError("the tiled rasterizer runs on CPU tensors; use backend='torch' for "
                          f"{means2d.device.type} tensors")
     n = means2d.shape[0]
-    if not planes or any(p.dim() not in (1, 2) or p.shape[0] != n or (p.dim() == 2 and p.shape[1] < 1)
-                         for p in planes):
+    # a plane given as a list of parts: its columns, gathered by the C++ without a concatenation
+    nparts = tuple(1 if torch.is_tensor(p) else len(p) for p in planes)
+    parts = [q for p in planes for q in ((p,) if torch.is_tensor(p) else p)]
+    if not planes or min(nparts) < 1 or any(p.dim() not in (1, 2) or p.shape[0] != n or (p.dim() == 2 and p.shape[1] < 1)
+                                           for p in parts):
         raise ValueError(f"composite_tiles: planes must be one or more (N,) or (N, c >= 1) tensors, N = {n}; got "
-                         f"{[tuple(p.shape) for p in planes]}")
-    c0 = 1 if planes[0].dim() == 1 else planes[0].shape[1]
+                         f"{[tuple(p.shape) for p in parts]}")
+    c0 = sum(1 if p.dim() == 1 else p.shape[1] for p in parts[:nparts[0]])
     if background is not None and background.shape != (c0,):
         raise ValueError(f"composite_tiles: background must be ({c0},) for the first plane, got {tuple(background.shape)}")
     # what only a backward reads is kept only when one can follow
     keep = torch.is_grad_enabled() and any(t is not None and t.requires_grad
-                                           for t in (means2d, conics, opacities, background, *planes))
+                                           for t in (means2d, conics, opacities, background, *parts))
     if groups is not None:
         if n_groups < 1 or groups.shape != (n,):
             raise ValueError(f"composite_tiles: groups must be ({n},) with n_groups >= 1")
         if len(groups) and not (int(groups.min()) >= -1 and int(groups.max()) < n_groups):
             raise ValueError(f"composite_tiles: group ids must lie in [-1, {n_groups})")
         return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, background, H, W, groups,
-                                    n_groups, keep, *planes)
+                                    n_groups, keep, nparts, *parts)
     return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, background, H, W, None, 0, keep,
-                                *planes)[:-1]
+                                nparts, *parts)[:-1]

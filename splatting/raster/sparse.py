@@ -277,11 +277,15 @@ def composite(means2d, conics, opacities, colors, depths, background, pairs, H, 
 
 
 def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_degree=None,
-              near=0.01, eps2d=0.3, features=None, antialiased=False, backend=None, groups=None):
+              near=0.01, eps2d=0.3, features=None, antialiased=False, backend=None, groups=None, depth=True):
     """Render N Gaussians into camera. See the module docstring for shapes.
 
     features: optional (N, F) extra channels composited like the colour (instance ids, albedo,
-    normals...; background 0), returned as out["features"] (H, W, F).
+    normals...; background 0), returned as out["features"] (H, W, F); or a list of (N, F_i)
+    parts, composited as their concatenation (the tiled back end reads the parts as they are:
+    no (N, F) table is built per render).
+    depth: False leaves the depth channel out (out has no "depth"): one channel less for the
+    compositor to blend, for renders that do not use it (relit shading, splatting/relight/render.py).
     antialiased: mip-splatting's 2D filter with opacity compensation (gsplat's "antialiased"
     mode): opacity x sqrt(det S / det(S + eps2d I)), S the projected covariance before the eps2d
     low-pass, so a Gaussian smaller than a pixel keeps its true footprint instead of growing
@@ -310,11 +314,18 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
         means2d.retain_grad()
     if antialiased:
         opacities = opacities * aa_compensation(conics, eps2d)
-    nf = 0 if features is None else features.shape[1]
+    if features is not None and not torch.is_tensor(features):  # parts
+        features = list(features)
+        nf = sum(f.shape[1] for f in features)
+        if backend == "torch" and features:
+            features = torch.cat(features, 1)
+    else:
+        nf = 0 if features is None else features.shape[1]
     group_alpha = None
+    want_depth = depth
     if backend == "tiles":
         rgb, alpha, depth, feats, group_alpha = _composite_tiles(means2d, conics, opacities, colors, features, depths,
-                                                                 radii, boxes, background, H, W, groups)
+                                                                 radii, boxes, background, H, W, groups, want_depth)
     else:
         if nf:
             colors = torch.cat([colors, features.to(colors)], 1)
@@ -325,6 +336,8 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
             group_alpha = _group_alpha_torch(means2d, conics, opacities, depths, radii, boxes, groups, H, W)
     out = {"rgb": rgb, "alpha": alpha, "depth": depth, "means2d": means2d, "radii": radii,
            "visible": visible, "backend": backend}
+    if not want_depth:
+        del out["depth"]
     if nf:
         out["features"] = feats
     if groups is not None:
@@ -373,22 +386,24 @@ def resolve_backend(backend, means):
 
 
 def _composite_tiles(means2d, conics, opacities, colors, features, depths, radii, boxes, background, H, W,
-                     groups=None):
+                     groups=None, depth=True):
     """The tiled C++ compositor with the torch path's outputs: rgb (H,W,3) over the background,
-    alpha, depth (camera z composited as the last channel), features (H,W,F) or None. Colour,
+    alpha, depth (camera z composited as the last channel; None when not depth), features (H,W,F)
+    or None, features a tensor or a list of parts (one plane). Colour,
     features and depth are handed over as separate planes; the compositor reads them in place,
     writes each as its own contiguous image (colour already over the background, alpha, the
     group alphas), and takes their gradients back the same way (no concatenation, no slicing, no
     torch op on a full image)."""
     from splatting.raster.cpu_tiles import composite_tiles
 
-    has_f = features is not None and features.shape[1] > 0
-    parts = [colors] + ([features.to(colors)] if has_f else []) + [depths]
-    res = composite_tiles(means2d, conics, opacities, parts, depths.detach(), radii, boxes, H, W,
+    fparts = [] if features is None else [features] if torch.is_tensor(features) else list(features)
+    fparts = [f.to(colors) for f in fparts if f.shape[1] > 0]
+    planes = [colors] + ([fparts[0] if len(fparts) == 1 else fparts] if fparts else []) + ([depths] if depth else [])
+    res = composite_tiles(means2d, conics, opacities, planes, depths.detach(), radii, boxes, H, W,
                           *(() if groups is None else groups), background=background)
-    rgb, depth, alpha = res[0], res[len(parts) - 1], res[len(parts)]
-    feats = res[1] if has_f else None if features is None else features.new_zeros(H, W, 0)
-    return rgb, alpha, depth, feats, None if groups is None else res[-1]
+    rgb, alpha = res[0], res[len(planes)]
+    feats = res[1] if fparts else None
+    return rgb, alpha, res[len(planes) - 1] if depth else None, feats, None if groups is None else res[-1]
 
 
 def render_gaussians(g, camera, **kw):

@@ -12,6 +12,7 @@ import torch
 
 from cyclist_formats import bike_folder
 from splatting.gaussians.container import Gaussians
+from splatting.relight.render import relit_static
 from splatting.rider.avatar import PLY_NAME, RiderAvatar
 
 # the roster riders' material (addon/core/rider_import.py): a fully rough dielectric
@@ -26,6 +27,7 @@ class RelightableAvatar:
                              f"{tuple(gloss.shape)} != ({n}, 3)")
         self.avatar = avatar
         self.albedo, self.normals, self.gloss = albedo.float(), normals.float(), gloss.float()
+        self.static = relit_static(self.albedo, self.gloss)  # render_relit(..., static=): pose-invariant
 
     @classmethod
     def load(cls, folder):

@@ -7,6 +7,7 @@ import torch
 
 from cyclist_formats import bike_folder
 from splatting.bike.model import BikeModel
+from splatting.relight.render import relit_static
 
 
 class RelightableBike:
@@ -21,6 +22,7 @@ class RelightableBike:
         self.gloss = gloss.float()
         self.normals = normals.float()
         self._sky = None
+        self.static = relit_static(self.albedo, self.gloss)  # render_relit(..., static=): pose-invariant
 
     @classmethod
     def load(cls, bike_dir):

@@ -4,8 +4,11 @@
 `prepare` / `composite_features` keep the pure-torch pair list for the relight fit, which needs the
 backward of the features with the geometry fixed (one projection per view, reused every step).
 """
+from typing import NamedTuple, Optional
+
 import torch
 
+from splatting.gaussians.sh import rgb_to_sh0
 from splatting.raster.sparse import composite, intersect, project
 from splatting.relight.shading import HIGHLIGHT, ROUGHNESS, Light, _shade_cm, _view_directions_cm
 
@@ -34,6 +37,23 @@ def composite_features(prep, features):
     return outs, alpha
 
 
+def gloss_luma(gloss):
+    """(N, 3) gloss -> (N, 1) its Rec. 709 luminance (the channel shade_composited reads)."""
+    return (gloss.float() @ LUMA)[:, None]
+
+
+def relight_feature_parts(normals, luma=None, roughness=None, visibility=None, sky_visibility=None):
+    """relight_features' columns as a list of (N, c) float32 parts (luma: gloss_luma(gloss)), for
+    rasterize(features=[...]), which composites them without concatenating them."""
+    cols = [normals.float()]
+    if luma is not None:
+        cols.append(luma.float())
+    for x in (roughness, visibility, sky_visibility):
+        if x is not None:
+            cols.append(x.float().reshape(-1, 1))
+    return cols
+
+
 def relight_features(normals, gloss=None, roughness=None, visibility=None, sky_visibility=None):
     """The per-Gaussian channels shade_composited reads, as one (N, C) float32 table: the world
     normal (3), then the gloss's luminance (1) when there is a gloss, a per-Gaussian roughness (1)
@@ -41,17 +61,25 @@ def relight_features(normals, gloss=None, roughness=None, visibility=None, sky_v
     given (cast shadows), the sky visibility (1) when given (self-occlusion, shadow.sky_visibility).
     The reflectance albedo + gloss is composited through the colour channels (or its own 3
     features, splatting/relight/scene.py)."""
-    cols = [normals.float()]
-    if gloss is not None:
-        cols.append((gloss.float() @ LUMA)[:, None])
-    for x in (roughness, visibility, sky_visibility):
-        if x is not None:
-            cols.append(x.float().reshape(-1, 1))
-    return torch.cat(cols, 1).contiguous()
+    luma = None if gloss is None else gloss_luma(gloss)
+    return torch.cat(relight_feature_parts(normals, luma, roughness, visibility, sky_visibility), 1).contiguous()
+
+
+class RelitStatic(NamedTuple):
+    """What render_relit derives from the pose-invariant albedo and gloss (relit_static): a
+    relightable bike or avatar keeps it (RelightableBike.static), so no render rebuilds it."""
+    sh: torch.Tensor                      # (N, 1, 3) the reflectance albedo + gloss as degree-0 SH
+    gloss_luma: Optional[torch.Tensor]    # (N, 1) gloss_luma(gloss), None without a gloss
+
+
+def relit_static(albedo, gloss=None):
+    refl = albedo.float() if gloss is None else albedo.float() + gloss.float()
+    return RelitStatic(rgb_to_sh0(refl)[:, None, :].contiguous(), None if gloss is None else gloss_luma(gloss))
 
 
 def shade_composited(R, feats, alpha, camera, light: Light, gloss=True, rough_channel=False, shadows=False,
-                     roughness=ROUGHNESS, highlight=HIGHLIGHT, box=None, backend=None, sky_channel=False):
+                     roughness=ROUGHNESS, highlight=HIGHLIGHT, box=None, backend=None, in_place=False,
+                     sky_channel=False):
     """Display colour of composited relight channels: R (H, W, 3) the premultiplied reflectance
     albedo + gloss, feats (H, W, C) the composited relight_features (same flags), alpha (H, W) the
     coverage of what they came from, camera the view they were rendered in (for the highlight's
@@ -60,16 +88,24 @@ def shade_composited(R, feats, alpha, camera, light: Light, gloss=True, rough_ch
     when given.  backend "c": the fused per-pixel loop of csrc/shade.cpp (float32 CPU; one pass
     instead of ~80 torch operations: 0.2 vs 4-9 ms for a bike's 22k pixels at 512 px), "torch":
     the same formula as torch operations (splatting/relight/shading.py, the reference the tests
-    hold the C to); None: "c" for float32 CPU tensors, else "torch"."""
+    hold the C to); None: "c" for float32 CPU tensors, else "torch".
+    in_place: the colour overwrites R (a contiguous image, 0 wherever alpha is 0, as the
+    compositor leaves it; no box) and R is returned: no image to allocate and fill, and the C loop
+    writes only the covered pixels (at 512 px a bike covers ~10 % of them)."""
     H, W = alpha.shape
     u0, v0, u1, v1 = box if box is not None else (0, 0, W, H)
-    rgb = torch.zeros(H * W, 3, dtype=feats.dtype)
     if backend is None:
         backend = "c" if feats.dtype == torch.float32 and feats.device.type == "cpu" else "torch"
+    if in_place and (box is not None or not R.is_contiguous()):
+        raise ValueError("shade_composited: in_place needs a contiguous R and no box")
+    # the C loop writes every pixel of its box (zeros where uncovered): no zero fill for the whole image
+    whole = backend == "c" and (u0, v0, u1, v1) == (0, 0, W, H)
     if backend == "c":
+        rgb = R.view(H * W, 3) if in_place else (torch.empty if whole else torch.zeros)(H * W, 3, dtype=feats.dtype)
         _shade_c((u0, v0, u1, v1), R, feats, alpha, rgb, camera, light, gloss, rough_channel, shadows, roughness,
-                 highlight, sky_channel)
+                 highlight, in_place, sky_channel)
         return rgb.reshape(H, W, 3)
+    rgb = torch.zeros(H * W, 3, dtype=feats.dtype)
     if backend != "torch":
         raise ValueError(f"shade_composited: backend must be 'c', 'torch' or None, got {backend!r}")
     ys, xs = torch.nonzero(alpha[v0:v1, u0:u1] > 1e-5, as_tuple=True)
@@ -94,14 +130,14 @@ def shade_composited(R, feats, alpha, camera, light: Light, gloss=True, rough_ch
     sky = (f[c] / a.clamp_min(1e-6)).clamp_(0, 1) if sky_channel else None
     view = _view_directions_cm(camera, ys, xs, f.dtype) if gloss else None
     rgb.index_copy_(0, pix, _shade_cm(alb, nrm, a, light, gl, view, roughness, highlight, vis, sky).T)
-    return rgb.reshape(H, W, 3)
+    return R.copy_(rgb.reshape(H, W, 3)) if in_place else rgb.reshape(H, W, 3)
 
 
 _C = None
 
 
 def _shade_c(box, R, feats, alpha, out, camera, light, gloss, rough_channel, shadows, roughness, highlight,
-             sky_channel=False):
+             in_place=False, sky_channel=False):
     """csrc/shade.cpp's rl_shade_f32 on the rasterizer's pixel-major views (no gathers, no copies)."""
     import ctypes
 
@@ -123,38 +159,48 @@ def _shade_c(box, R, feats, alpha, out, camera, light, gloss, rough_channel, sha
                         *camera.R.to(torch.float64).reshape(-1).tolist(),
                         0.0 if torch.is_tensor(roughness) else float(roughness), float(highlight)], dtype=torch.float32)
     _C(W, *box, R.data_ptr(), R.stride(1), feats.data_ptr(), feats.stride(1), alpha.data_ptr(), out.data_ptr(),
-       prm.data_ptr(), int(gloss) | 2 * int(rough_channel) | 4 * int(shadows) | 16 * int(sky_channel))
+       prm.data_ptr(), int(gloss) | 2 * int(rough_channel) | 4 * int(shadows) | 8 * int(in_place)
+       | 16 * int(sky_channel))
 
 
 @torch.no_grad()
 def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
-                 shadows=False, antialiased=True, sky_visibility=None):
+                 shadows=False, antialiased=True, static=None, reflectance=False, sky_visibility=None):
     """Gaussians g with per-Gaussian linear albedo (N, 3), world-frame unit normals (N, 3) and optionally
     a linear glossy colour (N, 3) under a light -> dict rgb (H, W, 3) display colour premultiplied
-    (over black), alpha, reflectance (albedo + gloss) and normal (composited).  One rasterizer call composites
+    (over black), alpha, normal (composited) and with reflectance=True the composited reflectance
+    albedo + gloss (else the shading overwrites it in place).  One rasterizer call composites
     every channel (rasterize(features=...)); the gloss reflects the sky and shows the sun's
     highlight (splatting/relight/shading.py).  shadows: the sun is blocked per Gaussian by the
     others (splatting/relight/shadow.py: one more render, from the sun).  antialiased: the
     rasterizer's mip filter (keeps sub-pixel Gaussians -- spokes, cables -- their true coverage
     when rendered below their training resolution; mask IoU 0.795 -> 0.892 for a 512 px-trained
-    bike at 256 px, bench/relight.py).  sky_visibility (N,): each Gaussian's share of the sky
-    (splatting/relight/shadow.py sky_visibility; a bike's: RelightableBike.sky_visibility), one
-    more composited channel; None: the sky reaches everything."""
+    bike at 256 px, bench/relight.py).  static: relit_static(albedo, gloss) kept by the caller
+    (RelightableBike.static): albedo and gloss are then not read; None derives it here.
+    sky_visibility (N,): each Gaussian's share of the sky (splatting/relight/shadow.py
+    sky_visibility; a bike's: RelightableBike.sky_visibility), one more composited channel; None:
+    the sky reaches everything."""
     from splatting.gaussians.container import Gaussians
-    from splatting.gaussians.sh import C0
     from splatting.raster.sparse import render_gaussians
 
-    # Channel budget (each composited channel costs the tiled compositor ~4-5 % of a render): the
+    # Channel budget (each composited channel costs the tiled compositor ~3-5 % of a render): the
     # reflectance albedo + gloss rides in the colour channels (degree-0 SH whose colour is it), the
-    # normal and the gloss's luminance are the features (relight_features).
-    refl = albedo if gloss is None else albedo + gloss
+    # normal and the gloss's luminance are the features (relight_features), handed over as parts
+    # (no table built per render), and no depth is composited.
+    static = relit_static(albedo, gloss) if static is None else static
+    if static.sh.shape != (len(g), 1, 3):
+        raise ValueError(f"render_relit: static channels for {static.sh.shape[0]} Gaussians, not {len(g)}")
     vis = None
     if shadows:
         from splatting.relight.shadow import sun_visibility
         vis = sun_visibility(g, light)
-    feats = relight_features(normals, gloss, visibility=vis, sky_visibility=sky_visibility)
-    gr = Gaussians(g.means, g.quats, g.log_scales, g.opacity_logits, ((refl.float() - 0.5) / C0)[:, None, :].contiguous())
-    r = render_gaussians(gr, camera, features=feats, sh_degree=0, antialiased=antialiased)
-    rgb = shade_composited(r["rgb"], r["features"], r["alpha"], camera, light, gloss is not None, False, shadows,
-                           roughness, highlight, sky_channel=sky_visibility is not None)
-    return {"rgb": rgb, "alpha": r["alpha"], "reflectance": r["rgb"], "normal": r["features"][..., :3]}
+    gr = Gaussians(g.means, g.quats, g.log_scales, g.opacity_logits, static.sh)
+    parts = relight_feature_parts(normals, static.gloss_luma, visibility=vis, sky_visibility=sky_visibility)
+    r = render_gaussians(gr, camera, features=parts, sh_degree=0, antialiased=antialiased, depth=False)
+    rgb = shade_composited(r["rgb"], r["features"], r["alpha"], camera, light, static.gloss_luma is not None, False,
+                           shadows, roughness, highlight, in_place=not reflectance,
+                           sky_channel=sky_visibility is not None)
+    out = {"rgb": rgb, "alpha": r["alpha"], "normal": r["features"][..., :3]}
+    if reflectance:
+        out["reflectance"] = r["rgb"]
+    return out

@@ -452,11 +452,15 @@ struct Planes {
 // below 1e-4 not taken). One pass: the alpha a Gaussian has at a pixel is computed once for the
 // image and its group, and a pixel's list is walked past the image's own cut-off only while
 // some group at that pixel is still open. grp (nv): the groups gathered into depth order.
-template <typename S, bool GROUPS>
-void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int W, int H, int nt,
+// CF > 0: the channel count as a compile-time constant (the per-pixel channel loop unrolls, its
+// per-Gaussian broadcasts stay in registers); CF == 0: any Cf. in: the input parts, per Gaussian
+// (their sizes sum to Cf; several may make up one output plane).
+template <typename S, bool GROUPS, int CF>
+void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf_, int W, int H, int nt,
              const Rec<S>* recs, int64_t* cursor, const int64_t* tile_off, const int64_t* goff,
              int32_t* list, int64_t* slot, S* feats, Planes<S*> out, S* T_final, S* alpha, int32_t* last,
              const int32_t* grp_in, int NG, int32_t* grp, S* A_grp, const S* bg) {
+  const int Cf = CF > 0 ? CF : Cf_;
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   const std::vector<int> torder = busiest_first(tile_off, NT);
   const int NC = n_chunks(nt);
@@ -467,7 +471,12 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
       for (int q = 0, c0 = 0; q < in.n; c0 += in.size[q++]) {
         const int cq = in.size[q];
         __builtin_prefetch(in.ptr[q] + gn * cq);
-        std::copy_n(in.ptr[q] + gi * cq, cq, feats + s * Cf + c0);
+        // a few channels: plain moves (std::copy_n was a memmove call per Gaussian and part)
+        const S* src = in.ptr[q] + gi * cq;
+        S* dst = feats + s * Cf + c0;
+        int c = 0;
+        for (; c + 4 <= cq; c += 4) dst[c] = src[c], dst[c + 1] = src[c + 1], dst[c + 2] = src[c + 2], dst[c + 3] = src[c + 3];
+        for (; c < cq; ++c) dst[c] = src[c];
       }
       if (GROUPS) grp[s] = grp_in[order[s]];
       const Rec<S>& r = recs[s];
@@ -487,7 +496,7 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
     const std::vector<V> lane_xc = Entry<S>::lane_centres();
     std::vector<V> T(NV);
     std::vector<I> done(NV), lst(NV);
-    std::vector<V> acc((size_t)NV * Cf);
+    std::vector<V> acc((size_t)NV * Cf), fv(Cf);
     std::vector<V> TG(GROUPS ? (size_t)NG * NV : 0);  // per group and pixel: its own transmittance
     std::vector<I> gdone(GROUPS ? (size_t)NG * NV : 0);
 #pragma omp for schedule(dynamic, 1) nowait  // the region's end is the barrier
@@ -542,6 +551,7 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
         I* const dq = q >= 0 ? gdone.data() + (size_t)q * NV : nullptr;
         const Entry<S> en(g, ox, oy, ex, ey, lane_xc.data());
         const S* f = feats + (int64_t)sp * Cf;
+        for (int c = 0; c < Cf; ++c) fv[c] = (V){} + f[c];  // broadcast once per entry, not per chunk
         const I kk = (I){} + (IS)(k + 1);
         for (int y = en.y0; y <= en.y1; ++y) {
           V by, cyy;
@@ -575,7 +585,7 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf, int 
             const I ok = m & ~term;
             const V w = ok ? al * T[v] : (V){};
             V* a = acc.data() + (size_t)v * Cf;
-            for (int c = 0; c < Cf; ++c) a[c] = vfma(w, (V){} + f[c], a[c]);
+            for (int c = 0; c < Cf; ++c) a[c] = vfma(w, fv[c], a[c]);
             T[v] = ok ? test_T : T[v];
             lst[v] = ok ? kk : lst[v];
           }
@@ -819,22 +829,32 @@ int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
     bin<S>(N, means2d, conics, opac, depths, radii, boxes, W, H, nt, (Rec<S>*)recs, order, rank,   \
            cursor, tile_off, goff, sizes);                                                         \
   }                                                                                                \
-  void gs_forward_##SUFFIX(int64_t nv, const int32_t* order, const S* const* feats, int Cf, int W, \
+  void gs_forward_##SUFFIX(int64_t nv, const int32_t* order, int NI, const int* isz,              \
+                           const S* const* feats, int Cf, int W,                                  \
                            int H, int nt, const void* recs, int64_t* cursor, const int64_t* tile_off, \
                            const int64_t* goff, int32_t* list, int64_t* slot, S* feats_sorted,    \
                            int NO, const int* osz, S* const* outs, S* T_final, S* alpha,          \
                            int32_t* last, const int32_t* grp_in, int NG, int32_t* grp, S* A_grp,  \
                            const S* bg) {                                                         \
     const Planes<S*> out{NO, osz, outs};                                                           \
-    const Planes<const S*> in{NO, osz, feats};                                                     \
+    /* the inputs: parts of the planes (several parts may fill one plane), per Gaussian */        \
+    const Planes<const S*> in{NI, isz, feats};                                                     \
+    const Rec<S>* r = (const Rec<S>*)recs;                                                         \
     if (NG > 0)                                                                                    \
-      forward<S, true>(nv, order, in, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off, goff,   \
-                       list, slot, feats_sorted, out, T_final, alpha, last, grp_in, NG, grp, A_grp, \
-                       bg);                                                                        \
+      forward<S, true, 0>(nv, order, in, Cf, W, H, nt, r, cursor, tile_off, goff, list, slot,       \
+                          feats_sorted, out, T_final, alpha, last, grp_in, NG, grp, A_grp, bg);   \
+    else if (Cf == 4) /* colour + depth: a plain render */                                         \
+      forward<S, false, 4>(nv, order, in, Cf, W, H, nt, r, cursor, tile_off, goff, list, slot,      \
+                           feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr, nullptr, bg); \
+    else if (Cf == 7) /* colour + relight features (splatting/relight/render.py) */                \
+      forward<S, false, 7>(nv, order, in, Cf, W, H, nt, r, cursor, tile_off, goff, list, slot,      \
+                           feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr, nullptr, bg); \
+    else if (Cf == 8) /* colour + relight features + sky visibility (a bike's, RelightableBike) */ \
+      forward<S, false, 8>(nv, order, in, Cf, W, H, nt, r, cursor, tile_off, goff, list, slot,      \
+                           feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr, nullptr, bg); \
     else                                                                                           \
-      forward<S, false>(nv, order, in, Cf, W, H, nt, (const Rec<S>*)recs, cursor, tile_off, goff,  \
-                        list, slot, feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr,  \
-                        nullptr, bg);                                                              \
+      forward<S, false, 0>(nv, order, in, Cf, W, H, nt, r, cursor, tile_off, goff, list, slot,      \
+                           feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr, nullptr, bg); \
   }                                                                                                \
   void gs_backward_##SUFFIX(int64_t N, int64_t nv, const int32_t* order, const int32_t* rank,      \
                             int Cf, int W, int H,                                                  \
