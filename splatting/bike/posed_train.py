@@ -15,10 +15,10 @@ stays in the mix.  No densification: the per-part training placed the Gaussians.
 
 writes OUT/bikes/ID/gaussians/<part>.ply in place (the rest-trained ones kept as <part>_rest.ply)
 and gaussians/posed_train.json (config, held-out-pose scores before/after).  Training poses come
-from seed 1000 of splatting.library.gt.sample_poses: never the checks' poses (seed 0).
+from seeds 1000, 1001, ... of splatting.library.gt.sample_poses (48 a seed): never the checks' poses
+(seed 0).
 """
 import dataclasses
-import json
 import os
 import shutil
 import subprocess
@@ -37,6 +37,7 @@ from splatting.training.trainer import FineTuneRates
 
 RENDER_SCRIPT = paths.blender_script("render_pose.py")
 POSE_SEED = 1000
+POSE_BLOCK = 48
 HELD_OUT = 4  # the last posed views: scored before and after, never trained on
 
 
@@ -55,10 +56,14 @@ class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (trai
 
 
 def training_poses(n):
-    """n random 8-DoF poses and ring-camera indices (the ground-truth check's ranges, another seed)."""
+    """n random 8-DoF poses and ring-camera indices (the ground-truth check's ranges, other seeds).
+    Drawn in blocks of POSE_BLOCK (seeds POSE_SEED, POSE_SEED + 1, ...), so the first n of any larger
+    --poses are these same n: more poses reuse the renders already made (block 0 is what 48 poses
+    always were, sample_poses(48, 1000))."""
     from splatting.library.gt import sample_poses
 
-    return sample_poses(n, POSE_SEED)
+    blocks = [sample_poses(POSE_BLOCK, POSE_SEED + b) for b in range(-(-n // POSE_BLOCK))]
+    return np.concatenate([p for p, _ in blocks])[:n], np.concatenate([c for _, c in blocks])[:n]
 
 
 def render_posed_views(bike_dir, out_dir, cfg: PosedTrainConfig, log=print):
@@ -74,13 +79,19 @@ def render_posed_views(bike_dir, out_dir, cfg: PosedTrainConfig, log=print):
     from cyclist_formats.atomic import write_json
 
     meta = os.path.join(out_dir, "poses.json")
-    if os.path.isfile(meta):
-        with open(meta) as f:
-            old = json.load(f)
-        if old.get("settings") != settings:  # renders of other settings: start again
-            for j in old.get("jobs", []):
-                if os.path.isfile(j["out"]):
-                    os.remove(j["out"])
+    old = read_json_or_none(meta)
+    if isinstance(old, dict):
+        # a render is reused only when its settings, pose and camera are this job's (the folder may
+        # have moved: compared by file and camera name)
+        def key(j):
+            return os.path.basename(j["out"]), tuple(j["pose"]), j["camera"].rpartition(":")[2]
+
+        now = {key(j) for j in jobs}
+        same = old.get("settings") == settings
+        for j in old.get("jobs", []):
+            stale = os.path.join(out_dir, os.path.basename(j["out"]))
+            if (not same or key(j) not in now) and os.path.isfile(stale):
+                os.remove(stale)
     write_json(meta, {"settings": settings, "jobs": jobs})
     todo = [j for j in jobs if not os.path.isfile(j["out"])]
     if todo:
