@@ -224,8 +224,12 @@ def test_renders_of_another_pose_are_rendered_again(tmp_path, monkeypatch):
     assert rendered(PosedTrainConfig(poses=6)) == [f"posed_{k:03d}.png" for k in range(6)]
     assert rendered(PosedTrainConfig(poses=6)) == []  # all reused
     assert rendered(PosedTrainConfig(poses=8)) == ["posed_006.png", "posed_007.png"]
+    assert rendered(PosedTrainConfig(poses=6)) == [] and rendered(PosedTrainConfig(poses=8)) == []  # kept
+    (out / "posed_009.png").write_bytes(b"")  # a file poses.json says nothing about is not trusted
+    assert rendered(PosedTrainConfig(poses=10)) == ["posed_008.png", "posed_009.png"]
     meta = json.loads((out / "poses.json").read_text())
     meta["jobs"][3]["pose"][0] += 1.0  # posed_003.png was rendered at another pose
     (out / "poses.json").write_text(json.dumps(meta))
     assert rendered(PosedTrainConfig(poses=8)) == ["posed_003.png"]
     assert len(rendered(PosedTrainConfig(poses=8, samples=64))) == 8  # other settings: all again
+    assert rendered(PosedTrainConfig(poses=10, samples=64)) == ["posed_008.png", "posed_009.png"]

@@ -80,19 +80,30 @@ def render_posed_views(bike_dir, out_dir, cfg: PosedTrainConfig, log=print):
 
     meta = os.path.join(out_dir, "poses.json")
     old = read_json_or_none(meta)
-    if isinstance(old, dict):
-        # a render is reused only when its settings, pose and camera are this job's (the folder may
-        # have moved: compared by file and camera name)
-        def key(j):
-            return os.path.basename(j["out"]), tuple(j["pose"]), j["camera"].rpartition(":")[2]
 
-        now = {key(j) for j in jobs}
-        same = old.get("settings") == settings
-        for j in old.get("jobs", []):
-            stale = os.path.join(out_dir, os.path.basename(j["out"]))
-            if (not same or key(j) not in now) and os.path.isfile(stale):
-                os.remove(stale)
-    write_json(meta, {"settings": settings, "jobs": jobs})
+    def key(j):  # the folder may have moved: compared by file and camera name
+        return os.path.basename(j["out"]), tuple(j["pose"]), j["camera"].rpartition(":")[2]
+
+    known = {}
+    if isinstance(old, dict):
+        if old.get("settings") == settings:
+            known = {os.path.basename(j["out"]): j for j in old.get("jobs", [])}
+        else:  # renders of other settings: start again
+            for j in old.get("jobs", []):
+                f = os.path.join(out_dir, os.path.basename(j["out"]))
+                if os.path.isfile(f):
+                    os.remove(f)
+        # a render is reused only when poses.json says it was made for this pose and camera
+        for j in jobs:
+            o = known.get(os.path.basename(j["out"]))
+            if os.path.isfile(j["out"]) and (o is None or key(o) != key(j)):
+                os.remove(j["out"])
+    # the record describes every render in the folder: these jobs, and those of an earlier, larger
+    # --poses (kept for a later run that asks for them again)
+    names = {os.path.basename(j["out"]) for j in jobs}
+    more = [dict(o, out=os.path.abspath(os.path.join(out_dir, n))) for n, o in sorted(known.items())
+            if n not in names and os.path.isfile(os.path.join(out_dir, n))]
+    write_json(meta, {"settings": settings, "jobs": jobs + more})
     todo = [j for j in jobs if not os.path.isfile(j["out"])]
     if todo:
         job_file = os.path.join(out_dir, "jobs.json")
