@@ -36,6 +36,10 @@ REFERENCE_SPP = 512
 # flat, converged pixels cost far fewer than 512 samples (0.005 ~ 46 dB of per-pixel noise, far
 # below the 28-36 dB differences being measured); 0 turns it off (every pixel 512 samples)
 REFERENCE_ADAPTIVE = 0.005
+# recorded in the references' job.json: references rendered before render.setup_lighting placed its
+# suns at once were lit from straight above (the workers read the suns before any update), so a
+# job.json without this value is another job and its references are rendered again
+REFERENCE_LIGHTING = "studio suns following the pose"
 GAUSS = "gaussians"
 
 
@@ -195,7 +199,8 @@ def run_compare(bike_dir, out_dir, n_poses=12, size=512, seed=0, spp=SPP, refere
     ref_dir = os.path.join(work, "reference")
     os.makedirs(ref_dir, exist_ok=True)
     job = {"bike": os.path.abspath(bike_dir), "poses": poses.tolist(), "cameras": cam_ids.tolist(), "size": size,
-           "reference_spp": reference_spp, "reference_adaptive": REFERENCE_ADAPTIVE}
+           "reference_spp": reference_spp, "reference_adaptive": REFERENCE_ADAPTIVE,
+           "lighting": REFERENCE_LIGHTING}
     job_path = os.path.join(ref_dir, "job.json")
     if not (os.path.isfile(job_path) and json.load(open(job_path)) == job):
         for f in os.listdir(ref_dir):  # references of another job

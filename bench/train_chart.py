@@ -303,6 +303,14 @@ if __name__ == "__main__":
             sys.stderr.write("train_chart: error: --bike-fidelity LABEL=BIKE_DIR,... needs existing bike folders and "
                              "--bike-reference a folder with job.json\n")
             raise SystemExit(2)
+        from bench.blender_compare import REFERENCE_LIGHTING
+        from cyclist_formats.atomic import read_json_or_none
+
+        job = read_json_or_none(os.path.join(a.bike_reference, "job.json"))
+        if not isinstance(job, dict) or job.get("lighting") != REFERENCE_LIGHTING:
+            sys.stderr.write(f"train_chart: error: {a.bike_reference}: references from before the sun fix (lit from "
+                             "above, not as the training views); render them again with bench/blender_compare.py\n")
+            raise SystemExit(2)
         rows = []
         for label, d in specs:
             rows.append(dict(bike_fidelity(d, a.bike_reference), label=label, bike=d))

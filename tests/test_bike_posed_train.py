@@ -172,3 +172,64 @@ def test_degree_one_fine_tune_rotates_its_sh_as_bike_model_does(scene):
         gt = im[..., :3] * im[..., 3:]
         ps.append(box_psnr(o["rgb"].clamp(0, 1).double().numpy(), gt, o["alpha"].numpy() > 0.5, im[..., 3] > 0.5, pad=8))
     assert abs(float(np.mean(ps)) - m["held_out_box_psnr_after"]) < 0.05, (np.mean(ps), m)
+
+
+def test_more_poses_keep_the_first_ones():
+    """--poses 100 starts with the 48 poses of --poses 48 (their renders are reused), and none of
+    them is a ground-truth check pose (seed 0)."""
+    from splatting.library.gt import sample_poses
+
+    p48, c48 = training_poses(48)
+    p100, c100 = training_poses(100)
+    assert len(p100) == len(c100) == 100
+    np.testing.assert_array_equal(p100[:48], p48)
+    np.testing.assert_array_equal(c100[:48], c48)
+    assert len({tuple(p) for p in p100}) == 100
+    checks, _ = sample_poses(12, 0)
+    assert not {tuple(p) for p in checks} & {tuple(p) for p in p100}
+
+
+FAKE_RENDER = """import json, sys
+from PIL import Image
+jobs = json.load(open(sys.argv[sys.argv.index("--batch") + 1]))
+with open(sys.argv[0] + ".log", "a") as f:
+    for j in jobs:
+        Image.new("RGBA", (4, 4)).save(j["out"])
+        f.write(j["out"] + "\\n")
+"""
+
+
+def test_renders_of_another_pose_are_rendered_again(tmp_path, monkeypatch):
+    """A posed render is reused only while its pose, camera and settings are this job's: with more
+    poses the old ones are kept and only the new ones rendered; a render whose pose changed (here:
+    its poses.json entry edited) is rendered again."""
+    from splatting.bike import posed_train
+
+    d = tmp_path / "bike"
+    whole = d / "views" / "whole"
+    os.makedirs(whole)
+    bike_folder.write_views_meta(str(whole), ring.ring([0.0, 0.5, 0.0], size=16, focal=ring.focal_for(16)))
+    fake = tmp_path / "fake_render.py"
+    fake.write_text(FAKE_RENDER)
+    monkeypatch.setattr(posed_train, "RENDER_SCRIPT", str(fake))
+    out = d / "views" / "posed"
+
+    def rendered(cfg):
+        log = tmp_path / "fake_render.py.log"
+        if log.exists():
+            log.unlink()
+        posed_train.render_posed_views(str(d), str(out), cfg, log=lambda s: None)
+        return sorted(os.path.basename(x) for x in log.read_text().split()) if log.exists() else []
+
+    assert rendered(PosedTrainConfig(poses=6)) == [f"posed_{k:03d}.png" for k in range(6)]
+    assert rendered(PosedTrainConfig(poses=6)) == []  # all reused
+    assert rendered(PosedTrainConfig(poses=8)) == ["posed_006.png", "posed_007.png"]
+    assert rendered(PosedTrainConfig(poses=6)) == [] and rendered(PosedTrainConfig(poses=8)) == []  # kept
+    (out / "posed_009.png").write_bytes(b"")  # a file poses.json says nothing about is not trusted
+    assert rendered(PosedTrainConfig(poses=10)) == ["posed_008.png", "posed_009.png"]
+    meta = json.loads((out / "poses.json").read_text())
+    meta["jobs"][3]["pose"][0] += 1.0  # posed_003.png was rendered at another pose
+    (out / "poses.json").write_text(json.dumps(meta))
+    assert rendered(PosedTrainConfig(poses=8)) == ["posed_003.png"]
+    assert len(rendered(PosedTrainConfig(poses=8, samples=64))) == 8  # other settings: all again
+    assert rendered(PosedTrainConfig(poses=10, samples=64)) == ["posed_008.png", "posed_009.png"]

@@ -10,6 +10,7 @@ import os
 from dataclasses import dataclass, replace
 
 import bpy
+import mathutils
 import numpy as np
 
 from . import frames
@@ -106,6 +107,10 @@ def setup_lighting(scene):
         d = np.asarray(direction, float)  # Blender frame, direction towards the sun
         obj.rotation_mode = "QUATERNION"
         obj.rotation_quaternion = _quat_z_to(d / np.linalg.norm(d))
+        # matrix_world too: it stays identity (a sun straight down) until the next depsgraph update,
+        # and callers that move the suns with a pose read it before one (bench/render_workers.py did:
+        # its 512-spp references were lit from above, not as the training views)
+        obj.matrix_world = mathutils.Quaternion(obj.rotation_quaternion).to_matrix().to_4x4()
 
 
 def _quat_z_to(d):
