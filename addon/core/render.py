@@ -16,7 +16,6 @@ import numpy as np
 from . import frames
 from .contract import bike_folder, instances, ply, ring
 from .contract import atomic, temp_name
-from .contract import UserError
 
 PART_IDS = instances.PART_IDS
 WHOLE = bike_folder.WHOLE
