@@ -311,6 +311,15 @@ if __name__ == "__main__":
             sys.stderr.write(f"train_chart: error: {a.bike_reference}: references from before the sun fix (lit from "
                              "above, not as the training views); render them again with bench/blender_compare.py\n")
             raise SystemExit(2)
+        from cyclist_formats.errors import UserError
+        from splatting.bike.model import BikeModel
+
+        for label, d in specs:  # every bike readable before any scoring: one line, not a traceback
+            try:
+                BikeModel.load(d)
+            except (UserError, OSError, ValueError, KeyError) as e:
+                sys.stderr.write(f"train_chart: error: --bike-fidelity {label}={d}: {e}\n")
+                raise SystemExit(2)
         rows = []
         for label, d in specs:
             rows.append(dict(bike_fidelity(d, a.bike_reference), label=label, bike=d))

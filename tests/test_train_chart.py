@@ -27,6 +27,8 @@ def test_old_references_are_refused(tmp_path):
 def test_current_references_pass_the_check(tmp_path):
     from bench.blender_compare import REFERENCE_LIGHTING
 
-    # past the check it loads the (empty) bike folder and fails there, not on the references
+    # past the check it loads the (empty) bike folder and refuses it in one line, not on the references
     r = _run(tmp_path, {"poses": [[0.0] * 8], "cameras": [0], "size": 64, "lighting": REFERENCE_LIGHTING})
-    assert r.returncode != 0 and "sun fix" not in r.stderr
+    assert r.returncode == 2 and "sun fix" not in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "a=" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert not (tmp_path / "chart.png").exists() and not (tmp_path / "chart.json").exists()
