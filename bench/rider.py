@@ -58,6 +58,27 @@ def camera_json(cam):
     return {"K": cam.K.tolist(), "R": cam.R.tolist(), "T": cam.T.tolist()}
 
 
+# Stills rendered before setup_lighting placed its suns at once (addon/core/render.py) were lit from
+# straight above whenever the light was yawed; render_rider.py keeps any still it finds, so a folder
+# without this stamp has its stills removed and rendered again.
+STILLS_LIGHTING = "suns placed by setup_lighting, turned with the yaw"
+
+
+def forget_stale_stills(gt_dir):
+    """Remove gt_dir's gt_NNN.png stills unless gt_dir/lighting.json says they were lit as
+    STILLS_LIGHTING, then stamp it. -> how many stills were removed."""
+    from cyclist_formats.atomic import read_json_or_none, write_json
+
+    stamp = os.path.join(gt_dir, "lighting.json")
+    if read_json_or_none(stamp) == {"lighting": STILLS_LIGHTING}:
+        return 0
+    stale = [f for f in os.listdir(gt_dir) if f.startswith("gt_") and f.endswith(".png")]
+    for f in stale:
+        os.remove(os.path.join(gt_dir, f))
+    write_json(stamp, {"lighting": STILLS_LIGHTING})
+    return len(stale)
+
+
 def posed_jobs(rider, rot, root, cams, gt_dir, extras=None):
     """Per pose: the LBS-posed mesh (posed_NNN.ply) and its ring camera (camera_NNN.json, framing the
     body) in gt_dir, plus gt_dir/jobs.json -> (jobs {mesh, camera, out} + that pose's `extras` dict,
@@ -127,6 +148,8 @@ def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, tim
     rot, root = posed_batch(rider, theta_p, theta_s, yaw)
     gt_dir = os.path.join(out_dir, "rider_gt")
     os.makedirs(gt_dir, exist_ok=True)
+    if forget_stale_stills(gt_dir):
+        print(f"  rider_gt: stills in {gt_dir} were lit before the sun fix: rendering them again", flush=True)
     jobs, cameras, job_file = posed_jobs(rider, rot, root, cams, gt_dir, [{"light_yaw_deg": float(y)} for y in yaw])
     cmd = [sys.executable, os.path.join(ROOT, "blender_scripts", "render_rider.py"), "--batch", job_file]
     if samples:

@@ -22,3 +22,17 @@ def test_suns_are_placed_before_any_update(fresh_scene):
         np.testing.assert_allclose(before[n], np.array(o.matrix_world), atol=1e-6, err_msg=n)
         # and not straight down: both suns are set at an angle to the vertical
         assert abs(before[n][2, 2]) < 0.99, n
+
+
+def test_rider_stills_from_before_the_fix_are_rendered_again(tmp_path):
+    # bench/rider.py reuses any gt_NNN.png it finds: stills without the lighting stamp are removed
+    # once (and only once), the meshes and cameras beside them are kept
+    from bench.rider import STILLS_LIGHTING, forget_stale_stills
+
+    for name in ("gt_000.png", "gt_001.png", "posed_000.ply", "camera_000.json"):
+        (tmp_path / name).write_bytes(b"x")
+    assert forget_stale_stills(str(tmp_path)) == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["camera_000.json", "lighting.json", "posed_000.ply"]
+    (tmp_path / "gt_000.png").write_bytes(b"new")  # rendered after the fix
+    assert forget_stale_stills(str(tmp_path)) == 0 and (tmp_path / "gt_000.png").read_bytes() == b"new"
+    assert STILLS_LIGHTING in (tmp_path / "lighting.json").read_text()
