@@ -151,3 +151,32 @@ def test_one_pass_amodal_alphas_equal_each_slot_rendered_alone(seed):
     assert (mixed["amodal"][small][0] == one["amodal"][small][0]).all()
     want = _subset_alpha(t, torch.nonzero(slots == big).squeeze(1), cam, one["boxes"][big], sizes[small])
     assert (mixed["amodal"][big][0] == want[0]).all() and mixed["amodal"][big][1] == want[1]
+
+
+@pytest.mark.parametrize("amodal_max_px", [None, 24])
+def test_antialiased_mask_draws_each_slot_as_it_was_trained(amodal_max_px):
+    """render_scene(antialiased=mask): a bike trained with the mip filter beside a rider trained
+    without, far apart on screen: each one's pixels and amodal alpha are those of a render with the
+    filter on (slot 1) or off (slot 2) for everything; a mask of the wrong length is refused."""
+    torch.set_num_threads(1)
+    from splatting.cyclist.scene_render import render_scene
+    from splatting.gaussians.container import Gaussians
+    a, b = _scene(4, n=150), _scene(5, n=150)
+    a = Gaussians(a.means * 0.3 - torch.tensor([1.6, 0.0, 0.0]), a.quats, a.log_scales - 1.5, a.opacity_logits, a.sh)
+    b = Gaussians(b.means * 0.3 + torch.tensor([1.6, 0.0, 0.0]), b.quats, b.log_scales - 1.5, b.opacity_logits, b.sh)
+    g = Gaussians.cat([a, b])
+    slots = torch.tensor([1] * 150 + [2] * 150)
+    cam = look_at_camera((0.0, 0.0, 9.0), width=160, height=96, focal=90.0)
+    mask = slots == 1
+    kw = dict(amodal_slots=(1, 2), amodal_max_px=amodal_max_px)
+    mixed = render_scene(g, slots, 3, cam, antialiased=mask, **kw)
+    on, off = (render_scene(g, slots, 3, cam, antialiased=f, **kw) for f in (True, False))
+    left = np.s_[:, :80]
+    np.testing.assert_allclose(mixed["alpha"][left], on["alpha"][left], atol=1e-6)
+    np.testing.assert_allclose(mixed["alpha"][:, 80:], off["alpha"][:, 80:], atol=1e-6)
+    assert np.abs(on["alpha"][left] - off["alpha"][left]).max() > 0.02  # the filter matters here
+    for s, want in ((1, on), (2, off)):
+        np.testing.assert_allclose(mixed["amodal"][s][0], want["amodal"][s][0], atol=1e-6)
+        assert np.abs(on["amodal"][s][0] - off["amodal"][s][0]).max() > 0.02  # the amodal alphas follow it too
+    with pytest.raises(ValueError, match="antialiased mask"):
+        render_scene(g, slots, 3, cam, antialiased=mask[:10], **kw)

@@ -82,21 +82,22 @@ def union(boxes):
     return u0, v0, u1 - u0, v1 - v0
 
 
-def _subset_alpha(t, idx, camera, crop, max_px=None):
+def _subset_alpha(t, idx, camera, crop, max_px=None, antialiased=False):
     """Alpha of the Gaussians idx of the tensors t alone inside crop, as (alpha (h, w) numpy,
     (u0, v0)).  max_px: when the crop is larger, it is rendered at max_px / size of the resolution
     (the full-size 0.3 px^2 low-pass in small pixels: the same alpha field, sampled coarser) and
     resampled bilinearly at the full-size pixel centres, so its mask edge is exact to about
     1 / scale pixels; None = full resolution."""
     means, quats, scales, opac = (x.index_select(0, idx) for x in t)
+    aa = antialiased.index_select(0, idx) if torch.is_tensor(antialiased) else antialiased
     dc = torch.zeros(len(idx), 1, 3)  # colour is not needed: alpha only
     u0, v0, w, h = crop
     cam = cropped_camera(camera, crop)
     if max_px is None or max(w, h) <= max_px:
-        return rasterize(means, quats, scales, opac, dc, cam, sh_degree=0)["alpha"].numpy(), (u0, v0)
+        return rasterize(means, quats, scales, opac, dc, cam, sh_degree=0, antialiased=aa)["alpha"].numpy(), (u0, v0)
     f = max_px / max(w, h)
     small = cam.scaled(f)
-    a = rasterize(means, quats, scales, opac, dc, small, sh_degree=0, eps2d=0.3 * f * f)["alpha"]
+    a = rasterize(means, quats, scales, opac, dc, small, sh_degree=0, eps2d=0.3 * f * f, antialiased=aa)["alpha"]
     lw, lh = small.width, small.height
     xs = f * (torch.arange(w, dtype=torch.float32) + 0.5) - 0.5  # full-size pixel centres, small-pixel coords
     ys = f * (torch.arange(h, dtype=torch.float32) + 0.5) - 0.5
@@ -128,14 +129,16 @@ def _argmax_channels(feat):
 
 
 @torch.no_grad()
-def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None, features=None):
+def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None, features=None, antialiased=False):
     """Gaussians g (N), slots (N,) long in 0..n_slots-1, camera -> dict:
     rgb (H, W, 3) premultiplied, alpha (H, W), depth (H, W) expected camera z (0 where alpha is 0),
     label (H, W) int16 (-1 where alpha <= 0.5), amodal {slot: (alpha crop, (u0, v0)) or None}
     (amodal_max_px: see _subset_alpha), boxes [slot box (u0, v0, w, h) or None] (slot_boxes).
     features: optional (N, F) channels composited in the same rasterization (relit datasets:
     splatting/relight/scene.py); then also "features" (h, w, n_slots + F): the slots' weights and
-    the features inside "crop" (u0, v0, w, h), the union of the slot boxes (None: nothing seen)."""
+    the features inside "crop" (u0, v0, w, h), the union of the slot boxes (None: nothing seen).
+    antialiased: rasterize's mip filter, for all Gaussians (bool) or those of a (N,) bool mask (the
+    bikes whose parts were trained with it: BikeModel.antialiased), amodal alphas included."""
     H, W = camera.height, camera.width
     t = (g.means.float(), g.quats.float(), g.scales.float(), g.opacities.float())
     boxes = slot_boxes(t[0], t[2], slots, n_slots, camera)
@@ -160,7 +163,8 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None,
             group_of[s] = k
         if one_pass:
             groups = (group_of[slots.long()], len(one_pass))
-        out = rasterize(*t, g.sh.float(), cropped_camera(camera, crop), features=onehot, groups=groups)
+        out = rasterize(*t, g.sh.float(), cropped_camera(camera, crop), features=onehot, groups=groups,
+                        antialiased=antialiased)
         feats = out["features"]
         a_c = out["alpha"]
         sl = np.s_[v0:v0 + h, u0:u0 + w]
@@ -179,7 +183,8 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None,
             u, v = bu - crop[0], bv - crop[1]
             amodal[s] = out["group_alpha"][one_pass.index(s), v:v + bh, u:u + bw].numpy(), (bu, bv)
         else:
-            amodal[s] = _subset_alpha(t, torch.nonzero(slots == s).squeeze(1), camera, boxes[s], amodal_max_px)
+            amodal[s] = _subset_alpha(t, torch.nonzero(slots == s).squeeze(1), camera, boxes[s], amodal_max_px,
+                                      antialiased)
     L = {"rgb": rgb, "alpha": alpha, "depth": d, "label": label, "amodal": amodal, "boxes": boxes}
     if features is not None:
         L.update(features=feats, crop=crop)

@@ -112,7 +112,7 @@ def render_sequence(cyc, poses, views, out, size=512, elevation=0.0, distance=12
         for i, fr in zip(idx, frames):
             for az, cam in cams.items():
                 d = os.path.join(out, view_name(az))
-                L = render_layers(fr.gaussians, fr.ids, cam)
+                L = render_layers(fr.gaussians, fr.ids, cam, antialiased=cyc.bike.antialiased)
                 _save_png(os.path.join(d, f"{i:05d}.png"), rgba_image(L))
                 _save_png(os.path.join(d, f"{i:05d}_mask.png"), L["ids"])
                 _save_png(os.path.join(d, f"{i:05d}_depth.png"),

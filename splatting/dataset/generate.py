@@ -259,7 +259,7 @@ def make_sample(cfg, index, assets):
     H, W = cam.height, cam.width
     bg_kind = d["background"]["kind"]
 
-    parts, slots, boxes, keeps = [], [], [], []
+    parts, slots, boxes, keeps, aa = [], [], [], [], []
     lod_cfg = cfg["lod"]
     looks = []
     for k, (inst, frame, _) in enumerate(frames):
@@ -282,6 +282,9 @@ def make_sample(cfg, index, assets):
                 slot = slot.index_select(0, idx)
         if relit is not None:
             relit.instance(k, inst["bike"], inst["rider"], frame.gaussians, looked, g, idx)
+        # a bike whose parts were trained antialiased is drawn so (its rider and the rest as trained)
+        bike_aa = (frame.ids != RIDER_ID) & bool(assets.bikes[inst["bike"]].antialiased)
+        aa.append(bike_aa if idx is None else bike_aa.index_select(0, idx))
         parts.append(g)
         slots.append(slot)
     b = cfg["backgrounds"]
@@ -297,10 +300,13 @@ def make_sample(cfg, index, assets):
         slots.append(torch.zeros(len(sc), dtype=torch.long))
     n_slots = 2 * len(frames) + 1
     if parts:
+        aa += [torch.zeros(len(p), dtype=torch.bool) for p in parts[len(aa):]]  # shadows, scene: as trained
+        aa = torch.cat(aa) if any(bool(m.any()) for m in aa) else False
         if relit is None:
-            L = render_scene(Gaussians.cat(parts), torch.cat(slots), n_slots, cam, range(1, n_slots), cfg["amodal_max_px"])
+            L = render_scene(Gaussians.cat(parts), torch.cat(slots), n_slots, cam, range(1, n_slots), cfg["amodal_max_px"],
+                             antialiased=aa)
         else:
-            L = relit.render(parts, torch.cat(slots), n_slots, cam, range(1, n_slots), cfg["amodal_max_px"])
+            L = relit.render(parts, torch.cat(slots), n_slots, cam, range(1, n_slots), cfg["amodal_max_px"], aa)
     else:
         L = {"rgb": np.zeros((H, W, 3), np.float32), "alpha": np.zeros((H, W), np.float32),
              "depth": np.zeros((H, W), np.float32), "label": np.full((H, W), -1, np.int16), "amodal": {},

@@ -213,12 +213,12 @@ class RelitSample:
         out[m] = np.clip(np.round(rgb[m].astype(np.float32) * keep[m][:, None]), 0, 255).astype(np.uint8)
         return out
 
-    def render(self, parts, slots, n_slots, camera, amodal_slots, amodal_max_px):
+    def render(self, parts, slots, n_slots, camera, amodal_slots, amodal_max_px, antialiased=False):
         """render_scene's layers with the instances (the first len(self.channels) parts) relit."""
         from splatting.relight.scene import render_scene_relit
         ch = [self.channels[k] for k in range(len(self.channels))]
         return render_scene_relit(parts, ch, slots, n_slots, camera, self.light, self.shadows, amodal_slots,
-                                  amodal_max_px)
+                                  amodal_max_px, antialiased)
 
     def record(self, camera):
         R = camera.R.double().numpy()

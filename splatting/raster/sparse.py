@@ -289,7 +289,9 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
     antialiased: mip-splatting's 2D filter with opacity compensation (gsplat's "antialiased"
     mode): opacity x sqrt(det S / det(S + eps2d I)), S the projected covariance before the eps2d
     low-pass, so a Gaussian smaller than a pixel keeps its true footprint instead of growing
-    to a 0.3 px^2 blob at full opacity (thin spokes, far-away cyclists).
+    to a 0.3 px^2 blob at full opacity (thin spokes, far-away cyclists).  A (N,) bool tensor
+    applies it to those Gaussians only (a scene mixing assets trained with and without it: each
+    is drawn as it was trained).
     groups: optional (ids (N,) int in [-1, G), G): also out["group_alpha"] (G, H, W), the alpha of
     each group's Gaussians rendered alone (no occlusion by the other Gaussians: amodal masks), not
     differentiable; "tiles" computes them in the image's own pass, "torch" renders each group.
@@ -312,7 +314,14 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
         visible = radii > 0
     if means2d.requires_grad:
         means2d.retain_grad()
-    if antialiased:
+    if torch.is_tensor(antialiased):
+        if antialiased.shape != opacities.shape:
+            raise ValueError(f"rasterize: antialiased mask {tuple(antialiased.shape)} for {tuple(opacities.shape)} "
+                             "Gaussians")
+        if bool(antialiased.any()):
+            comp = aa_compensation(conics, eps2d)
+            opacities = opacities * torch.where(antialiased.to(comp.device), comp, torch.ones_like(comp))
+    elif antialiased:
         opacities = opacities * aa_compensation(conics, eps2d)
     if features is not None and not torch.is_tensor(features):  # parts
         features = list(features)
