@@ -9,7 +9,11 @@ Here the whole bike's mesh is rendered by Blender at random 8-DoF poses from ran
 and every step renders the composed parts re-posed by BikeModel's rigid part transforms; the loss
 flows back into each part's canonical means, rotations, scales, opacities and colours (as
 splatting/rider/posed_train.py does for riders).  The whole bike's rest-pose ring (views/whole)
-stays in the mix.  No densification: the per-part training placed the Gaussians.
+stays in the mix.  By default no densification: the per-part training placed the Gaussians.  With
+--densify each part runs the trainer's adaptive density control (training/strategy.py) on its own
+Gaussians during the first half of the fine-tune, fed with the screen-space gradients of the posed
+renders (rigid transforms move a Gaussian's centre, they leave its pixel gradient as it is), up to
+--densify-max Gaussians per part: room at the silhouettes the rest-trained budget turned away.
 
     python -m splatting bike-posed-train --bike OUT/bikes/ID [--poses 144 --iterations 6000 --sh-degree 1]
 
@@ -54,6 +58,8 @@ class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (trai
     crop_margin_px: int = 8
     sh_degree: int = 1           # 1: the fine-tune adds degree-1 SH (view-dependent colour), rotated with each part
     lr_shN: float = 2.5e-3       # the band-1 coefficients' rate (the DC's; INRIA's /20 gained less)
+    densify: bool = False        # adaptive density control per part in the first half (docs/training.md)
+    densify_max: int = 30000     # ... up to this many Gaussians per part
     progress: bool = True
 
 
@@ -145,6 +151,7 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
     from splatting.gaussians.container import Gaussians
     from splatting.raster.sparse import rasterize
     from splatting.training.metrics import box_psnr, mask_iou
+    from splatting.training.strategy import DensifyStrategy
     from splatting.training.targets import Targets, crop_camera
     from splatting.training.trainer import finite_grads, rgba_loss
     from splatting.training.views import load_views
@@ -160,15 +167,24 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
     posed = _load_posed(jobs, cfg.crop_margin_px)
     rigs = [model._part_rigids(check_poses(torch.tensor(j["pose"], dtype=torch.float64)[None])) for j in jobs]
     c = model.canonical
-    params = {k: torch.nn.Parameter(v.detach().clone().contiguous()) for k, v in
-              {"means": c.means, "quats": c.quats, "log_scales": c.log_scales, "opacity_logits": c.opacity_logits,
-               "sh0": c.sh}.items()}
     ext = float((c.means.max(0).values - c.means.min(0).values).norm())
     lrs = cfg.rates(ext)
-    if cfg.sh_degree:  # starts view-independent
-        params["shN"] = torch.nn.Parameter(torch.zeros(len(c), 3, 3, dtype=c.sh.dtype))
+    if cfg.sh_degree:
         lrs["shN"] = cfg.lr_shN
-    opt = torch.optim.Adam([{"params": [params[k]], "lr": lrs[k]} for k in params], lr=0.0, eps=1e-15)
+    # one parameter dict and one Adam per part (Adam is per element: the same steps as one optimiser
+    # over the concatenation), so that densification can grow each part on its own
+    parts_p, opts, dens = {}, {}, {}
+    for name, (a, e) in zip(model.part_names, model.ranges):
+        p = {k: torch.nn.Parameter(v[a:e].detach().clone().contiguous()) for k, v in
+             {"means": c.means, "quats": c.quats, "log_scales": c.log_scales, "opacity_logits": c.opacity_logits,
+              "sh0": c.sh}.items()}
+        if cfg.sh_degree:  # starts view-independent
+            p["shN"] = torch.nn.Parameter(torch.zeros(e - a, 3, 3, dtype=c.sh.dtype))
+        parts_p[name] = p
+        opts[name] = torch.optim.Adam([{"params": [p[k]], "lr": lrs[k], "name": k} for k in p], lr=0.0, eps=1e-15)
+        if cfg.densify:
+            m = p["means"].detach()
+            dens[name] = DensifyStrategy(_densify_config(cfg), float((m.max(0).values - m.min(0).values).norm()))
     aa = model.antialiased
 
     from splatting.gaussians.sh_rotation import sh_band_matrices
@@ -176,22 +192,28 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
     def world(rig):
         """The canonical parameters moved by one pose's per-part rigid transforms (differentiable):
         means, rotations and, with degree 1, the band-1 SH coefficients (c' = D_1 c per part)."""
-        sh1 = params.get("shN")
-        if rig is None:
-            return params["means"], params["quats"], sh1
         ms, qs, ss = [], [], []
-        for name, (a, e) in zip(model.part_names, model.ranges):
-            R, t, L = (x[0].to(params["means"].dtype) for x in rig[name])
-            ms.append(params["means"][a:e] @ R.T + t)
-            qs.append(params["quats"][a:e] @ L.T)
-            if sh1 is not None:
-                ss.append(torch.einsum("ij,njc->nic", sh_band_matrices(R, 1)[0], sh1[a:e]))
+        for name in model.part_names:
+            p = parts_p[name]
+            if rig is None:
+                ms.append(p["means"])
+                qs.append(p["quats"])
+                if "shN" in p:
+                    ss.append(p["shN"])
+                continue
+            R, t, L = (x[0].to(p["means"].dtype) for x in rig[name])
+            ms.append(p["means"] @ R.T + t)
+            qs.append(p["quats"] @ L.T)
+            if "shN" in p:
+                ss.append(torch.einsum("ij,njc->nic", sh_band_matrices(R, 1)[0], p["shN"]))
         return torch.cat(ms), torch.cat(qs), (torch.cat(ss) if ss else None)
 
     def render(rig, cam, bg):
         m, q, sh1 = world(rig)
-        sh = params["sh0"] if sh1 is None else torch.cat([params["sh0"], sh1], 1)
-        return rasterize(m, q, torch.exp(params["log_scales"]), torch.sigmoid(params["opacity_logits"]), sh,
+        sh0 = torch.cat([parts_p[n]["sh0"] for n in model.part_names])
+        sh = sh0 if sh1 is None else torch.cat([sh0, sh1], 1)
+        cat = lambda k, f: torch.cat([f(parts_p[n][k]) for n in model.part_names])  # noqa: E731
+        return rasterize(m, q, cat("log_scales", torch.exp), cat("opacity_logits", torch.sigmoid), sh,
                          cam, background=bg, antialiased=aa)
 
     n_train = len(jobs) - HELD_OUT
@@ -224,27 +246,54 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
         out = render(rig, crop_camera(cams[v], boxes[v]), None)
         gt = img[v, :, y0:y1, x0:x1].permute(1, 2, 0)
         loss = rgba_loss(out, gt, torch.rand(3, generator=gen), cfg.lambda_dssim)  # a random background
-        opt.zero_grad(set_to_none=True)
+        for o in opts.values():
+            o.zero_grad(set_to_none=True)
         loss.backward()
-        if bool(torch.isfinite(loss)) and finite_grads(params):
-            opt.step()
+        g2d = out["means2d"].grad
+        if (bool(torch.isfinite(loss)) and all(finite_grads(p) for p in parts_p.values())
+                and (g2d is None or bool(torch.isfinite(g2d).all()))):
+            for o in opts.values():
+                o.step()
+            if dens and g2d is not None:
+                a = 0
+                for name in model.part_names:  # each part's slice of the composed render
+                    e = a + len(parts_p[name]["means"])
+                    dens[name].post_backward(it, parts_p[name], opts[name], g2d[a:e], out["radii"][a:e],
+                                             cams[v].width, cams[v].height)
+                    a = e
         with torch.no_grad():
-            params["quats"] /= params["quats"].norm(dim=-1, keepdim=True).clamp_min(1e-12)
+            for p in parts_p.values():
+                p["quats"] /= p["quats"].norm(dim=-1, keepdim=True).clamp_min(1e-12)
         loss_v = float(loss.detach())
         prog.line(f"bike posed train {it}/{cfg.iterations} loss {loss_v:.4f} {time.time() - t0:6.1f}s")
     prog.close()
+    for name, d in dens.items():
+        d.finish(parts_p[name], opts[name])
     wall = time.time() - t0
     after = held_out()
-    d = {k: p.detach() for k, p in params.items()}
-    sh = d["sh0"] if "shN" not in d else torch.cat([d["sh0"], d["shN"]], 1)
-    parts = {name: Gaussians(d["means"][a:e], d["quats"][a:e], d["log_scales"][a:e], d["opacity_logits"][a:e],
-                             sh[a:e]) for name, (a, e) in zip(model.part_names, model.ranges)}
+    parts = {}
+    for name, p in parts_p.items():
+        d = {k: v.detach() for k, v in p.items()}
+        sh = d["sh0"] if "shN" not in d else torch.cat([d["sh0"], d["shN"]], 1)
+        parts[name] = Gaussians(d["means"], d["quats"], d["log_scales"], d["opacity_logits"], sh)
     cfg_d = dataclasses.asdict(cfg)
     cfg_d.pop("progress")
-    return parts, {"config": cfg_d, "poses": len(jobs), "held_out_poses": HELD_OUT,
+    return parts, {"gaussians": {n: len(g.means) for n, g in parts.items()},
+                   "densify": {n: d.stats for n, d in dens.items()},
+                   "config": cfg_d, "poses": len(jobs), "held_out_poses": HELD_OUT,
                    "held_out_box_psnr_before": before[0], "held_out_iou_before": before[1],
                    "held_out_box_psnr_after": after[0], "held_out_iou_after": after[1],
                    "loss": round(loss_v, 5), "wall_s": round(wall, 1), "antialiased": aa}
+
+
+def _densify_config(cfg: PosedTrainConfig):
+    """The trainer's rules, run over the first half of the fine-tune (the second settles what was
+    added); no visual-hull pruning (the posed views' silhouettes move with the pose) and no opacity
+    reset (the parts are already trained)."""
+    from splatting.training.strategy import DensifyConfig
+
+    return DensifyConfig(start=100, stop=max(100, cfg.iterations // 2), every=100, reset_every=0,
+                         max_gaussians=cfg.densify_max, hull_prune=False)
 
 
 def done_with(bike_dir, cfg: PosedTrainConfig):
@@ -259,7 +308,11 @@ def done_with(bike_dir, cfg: PosedTrainConfig):
     # a part retrained since (its file newer than posed_train.json) needs the fine-tune again
     newer = any(f.endswith(".ply") and not f.endswith("_rest.ply")
                 and os.path.getmtime(os.path.join(gdir, f)) > os.path.getmtime(p) for f in os.listdir(gdir))
-    return m if isinstance(m, dict) and m.get("config") == want and not newer else None
+    if not isinstance(m, dict) or not isinstance(m.get("config"), dict):
+        return None
+    # fine-tunes recorded before --densify existed ran without it: still this config when it is off
+    have = {"densify": False, "densify_max": PosedTrainConfig.densify_max, **m["config"]}
+    return m if have == want and not newer else None
 
 
 def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print):
@@ -311,6 +364,10 @@ def add_arguments(p):
     p.add_argument("--samples", type=int, default=d.samples, help="Cycles samples of the posed renders (default %(default)s)")
     p.add_argument("--sh-degree", type=int, choices=(0, 1), default=d.sh_degree,
                    help="1: add view-dependent (degree-1 SH) colour in the fine-tune (default %(default)s)")
+    p.add_argument("--densify", action="store_true",
+                   help="grow each part's Gaussians (adaptive density control) in the first half of the fine-tune")
+    p.add_argument("--densify-max", type=int, default=d.densify_max,
+                   help="with --densify: most Gaussians per part (default %(default)s)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
 
 
@@ -321,6 +378,7 @@ def check_args(args):
     checks.integer("poses", args.poses, HELD_OUT + 1, 10_000)
     checks.count("iterations", args.iterations, hi=10_000_000)
     checks.count("samples", args.samples, hi=1 << 16)
+    checks.count("densify-max", args.densify_max, hi=10_000_000)
     for p in ("frame", "steering"):
         if not os.path.isfile(os.path.join(args.bike, "gaussians", p + ".ply")):
             raise UserError(f"{args.bike} has no trained gaussians/{p}.ply (python -m splatting train first)")
@@ -328,6 +386,6 @@ def check_args(args):
 
 def run(args):
     cfg = PosedTrainConfig(poses=args.poses, iterations=args.iterations, samples=args.samples, sh_degree=args.sh_degree,
-                           progress=not args.quiet)
+                           densify=args.densify, densify_max=args.densify_max, progress=not args.quiet)
     train_bike_posed(args.bike, cfg)
     return 0
