@@ -128,10 +128,7 @@ class _Channels:
     def rider(self, assets, rider):
         if rider not in self.riders:
             from splatting.relight.avatar import RelightableAvatar
-            from splatting.rider.avatar import PLY_NAME
-            av = assets.avatars[rider]
-            r = bike_folder.read_relight(os.path.join(assets.cfg["riders_root"], rider, PLY_NAME), n=len(av))
-            self.riders[rider] = RelightableAvatar(av, *(torch.from_numpy(r[k]) for k in ("albedo", "normal", "gloss")))
+            self.riders[rider] = RelightableAvatar.of(assets.avatars[rider], os.path.join(assets.cfg["riders_root"], rider))
         return self.riders[rider]
 
 

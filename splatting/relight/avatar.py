@@ -31,9 +31,13 @@ class RelightableAvatar:
 
     @classmethod
     def load(cls, folder):
-        av = RiderAvatar.load(folder)
-        r = bike_folder.read_relight(os.path.join(folder, PLY_NAME), n=len(av))
-        return cls(av, *(torch.from_numpy(r[k]) for k in ("albedo", "normal", "gloss")))
+        return cls.of(RiderAvatar.load(folder), folder)
+
+    @classmethod
+    def of(cls, avatar, folder):
+        """The relight channels of folder's avatar (PLY_NAME's .relight.npz) for its loaded avatar."""
+        r = bike_folder.read_relight(os.path.join(folder, PLY_NAME), n=len(avatar))
+        return cls(avatar, *(torch.from_numpy(r[k]) for k in ("albedo", "normal", "gloss")))
 
     def posed_normals(self, rotations):
         """(..., N, 3, 3) skinning rotations (RiderAvatar.pose_tensors' "rotations") -> (..., N, 3) normals."""
