@@ -342,7 +342,7 @@ def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print):
     jobs = render_posed_views(bike_dir, os.path.join(bike_dir, "views", "posed"), cfg, log)
     parts, metrics = fine_tune(model, os.path.join(bike_dir, "views", "whole"), jobs, cfg)
     for p, g in parts.items():
-        write_ply(g, os.path.join(gdir, p + ".ply"))  # same Gaussians, same order
+        write_ply(g, os.path.join(gdir, p + ".ply"))  # the same Gaussians in the same order (with --densify: the grown and pruned set)
     write_json(meta, metrics)  # written last: its time marks the part files as this stage's
     log(f"bike-posed-train: held-out poses box PSNR {metrics['held_out_box_psnr_before']:.2f} -> "
         f"{metrics['held_out_box_psnr_after']:.2f} dB, IoU {metrics['held_out_iou_before']:.4f} -> "
