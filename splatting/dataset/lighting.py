@@ -116,7 +116,7 @@ class _Channels:
     """Per-process cache (kept on the dataset's Assets): RelightableBike / RelightableAvatar by id."""
 
     def __init__(self):
-        self.bikes, self.riders = {}, {}
+        self.bikes, self.riders, self.statics = {}, {}, {}
 
     def bike(self, assets, bike):
         if bike not in self.bikes:
@@ -130,6 +130,26 @@ class _Channels:
             from splatting.relight.avatar import RelightableAvatar
             self.riders[rider] = RelightableAvatar.of(assets.avatars[rider], os.path.join(assets.cfg["riders_root"], rider))
         return self.riders[rider]
+
+    def static(self, assets, bike, rider):
+        """The pose-invariant channels of a (bike, rider) cyclist, bike parts then rider: albedo,
+        gloss, roughness and sky visibility, concatenated once rather than per image."""
+        key = (bike, rider)
+        if key not in self.statics:
+            from splatting.relight.avatar import RIDER_ROUGHNESS
+            from splatting.relight.shading import ROUGHNESS
+            rb = self.bike(assets, bike)
+            alb, gl = [rb.albedo], [rb.gloss]
+            rough = [torch.full((len(rb.albedo),), ROUGHNESS)]
+            sky = [rb.sky_visibility()]  # the bike's self-occlusion (once per bike and process)
+            if rider is not None:
+                ra = self.rider(assets, rider)
+                alb.append(ra.albedo)
+                gl.append(ra.gloss)
+                rough.append(torch.full((len(ra.albedo),), float(RIDER_ROUGHNESS)))
+                sky.append(torch.ones(len(ra.albedo)))  # riders: the whole sky (rider_relit's model)
+            self.statics[key] = tuple(torch.cat(x) for x in (alb, gl, rough, sky))
+        return self.statics[key]
 
 
 def _srgb_decode(c):
@@ -168,20 +188,9 @@ class RelitSample:
         (the look's change of each Gaussian's colour goes into its albedo, in linear light),
         g = what is rendered (after the level of detail, idx its rows of looked, or None)."""
         from splatting.gaussians.sh import C0
-        from splatting.relight.avatar import RIDER_ROUGHNESS
         from splatting.relight.render import relight_features
-        from splatting.relight.shading import ROUGHNESS
-        rb = self.ch.bike(self.assets, bike)
-        alb, gl = [rb.albedo], [rb.gloss]
-        rough = [torch.full((len(rb.albedo),), ROUGHNESS)]
-        sky = [rb.sky_visibility()]  # the bike's self-occlusion (once per bike and process)
-        if rider is not None:
-            ra = self.ch.rider(self.assets, rider)
-            alb.append(ra.albedo)
-            gl.append(ra.gloss)
-            rough.append(torch.full((len(ra.albedo),), float(RIDER_ROUGHNESS)))
-            sky.append(torch.ones(len(ra.albedo)))  # riders: the whole sky (rider_relit's model)
-        alb, gl, rough, sky, nrm = torch.cat(alb), torch.cat(gl), torch.cat(rough), torch.cat(sky), self.normals[k]
+        alb, gl, rough, sky = self.ch.static(self.assets, bike, rider)
+        nrm = self.normals[k]
         if looked is not trained:
             before = _srgb_decode((C0 * trained.sh[:, 0] + 0.5).float()).clamp_min(1e-3)
             after = _srgb_decode((C0 * looked.sh[:, 0] + 0.5).float())
