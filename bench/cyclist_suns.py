@@ -65,7 +65,8 @@ def blender_worker(job_path):
 
 
 def posed_cyclist(bike_dir, avatar_dir):
-    """-> (posed Gaussians, reflectance, world normals, gloss, roughness (per Gaussian), rider body, IK rotations, root)."""
+    """-> (posed Gaussians, reflectance, world normals, gloss, roughness, sky visibility (per Gaussian),
+    rider body, IK rotations, root)."""
     import torch
 
     from splatting.cyclist.compose import Cyclist
@@ -85,10 +86,11 @@ def posed_cyclist(bike_dir, avatar_dir):
     nrm = torch.cat([rb.posed_normals(pose), ra.posed_normals(rec.rotations[0])])
     alb, gl = torch.cat([rb.albedo, ra.albedo]), torch.cat([rb.gloss, ra.gloss])
     rough = torch.cat([torch.full((len(rb.albedo),), ROUGHNESS), torch.full((len(ra.albedo),), float(RIDER_ROUGHNESS))])
-    return frame.gaussians, alb + gl, nrm, gl, rough, load_rider(ra.avatar.rider_id), rot, root
+    sky = torch.cat([rb.sky_visibility(), torch.ones(len(ra.albedo))])  # as relit datasets: riders see the whole sky
+    return frame.gaussians, alb + gl, nrm, gl, rough, sky, load_rider(ra.avatar.rider_id), rot, root
 
 
-def render_relit_cyclist(g, refl, nrm, gl, rough, camera, light):
+def render_relit_cyclist(g, refl, nrm, gl, rough, sky, camera, light):
     """One rasterization with the relight channels (reflectance as the colour), shaded per pixel."""
     from splatting.gaussians.container import Gaussians
     from splatting.gaussians.sh import C0
@@ -96,11 +98,11 @@ def render_relit_cyclist(g, refl, nrm, gl, rough, camera, light):
     from splatting.relight.render import relight_features, shade_composited
     from splatting.relight.shadow import sun_visibility
 
-    feats = relight_features(nrm, gl, rough, sun_visibility(g, light))
+    feats = relight_features(nrm, gl, rough, sun_visibility(g, light), sky)
     gr = Gaussians(g.means, g.quats, g.log_scales, g.opacity_logits, ((refl.float() - 0.5) / C0)[:, None, :].contiguous())
     r = render_gaussians(gr, camera, features=feats, sh_degree=0)
     rgb = shade_composited(r["rgb"], r["features"], r["alpha"], camera, light, gloss=True, rough_channel=True,
-                           shadows=True)
+                           shadows=True, sky_channel=True)
     return rgb.numpy().astype(np.float64), r["alpha"].numpy().astype(np.float64)
 
 
@@ -131,7 +133,7 @@ def main():
     from splatting.rider.body import export_rider, pose_vertices
 
     torch.set_num_threads(1)
-    g, refl, nrm, gl, rough, rider, rot, root = posed_cyclist(a.bike, a.avatar)
+    g, refl, nrm, gl, rough, sky, rider, rot, root = posed_cyclist(a.bike, a.avatar)
     lo, hi = g.means.min(0).values.double(), g.means.max(0).values.double()
     cam = ring_camera(CAMERA_AZIMUTH, tuple(float(x) for x in (lo + hi) / 2), name="camera_suns")
     os.makedirs(a.work, exist_ok=True)
@@ -148,7 +150,7 @@ def main():
     top, bottom, rows = [], [], []
     for i, light in enumerate(lights):
         gt_png = os.path.join(a.work, f"gt_{i}.png")
-        rgb, alpha = render_relit_cyclist(g, refl, nrm, gl, rough, cam, light)
+        rgb, alpha = render_relit_cyclist(g, refl, nrm, gl, rough, sky, cam, light)
         iou, ps, gt_rgb, _ = score_png(gt_png, rgb, alpha)
         rows.append({"elevation_deg": SUNS[i][0], "azimuth_deg": SUNS[i][1], "box_psnr": round(ps, 2), "iou": round(iou, 4)})
         gt = np.asarray(Image.open(gt_png).convert("RGBA")).astype(np.float64) / 255
