@@ -205,11 +205,11 @@ def draw_fidelity(runs, png, title=""):
 
 # -- whole bikes at random poses ---------------------------------------------------------------------
 
-def bike_fidelity(bike_dir, reference_dir):
+def bike_fidelity(bike_dir, reference_dir, model=None):
     """Box PSNR and mask IoU (means) of a bike's composed parts at the poses of a blender_compare
     reference folder (ref_NNN.png + job.json), scored as blender_compare scores its Gaussians (8-bit
     straight-alpha PNG, union box + 8 px), and the bike's one-time training wall time (parts +
-    bike-posed-train, from their JSONs)."""
+    bike-posed-train, from their JSONs). model: the bike if already loaded (BikeModel.load(bike_dir))."""
     import numpy as np
     import torch
 
@@ -221,7 +221,7 @@ def bike_fidelity(bike_dir, reference_dir):
 
     with open(os.path.join(reference_dir, "job.json")) as f:
         job = json.load(f)
-    model = BikeModel.load(bike_dir)
+    model = BikeModel.load(bike_dir) if model is None else model
     cams = cameras(bike_dir, job["cameras"], job["size"])
     ps, ious = [], []
     import tempfile
@@ -314,15 +314,16 @@ if __name__ == "__main__":
         from cyclist_formats.errors import UserError
         from splatting.bike.model import BikeModel
 
+        models = []
         for label, d in specs:  # every bike readable before any scoring: one line, not a traceback
             try:
-                BikeModel.load(d)
+                models.append(BikeModel.load(d))
             except (UserError, OSError, ValueError, KeyError) as e:
                 sys.stderr.write(f"train_chart: error: --bike-fidelity {label}={d}: {e}\n")
                 raise SystemExit(2)
         rows = []
-        for label, d in specs:
-            rows.append(dict(bike_fidelity(d, a.bike_reference), label=label, bike=d))
+        for (label, d), model in zip(specs, models):
+            rows.append(dict(bike_fidelity(d, a.bike_reference, model), label=label, bike=d))
             print(json.dumps(rows[-1]), flush=True)
         from cyclist_formats.atomic import write_json
         write_json(os.path.splitext(a.png)[0] + ".json", {"reference": os.path.abspath(a.bike_reference), "rows": rows})
