@@ -11,7 +11,7 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from addon.core.script import UserError, run_main  # noqa: E402
+from addon.core.script import run_main  # noqa: E402
 
 
 def parse(argv):

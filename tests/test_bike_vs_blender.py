@@ -43,8 +43,6 @@ def _part_points(bike_dir, n=400):
 
 def _blender_posed(bike_dir, pose, rest_points):
     """Posed keypoints and posed part sample points from Blender's armature."""
-    from mathutils import Matrix
-
     from addon.core import frames
     from addon.core.articulation import apply_pose, posed_keypoints
     from addon.core.bike_asset import open_bike

@@ -118,8 +118,7 @@ def test_amass_z_up_puts_head_up(riders, tmp_path):
     assert (j[:, J["left_hip"], 2] < 0).all()
 
 
-def test_cliff_formats_agree(riders, tmp_path):
-    rider = riders[0]
+def test_cliff_formats_agree(tmp_path):
     n = 2
     rng = np.random.default_rng(0)
     aa = rng.normal(scale=0.3, size=(n, 24, 3))

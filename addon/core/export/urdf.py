@@ -11,8 +11,6 @@ import json
 import os
 import xml.etree.ElementTree as ET
 
-import numpy as np
-
 from .. import frames
 from .mass import mass_properties
 from .meshes import write_obj

@@ -13,7 +13,7 @@ Z = np.array([0.0, 0.0, 1.0])
 def build_crank(s, L):
     mb = MeshBuilder()
     bb = L["bb"]
-    q, po = L["crank_q"], L["pedal_out"]
+    q = L["crank_q"]
     cl = s["crank_length_m"]
     comp = "dark" if s["accent_dark"] else "metal"
     mb.add(*cylinder(bb - (q + 0.008) * Z, bb + (q + 0.008) * Z, 0.0125, sides=16), "metal")

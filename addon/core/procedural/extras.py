@@ -58,7 +58,7 @@ def scooter_steering(s, L):
 
 def motorcycle_frame(s, L):
     mb = MeshBuilder()
-    u, n = L["u"], L["n"]
+    u = L["u"]
     hb, ht = L["head_bottom"], L["head_top"]
     rear, R, tw = L["rear_axle"], L["R"], s["tyre_width_m"]
     bb = L["bb"]
