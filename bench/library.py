@@ -28,8 +28,9 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
+# without the posed fine-tune (added to the library later): the same 10 tasks as the recorded numbers
 BUDGET = ["--size", "64", "--samples", "4", "--iterations", "200", "--max-gaussians", "3000", "--gt-poses", "2",
-          "--quiet"]
+          "--no-posed-train", "--quiet"]
 
 
 def _env():

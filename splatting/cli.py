@@ -27,7 +27,7 @@ COMMANDS = {
     "rider import": ("splatting.rider.import_command", "a rigged human (.glb/.fbx, Mixamo/Rigify bones) becomes a "
                                                         "roster rider (bones -> 24 SMPL joints, weights, textures)"),
     "dataset merge": ("splatting.dataset.merge", "merge a dataset's per-sample shards into annotations.json (idempotent)"),
-    "library build": ("splatting.library.command", "build every bike's views + part Gaussians + ground-truth check "
+    "library build": ("splatting.library.command", "build every bike's views + part Gaussians + posed fine-tune + ground-truth check "
                                                    "and every rider's avatar, resumable, into library.json"),
 }
 

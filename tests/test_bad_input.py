@@ -106,6 +106,9 @@ SPLATTING_CASES = [
     ["library build", "--out", "lib", "--workers", "0"],
     ["library build", "--out", "lib", "--gt-poses", "-1"],
     ["library build", "--out", "lib", "--min-iou", "2"],
+    ["library build", "--out", "lib", "--posed-poses", "4"],  # 4 are held out: none left to train on
+    ["library build", "--out", "lib", "--posed-iterations", "0"],
+    ["library build", "--out", "lib", "--no-posed-train", "--posed-poses", "12"],
     # output paths that exist as a file, or lie under one
     ["train", "--views", f"{V}/good", "--out", "a_folder"],
     ["train", "--views", f"{V}/good", "--out", "a_file.txt/o.ply"],
@@ -122,6 +125,7 @@ SPLATTING_CASES = [
     ["demo", "--out", "a_file.txt"],
     ["library build", "--out", "a_file.txt"],
     ["bike-posed-train", "--bike", "a_folder"],  # no trained parts
+    ["bike-posed-train", "--bike", "a_folder", "--from-rest"],  # no gaussians/frame_rest.ply
     ["bike-posed-train", "--bike", "a_file.txt"],
     # views folders whose cameras.json and images disagree
     ["train", "--views", f"{V}/extra", "--out", "o.ply"],

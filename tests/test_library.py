@@ -1,6 +1,9 @@
-"""`python -m splatting library build` (issue 15): the task graph, the manifest's quality floor,
-datasets refusing untrained or below-floor assets, and (slow) a tiny two-bike build that a kill +
-rerun and the Ray engine finish with the same files."""
+"""`python -m splatting library build` (issue 15): the task graph (views -> parts -> posed fine-tune
+-> ground truth), the settings each task depends on, the manifest's quality floor, datasets
+refusing untrained or below-floor assets, and (slow) a tiny two-bike build that two kills + reruns
+and the Ray engine finish with the same files, whose tasks never share a file, whose
+--no-posed-train parts are the posed build's rest-trained parts, and where a changed fine-tune
+setting redoes only the posed and ground-truth tasks."""
 import json
 import os
 import signal
@@ -19,22 +22,91 @@ def _record(root, task_id, metrics, files=None):
     write_record(str(root), task_id, {"metrics": metrics, "files": files or {}, "wall_s": 1.5, "settings": {}})
 
 
-def test_graph_orders_views_parts_then_ground_truth(tmp_path):
-    from splatting.library.tasks import make_graph
+def _two_bikes(tmp_path):
     a = write_test_bike(str(tmp_path / "bikes"), "city_a")
     b = write_test_bike(str(tmp_path / "bikes"), "scooter_b")
     with open(os.path.join(b, "meta.json"), "w") as f:
         json.dump({"bike_id": "scooter_b", "has_crank": False}, f)
-    g = make_graph(str(tmp_path), {"city_a": a, "scooter_b": b}, ["m_adult_average_185"])
+    return {"city_a": a, "scooter_b": b}
+
+
+def test_graph_orders_views_parts_posed_then_ground_truth(tmp_path):
+    from splatting.library.tasks import make_graph
+    g = make_graph(str(tmp_path), _two_bikes(tmp_path), ["m_adult_average_185"])
     ids = [t.id for t in g]
-    assert ids == ["views:city_a", "train:city_a:frame", "train:city_a:steering", "train:city_a:crank", "gt:city_a",
-                   "views:scooter_b", "train:scooter_b:frame", "train:scooter_b:steering", "gt:scooter_b",
-                   "avatar:m_adult_average_185"]
+    assert ids == ["views:city_a", "train:city_a:frame", "train:city_a:steering", "train:city_a:crank", "posed:city_a",
+                   "gt:city_a", "views:scooter_b", "train:scooter_b:frame", "train:scooter_b:steering",
+                   "posed:scooter_b", "gt:scooter_b", "avatar:m_adult_average_185"]
     by = {t.id: t for t in g}
-    assert by["gt:city_a"].deps == ["train:city_a:frame", "train:city_a:steering", "train:city_a:crank"]
+    assert by["posed:city_a"].deps == ["train:city_a:frame", "train:city_a:steering", "train:city_a:crank"]
+    assert by["gt:city_a"].deps == ["posed:city_a"]
+    assert by["posed:scooter_b"].deps == ["train:scooter_b:frame", "train:scooter_b:steering"]
     assert by["train:scooter_b:frame"].deps == ["views:scooter_b"]
     for t in g:  # every dependency comes earlier (the Ray engine passes refs in this order)
         assert all(ids.index(d) < ids.index(t.id) for d in t.deps)
+
+
+def test_graph_without_the_posed_stage_is_the_old_one(tmp_path):
+    from splatting.library.tasks import make_graph, part_file
+    g = make_graph(str(tmp_path), _two_bikes(tmp_path), [], posed=False)
+    assert [t.id for t in g] == ["views:city_a", "train:city_a:frame", "train:city_a:steering", "train:city_a:crank",
+                                 "gt:city_a", "views:scooter_b", "train:scooter_b:frame", "train:scooter_b:steering",
+                                 "gt:scooter_b"]
+    assert g[4].deps == ["train:city_a:frame", "train:city_a:steering", "train:city_a:crank"]
+    assert part_file("B", "frame", {"posed_train": False}) == os.path.join("B", "gaussians", "frame.ply")
+    assert part_file("B", "frame", {"posed_train": True}) == os.path.join("B", "gaussians", "frame_rest.ply")
+
+
+def _settings(**kw):
+    from argparse import ArgumentParser
+
+    from splatting.library.command import add_arguments, settings_of
+    p = ArgumentParser()
+    add_arguments(p)
+    return settings_of(p.parse_args([a for k, v in kw.items() for a in (f"--{k.replace('_', '-')}", str(v))]))
+
+
+def test_a_changed_fine_tune_setting_clashes_with_posed_and_gt_only(tmp_path):
+    """SETTING_KEYS: a fine-tune setting belongs to the posed and ground-truth tasks, never to the
+    views and part trainings (those are kept); a training setting clashes with everything after views."""
+    from splatting.library.manifest import check_all_settings, write_record
+    from splatting.library.tasks import make_graph, task_settings
+    g = make_graph(str(tmp_path), {"city_a": write_test_bike(str(tmp_path / "bikes"), "city_a")}, [])
+    built = _settings(size=64, posed_iterations=20)
+    assert built["posed_train"] is True and built["posed_iterations"] == 20 and built["posed_poses"] > 4
+    for t in g:
+        write_record(str(tmp_path), t.id, {"files": {}, "metrics": {}, "settings": task_settings(t.kind, built)})
+    check_all_settings(str(tmp_path), [(t.id, task_settings(t.kind, built)) for t in g])  # same: fine
+
+    def clash(s):
+        with pytest.raises(UserError) as e:
+            check_all_settings(str(tmp_path), [(t.id, task_settings(t.kind, s)) for t in g])
+        return str(e.value)
+
+    for k, v in (("posed_iterations", 30), ("posed_poses", 9), ("posed_samples", 3), ("posed_sh_degree", 0)):
+        msg = clash(_settings(size=64, **dict({"posed_iterations": 20}, **{k: v})))
+        assert "posed:city_a, gt:city_a)" in msg and f"({k} differ)" in msg, msg
+        assert "posed__city_a.json gt__city_a.json" in msg and "train" not in msg and "views" not in msg, msg
+    msg = clash(_settings(size=64, posed_iterations=20, iterations=10))
+    assert "(train:city_a:frame, train:city_a:steering, train:city_a:crank, posed:city_a, ...)" in msg, msg
+    assert "views" not in msg
+    # switching the stage off changes where the parts go: the trainings clash too
+    assert "train:city_a:frame" in clash(dict(_settings(size=64), posed_train=False))
+
+
+def test_settings_without_the_posed_stage_match_records_from_before_it(tmp_path):
+    """A library built before the posed stage existed (records without posed keys) is the same
+    library as --no-posed-train: nothing clashes, nothing is redone."""
+    from splatting.library.manifest import check_all_settings, write_record
+    from splatting.library.tasks import make_graph, task_settings
+    g = make_graph(str(tmp_path), {"city_a": write_test_bike(str(tmp_path / "bikes"), "city_a")}, [], posed=False)
+    old = {"views": ("view_size", "samples"),  # SETTING_KEYS before the posed stage
+           "train": ("view_size", "samples", "iterations", "max_gaussians", "time_budget_s"),
+           "gt": ("view_size", "samples", "iterations", "max_gaussians", "time_budget_s", "gt_poses", "gt_seed")}
+    s = dict(_settings(size=64), posed_train=False)
+    for t in g:
+        write_record(str(tmp_path), t.id, {"files": {}, "metrics": {}, "settings": {k: s[k] for k in old[t.kind]}})
+    check_all_settings(str(tmp_path), [(t.id, task_settings(t.kind, s)) for t in g])
 
 
 def _manifest(tmp_path, gt_iou, part_psnr=30.0, complete=True):
@@ -45,7 +117,10 @@ def _manifest(tmp_path, gt_iou, part_psnr=30.0, complete=True):
     _record(tmp_path, "views:city_a", {"views": 144})
     for p in ("frame", "steering", "crank"):
         _record(tmp_path, f"train:city_a:{p}", {"psnr": part_psnr, "box_psnr": part_psnr - 5},
-                {f"bikes/city_a/gaussians/{p}.ply": "ab" * 32})
+                {f"bikes/city_a/gaussians/{p}_rest.ply": "ab" * 32})
+    _record(tmp_path, "posed:city_a", {"held_out_box_psnr_before": 29.5, "held_out_iou_before": 0.97,
+                                       "held_out_box_psnr_after": 31.2, "held_out_iou_after": 0.975},
+            {f"bikes/city_a/gaussians/{p}.ply": "cd" * 32 for p in ("frame", "steering", "crank")})
     if complete:
         _record(tmp_path, "gt:city_a", {"gt_iou": gt_iou, "gt_box_psnr": 25.0, "gt_iou_min": gt_iou,
                                         "gt_box_psnr_min": 24.0, "gt_poses": 3})
@@ -56,7 +131,9 @@ def test_manifest_marks_assets_below_the_floor(tmp_path):
     good = _manifest(tmp_path / "good", gt_iou=0.95)["bikes"]["city_a"]
     assert good["usable"] and good["complete"] and good["below_floor"] == []
     assert good["quality"]["part_psnr"] == {"frame": 30.0, "steering": 30.0, "crank": 30.0}
-    assert good["build_s"] == 7.5 and len(good["files"]) == 3
+    assert good["quality"]["posed_box_psnr"] == 31.2 and good["quality"]["posed_iou"] == 0.975
+    assert good["quality"]["posed_box_psnr_before"] == 29.5
+    assert good["build_s"] == 9.0 and len(good["files"]) == 6
     low = _manifest(tmp_path / "low", gt_iou=0.5)["bikes"]["city_a"]
     assert not low["usable"] and "IoU" in low["below_floor"][0]
     blurry = _manifest(tmp_path / "blurry", gt_iou=0.95, part_psnr=12.0)["bikes"]["city_a"]

@@ -44,7 +44,9 @@ class BikeModel:
     """Load with BikeModel.load(bike_dir); pose with model.pose(poses)."""
 
     @classmethod
-    def load(cls, bike_dir, bike_id=None, sh_degree=None):
+    def load(cls, bike_dir, bike_id=None, sh_degree=None, suffix=""):
+        """suffix "_rest": the rest-trained parts gaussians/<part>_rest.ply that bike-posed-train
+        starts from (the library's train tasks write those when its posed stage is on)."""
         bike_dir = os.fspath(bike_dir)
         if not os.path.isdir(bike_dir):
             raise UserError(f"no bike folder: {bike_dir}")
@@ -60,13 +62,13 @@ class BikeModel:
         gdir = os.path.join(bike_dir, "gaussians")
         names = [p for p in MAIN_PARTS if p != "crank" or has_crank]
         for p in names:
-            if not os.path.isfile(os.path.join(gdir, p + ".ply")):
-                raise UserError(f"missing part file {os.path.join(gdir, p + '.ply')}"
+            if not os.path.isfile(os.path.join(gdir, p + suffix + ".ply")):
+                raise UserError(f"missing part file {os.path.join(gdir, p + suffix + '.ply')}"
                                 + (" (meta.json has_crank is true)" if p == "crank" else ""))
-        names += [p for p in SUB_PARTS if os.path.isfile(os.path.join(gdir, p + ".ply"))]
-        parts = {p: read_ply(os.path.join(gdir, p + ".ply")) for p in names}
+        names += [p for p in SUB_PARTS if os.path.isfile(os.path.join(gdir, p + suffix + ".ply"))]
+        parts = {p: read_ply(os.path.join(gdir, p + suffix + ".ply")) for p in names}
         return cls(parts, kp_doc, meta, sh_degree=sh_degree, source=bike_dir,
-                   antialiased=trained_antialiased(gdir, names))
+                   antialiased=trained_antialiased(gdir, [p + suffix for p in names]))
 
     def __init__(self, parts, keypoints_doc, meta, sh_degree=None, source="<memory>", antialiased=False):
         """parts: {part name: Gaussians}; keypoints_doc: the keypoints.json object; meta: meta.json.
@@ -223,11 +225,15 @@ class BikeModel:
 
 def trained_antialiased(gdir, names):
     """Whether the parts in gdir were trained with antialiased splatting: their <part>.json
-    "config" (a part without metrics, e.g. imported, counts as plain). Parts that disagree are an
-    error: one renderer setting cannot draw both right (a mixed bike lost ~2 dB, docs/training.md)."""
+    "config", else <part>_rest.json (a part fine-tuned by the library's posed stage: its training
+    metrics stay with the rest-trained part); a part without metrics, e.g. imported, counts as
+    plain. Parts that disagree are an error: one renderer setting cannot draw both right (a mixed
+    bike lost ~2 dB, docs/training.md)."""
     flags = {}
     for p in names:
         js = os.path.join(gdir, p + ".json")
+        if not os.path.isfile(js):
+            js = os.path.join(gdir, p + "_rest.json")
         if os.path.isfile(js):
             doc = bike_folder.read_json(js, f"{p}.json")
             cfg = doc.get("config") if isinstance(doc, dict) else None

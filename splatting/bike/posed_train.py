@@ -18,7 +18,9 @@ renders (rigid transforms move a Gaussian's centre, they leave its pixel gradien
     python -m splatting bike-posed-train --bike OUT/bikes/ID [--poses 144 --iterations 6000 --sh-degree 1]
 
 writes OUT/bikes/ID/gaussians/<part>.ply in place (the rest-trained ones kept as <part>_rest.ply)
-and gaussians/posed_train.json (config, held-out-pose scores before/after).  Training poses come
+and gaussians/posed_train.json (config, held-out-pose scores before/after); with --from-rest (the
+library's posed:<bike> task) it starts from gaussians/<part>_rest.{ply,json} as the library's train
+tasks left them and never writes those.  Training poses come
 from seeds 1000, 1001, ... of splatting.library.gt.sample_poses (48 a seed): never the checks' poses
 (seed 0).
 """
@@ -123,6 +125,7 @@ def render_posed_views(bike_dir, out_dir, cfg: PosedTrainConfig, log=print):
         r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
         if r.returncode != 0:
             raise UserError(f"Blender rendering of the posed bike failed: {r.stdout.strip().splitlines()[-3:]}")
+        os.remove(job_file)  # Blender's input only (poses.json is the record): no leftover for a rerun to differ by
     return jobs
 
 
@@ -315,8 +318,10 @@ def done_with(bike_dir, cfg: PosedTrainConfig):
     return m if have == want and not newer else None
 
 
-def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print):
-    """Render the posed views, fine-tune, write the parts (rest-trained copies kept). Returns the metrics."""
+def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print, from_rest=False):
+    """Render the posed views, fine-tune, write the parts (rest-trained copies kept). Returns the metrics.
+    from_rest: start from gaussians/<part>_rest.ply (and its .json) as they are, never copying onto
+    them (the library's train tasks own those files; a killed run's <part>.ply is only overwritten)."""
     from cyclist_formats.atomic import write_json
     from splatting.bike.model import BikeModel
     from splatting.gaussians.container import write_ply
@@ -324,7 +329,7 @@ def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print):
     cfg = cfg or PosedTrainConfig()
     torch.set_num_threads(1)
     gdir = os.path.join(bike_dir, "gaussians")
-    model = BikeModel.load(bike_dir)
+    model = BikeModel.load(bike_dir, suffix="_rest" if from_rest else "")
     meta = os.path.join(gdir, "posed_train.json")
     # a part file no newer than posed_train.json is this stage's own output: start again from the
     # rest-trained copy kept beside it; a newer one (or one never fine-tuned) is the new start
@@ -332,7 +337,7 @@ def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print):
     start = {}
     for p in model.part_names:
         ply, rest = os.path.join(gdir, p + ".ply"), os.path.join(gdir, p + "_rest.ply")
-        if t_meta is None or not os.path.isfile(rest) or os.path.getmtime(ply) > t_meta:
+        if not from_rest and (t_meta is None or not os.path.isfile(rest) or os.path.getmtime(ply) > t_meta):
             shutil.copyfile(ply, rest)
         start[p] = rest
     from splatting.gaussians.container import read_ply
@@ -368,6 +373,9 @@ def add_arguments(p):
                    help="grow each part's Gaussians (adaptive density control) in the first half of the fine-tune")
     p.add_argument("--densify-max", type=int, default=d.densify_max,
                    help="with --densify: most Gaussians per part (default %(default)s)")
+    p.add_argument("--from-rest", action="store_true",
+                   help="start from gaussians/<part>_rest.ply as they are and never write them (the layout "
+                        "`library build` leaves; default: keep the current <part>.ply as <part>_rest.ply first)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
 
 
@@ -380,12 +388,13 @@ def check_args(args):
     checks.count("samples", args.samples, hi=1 << 16)
     checks.count("densify-max", args.densify_max, hi=10_000_000)
     for p in ("frame", "steering"):
-        if not os.path.isfile(os.path.join(args.bike, "gaussians", p + ".ply")):
-            raise UserError(f"{args.bike} has no trained gaussians/{p}.ply (python -m splatting train first)")
+        f = p + ("_rest.ply" if args.from_rest else ".ply")
+        if not os.path.isfile(os.path.join(args.bike, "gaussians", f)):
+            raise UserError(f"{args.bike} has no trained gaussians/{f} (python -m splatting train first)")
 
 
 def run(args):
     cfg = PosedTrainConfig(poses=args.poses, iterations=args.iterations, samples=args.samples, sh_degree=args.sh_degree,
                            densify=args.densify, densify_max=args.densify_max, progress=not args.quiet)
-    train_bike_posed(args.bike, cfg)
+    train_bike_posed(args.bike, cfg, from_rest=args.from_rest)
     return 0

@@ -2,7 +2,7 @@
 manifest (library.json) and the engines that run it and the datasets (local pool or Ray).
 
     manifest     task records, file hashes, library.json, quality floors
-    tasks        the task kinds: bike views, part training, ground-truth check, rider avatar
+    tasks        the task kinds: bike views, part training, posed fine-tune, ground-truth check, rider avatar
     gt           the ground-truth check: composed Gaussian bike vs Blender at fixed random poses
     engine       run a task graph on a local pool or on Ray
     command      the `library build` command line

@@ -1,7 +1,10 @@
 """The library's records: one JSON per completed task, and library.json summing them up.
 
 Layout under the library root OUT (the folder holding bikes/):
-    OUT/bikes/<id>/views/<part>/, OUT/bikes/<id>/gaussians/<part>.{ply,json}   (the assets)
+    OUT/bikes/<id>/views/<part>/, OUT/bikes/<id>/gaussians/<part>.ply   (the assets; with the posed
+                                     stage the train tasks write <part>_rest.{ply,json} and the posed
+                                     task <part>.ply, posed_train.json and views/posed/; without it
+                                     the train tasks write <part>.{ply,json})
     OUT/library/tasks/<task>.json    written atomically when a task has finished: its outputs
                                      with hashes, metrics, wall time and settings.  Its presence
                                      is what makes a rerun skip the task.
@@ -63,6 +66,11 @@ def write_record(root, task_id, record):
     write_json(task_file(root, task_id), dict(record, task=task_id, finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())))
 
 
+def _differ(rec, settings):
+    old = rec.get("settings") or {}
+    return sorted(k for k in set(old) | set(settings) if old.get(k) != settings.get(k))
+
+
 def check_settings(root, task_id, settings):
     """A done task built with other settings is an error (mixing budgets in one library would make
     its quality numbers meaningless); None when not done, the record when done with these settings."""
@@ -70,11 +78,27 @@ def check_settings(root, task_id, settings):
     if rec is None:
         return None
     if rec.get("settings") != settings:
-        old = rec.get("settings") or {}
-        diff = sorted(k for k in set(old) | set(settings) if old.get(k) != settings.get(k))
-        raise UserError(f"task {task_id} in {root} was built with other settings ({', '.join(diff)} differ); "
-                        f"use another --out, or delete {task_file(root, task_id)} to rebuild it")
+        raise UserError(f"task {task_id} in {root} was built with other settings ({', '.join(_differ(rec, settings))} "
+                        f"differ); use another --out, or delete {task_file(root, task_id)} to rebuild it")
     return rec
+
+
+def check_all_settings(root, task_settings):
+    """check_settings over [(task id, settings)], naming every clashing task in one line (a changed
+    fine-tune setting clashes with the posed and ground-truth records of every bike at once)."""
+    bad = []
+    for tid, s in task_settings:
+        rec = read_record(root, tid)
+        if rec is not None and rec.get("settings") != s:
+            bad.append((tid, _differ(rec, s)))
+    if not bad:
+        return
+    keys = sorted({k for _, d in bad for k in d})
+    names = [os.path.basename(task_file(root, t)) for t, _ in bad]
+    raise UserError(f"{len(bad)} task{'s' if len(bad) > 1 else ''} in {root} ({', '.join(t for t, _ in bad[:4])}"
+                    f"{', ...' if len(bad) > 4 else ''}) {'were' if len(bad) > 1 else 'was'} built with other settings ({', '.join(keys)} differ); "
+                    f"use another --out, or delete their records in {os.path.dirname(task_file(root, bad[0][0]))} "
+                    f"({' '.join(names[:4])}{' ...' if len(names) > 4 else ''}) to rebuild them")
 
 
 def usable(asset, floors):
@@ -109,6 +133,12 @@ def build_manifest(root, graph, floors, settings, engine):
             if t.kind == "train":
                 a["quality"].setdefault("part_psnr", {})[t.part] = rec["metrics"].get("psnr")
                 a["quality"].setdefault("part_box_psnr", {})[t.part] = rec["metrics"].get("box_psnr")
+            elif t.kind == "posed":  # the fine-tune's held-out posed renders, after (and before) it
+                m = rec["metrics"]
+                a["quality"].update({"posed_box_psnr": m.get("held_out_box_psnr_after"),
+                                     "posed_iou": m.get("held_out_iou_after"),
+                                     "posed_box_psnr_before": m.get("held_out_box_psnr_before"),
+                                     "posed_iou_before": m.get("held_out_iou_before")})
             elif t.kind == "gt":
                 a["quality"].update({k: rec["metrics"][k] for k in ("gt_iou", "gt_box_psnr", "gt_iou_min",
                                                                      "gt_box_psnr_min", "gt_poses")})

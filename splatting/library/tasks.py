@@ -1,9 +1,15 @@
 """The library's task kinds and the graph over them.
 
     views:<bike>          blender_scripts/render_views.py (subprocess): views/{frame,steering,crank,whole}
-    train:<bike>:<part>   python -m splatting train (subprocess): gaussians/<part>.{ply,json}; after views
-    gt:<bike>             ground-truth check (splatting.library.gt); after every train of the bike
+    train:<bike>:<part>   python -m splatting train (subprocess): gaussians/<part>_rest.{ply,json} (the
+                          rest-trained part; gaussians/<part>.{ply,json} with the posed stage off); after views
+    posed:<bike>          python -m splatting bike-posed-train --from-rest (subprocess): gaussians/<part>.ply,
+                          gaussians/posed_train.json, views/posed/; after every train of the bike
+    gt:<bike>             ground-truth check (splatting.library.gt); after posed (or every train when it is off)
     avatar:<rider>        python -m splatting rider-avatar (subprocess): RIDERS/<rider>/
+
+The posed stage (the asset recipe's fine-tune through the 8-DoF pose, docs/training.md) is on by
+default; settings["posed_train"] False (`--no-posed-train`) leaves the graph and layout without it.
 
 Every task is a function of (library root, settings) that does its work in subprocesses, writes
 only its own outputs (atomically, by the commands it runs) and returns its record; the engine
@@ -46,14 +52,16 @@ def bike_parts(bike_dir):
     return [p for p in PARTS if p != "crank" or has_crank]
 
 
-def make_graph(root, bikes, riders):
-    """bikes: {id: folder}; riders: [ids] -> [Task] in dependency order."""
+def make_graph(root, bikes, riders, posed=True):
+    """bikes: {id: folder}; riders: [ids] -> [Task] in dependency order.  posed: the posed:<bike>
+    fine-tune between a bike's trains and its ground-truth check."""
     graph = []
     for b, d in bikes.items():
         views = Task(f"views:{b}", "views", b, [], 1, d)
         trains = [Task(f"train:{b}:{p}", "train", b, [views.id], 1, d, p) for p in bike_parts(d)]
-        gt = Task(f"gt:{b}", "gt", b, [t.id for t in trains], 1, d)
-        graph += [views, *trains, gt]
+        last = [Task(f"posed:{b}", "posed", b, [t.id for t in trains], 1, d)] if posed else []
+        gt = Task(f"gt:{b}", "gt", b, [t.id for t in (last or trains)], 1, d)
+        graph += [views, *trains, *last, gt]
     for r in riders:
         graph.append(Task(f"avatar:{r}", "avatar", r, [], 1))
     return graph
@@ -89,8 +97,13 @@ def run_views(task, root, s):
             "wall_s": round(wall, 2)}
 
 
+def part_file(bike_dir, part, s):
+    """The train task's part file: <part>_rest.ply when the posed task writes <part>.ply from it."""
+    return os.path.join(bike_dir, "gaussians", part + ("_rest.ply" if s.get("posed_train") else ".ply"))
+
+
 def run_train(task, root, s):
-    out = os.path.join(task.bike_dir, "gaussians", task.part + ".ply")
+    out = part_file(task.bike_dir, task.part, s)
     cmd = [sys.executable, "-m", "splatting", "train", "--views", os.path.join(task.bike_dir, "views", task.part),
            "--out", out, "--iterations", str(s["iterations"]), "--max-gaussians", str(s["max_gaussians"]),
            "--time-budget-s", str(s["time_budget_s"]), "--seed", "0", "--threads", "1", "--quiet"]
@@ -104,6 +117,27 @@ def run_train(task, root, s):
             "metrics": {"psnr": m.get("psnr"), "box_psnr": m.get("psnr_crop"), "ssim": m.get("ssim"),
                         "gaussians": m.get("gaussians"), "iterations": m.get("iterations")},
             "wall_s": round(wall, 2)}
+
+
+def run_posed(task, root, s):
+    """The parts fine-tuned together through the pose on posed Blender renders; its metrics are the
+    fine-tune's held-out posed renders (the last 4) before and after."""
+    gdir = os.path.join(task.bike_dir, "gaussians")
+    cmd = [sys.executable, "-m", "splatting", "bike-posed-train", "--bike", task.bike_dir, "--from-rest",
+           "--poses", str(s["posed_poses"]), "--iterations", str(s["posed_iterations"]),
+           "--samples", str(s["posed_samples"]), "--sh-degree", str(s["posed_sh_degree"]), "--quiet"]
+    t = time.time()
+    _run(cmd, f"posed fine-tune of {task.asset}")
+    wall = time.time() - t
+    meta = os.path.join(gdir, "posed_train.json")
+    with open(meta) as f:
+        m = json.load(f)
+    files = manifest.files_record(root, [os.path.join(gdir, p + ".ply") for p in bike_parts(task.bike_dir)] + [meta])
+    posed_dir = os.path.join(task.bike_dir, "views", "posed")
+    files[os.path.relpath(posed_dir, root) + "/"] = manifest.tree_hash(posed_dir)[0]
+    keys = ("held_out_box_psnr_before", "held_out_iou_before", "held_out_box_psnr_after", "held_out_iou_after",
+            "poses", "held_out_poses", "gaussians")
+    return {"files": files, "metrics": {k: m.get(k) for k in keys}, "wall_s": round(wall, 2)}
 
 
 def run_gt(task, root, s):
@@ -132,16 +166,24 @@ def run_avatar(task, root, s):
             "wall_s": round(wall, 2)}
 
 
-RUNNERS = {"views": run_views, "train": run_train, "gt": run_gt, "avatar": run_avatar}
+RUNNERS = {"views": run_views, "train": run_train, "posed": run_posed, "gt": run_gt, "avatar": run_avatar}
 # the settings each kind depends on: a task is redone/refused only when these change
+_TRAIN = ("view_size", "samples", "iterations", "max_gaussians", "time_budget_s")
+POSED_KEYS = ("posed_train", "posed_poses", "posed_iterations", "posed_samples", "posed_sh_degree")
 SETTING_KEYS = {"views": ("view_size", "samples"),
-                "train": ("view_size", "samples", "iterations", "max_gaussians", "time_budget_s"),
-                "gt": ("view_size", "samples", "iterations", "max_gaussians", "time_budget_s", "gt_poses", "gt_seed"),
+                "train": _TRAIN + ("posed_train",),  # where it writes: <part>_rest.ply or <part>.ply
+                "posed": _TRAIN + POSED_KEYS,
+                "gt": _TRAIN + POSED_KEYS + ("gt_poses", "gt_seed"),
                 "avatar": ("samples", "rider_iterations", "max_gaussians", "riders_root")}
 
 
 def task_settings(kind, settings):
-    return {k: settings.get(k) for k in SETTING_KEYS[kind]}
+    """The settings a task of this kind depends on.  With the posed stage off the posed keys are
+    left out altogether, so records written before the stage existed still match."""
+    keys = SETTING_KEYS[kind]
+    if not settings.get("posed_train"):
+        keys = [k for k in keys if k not in POSED_KEYS]
+    return {k: settings.get(k) for k in keys}
 
 
 def execute(task, root, settings):
