@@ -187,10 +187,12 @@ def test_dataset_command_names_the_build_command(tmp_path):
 
 TINY = ["--size", "64", "--samples", "2", "--iterations", "60", "--max-gaussians", "1500", "--gt-poses", "1",
         "--quiet"]
+POSED = ["--posed-poses", "6", "--posed-iterations", "20"]  # 2 training + 4 held-out posed renders
+PARTS = ("frame", "steering", "crank")
 
 
-def _build(out, *extra):
-    return subprocess.run([sys.executable, "-m", "splatting", "library", "build", "--out", out, *TINY, *extra],
+def _build(out, *extra, posed=POSED):
+    return subprocess.run([sys.executable, "-m", "splatting", "library", "build", "--out", out, *TINY, *posed, *extra],
                           cwd=ROOT, capture_output=True, text=True, env=dict(os.environ, OMP_NUM_THREADS="1"))
 
 
@@ -201,12 +203,13 @@ def _asset_hashes(out):
 
 
 # What may differ between two builds of the same library: Blender stamps each PNG with the .blend
-# path, date and render time (metadata chunks), and the metrics JSON records wall times and
-# absolute paths.  Everything else - pixels, Gaussians, metrics - must be equal.
+# path, date and render time (metadata chunks), the metrics JSON records wall times, and the posed
+# renders' poses.json names its files and cameras by absolute path (the library root differs).
+# Everything else - pixels, Gaussians, metrics - must be equal.
 TIMING_KEYS = {"wall_s", "eval_s", "views", "psnr_history"}
 
 
-def _content(path):
+def _content(path, root):
     if path.endswith(".png"):
         import numpy as np
         from PIL import Image
@@ -215,8 +218,9 @@ def _content(path):
     if path.endswith(".json"):
         with open(path) as f:
             d = json.load(f)
-        return json.dumps({k: v for k, v in d.items() if k not in TIMING_KEYS}, sort_keys=True) \
+        text = json.dumps({k: v for k, v in d.items() if k not in TIMING_KEYS}, sort_keys=True) \
             if isinstance(d, dict) else json.dumps(d)
+        return text.replace(os.path.abspath(root), "<OUT>")
     with open(path, "rb") as f:
         return f.read()
 
@@ -232,9 +236,36 @@ def same_library(a, b):
                 pa = os.path.join(d, name)
                 pb = os.path.join(b, os.path.relpath(pa, a))
                 assert os.path.isfile(pb), pb
-                assert _content(pa) == _content(pb), os.path.relpath(pa, a)
+                assert _content(pa, a) == _content(pb, b), os.path.relpath(pa, a)
                 n += 1
     return n
+
+
+def _read(path):
+    with open(path, "rb") as f:
+        return f.read()
+
+
+def _records(out):
+    tasks = os.path.join(out, "library", "tasks")
+    recs = {}
+    for f in sorted(os.listdir(tasks)):
+        with open(os.path.join(tasks, f)) as fh:
+            recs[f[:-5]] = json.load(fh)
+    return recs
+
+
+def _kill_when(out, ready, what):
+    """Start a build of out, SIGKILL it (driver, Blender, training) once ready() holds."""
+    p = subprocess.Popen([sys.executable, "-m", "splatting", "library", "build", "--out", out, *TINY, *POSED],
+                         cwd=ROOT, env=dict(os.environ, OMP_NUM_THREADS="1"), start_new_session=True,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    t0 = time.time()
+    while p.poll() is None and time.time() - t0 < 900 and not ready():
+        time.sleep(0.1)
+    os.killpg(p.pid, signal.SIGKILL)
+    p.wait()
+    assert not os.path.exists(os.path.join(out, "library.json")), f"killed too late ({what})"
 
 
 @pytest.mark.slow
@@ -244,33 +275,79 @@ def test_tiny_library_build_killed_rerun_and_ray_give_the_same_files(tmp_path):
     r = subprocess.run([sys.executable, os.path.join(ROOT, "blender_scripts", "make_bikes.py"), "--out", bikes,
                         "--count", "2", "--no-extras"], cwd=ROOT, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    copies = {k: str(tmp_path / k) for k in ("whole", "killed", "ray")}
+    copies = {k: str(tmp_path / k) for k in ("whole", "killed", "ray", "quick")}
     for c in copies.values():
         shutil.copytree(bikes, c)
     r = _build(copies["whole"], "--workers", "2")
     assert r.returncode == 0, r.stderr
     ref, doc = _asset_hashes(copies["whole"])
-    assert sorted(ref) == sorted(os.listdir(os.path.join(bikes, "bikes")))
+    ids = sorted(os.listdir(os.path.join(bikes, "bikes")))
+    assert sorted(ref) == ids
     for b in doc["bikes"].values():
         assert b["complete"] and b["quality"]["gt_poses"] == 1 and 0 <= b["quality"]["gt_iou"] <= 1
-        assert set(b["quality"]["part_psnr"]) == {"frame", "steering", "crank"}
-    # killed after its first trained part, then rerun
-    p = subprocess.Popen([sys.executable, "-m", "splatting", "library", "build", "--out", copies["killed"], *TINY],
-                         cwd=ROOT, env=dict(os.environ, OMP_NUM_THREADS="1"), start_new_session=True,
-                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        assert set(b["quality"]["part_psnr"]) == set(PARTS)
+        assert 0 <= b["quality"]["posed_iou"] <= 1 and b["quality"]["posed_box_psnr"] > 0
+        g = os.path.join(copies["whole"], b["folder"], "gaussians")
+        assert sorted(os.listdir(g)) == sorted([f"{p}.ply" for p in PARTS] + [f"{p}_rest.{e}" for p in PARTS
+                                                                             for e in ("ply", "json")]
+                                               + ["posed_train.json"])
+        for p in PARTS:  # the posed task fine-tuned what the train task left
+            assert _read(os.path.join(g, p + ".ply")) != _read(os.path.join(g, p + "_rest.ply"))
+    recs = _records(copies["whole"])
+    assert len(recs) == 12 and all(recs[f"posed__{b}"]["metrics"]["poses"] == 6 for b in ids)
+    owner = {}
+    for tid, rec in recs.items():  # one owner per file
+        for f in rec["files"]:
+            assert f not in owner, f"{f} written by {owner[f]} and {tid}"
+            owner[f] = tid
+    assert owner[f"bikes/{ids[0]}/gaussians/frame.ply"] == f"posed__{ids[0]}"
+    assert owner[f"bikes/{ids[0]}/gaussians/frame_rest.ply"] == f"train__{ids[0]}__frame"
+    # killed after its first trained part, rerun and killed again in its first fine-tune, then rerun
     tasks = os.path.join(copies["killed"], "library", "tasks")
-    t0 = time.time()
-    while p.poll() is None and time.time() - t0 < 900:
-        if os.path.isdir(tasks) and any(f.startswith("train") for f in os.listdir(tasks)):
-            break
-        time.sleep(0.2)
-    os.killpg(p.pid, signal.SIGKILL)  # the driver and its Blender / training subprocesses
-    p.wait()
-    assert not os.path.exists(os.path.join(copies["killed"], "library.json")), "killed too late"
+    _kill_when(copies["killed"], lambda: os.path.isdir(tasks) and any(f.startswith("train") for f in os.listdir(tasks)),
+               "first part")
+    _kill_when(copies["killed"], lambda: os.path.isdir(os.path.join(copies["killed"], "bikes", ids[0], "views", "posed")),
+               "first fine-tune")
+    assert not os.path.exists(os.path.join(tasks, f"posed__{ids[0]}.json")), "killed too late (first fine-tune)"
     r = _build(copies["killed"])
     assert r.returncode == 0, r.stderr
-    assert same_library(copies["whole"], copies["killed"]) > 400
+    assert same_library(copies["whole"], copies["killed"]) > 450
     assert {b: sorted(f) for b, f in _asset_hashes(copies["killed"])[0].items()} == {b: sorted(f) for b, f in ref.items()}
     r = _build(copies["ray"], "--engine", "ray")
     assert r.returncode == 0, r.stderr
-    assert same_library(copies["whole"], copies["ray"]) > 400
+    assert same_library(copies["whole"], copies["ray"]) > 450
+    # --no-posed-train: today's layout, and its parts are the posed build's rest-trained parts
+    # (the views are reused from the posed build: their record does not depend on the posed stage)
+    b, q = ids[0], copies["quick"]
+    for part in ("frame", "steering", "crank", "whole"):
+        shutil.copytree(os.path.join(copies["whole"], "bikes", b, "views", part), os.path.join(q, "bikes", b, "views", part))
+    os.makedirs(os.path.join(q, "library", "tasks"))
+    shutil.copy(os.path.join(copies["whole"], "library", "tasks", f"views__{b}.json"), os.path.join(q, "library", "tasks"))
+    r = _build(q, "--bikes", b, "--no-posed-train", posed=[])
+    assert r.returncode == 0, r.stderr
+    assert "5 tasks (4 run, 1 done earlier)" in r.stdout, r.stdout
+    g = os.path.join(q, "bikes", b, "gaussians")
+    assert sorted(os.listdir(g)) == sorted(f"{p}.{e}" for p in PARTS for e in ("ply", "json"))
+    assert not os.path.exists(os.path.join(q, "bikes", b, "views", "posed"))
+    wg = os.path.join(copies["whole"], "bikes", b, "gaussians")
+    for p in PARTS:
+        assert _read(os.path.join(g, p + ".ply")) == _read(os.path.join(wg, p + "_rest.ply"))
+    quick = _asset_hashes(q)[1]["bikes"][b]
+    assert quick["complete"] and "posed_box_psnr" not in quick["quality"]
+    assert quick["quality"]["part_psnr"] == doc["bikes"][b]["quality"]["part_psnr"]
+    # a changed fine-tune setting: refused naming the posed and ground-truth records; once those
+    # are deleted, only they are redone (the trained parts stay, byte for byte)
+    w = copies["whole"]
+    before = {f: _read(os.path.join(wg, f)) for f in os.listdir(wg)}
+    more = ["--posed-poses", "6", "--posed-iterations", "30"]
+    r = _build(w, "--bikes", b, posed=more)
+    assert r.returncode == 2 and f"(posed:{b}, gt:{b})" in r.stderr and "train:" not in r.stderr, r.stderr
+    for t in (f"posed__{b}", f"gt__{b}"):
+        os.remove(os.path.join(w, "library", "tasks", t + ".json"))
+    r = _build(w, "--bikes", b, posed=more)
+    assert r.returncode == 0, r.stderr
+    assert "6 tasks (2 run, 4 done earlier)" in r.stdout, r.stdout
+    after = {f: _read(os.path.join(wg, f)) for f in before}
+    assert all(after[f] == before[f] for f in before if "_rest." in f)
+    assert all(after[f"{p}.ply"] != before[f"{p}.ply"] for p in PARTS)
+    assert _records(w)[f"posed__{b}"]["settings"]["posed_iterations"] == 30
