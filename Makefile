@@ -48,7 +48,7 @@ bikes: setup
 views: bikes
 	for b in $(OUT)/bikes/*/; do $(PY) blender_scripts/render_views.py --bike $$b --parts all || exit 1; done
 
-# The trained library: every bike's views, part Gaussians and ground-truth check, and every
+# The trained library: every bike's views, part Gaussians, posed fine-tune and ground-truth check, and every
 # roster rider's avatar; resumable, writes $(OUT)/library.json (docs/scale_out.md).
 # e.g. make library LIBRARY_ARGS="--engine ray --address auto --riders all"
 LIBRARY_ARGS ?= --riders all
