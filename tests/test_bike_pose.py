@@ -343,6 +343,23 @@ def test_antialiased_flag_comes_from_the_parts_training(tmp_path):
     assert BikeModel.load(d).antialiased is False
 
 
+def test_a_library_fine_tuned_bike_takes_the_flag_from_its_rest_trained_parts(tmp_path):
+    """The library's posed stage: <part>.ply fine-tuned, the training metrics in <part>_rest.json
+    (no <part>.json); load(suffix="_rest") reads the rest-trained parts themselves."""
+    import shutil
+    d = make_bike(tmp_path, "lib")
+    g = os.path.join(d, "gaussians")
+    for p in ("frame", "steering", "crank"):
+        _write_metrics(d, p, True)
+        os.rename(os.path.join(g, p + ".json"), os.path.join(g, p + "_rest.json"))
+        shutil.copyfile(os.path.join(g, p + ".ply"), os.path.join(g, p + "_rest.ply"))
+    assert BikeModel.load(d).antialiased is True
+    assert BikeModel.load(d, suffix="_rest").antialiased is True
+    os.remove(os.path.join(g, "crank_rest.ply"))
+    with pytest.raises(UserError, match="crank_rest.ply"):
+        BikeModel.load(d, suffix="_rest")
+
+
 def test_parts_trained_with_and_without_antialiasing_are_refused(tmp_path):
     d = make_bike(tmp_path, "mixed")
     _write_metrics(d, "frame", True)
