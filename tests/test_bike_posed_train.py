@@ -67,6 +67,34 @@ def scene(tmp_path_factory):
     return d, jobs
 
 
+def test_from_rest_starts_from_the_rest_parts_and_never_writes_them(scene, tmp_path):
+    """--from-rest (the library's posed task): the train tasks left gaussians/<part>_rest.ply and no
+    <part>.ply; the fine-tune reads those, writes <part>.ply, and never touches a _rest file, also
+    when a killed run left a stale <part>.ply behind (it is overwritten, never copied onto the rest)."""
+    import shutil
+
+    from splatting.bike.posed_train import train_bike_posed
+
+    d = str(tmp_path / "bike")
+    shutil.copytree(scene[0], d)
+    g = os.path.join(d, "gaussians")
+    for f in os.listdir(g):
+        base, ext = os.path.splitext(f)
+        os.rename(os.path.join(g, f), os.path.join(g, base + "_rest" + ext))
+    rest = {f: open(os.path.join(g, f), "rb").read() for f in os.listdir(g)}
+    cfg = PosedTrainConfig(poses=12, iterations=3, progress=False)  # the fixture's 12 posed views: no Blender
+    train_bike_posed(d, cfg, log=lambda s: None, from_rest=True)
+    parts = ("frame", "steering", "crank")
+    first = {p: open(os.path.join(g, p + ".ply"), "rb").read() for p in parts}
+    assert all(first[p] != rest[p + "_rest.ply"] for p in parts)  # fine-tuned from the rest parts
+    shutil.copyfile(os.path.join(g, "crank.ply"), os.path.join(g, "frame.ply"))  # a killed run's leftover
+    os.remove(os.path.join(g, "posed_train.json"))
+    train_bike_posed(d, cfg, log=lambda s: None, from_rest=True)
+    assert {f: open(os.path.join(g, f), "rb").read() for f in rest} == rest
+    assert {p: open(os.path.join(g, p + ".ply"), "rb").read() for p in parts} == first
+    assert BikeModel.load(d).part_names == list(parts)  # the final bike loads from <part>.ply
+
+
 def test_fine_tuning_through_the_pose_recovers_the_posed_bike(scene):
     d, jobs = scene
     start = BikeModel.load(d)
@@ -283,30 +311,3 @@ def test_cli_refuses_a_bad_densify_cap(tmp_path):
                        capture_output=True, text=True, env=env, cwd=ROOT)
     assert r.returncode == 2 and "densify-max" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
 
-
-def test_from_rest_starts_from_the_rest_parts_and_never_writes_them(scene, tmp_path):
-    """--from-rest (the library's posed task): the train tasks left gaussians/<part>_rest.ply and no
-    <part>.ply; the fine-tune reads those, writes <part>.ply, and never touches a _rest file, also
-    when a killed run left a stale <part>.ply behind (it is overwritten, never copied onto the rest)."""
-    import shutil
-
-    from splatting.bike.posed_train import train_bike_posed
-
-    d = str(tmp_path / "bike")
-    shutil.copytree(scene[0], d)
-    g = os.path.join(d, "gaussians")
-    for f in os.listdir(g):
-        base, ext = os.path.splitext(f)
-        os.rename(os.path.join(g, f), os.path.join(g, base + "_rest" + ext))
-    rest = {f: open(os.path.join(g, f), "rb").read() for f in os.listdir(g)}
-    cfg = PosedTrainConfig(poses=12, iterations=3, progress=False)  # the fixture's 12 posed views: no Blender
-    train_bike_posed(d, cfg, log=lambda s: None, from_rest=True)
-    parts = ("frame", "steering", "crank")
-    first = {p: open(os.path.join(g, p + ".ply"), "rb").read() for p in parts}
-    assert all(first[p] != rest[p + "_rest.ply"] for p in parts)  # fine-tuned from the rest parts
-    shutil.copyfile(os.path.join(g, "crank.ply"), os.path.join(g, "frame.ply"))  # a killed run's leftover
-    os.remove(os.path.join(g, "posed_train.json"))
-    train_bike_posed(d, cfg, log=lambda s: None, from_rest=True)
-    assert {f: open(os.path.join(g, f), "rb").read() for f in rest} == rest
-    assert {p: open(os.path.join(g, p + ".ply"), "rb").read() for p in parts} == first
-    assert BikeModel.load(d).part_names == list(parts)  # the final bike loads from <part>.ply

@@ -364,6 +364,9 @@ def model_keypoints_doc(bike_dir):
 def add_arguments(p):
     d = PosedTrainConfig()
     p.add_argument("--bike", required=True, help="a bike folder with trained parts (gaussians/) and views/whole")
+    p.add_argument("--from-rest", action="store_true",
+                   help="start from gaussians/<part>_rest.ply as they are and never write them (the layout "
+                        "`library build` leaves; default: keep the current <part>.ply as <part>_rest.ply first)")
     p.add_argument("--poses", type=int, default=d.poses, help="posed whole-bike renders (default %(default)s)")
     p.add_argument("--iterations", type=int, default=d.iterations, help="fine-tuning steps (default %(default)s)")
     p.add_argument("--samples", type=int, default=d.samples, help="Cycles samples of the posed renders (default %(default)s)")
@@ -373,9 +376,6 @@ def add_arguments(p):
                    help="grow each part's Gaussians (adaptive density control) in the first half of the fine-tune")
     p.add_argument("--densify-max", type=int, default=d.densify_max,
                    help="with --densify: most Gaussians per part (default %(default)s)")
-    p.add_argument("--from-rest", action="store_true",
-                   help="start from gaussians/<part>_rest.ply as they are and never write them (the layout "
-                        "`library build` leaves; default: keep the current <part>.ply as <part>_rest.ply first)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
 
 
