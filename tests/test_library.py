@@ -88,10 +88,11 @@ def test_a_changed_fine_tune_setting_clashes_with_posed_and_gt_only(tmp_path):
         assert "posed:city_a, gt:city_a)" in msg and f"({k} differ)" in msg, msg
         assert "posed__city_a.json gt__city_a.json" in msg and "train" not in msg and "views" not in msg, msg
     msg = clash(_settings(size=64, posed_iterations=20, iterations=10))
-    assert "(train:city_a:frame, train:city_a:steering, train:city_a:crank, posed:city_a, ...)" in msg, msg
+    assert "(train:city_a:frame, train:city_a:steering, train:city_a:crank, posed:city_a ...)" in msg, msg
     assert "views" not in msg
     # switching the stage off changes where the parts go: the trainings clash too
-    assert "train:city_a:frame" in clash(dict(_settings(size=64), posed_train=False))
+    msg = clash(dict(_settings(size=64), posed_train=False))
+    assert "train:city_a:frame" in msg and msg.endswith("built with the posed fine-tune: drop --no-posed-train"), msg
 
 
 def test_settings_without_the_posed_stage_match_records_from_before_it(tmp_path):
@@ -107,6 +108,10 @@ def test_settings_without_the_posed_stage_match_records_from_before_it(tmp_path)
     for t in g:
         write_record(str(tmp_path), t.id, {"files": {}, "metrics": {}, "settings": {k: s[k] for k in old[t.kind]}})
     check_all_settings(str(tmp_path), [(t.id, task_settings(t.kind, s)) for t in g])
+    posed = _settings(size=64)  # the posed stage on, over that library: the trainings clash, with the way out
+    g = make_graph(str(tmp_path), {"city_a": g[0].bike_dir}, [])
+    with pytest.raises(UserError, match="train:city_a:frame.*without the posed fine-tune: add --no-posed-train$"):
+        check_all_settings(str(tmp_path), [(t.id, task_settings(t.kind, posed)) for t in g])
 
 
 def _manifest(tmp_path, gt_iou, part_psnr=30.0, complete=True):

@@ -86,19 +86,25 @@ def check_settings(root, task_id, settings):
 def check_all_settings(root, task_settings):
     """check_settings over [(task id, settings)], naming every clashing task in one line (a changed
     fine-tune setting clashes with the posed and ground-truth records of every bike at once)."""
-    bad = []
+    bad, was_posed = [], None
     for tid, s in task_settings:
         rec = read_record(root, tid)
         if rec is not None and rec.get("settings") != s:
             bad.append((tid, _differ(rec, s)))
+            if "posed_train" in bad[-1][1] and was_posed is None:
+                was_posed = bool((rec.get("settings") or {}).get("posed_train"))
     if not bad:
         return
     keys = sorted({k for _, d in bad for k in d})
-    names = [os.path.basename(task_file(root, t)) for t, _ in bad]
-    raise UserError(f"{len(bad)} task{'s' if len(bad) > 1 else ''} in {root} ({', '.join(t for t, _ in bad[:4])}"
-                    f"{', ...' if len(bad) > 4 else ''}) {'were' if len(bad) > 1 else 'was'} built with other settings ({', '.join(keys)} differ); "
-                    f"use another --out, or delete their records in {os.path.dirname(task_file(root, bad[0][0]))} "
-                    f"({' '.join(names[:4])}{' ...' if len(names) > 4 else ''}) to rebuild them")
+    ids, names = [t for t, _ in bad], [os.path.basename(task_file(root, t)) for t, _ in bad]
+    more = " ..." if len(bad) > 4 else ""
+    hint = "" if was_posed is None else (
+        "; it was built with the posed fine-tune: drop --no-posed-train" if was_posed
+        else "; it was built without the posed fine-tune: add --no-posed-train")
+    raise UserError(f"{len(bad)} task{'s' if len(bad) > 1 else ''} in {root} ({', '.join(ids[:4])}{more}) "
+                    f"{'were' if len(bad) > 1 else 'was'} built with other settings ({', '.join(keys)} differ); "
+                    f"use another --out, or delete their records in {os.path.dirname(task_file(root, ids[0]))} "
+                    f"({' '.join(names[:4])}{more}) to rebuild them{hint}")
 
 
 def usable(asset, floors):
