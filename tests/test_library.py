@@ -16,6 +16,8 @@ import pytest
 from cyclist_formats.errors import UserError
 from helpers import ROOT, small_config, write_test_bike
 
+PARTS = ("frame", "steering", "crank")
+
 
 def _record(root, task_id, metrics, files=None):
     from splatting.library.manifest import write_record
@@ -87,6 +89,10 @@ def test_a_changed_fine_tune_setting_clashes_with_posed_and_gt_only(tmp_path):
         msg = clash(_settings(size=64, **dict({"posed_iterations": 20}, **{k: v})))
         assert "posed:city_a, gt:city_a)" in msg and f"({k} differ)" in msg, msg
         assert "posed__city_a.json gt__city_a.json" in msg and "train" not in msg and "views" not in msg, msg
+    # a default changed in splatting/bike/posed_train.py (not an option here) is a settings change too
+    assert built["posed_rest_fraction"] > 0 and built["posed_lr_means"] > 0
+    msg = clash(dict(built, posed_rest_fraction=built["posed_rest_fraction"] / 2))
+    assert "(posed:city_a, gt:city_a)" in msg and "(posed_rest_fraction differ)" in msg, msg
     msg = clash(_settings(size=64, posed_iterations=20, iterations=10))
     assert "(train:city_a:frame, train:city_a:steering, train:city_a:crank, posed:city_a ...)" in msg, msg
     assert "views" not in msg
@@ -112,6 +118,33 @@ def test_settings_without_the_posed_stage_match_records_from_before_it(tmp_path)
     g = make_graph(str(tmp_path), {"city_a": g[0].bike_dir}, [])
     with pytest.raises(UserError, match="train:city_a:frame.*without the posed fine-tune: add --no-posed-train$"):
         check_all_settings(str(tmp_path), [(t.id, task_settings(t.kind, posed)) for t in g])
+
+
+def test_posed_task_refuses_a_fine_tune_run_with_another_config(tmp_path, monkeypatch):
+    """The posed record's settings must be the configuration bike-posed-train really ran (its
+    posed_train.json "config"), or the record would describe other parts than the files."""
+    from splatting.library import tasks
+    d = write_test_bike(str(tmp_path / "bikes"), "city_a")
+    s = _settings(size=64, posed_poses=6)
+    cfg = {k[len("posed_"):]: v for k, v in s.items() if k.startswith("posed_") and k != "posed_train"}
+    os.makedirs(os.path.join(d, "gaussians"), exist_ok=True)
+    os.makedirs(os.path.join(d, "views", "posed"), exist_ok=True)
+    for p in PARTS:
+        open(os.path.join(d, "gaussians", p + ".ply"), "wb").close()
+    ran = []
+    monkeypatch.setattr(tasks, "_run", lambda cmd, what: ran.append(cmd))  # the subprocess "ran" with cfg
+    task = tasks.make_graph(str(tmp_path), {"city_a": d}, [])[4]
+    assert task.id == "posed:city_a"
+    for config, ok in ((cfg, True), (dict(cfg, iterations=cfg["iterations"] + 1), False)):
+        with open(os.path.join(d, "gaussians", "posed_train.json"), "w") as f:
+            json.dump({"config": config, "held_out_box_psnr_after": 30.0, "poses": 6}, f)
+        if ok:
+            rec = tasks.run_posed(task, str(tmp_path), s)
+            assert rec["metrics"]["held_out_box_psnr_after"] == 30.0 and len(rec["files"]) == 5
+        else:
+            with pytest.raises(RuntimeError, match=r"another configuration .*\(iterations\)"):
+                tasks.run_posed(task, str(tmp_path), s)
+    assert "--from-rest" in ran[0] and ran[0][ran[0].index("--poses") + 1] == "6"
 
 
 def _manifest(tmp_path, gt_iou, part_psnr=30.0, complete=True):
@@ -193,7 +226,6 @@ def test_dataset_command_names_the_build_command(tmp_path):
 TINY = ["--size", "64", "--samples", "2", "--iterations", "60", "--max-gaussians", "1500", "--gt-poses", "1",
         "--quiet"]
 POSED = ["--posed-poses", "6", "--posed-iterations", "20"]  # 2 training + 4 held-out posed renders
-PARTS = ("frame", "steering", "crank")
 
 
 def _build(out, *extra, posed=POSED):

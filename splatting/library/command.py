@@ -115,13 +115,26 @@ def settings_of(args):
          "time_budget_s": args.time_budget_s, "max_gaussians": args.max_gaussians,
          "rider_iterations": args.rider_iterations, "gt_poses": args.gt_poses, "gt_seed": 0,
          "riders_root": os.path.abspath(args.riders_root), "posed_train": not args.no_posed_train}
-    if s["posed_train"]:  # resolved here (the module imports torch; --help should not)
-        from splatting.bike.posed_train import PosedTrainConfig
-        d = PosedTrainConfig()
-        s.update(posed_poses=args.posed_poses or d.poses, posed_iterations=args.posed_iterations or d.iterations,
-                 posed_samples=args.posed_samples or args.samples or d.samples,
-                 posed_sh_degree=d.sh_degree if args.posed_sh_degree is None else args.posed_sh_degree)
+    if s["posed_train"]:
+        s.update(posed_settings(args))
     return s
+
+
+def posed_settings(args):
+    """The fine-tune's whole configuration as posed_<field> settings: the options given here plus
+    every other PosedTrainConfig default (rates, rest fraction, denoiser, ...), so that a default
+    changed in splatting/bike/posed_train.py is a settings change too, never a silent one.  Resolved
+    here, not in add_arguments: the module imports torch, --help should not."""
+    from dataclasses import asdict
+
+    from splatting.bike.posed_train import PosedTrainConfig
+    d = PosedTrainConfig()
+    cfg = PosedTrainConfig(poses=args.posed_poses or d.poses, iterations=args.posed_iterations or d.iterations,
+                           samples=args.posed_samples or args.samples or d.samples,
+                           sh_degree=d.sh_degree if args.posed_sh_degree is None else args.posed_sh_degree)
+    out = {"posed_" + k: v for k, v in asdict(cfg).items() if k != "progress"}
+    assert "posed_train" not in out  # the stage's on/off switch
+    return out
 
 
 def floors_of(args):

@@ -132,6 +132,12 @@ def run_posed(task, root, s):
     meta = os.path.join(gdir, "posed_train.json")
     with open(meta) as f:
         m = json.load(f)
+    # the record says which configuration made these parts: the one the subprocess really ran
+    want = {k[len("posed_"):]: v for k, v in s.items() if k.startswith("posed_") and k != "posed_train"}
+    have = m.get("config") or {}
+    diff = sorted(k for k in set(want) | set(have) if want.get(k) != have.get(k))
+    if diff:
+        raise RuntimeError(f"bike-posed-train ran another configuration than the library's settings ({', '.join(diff)})")
     files = manifest.files_record(root, [os.path.join(gdir, p + ".ply") for p in bike_parts(task.bike_dir)] + [meta])
     posed_dir = os.path.join(task.bike_dir, "views", "posed")
     files[os.path.relpath(posed_dir, root) + "/"] = manifest.tree_hash(posed_dir)[0]
@@ -167,23 +173,28 @@ def run_avatar(task, root, s):
 
 
 RUNNERS = {"views": run_views, "train": run_train, "posed": run_posed, "gt": run_gt, "avatar": run_avatar}
-# the settings each kind depends on: a task is redone/refused only when these change
+# the settings each kind depends on: a task is redone/refused only when these change.  "posed_*":
+# every posed_<field> setting (the fine-tune's whole configuration, command.posed_settings)
 _TRAIN = ("view_size", "samples", "iterations", "max_gaussians", "time_budget_s")
-POSED_KEYS = ("posed_train", "posed_poses", "posed_iterations", "posed_samples", "posed_sh_degree")
 SETTING_KEYS = {"views": ("view_size", "samples"),
                 "train": _TRAIN + ("posed_train",),  # where it writes: <part>_rest.ply or <part>.ply
-                "posed": _TRAIN + POSED_KEYS,
-                "gt": _TRAIN + POSED_KEYS + ("gt_poses", "gt_seed"),
+                "posed": _TRAIN + ("posed_train", "posed_*"),
+                "gt": _TRAIN + ("posed_train", "posed_*", "gt_poses", "gt_seed"),
                 "avatar": ("samples", "rider_iterations", "max_gaussians", "riders_root")}
 
 
 def task_settings(kind, settings):
-    """The settings a task of this kind depends on.  With the posed stage off the posed keys are
-    left out altogether, so records written before the stage existed still match."""
-    keys = SETTING_KEYS[kind]
-    if not settings.get("posed_train"):
-        keys = [k for k in keys if k not in POSED_KEYS]
-    return {k: settings.get(k) for k in keys}
+    """The settings a task of this kind depends on.  With the posed stage off every posed key is
+    left out, so records written before the stage existed still match."""
+    out = {}
+    for k in SETTING_KEYS[kind]:
+        if k.startswith("posed_") and not settings.get("posed_train"):
+            continue
+        if k == "posed_*":
+            out.update({n: v for n, v in sorted(settings.items()) if n.startswith("posed_") and n != "posed_train"})
+        else:
+            out[k] = settings.get(k)
+    return out
 
 
 def execute(task, root, settings):
