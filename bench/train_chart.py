@@ -246,6 +246,8 @@ def bike_fidelity(bike_dir, reference_dir, model=None):
     gdir = os.path.join(bike_dir, "gaussians")
     for name in model.part_names + ["posed_train"]:
         js = os.path.join(gdir, name + ".json")
+        if not os.path.isfile(js):  # a library-built bike keeps its part trainings' metrics as <part>_rest.json
+            js = os.path.join(gdir, name + "_rest.json")
         if os.path.isfile(js):
             with open(js) as f:
                 wall += float(json.load(f).get("wall_s", 0.0))
