@@ -16,6 +16,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <type_traits>
 #include <vector>
 
 namespace {
@@ -53,14 +54,17 @@ struct Prm {
 // One pixel's straight colour, clamped to [0, 1], before the sRGB encoding: alpha a (> 1e-5),
 // premultiplied reflectance r, composited normal n, gloss luminance, roughness, sun and sky
 // visibility (premultiplied; read only when their flag is set), x the pixel column's view ray
-// part ((u + 0.5 - cx) / fx), vy its row's (y Rc[3 + j] + Rc[6 + j]).  Inlined into SIMD loops.
+// part ((u + 0.5 - cx) / fx), vy its row's (y Rc[3 + j] + Rc[6 + j]).  Inlined into SIMD loops;
+// the flags are template arguments (with_flags): as run-time bools gcc 12 vectorised the loop
+// only while the formula was written out inside it.
+template <bool gloss, bool rough_ch, bool shadows, bool sky_ch>
 __attribute__((always_inline)) inline void shade_px(const Prm& P, float a, float r0, float r1, float r2, float n0,
                                                     float n1, float n2, float lum_c, float rough_c, float vis_c,
                                                     float sky_c, float x, float vy0, float vy1, float vy2, float& o0,
                                                     float& o1, float& o2) {
     const float ac = a > 1e-6f ? a : 1e-6f;
     float g0 = 0.0f, g1 = 0.0f, g2 = 0.0f;  // the gloss colour, the rest is albedo
-    if (P.gloss) {
+    if constexpr (gloss) {
         // per pixel the gloss colour is the reflectance's tint times the composited gloss
         // luminance (exact for grey gloss: metals, clear coats)
         float lum = 0.2126f * r0 + 0.7152f * r1 + 0.0722f * r2;
@@ -69,9 +73,9 @@ __attribute__((always_inline)) inline void shade_px(const Prm& P, float a, float
         g0 = r0 * share, g1 = r1 * share, g2 = r2 * share;
     }
     const float a0 = r0 - g0, a1 = r1 - g1, a2_ = r2 - g2;
-    const float rough = P.rough_ch ? clampf(rough_c / ac, 0.05f, 1.0f) : P.rough0;
-    const float vis = P.shadows ? clampf(vis_c / ac, 0.0f, 1.0f) : 1.0f;
-    const float skv = P.sky_ch ? clampf(sky_c / ac, 0.0f, 1.0f) : 1.0f;  // the sky's share
+    const float rough = rough_ch ? clampf(rough_c / ac, 0.05f, 1.0f) : P.rough0;
+    const float vis = shadows ? clampf(vis_c / ac, 0.0f, 1.0f) : 1.0f;
+    const float skv = sky_ch ? clampf(sky_c / ac, 0.0f, 1.0f) : 1.0f;  // the sky's share
     const float k0 = P.sky0 * skv, k1 = P.sky1 * skv, k2 = P.sky2 * skv;
     float nn = std::sqrt(n0 * n0 + n1 * n1 + n2 * n2);
     nn = nn > 1e-6f ? nn : 1e-6f;
@@ -80,7 +84,7 @@ __attribute__((always_inline)) inline void shade_px(const Prm& P, float a, float
     cosl = cosl > 0.0f ? cosl : 0.0f;
     const float k = cosl / kPi * vis;
     float s0 = (P.sun0 * k + k0) * a0, s1 = (P.sun1 * k + k1) * a1, s2 = (P.sun2 * k + k2) * a2_;
-    if (P.gloss) {
+    if constexpr (gloss) {
         // the view direction: from the pixel's surface towards the camera, in the world
         float w0 = x * P.Rc[0] + vy0, w1 = x * P.Rc[1] + vy1, w2 = x * P.Rc[2] + vy2;
         const float vn = std::sqrt(w0 * w0 + w1 * w1 + w2 * w2);
@@ -99,6 +103,20 @@ __attribute__((always_inline)) inline void shade_px(const Prm& P, float a, float
         s0 += (P.sun0 * spec + k0) * g0, s1 += (P.sun1 * spec + k1) * g1, s2 += (P.sun2 * spec + k2) * g2;
     }
     o0 = clampf(s0 / ac, 0.0f, 1.0f), o1 = clampf(s1 / ac, 0.0f, 1.0f), o2 = clampf(s2 / ac, 0.0f, 1.0f);
+}
+
+// f(G, R, S, K) with the flags as std::integral_constant<bool, ...> (shade_px's template arguments)
+template <class F>
+inline void with_flags(const Prm& P, F&& f) {
+    auto pick = [](bool x, auto&& next) {
+        if (x)
+            next(std::true_type{});
+        else
+            next(std::false_type{});
+    };
+    pick(P.gloss, [&](auto G) {
+        pick(P.rough_ch, [&](auto R) { pick(P.shadows, [&](auto S) { pick(P.sky_ch, [&](auto K) { f(G, R, S, K); }); }); });
+    });
 }
 }  // namespace
 
@@ -161,10 +179,13 @@ extern "C" void rl_shade_f32(int64_t W, int64_t u0, int64_t v0, int64_t u1, int6
                     *__restrict pN2 = b[kN2], *__restrict pLum = b[kLum], *__restrict pRough = b[kRough],
                     *__restrict pVis = b[kVis], *__restrict pSky = b[kSky], *__restrict pX = b[kX];
         float *__restrict pS0 = b[kS0], *__restrict pS1 = b[kS1], *__restrict pS2 = b[kS2];
+        with_flags(P, [&](auto G, auto RC, auto SH, auto SK) {
 #pragma omp simd
-        for (int64_t i = 0; i < m; ++i)  // a > 1e-5 here
-            shade_px(P, pA[i], pR0[i], pR1[i], pR2[i], pN0[i], pN1[i], pN2[i], pLum[i], pRough[i], pVis[i], pSky[i],
-                     (pX[i] + 0.5f - P.cx) / P.fx, vy0, vy1, vy2, pS0[i], pS1[i], pS2[i]);
+            for (int64_t i = 0; i < m; ++i)  // a > 1e-5 here
+                shade_px<G, RC, SH, SK>(P, pA[i], pR0[i], pR1[i], pR2[i], pN0[i], pN1[i], pN2[i], pLum[i], pRough[i],
+                                        pVis[i], pSky[i], (pX[i] + 0.5f - P.cx) / P.fx, vy0, vy1, vy2, pS0[i], pS1[i],
+                                        pS2[i]);
+        });
 #pragma omp simd
         for (int64_t i = 0; i < m; ++i) pS0[i] = srgb(pS0[i]), pS1[i] = srgb(pS1[i]), pS2[i] = srgb(pS2[i]);
         for (int64_t i = 0; i < m; ++i) {
@@ -190,7 +211,11 @@ extern "C" int rl_shade_tile_f32(const float* acc, int Cf, const float* T, int t
     constexpr int L = 8;
     const Prm P(prm, flags);
     if (Cf != 3 + P.channels() || tile % L) return -1;
-    const int NJ = tile / L, cl = 3 + P.c_rough, cv = 3 + P.c_vis, cs = 3 + P.c_sky;
+    const bool gloss = P.gloss, rough_ch = P.rough_ch, shadows = P.shadows, sky_ch = P.sky_ch;
+    // the optional channels' places in acc, channel 0 for those the flags leave out (read, unused:
+    // unconditional loads vectorise, masked ones did not)
+    const int NJ = tile / L, cg = gloss ? 6 : 0, cl = rough_ch ? 3 + P.c_rough : 0, cv = shadows ? 3 + P.c_vis : 0,
+              cs = sky_ch ? 3 + P.c_sky : 0;
     for (int y = oy; y <= ey; ++y) {
         const float yr = (float(y) + 0.5f - P.cy) / P.fy;
         const float vy0 = yr * P.Rc[3] + P.Rc[6], vy1 = yr * P.Rc[4] + P.Rc[7], vy2 = yr * P.Rc[5] + P.Rc[8];
@@ -210,12 +235,13 @@ extern "C" int rl_shade_tile_f32(const float* acc, int Cf, const float* T, int t
                 continue;
             }
             float s0[L], s1[L], s2[L];
+            with_flags(P, [&](auto G, auto RC, auto SH, auto SK) {
 #pragma omp simd
-            for (int l = 0; l < L; ++l)
-                shade_px(P, a[l], c[l], c[L + l], c[2 * L + l], c[3 * L + l], c[4 * L + l], c[5 * L + l],
-                         P.gloss ? c[6 * L + l] : 0.0f, P.rough_ch ? c[cl * L + l] : 0.0f,
-                         P.shadows ? c[cv * L + l] : 0.0f, P.sky_ch ? c[cs * L + l] : 0.0f,
-                         (float(x0 + l) + 0.5f - P.cx) / P.fx, vy0, vy1, vy2, s0[l], s1[l], s2[l]);
+                for (int l = 0; l < L; ++l)
+                    shade_px<G, RC, SH, SK>(P, a[l], c[l], c[L + l], c[2 * L + l], c[3 * L + l], c[4 * L + l],
+                                            c[5 * L + l], c[cg * L + l], c[cl * L + l], c[cv * L + l], c[cs * L + l],
+                                            (float(x0 + l) + 0.5f - P.cx) / P.fx, vy0, vy1, vy2, s0[l], s1[l], s2[l]);
+            });
 #pragma omp simd
             for (int l = 0; l < L; ++l) {
                 const bool cov = a[l] > 1e-5f;
