@@ -415,6 +415,14 @@ def test_shaded_tiles_write_only_what_is_asked_and_refuse_what_they_cannot_shade
     want = shade_composited(plain["rgb"], plain["features"], plain["alpha"], cam, light, gloss=True, backend="torch")
     torch.testing.assert_close(shaded["rgb"], want, atol=2e-5, rtol=1e-4)
     assert float((shaded["rgb"] - plain["rgb"]).abs().max()) > 0.05
+    old = torch.get_num_threads()  # tiles shaded by two threads: the same bits
+    torch.set_num_threads(2)
+    try:
+        with torch.no_grad():
+            two = rasterize(*scene, cam, features=feats, backend="tiles", depth=False, shade=spec)
+    finally:
+        torch.set_num_threads(old)
+    assert torch.equal(two["rgb"], shaded["rgb"]) and torch.equal(two["alpha"], shaded["alpha"])
     with torch.no_grad():
         for kw, what in ((dict(depth=True), "depth=False"), (dict(background=torch.ones(3)), "a background"),
                          (dict(features=feats[:1]), "6 channels where flags 1 need 7")):
