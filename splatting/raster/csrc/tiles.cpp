@@ -26,7 +26,7 @@
 
 #include <omp.h>
 
-// csrc/../../relight/csrc/shade.cpp (the same library): the relit shading as a tile epilogue
+// splatting/relight/csrc/shade.cpp (built into the same library): the relit shading as a tile epilogue
 extern "C" int rl_shade_tile_f32(const float* acc, int Cf, const float* T, int tile, int ox, int oy, int ex, int ey,
                                  int64_t W, float* out, const float* prm, int32_t flags);
 extern "C" int rl_shade_tile_channels(int32_t flags);

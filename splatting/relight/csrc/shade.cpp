@@ -31,8 +31,9 @@ inline bool blank8(const float* p) {
 // x^(1/2.4) for x in [0.0031308, 1] (the sRGB curve's power segment) as exp(ln(x) / 2.4), with
 // Cephes' logf and expf polynomials (the latter as tiles.cpp's vexp): plain float arithmetic and
 // bit moves that vectorise inside the pixel loops.  Measured over every float of that range:
-// at most 5.1e-7 relative error, and srgb() at most 1.6e-7 from the double-precision curve.  Hand-written because glibc's vectorised powf (general x^y)
-// was most of the shading's time: a relit 512 px view 0.3-0.4 ms faster (docs/relighting.md).
+// at most 5.1e-7 relative error, and srgb() at most 1.6e-7 from the double-precision curve.
+// Hand-written because glibc's vectorised powf (a general x^y) was most of the shading's time:
+// relit 512 px views 0.14-0.27 ms faster with this (docs/relighting.md).
 inline float pow_inv24(float x) {
     uint32_t u = __builtin_bit_cast(uint32_t, x);
     int e = int(u >> 23) - 126;                                        // x = m 2^e, m in [0.5, 1)
