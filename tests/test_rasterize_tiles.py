@@ -389,3 +389,48 @@ def test_group_ids_out_of_range_are_refused():
     cam = look_at_camera((0.0, 0.0, -3.0))
     with pytest.raises(ValueError, match="group"):
         rasterize(*scene, cam, groups=(torch.tensor([2]), 2))
+
+
+def test_shaded_tiles_write_only_what_is_asked_and_refuse_what_they_cannot_shade():
+    """rasterize(shade=TileShade(...)) (the relit tile epilogue, csrc/shade.cpp): the same alpha as a
+    plain render bit for bit, the feature image only with features=True (then bit for bit the plain
+    one), the colour the shaded one (not the composited colour); refused under grad, with depth,
+    with a background, float64, or features of another count than the flags name."""
+    from splatting.raster.cpu_tiles import TileShade
+    from splatting.relight.render import shade_composited, shade_flags, shade_params
+    from splatting.relight.shading import Light
+    gen = torch.Generator().manual_seed(46)
+    scene = [t.float() for t in random_scene(gen, 80, 0)]
+    cam = random_camera(gen)
+    feats = [torch.randn(80, 3, generator=gen), torch.rand(80, 1, generator=gen)]  # normal, gloss luminance
+    light = Light(sun_direction=(0.2, 0.9, -0.3), sun_strength=3.0, sky=(0.3, 0.3, 0.35))
+    spec = TileShade(shade_params(cam, light), shade_flags(True))
+    with torch.no_grad():
+        plain = rasterize(*scene, cam, features=feats, backend="tiles", depth=False)
+        shaded = rasterize(*scene, cam, features=feats, backend="tiles", depth=False, shade=spec)
+        both = rasterize(*scene, cam, features=feats, backend="tiles", depth=False, shade=spec._replace(features=True))
+    assert "features" not in shaded and torch.equal(both["features"], plain["features"])
+    assert torch.equal(shaded["alpha"], plain["alpha"]) and torch.equal(both["rgb"], shaded["rgb"])
+    assert float(plain["alpha"].max()) > 0.3
+    want = shade_composited(plain["rgb"], plain["features"], plain["alpha"], cam, light, gloss=True, backend="torch")
+    torch.testing.assert_close(shaded["rgb"], want, atol=2e-5, rtol=1e-4)
+    assert float((shaded["rgb"] - plain["rgb"]).abs().max()) > 0.05
+    old = torch.get_num_threads()  # tiles shaded by two threads: the same bits
+    torch.set_num_threads(2)
+    try:
+        with torch.no_grad():
+            two = rasterize(*scene, cam, features=feats, backend="tiles", depth=False, shade=spec)
+    finally:
+        torch.set_num_threads(old)
+    assert torch.equal(two["rgb"], shaded["rgb"]) and torch.equal(two["alpha"], shaded["alpha"])
+    with torch.no_grad():
+        for kw, what in ((dict(depth=True), "depth=False"), (dict(background=torch.ones(3)), "a background"),
+                         (dict(features=feats[:1]), "6 channels where flags 1 need 7")):
+            with pytest.raises(ValueError, match=what):
+                rasterize(*scene, cam, **{"features": feats, "backend": "tiles", "depth": False, "shade": spec, **kw})
+        with pytest.raises(ValueError, match="not float32"):
+            rasterize(*[t.double() for t in scene], cam, features=[f.double() for f in feats], backend="tiles",
+                      depth=False, shade=spec)
+    with pytest.raises(ValueError, match="a gradient is wanted"):
+        rasterize(scene[0].clone().requires_grad_(True), *scene[1:], cam, features=feats, backend="tiles",
+                  depth=False, shade=spec)

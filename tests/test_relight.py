@@ -190,18 +190,62 @@ def test_relit_channels_equal_the_pair_list_compositing():
     cam = ring_camera(20, orbit_centre=(0, 1, 0), size=48, focal=2084.97 * 48 / 512 * 2)
     alb, gl = torch.rand(len(g), 3, generator=gen) * 0.8, torch.rand(len(g), 3, generator=gen) * 0.1
     nrm = torch.nn.functional.normalize(torch.randn(len(g), 3, generator=gen), dim=-1)
-    out = render_relit(g, alb, nrm, cam, Light(), gl, antialiased=False, reflectance=True)
+    out = render_relit(g, alb, nrm, cam, Light(), gl, antialiased=False, reflectance=True, normal=True)
     (R, n), alpha = composite_features(prepare(g, cam), [alb + gl, nrm])
     assert float(alpha.max()) > 0.5
     torch.testing.assert_close(out["alpha"], alpha, atol=2e-4, rtol=1e-3)
     torch.testing.assert_close(out["reflectance"], R, atol=2e-4, rtol=1e-3)
     torch.testing.assert_close(out["normal"], n, atol=2e-4, rtol=1e-3)
     # the pose-invariant channels kept by the caller (RelightableBike.static) render the same, bit for bit
-    kept = render_relit(g, None, nrm, cam, Light(), None, antialiased=False, static=relit_static(alb, gl))
+    kept = render_relit(g, None, nrm, cam, Light(), None, antialiased=False, static=relit_static(alb, gl), normal=True,
+                        fused=False)
     for k in ("rgb", "alpha", "normal"):  # (and the shading in place over the reflectance: the same colours)
         assert torch.equal(kept[k], out[k]), k
     with pytest.raises(ValueError, match="static channels for 99 Gaussians"):
         render_relit(g, alb, nrm, cam, Light(), gl, static=relit_static(alb[:99], gl[:99]))
+
+
+@pytest.mark.parametrize("gloss, shadows, sky", [(True, False, True), (False, True, False), (True, True, True),
+                                                 (False, False, False)])
+def test_relit_render_shaded_in_the_compositor_equals_two_passes(gloss, shadows, sky):
+    # render_relit's default: the compositor shades each tile as it finishes it (csrc/shade.cpp
+    # rl_shade_tile_f32) and writes no reflectance or feature image; against the two-pass path
+    # (composite, then shade_composited's C loop) and against the torch pair list shaded by the
+    # torch formula.  45 x 37 px: edge tiles, and rows not a multiple of the 8 SIMD lanes.
+    from splatting.relight.render import gloss_luma, shade_composited
+    from splatting.relight.shadow import sun_visibility
+    g = _flat_patch(seed=3)
+    gen = torch.Generator().manual_seed(4)
+    g.opacity_logits = torch.randn(len(g), generator=gen)  # semi-transparent: partly covered pixels
+    g.means = g.means + 0.05 * torch.randn(len(g), 3, generator=gen)
+    cam = ring_camera(20, orbit_centre=(0, 1, 0), size=45, focal=2084.97 * 45 / 512 * 2)
+    cam = type(cam)(cam.R, cam.T, cam.K, 45, 37, "c")
+    alb = torch.rand(len(g), 3, generator=gen) * 0.8
+    gl = torch.rand(len(g), 3, generator=gen) * 0.2 if gloss else None
+    nrm = torch.nn.functional.normalize(torch.randn(len(g), 3, generator=gen) + torch.tensor([0, 0, -2.0]), dim=-1)
+    skv = torch.rand(len(g), generator=gen) if sky else None
+    light = Light(sun_direction=(0.3, 0.5, -0.8), sun_strength=4.0, sky=(0.2, 0.25, 0.3))
+    kw = dict(antialiased=False, shadows=shadows, sky_visibility=skv)
+    fused = render_relit(g, alb, nrm, cam, light, gl, normal=True, **kw)
+    two = render_relit(g, alb, nrm, cam, light, gl, normal=True, fused=False, **kw)
+    assert set(fused) == {"rgb", "alpha", "normal"}
+    assert torch.equal(fused["alpha"], two["alpha"]) and torch.equal(fused["normal"], two["normal"])
+    torch.testing.assert_close(fused["rgb"], two["rgb"], atol=1e-5, rtol=0)
+    cover = fused["alpha"] > 1e-5
+    assert 200 < int(cover.sum()) < 45 * 37 and float(fused["rgb"][cover].max()) > 0.2
+    assert float(fused["rgb"][~cover].abs().max()) == 0.0
+    # the reference: channels composited over the torch pair list, shaded by the torch formula
+    cols = [nrm] + ([gloss_luma(gl)] if gloss else []) + ([sun_visibility(g, light)[:, None]] if shadows else []) \
+        + ([skv[:, None]] if sky else [])
+    refl = alb if gl is None else alb + gl
+    (R, F), alpha = composite_features(prepare(g, cam), [refl, torch.cat(cols, 1)])
+    ref = shade_composited(R, F, alpha, cam, light, gloss, False, shadows, backend="torch", sky_channel=sky)
+    torch.testing.assert_close(fused["alpha"], alpha, atol=2e-4, rtol=1e-3)
+    torch.testing.assert_close(fused["rgb"], ref, atol=1e-3, rtol=1e-3)
+    # the normal is written only when asked for; the composited reflectance only by the two passes
+    assert set(render_relit(g, alb, nrm, cam, light, gl, **kw)) == {"rgb", "alpha"}
+    with pytest.raises(ValueError, match="fused shading needs"):
+        render_relit(g, alb, nrm, cam, light, gl, reflectance=True, fused=True, **kw)
 
 
 def test_relight_fit_command_bad_input(tmp_path):

@@ -86,7 +86,7 @@ def load():
             f = getattr(lib, f"gs_bin_{sfx}")
             f.argtypes, f.restype = [i64, p, p, p, p, p, p, i32, i32, i32, p, p, p, p, p, p, p], None
             f = getattr(lib, f"gs_forward_{sfx}")
-            f.argtypes, f.restype = [i64, p, i32, p, p, i32, i32, i32, i32, p, p, p, p, p, p, p, i32, p, p, p, p, p, p, i32, p, p, p], None
+            f.argtypes, f.restype = [i64, p, i32, p, p, i32, i32, i32, i32, p, p, p, p, p, p, p, i32, p, p, p, p, p, p, i32, p, p, p, p, i32], i32
             f = getattr(lib, f"gs_backward_{sfx}")
             f.argtypes, f.restype = [i64, i64, p, p, i32, i32, i32, i32, p, p, p, p, p, p, p, p, i32, p, p, p, p, p, p, p, p, p, p], None
             f = getattr(lib, f"gs_preprocess_fwd_{sfx}")

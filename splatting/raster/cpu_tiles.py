@@ -22,6 +22,11 @@ Steps (all threads: torch.get_num_threads()):
 Optionally (groups, forward only) each group's alpha as if it were rendered alone, from
 the same pass (csrc/tiles.cpp, forward<S, GROUPS>): what amodal instance masks need.
 
+Relit renders (forward only): shade=TileShade(...) shades each tile as it is finished
+(csrc/shade.cpp rl_shade_tile_f32, the compositor's epilogue): the first plane (the reflectance)
+comes back as the display colour and the feature plane is not written unless asked for, so no
+feature image is written and read back (splatting/relight/render.py, docs/relighting.md).
+
 Glue kept small on purpose: every torch op here runs between the parallel C calls on one thread
 (and a parallel one, >= 32k elements, first wakes the other thread: ~50-100 us under
 OMP_WAIT_POLICY=PASSIVE). Gradients are not materialised (an unused output's gradient is a null
@@ -29,6 +34,7 @@ pointer), the gradient buffers are allocated uninitialised (the C++ writes every
 """
 import ctypes
 import threading
+from typing import NamedTuple
 
 import torch
 
@@ -64,6 +70,16 @@ def _buffer(name, numel, dtype, reuse):
     return b[:numel]
 
 
+class TileShade(NamedTuple):
+    """The relit shading as the compositor's tile epilogue (csrc/shade.cpp rl_shade_tile_f32):
+    params (24,) float32 and flags as rl_shade_f32 takes them (splatting/relight/render.py
+    shade_params / shade_flags); the planes must be the reflectance (3) then the relight features
+    the flags name.  features: also write the composited feature plane (else it is None)."""
+    params: torch.Tensor
+    flags: int
+    features: bool = False
+
+
 def _ptrs(ts):
     """A C array of the tensors' data pointers (null for None)."""
     return (ctypes.c_void_p * len(ts))(*[None if t is None else t.data_ptr() for t in ts])
@@ -76,7 +92,7 @@ class _TileComposite(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, means2d, conics, opacities, depths, radii, boxes, background, H, W, groups, n_groups, keep,
-                nparts, *parts):
+                shade, unwritten, nparts, *parts):
         lib = build.load()
         dt = means2d.dtype
         if dt not in _SUFFIX:
@@ -114,7 +130,8 @@ class _TileComposite(torch.autograd.Function):
         lst = _buffer("lst", max(total, 1), torch.int32, reuse)
         slot = torch.empty(max(total, 1), dtype=torch.int64) if keep else None
         fs = _buffer("fs", max(nv, 1) * cf, dt, reuse).view(max(nv, 1), cf)
-        outs = [torch.empty((H, W, c) if c > 1 else (H, W), dtype=dt) for c in split]
+        outs = [None if i in unwritten else torch.empty((H, W, c) if c > 1 else (H, W), dtype=dt)
+                for i, c in enumerate(split)]
         alpha = torch.empty(H, W, dtype=dt)
         # T_final, last and slot only for a backward (a no-grad render skips their ~3 MB of stores)
         T_final = torch.empty(H, W, dtype=dt) if keep else None
@@ -124,11 +141,16 @@ class _TileComposite(torch.autograd.Function):
         g_sorted = _buffer("g_sorted", max(nv, 1), torch.int32, reuse) if ng else None
         A_groups = torch.empty(ng, H, W, dtype=dt)
         osz = (ctypes.c_int * len(split))(*split)
-        getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), len(fe), (ctypes.c_int * len(fe))(*isz), _ptrs(fe), cf,
+        sprm = None if shade is None else shade.params.to(torch.float32).contiguous()
+        rc = getattr(lib, f"gs_forward_{sfx}")(nv, _ptr(order), len(fe), (ctypes.c_int * len(fe))(*isz), _ptrs(fe), cf,
                                           W, H, nt, _ptr(recs), _ptr(cursor),
                                           _ptr(tile_off), _ptr(goff), _ptr(lst), _nptr(slot), _ptr(fs),
                                           len(split), osz, _ptrs(outs), _nptr(T_final), _ptr(alpha), _nptr(last),
-                                          _nptr(gr), ng, _nptr(g_sorted), _ptr(A_groups) if ng else None, _nptr(bg))
+                                          _nptr(gr), ng, _nptr(g_sorted), _ptr(A_groups) if ng else None, _nptr(bg),
+                                          _nptr(sprm), 0 if shade is None else int(shade.flags))
+        if rc != 0:  # composite_tiles checked these first: this is a caller of _TileComposite's mistake
+            raise ValueError("composite_tiles: the tile shading needs float32, no groups, no background, a "
+                             "3-channel first plane and the feature channels its flags name")
         ctx.mark_non_differentiable(A_groups)
         ctx.set_materialize_grads(False)
         ctx.geom = (n, cf, H, W, nv, order, rank, recs, tile_off, goff, lst, slot, fs, last, split, bg)
@@ -173,11 +195,12 @@ class _TileComposite(torch.autograd.Function):
                 g_parts.append(None if gj is None else (gj if dims[j] == 2 else gj[:, 0]).to(dps[j]))
         g_planes = g_parts
         g_bg = None if g_bg is None else g_bg.to(ctx.bg_dtype)
-        return (g_m2, g_cn.to(dc), g_op.to(do), None, None, None, g_bg, None, None, None, None, None, None, *g_planes)
+        return (g_m2, g_cn.to(dc), g_op.to(do), None, None, None, g_bg, None, None, None, None, None, None, None, None,
+                *g_planes)
 
 
 def composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H, W, groups=None, n_groups=0,
-                    background=None):
+                    background=None, shade=None):
     """See the module docstring. CPU tensors only; float32 or float64 (means2d's dtype).
     planes: a list of (N, c) or (N,) tensors (at least one; the caller's colour, features, depth);
     a plane may also be a list of such parts (its channels in that order, e.g. relit normals and
@@ -186,6 +209,9 @@ def composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H,
     groups (N,) int in [-1, n_groups) (-1: in no group), n_groups >= 1: also returns A_groups
     (n_groups, H, W), each group's alpha rendered alone (not differentiable).
     background: None or one value per channel of the first plane (differentiable).
+    shade: None or a TileShade (forward only: no input may require a gradient under grad mode;
+    float32; no groups, no background): the first image is the shaded display colour, and the
+    second plane's image is None unless shade.features.
     -> (*images, alpha, T_final) or (*images, alpha, T_final, A_groups) with groups; T_final is None when
     no gradient can flow (grad mode off or no input requiring one)."""
     if means2d.device.type != "cpu":
@@ -205,12 +231,24 @@ def composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H,
     # what only a backward reads is kept only when one can follow
     keep = torch.is_grad_enabled() and any(t is not None and t.requires_grad
                                            for t in (means2d, conics, opacities, background, *parts))
+    unwritten = ()
+    if shade is not None:
+        cs = sum(1 if p.dim() == 1 else p.shape[1] for p in parts)
+        need = 6 + sum(bool(shade.flags & b) for b in (1, 2, 4, 16))
+        bad = [what for no, what in ((keep, "a gradient is wanted"), (means2d.dtype != torch.float32, "not float32"),
+                                     (groups is not None, "groups"), (background is not None, "a background"),
+                                     (c0 != 3, f"a first plane of {c0} channels, not 3"),
+                                     (cs != need, f"{cs} channels where flags {shade.flags} need {need}"),
+                                     (shade.params.shape != (24,), "params not (24,)")) if no]
+        if bad:
+            raise ValueError(f"composite_tiles: cannot shade the tiles: {', '.join(bad)}")
+        unwritten = () if shade.features else tuple(range(1, len(planes)))
     if groups is not None:
         if n_groups < 1 or groups.shape != (n,):
             raise ValueError(f"composite_tiles: groups must be ({n},) with n_groups >= 1")
         if len(groups) and not (int(groups.min()) >= -1 and int(groups.max()) < n_groups):
             raise ValueError(f"composite_tiles: group ids must lie in [-1, {n_groups})")
         return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, background, H, W, groups,
-                                    n_groups, keep, nparts, *parts)
+                                    n_groups, keep, None, (), nparts, *parts)
     return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, background, H, W, None, 0, keep,
-                                nparts, *parts)[:-1]
+                                shade, unwritten, nparts, *parts)[:-1]

@@ -277,7 +277,8 @@ def composite(means2d, conics, opacities, colors, depths, background, pairs, H, 
 
 
 def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_degree=None,
-              near=0.01, eps2d=0.3, features=None, antialiased=False, backend=None, groups=None, depth=True):
+              near=0.01, eps2d=0.3, features=None, antialiased=False, backend=None, groups=None, depth=True,
+              shade=None):
     """Render N Gaussians into camera. See the module docstring for shapes.
 
     features: optional (N, F) extra channels composited like the colour (instance ids, albedo,
@@ -295,11 +296,17 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
     groups: optional (ids (N,) int in [-1, G), G): also out["group_alpha"] (G, H, W), the alpha of
     each group's Gaussians rendered alone (no occlusion by the other Gaussians: amodal masks), not
     differentiable; "tiles" computes them in the image's own pass, "torch" renders each group.
+    shade: a splatting.raster.cpu_tiles.TileShade (tiled back end, float32, no grad, depth=False,
+    no background; splatting/relight/render.py builds it): each tile is shaded as the compositor
+    finishes it, out["rgb"] is the display colour shaded from the composited colour (the
+    reflectance) and features, and out["features"] is there only when shade.features.
     backend: "tiles" (the fused OpenMP C++ compositor, splatting/raster/cpu_tiles.py; CPU tensors),
     "torch" (the pure-torch pair list below: the reference, and the path for CUDA tensors), or
     None: "tiles" for CPU tensors, "torch" otherwise. out["backend"] says which one ran."""
     H, W = camera.height, camera.width
     backend = resolve_backend(backend, means)
+    if shade is not None and (backend != "tiles" or depth):
+        raise ValueError("rasterize: shade needs the tiled back end and depth=False")
     if backend == "tiles":  # projection + SH fused in C++ (splatting/raster/cpu_project.py)
         from splatting.raster.cpu_project import preprocess
 
@@ -334,7 +341,8 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
     want_depth = depth
     if backend == "tiles":
         rgb, alpha, depth, feats, group_alpha = _composite_tiles(means2d, conics, opacities, colors, features, depths,
-                                                                 radii, boxes, background, H, W, groups, want_depth)
+                                                                 radii, boxes, background, H, W, groups, want_depth,
+                                                                 shade)
     else:
         if nf:
             colors = torch.cat([colors, features.to(colors)], 1)
@@ -347,7 +355,7 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
            "visible": visible, "backend": backend}
     if not want_depth:
         del out["depth"]
-    if nf:
+    if nf and feats is not None:
         out["features"] = feats
     if groups is not None:
         out["group_alpha"] = group_alpha
@@ -395,7 +403,7 @@ def resolve_backend(backend, means):
 
 
 def _composite_tiles(means2d, conics, opacities, colors, features, depths, radii, boxes, background, H, W,
-                     groups=None, depth=True):
+                     groups=None, depth=True, shade=None):
     """The tiled C++ compositor with the torch path's outputs: rgb (H,W,3) over the background,
     alpha, depth (camera z composited as the last channel; None when not depth), features (H,W,F)
     or None, features a tensor or a list of parts (one plane). Colour,
@@ -409,7 +417,7 @@ def _composite_tiles(means2d, conics, opacities, colors, features, depths, radii
     fparts = [f.to(colors) for f in fparts if f.shape[1] > 0]
     planes = [colors] + ([fparts[0] if len(fparts) == 1 else fparts] if fparts else []) + ([depths] if depth else [])
     res = composite_tiles(means2d, conics, opacities, planes, depths.detach(), radii, boxes, H, W,
-                          *(() if groups is None else groups), background=background)
+                          *(() if groups is None else groups), background=background, shade=shade)
     rgb, alpha = res[0], res[len(planes)]
     feats = res[1] if fparts else None
     return rgb, alpha, res[len(planes) - 1] if depth else None, feats, None if groups is None else res[-1]

@@ -26,6 +26,11 @@
 
 #include <omp.h>
 
+// splatting/relight/csrc/shade.cpp (built into the same library): the relit shading as a tile epilogue
+extern "C" int rl_shade_tile_f32(const float* acc, int Cf, const float* T, int tile, int ox, int oy, int ex, int ey,
+                                 int64_t W, float* out, const float* prm, int32_t flags);
+extern "C" int rl_shade_tile_channels(int32_t flags);
+
 namespace {
 
 constexpr int TILE = 16;
@@ -455,11 +460,17 @@ struct Planes {
 // CF > 0: the channel count as a compile-time constant (the per-pixel channel loop unrolls, its
 // per-Gaussian broadcasts stay in registers); CF == 0: any Cf. in: the input parts, per Gaussian
 // (their sizes sum to Cf; several may make up one output plane).
+// An output plane whose pointer is null is not written (a channel the caller composites only to
+// shade it). shade_prm (float only; null: none): the relit shading of csrc/shade.cpp as the tile's
+// epilogue (rl_shade_tile_f32, flags shade_flags): plane 0 (3 channels, the reflectance) receives
+// the display colour shaded from the tile's accumulated reflectance and relight features (the
+// channels after it), so neither needs to be written and read back (docs/relighting.md).
 template <typename S, bool GROUPS, int CF>
 void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf_, int W, int H, int nt,
              const Rec<S>* recs, int64_t* cursor, const int64_t* tile_off, const int64_t* goff,
              int32_t* list, int64_t* slot, S* feats, Planes<S*> out, S* T_final, S* alpha, int32_t* last,
-             const int32_t* grp_in, int NG, int32_t* grp, S* A_grp, const S* bg) {
+             const int32_t* grp_in, int NG, int32_t* grp, S* A_grp, const S* bg, const float* shade_prm,
+             int32_t shade_flags) {
   const int Cf = CF > 0 ? CF : Cf_;
   const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
   const std::vector<int> torder = busiest_first(tile_off, NT);
@@ -509,7 +520,8 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf_, int
           if (T_final) std::fill_n(T_final + p, nx, (S)1);
           std::fill_n(alpha + p, nx, (S)0);
           if (last) std::fill_n(last + p, nx, 0);
-          for (int q = 0; q < out.n; ++q) std::fill_n(out.ptr[q] + p * out.size[q], nx * out.size[q], (S)0);
+          for (int q = 0; q < out.n; ++q)
+            if (out.ptr[q]) std::fill_n(out.ptr[q] + p * out.size[q], nx * out.size[q], (S)0);
           if (bg)
             for (int64_t i = 0; i < nx; ++i)
               for (int c = 0; c < out.size[0]; ++c) out.ptr[0][(p + i) * out.size[0] + c] = (S)0 + (S)1 * bg[c];
@@ -591,6 +603,10 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf_, int
           }
         }
       }
+      if constexpr (std::is_same<S, float>::value)
+        if (shade_prm)  // (Cf checked by the caller, gs_forward)
+          rl_shade_tile_f32((const float*)acc.data(), Cf, (const float*)T.data(), TILE, ox, oy, ex, ey, W,
+                            out.ptr[0], shade_prm, shade_flags);
       for (int y = oy; y <= ey; ++y)
         for (int j = 0; j < NJ && ox + j * L <= ex; ++j) {
           const int v = (y - oy) * NJ + j, nl = std::min(L, ex - (ox + j * L) + 1);
@@ -608,6 +624,7 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf_, int
           const V* a = acc.data() + (size_t)v * Cf;
           for (int q = 0, c0 = 0; q < out.n; c0 += out.size[q++]) {  // pixel-major per plane
             const int cq = out.size[q];
+            if (!out.ptr[q] || (q == 0 && shade_prm)) continue;  // not wanted, or shaded above
             S* __restrict const o = out.ptr[q] + p * cq;
             if (q == 0 && bg) {  // over the background: c + T_final bg (as rgb + T_final * bg in torch)
               for (int l = 0; l < nl; ++l)
@@ -829,32 +846,40 @@ int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
     bin<S>(N, means2d, conics, opac, depths, radii, boxes, W, H, nt, (Rec<S>*)recs, order, rank,   \
            cursor, tile_off, goff, sizes);                                                         \
   }                                                                                                \
-  void gs_forward_##SUFFIX(int64_t nv, const int32_t* order, int NI, const int* isz,              \
-                           const S* const* feats, int Cf, int W,                                  \
-                           int H, int nt, const void* recs, int64_t* cursor, const int64_t* tile_off, \
-                           const int64_t* goff, int32_t* list, int64_t* slot, S* feats_sorted,    \
-                           int NO, const int* osz, S* const* outs, S* T_final, S* alpha,          \
-                           int32_t* last, const int32_t* grp_in, int NG, int32_t* grp, S* A_grp,  \
-                           const S* bg) {                                                         \
+  /* shade_prm, shade_flags: forward<>'s relit tile epilogue (float, no groups, no background, */   \
+  /* plane 0 of 3 channels, Cf as the flags need; else -1 and nothing is done). Returns 0. */      \
+  int gs_forward_##SUFFIX(int64_t nv, const int32_t* order, int NI, const int* isz,               \
+                          const S* const* feats, int Cf, int W,                                   \
+                          int H, int nt, const void* recs, int64_t* cursor, const int64_t* tile_off, \
+                          const int64_t* goff, int32_t* list, int64_t* slot, S* feats_sorted,     \
+                          int NO, const int* osz, S* const* outs, S* T_final, S* alpha,           \
+                          int32_t* last, const int32_t* grp_in, int NG, int32_t* grp, S* A_grp,   \
+                          const S* bg, const float* shade_prm, int32_t shade_flags) {             \
+    if (shade_prm && (sizeof(S) != sizeof(float) || NG > 0 || bg || NO < 1 || osz[0] != 3 || !outs[0] || \
+                      Cf != rl_shade_tile_channels(shade_flags)))                                  \
+      return -1;                                                                                   \
     const Planes<S*> out{NO, osz, outs};                                                           \
     /* the inputs: parts of the planes (several parts may fill one plane), per Gaussian */        \
     const Planes<const S*> in{NI, isz, feats};                                                     \
     const Rec<S>* r = (const Rec<S>*)recs;                                                         \
+    const float* sp = shade_prm;                                                                   \
+    const int32_t sf = shade_flags;                                                                \
     if (NG > 0)                                                                                    \
       forward<S, true, 0>(nv, order, in, Cf, W, H, nt, r, cursor, tile_off, goff, list, slot,       \
-                          feats_sorted, out, T_final, alpha, last, grp_in, NG, grp, A_grp, bg);   \
+                          feats_sorted, out, T_final, alpha, last, grp_in, NG, grp, A_grp, bg, sp, sf); \
     else if (Cf == 4) /* colour + depth: a plain render */                                         \
       forward<S, false, 4>(nv, order, in, Cf, W, H, nt, r, cursor, tile_off, goff, list, slot,      \
-                           feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr, nullptr, bg); \
+                           feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr, nullptr, bg, sp, sf); \
     else if (Cf == 7) /* colour + relight features (splatting/relight/render.py) */                \
       forward<S, false, 7>(nv, order, in, Cf, W, H, nt, r, cursor, tile_off, goff, list, slot,      \
-                           feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr, nullptr, bg); \
+                           feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr, nullptr, bg, sp, sf); \
     else if (Cf == 8) /* colour + relight features + sky visibility (a bike's, RelightableBike) */ \
       forward<S, false, 8>(nv, order, in, Cf, W, H, nt, r, cursor, tile_off, goff, list, slot,      \
-                           feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr, nullptr, bg); \
+                           feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr, nullptr, bg, sp, sf); \
     else                                                                                           \
       forward<S, false, 0>(nv, order, in, Cf, W, H, nt, r, cursor, tile_off, goff, list, slot,      \
-                           feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr, nullptr, bg); \
+                           feats_sorted, out, T_final, alpha, last, nullptr, 0, nullptr, nullptr, bg, sp, sf); \
+    return 0;                                                                                      \
   }                                                                                                \
   void gs_backward_##SUFFIX(int64_t N, int64_t nv, const int32_t* order, const int32_t* rank,      \
                             int Cf, int W, int H,                                                  \
