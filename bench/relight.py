@@ -244,8 +244,10 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
 
     rb = RelightableBike.load(bike)
     ring, _ = load_cameras(os.path.join(bike_folder.views_dir(bike, "frame"), "cameras.json"))
-    # the mip filter is for rendering below the training resolution (at 512 px it cost IoU 0.952 -> 0.889)
-    aa = size < ring[0].width
+    # the mip filter is for rendering below the training resolution (at 512 px it cost IoU 0.952 -> 0.889),
+    # and for parts trained with it (BikeModel.antialiased: baked, relit and their shadow maps alike)
+    trained_aa = rb.model.antialiased
+    aa = trained_aa or size < ring[0].width
     t = time.time()
     sky = rb.sky_visibility()  # once per bike (the sky's occlusion; shadow.sky_visibility), not timed per render
     sky_s = time.time() - t
@@ -259,13 +261,13 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
             tb, tr, ts = [], [], []
             for _ in range(repeats):  # interleaved, so load changes hit all alike
                 a = time.perf_counter()
-                baked = render_gaussians(g, cam)
+                baked = render_gaussians(g, cam, antialiased=trained_aa)
                 b = time.perf_counter()
                 flat = render_relit(g, albedo, normals, cam, light, gloss, antialiased=aa, static=rb.static,
-                                    sky_visibility=sky)
+                                    sky_visibility=sky, shadow_antialiased=trained_aa)
                 c2 = time.perf_counter()
                 relit = render_relit(g, albedo, normals, cam, light, gloss, shadows=True, antialiased=aa,
-                                     static=rb.static, sky_visibility=sky)
+                                     static=rb.static, sky_visibility=sky, shadow_antialiased=trained_aa)
                 ts.append(time.perf_counter() - c2)
                 tr.append(c2 - b)
                 tb.append(b - a)
@@ -295,6 +297,7 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
                              # the geometry's share: the relit colour under Blender's own coverage
                              "blender_coverage_box_psnr_mean": mean("relit_box_psnr_blender_coverage"),
                              "mask_disagreement_err_share_mean": mean("mask_disagreement_err_share"), "size_px": size, "bike": os.path.basename(bike), "gaussians": len(rb.model),
+                             "antialiased": trained_aa,
                              "prepare_s": round(prep_s, 1), "sky_visibility_s": round(sky_s, 1),
                              "train": train_stats}
     results["relight_render_overhead"] = overhead

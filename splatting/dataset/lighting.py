@@ -191,7 +191,11 @@ class RelitSample:
         vis = None
         if self.shadows:
             from splatting.relight.shadow import sun_visibility
-            vis = sun_visibility(g, self.light)
+            aa = False  # the shadow map draws a bike trained with the mip filter with it (its rider as trained)
+            if rb.model.antialiased:
+                aa = torch.arange(len(trained)) < len(rb.albedo)
+                aa = aa if idx is None else aa.index_select(0, idx)
+            vis = sun_visibility(g, self.light, antialiased=aa)
         self.channels[k] = (alb + gl, relight_features(nrm, gl, rough, vis, sky))
 
     def cast_shadows(self, rgb, L, camera, footprints, heights, opacity):

@@ -1,7 +1,8 @@
 """Fit per-Gaussian albedo, gloss and normal of trained Gaussians to a views folder's render passes.
 
 `python -m splatting relight-fit --views OUT/bikes/ID/views/PART [--ply gaussians/PART.ply]` writes
-gaussians/PART.relight.npz (cyclist_formats.bike_folder.relight_path).  The geometry (means,
+gaussians/PART.relight.npz (cyclist_formats.bike_folder.relight_path); `--bike OUT/bikes/ID` fits
+every part of a trained bike (after bike-posed-train too: its parts keep their ring views).  The geometry (means,
 scales, rotations, opacities) is the colour training's and stays fixed, so every view's projection
 and pair list is computed once and each step is only the compositing of two 3-channel features
 with its backward: seconds, not minutes.  Loss: L1 of the composited (premultiplied) linear albedo
@@ -78,15 +79,17 @@ def initial_normals(g, items):
     return torch.where(vote[:, None] < 0, -n, n)
 
 
-def _views_at(g, views, idx, targets, scale, margin=4):
-    """Per view: fixed projection + pairs in the cropped camera, and the cropped targets."""
+def _views_at(g, views, idx, targets, scale, margin=4, antialiased=False):
+    """Per view: fixed projection + pairs in the cropped camera (with the mip filter when the
+    Gaussians were trained with it), and the cropped targets."""
     out = []
     for i in idx:
         cam = views.cameras[i].scaled(scale) if scale != 1.0 else views.cameras[i]
         cover = (targets["albedo"][i].abs().sum(-1) + (targets["normal"][i].abs().sum(-1) > 0.02)) > 0
         box = crop_box(cover.float(), margin)
         x0, y0, x1, y1 = box
-        out.append((prepare(g, crop_camera(cam, box)), {k: t[i, y0:y1, x0:x1] for k, t in targets.items()}))
+        out.append((prepare(g, crop_camera(cam, box), antialiased),
+                    {k: t[i, y0:y1, x0:x1] for k, t in targets.items()}))
     return out
 
 
@@ -133,17 +136,20 @@ def _evaluate(feats, items):
             "heldout_normal_err_deg": round(sum(ang) / len(ang), 2) if ang else None}
 
 
-def fit_relight(g, views, cfg: RelightFitConfig = None):
+def fit_relight(g, views, cfg: RelightFitConfig = None, antialiased=False):
     """Gaussians g (trained on views) -> ({"albedo", "normal", "gloss"}: (N, 3); colours linear, normals
-    unit), metrics)."""
+    unit), metrics).  antialiased: g was trained with the rasterizer's mip filter (and is rendered
+    with it: BikeModel.antialiased), so its fixed geometry is composited with it too: without it a
+    sub-pixel spoke Gaussian covers ~0.3 px^2 at its full opacity, not its own footprint, and the
+    channels are fitted under the wrong coverage."""
     cfg = cfg or RelightFitConfig()
     t0 = time.time()
     torch.manual_seed(cfg.seed)
     scale = min(1.0, cfg.max_size / max(views.height, views.width))
     targets = load_pass_targets(views, scale)
     train_idx, hold_idx = split_views(views, cfg.holdout)
-    tr = _views_at(g, views, train_idx, targets, scale)
-    ho = _views_at(g, views, hold_idx, targets, scale) if hold_idx else []
+    tr = _views_at(g, views, train_idx, targets, scale, antialiased=antialiased)
+    ho = _views_at(g, views, hold_idx, targets, scale, antialiased=antialiased) if hold_idx else []
 
     base = srgb_decode(g.sh[:, 0].float() * C0 + 0.5).clamp(0.02, 0.98)  # SH0 -> colour
     albedo_logit = torch.nn.Parameter(torch.logit(base))
@@ -174,14 +180,24 @@ def fit_relight(g, views, cfg: RelightFitConfig = None):
              "normal": (normal_raw / normal_raw.norm(dim=-1, keepdim=True).clamp_min(1e-6)).detach(),
              "gloss": torch.sigmoid(gloss_logit).detach()}
     metrics = {"iterations": cfg.iterations, "loss": round(loss_v, 5), "scale": round(scale, 4),
-               "wall_s": round(time.time() - t0, 2)}
+               "antialiased": bool(antialiased), "wall_s": round(time.time() - t0, 2)}
     if ho:
         metrics.update(_evaluate(feats, ho))
     return feats, metrics
 
 
+def trained_antialiased(ply_path):
+    """Whether the Gaussians at ply_path were trained with the mip filter: their <part>.json's
+    "config" (splatting.bike.model.trained_antialiased's rule; no metrics: plain)."""
+    from splatting.bike.model import trained_antialiased as parts_antialiased
+
+    stem = os.path.splitext(os.path.basename(ply_path))[0]
+    return parts_antialiased(os.path.dirname(ply_path), [stem])
+
+
 def fit_file(views_dir, ply_path=None, cfg: RelightFitConfig = None):
-    """Fit and write <ply>.relight.npz beside the Gaussians; returns the metrics."""
+    """Fit and write <ply>.relight.npz beside the Gaussians; returns the metrics.  Gaussians trained
+    with the mip filter (their <part>.json says so) are fitted through it."""
     from splatting.training.trainer import default_out
 
     ply_path = ply_path or default_out(views_dir)
@@ -192,15 +208,53 @@ def fit_file(views_dir, ply_path=None, cfg: RelightFitConfig = None):
     if missing:
         raise UserError(f"{views_dir}: {len(missing)} views lack the albedo/normal passes (e.g. {missing[0]}); "
                         "render them again with render_views")
+    aa = trained_antialiased(ply_path)
     g = read_ply(ply_path)
-    feats, metrics = fit_relight(g, views, cfg)
+    feats, metrics = fit_relight(g, views, cfg, antialiased=aa)
     metrics["path"] = bike_folder.write_relight(ply_path, **{k: v.numpy() for k, v in feats.items()})
     return metrics
 
 
+def bike_parts(bike_dir):
+    """The parts of a trained bike folder to fit: those with gaussians/<part>.ply (BikeModel's parts),
+    each needing its views folder with the passes; refuses a bike whose parts disagree on the mip
+    filter (BikeModel.load's rule) before any work."""
+    from splatting.bike.model import MAIN_PARTS, SUB_PARTS, trained_antialiased as parts_antialiased
+
+    gdir = os.path.join(bike_dir, "gaussians")
+    parts = [p for p in MAIN_PARTS + SUB_PARTS if os.path.isfile(os.path.join(gdir, p + ".ply"))]
+    if "frame" not in parts:
+        raise UserError(f"{bike_dir}: no trained gaussians/frame.ply")
+    for p in parts:
+        vd = bike_folder.views_dir(bike_dir, p)
+        if not os.path.isfile(os.path.join(vd, "cameras.json")):
+            raise UserError(f"{bike_dir}: part {p} has no views folder {vd} to fit its relight channels on")
+    parts_antialiased(gdir, parts)
+    return parts
+
+
+def fit_bike(bike_dir, cfg: RelightFitConfig = None, log=print):
+    """Fit every part of a trained bike (e.g. after bike-posed-train, whose parts keep their ring
+    views): {part: metrics}."""
+    out = {}
+    for p in bike_parts(bike_dir):
+        out[p] = fit_file(bike_folder.views_dir(bike_dir, p), bike_folder.gaussians_path(bike_dir, p), cfg)
+        log(_summary(out[p]))
+    return out
+
+
+def _summary(m):
+    return (f"{m['path']}: albedo PSNR {m.get('heldout_albedo_psnr')} dB, normal error "
+            f"{m.get('heldout_normal_err_deg')} deg (held-out views), {m['wall_s']} s"
+            + (", mip filter" if m.get("antialiased") else ""))
+
+
 def add_arguments(p):
-    p.add_argument("--views", required=True, help="a part's views folder with albedo/ and normal/ passes")
-    p.add_argument("--ply", help="the trained Gaussians (default OUT/bikes/ID/gaussians/PART.ply)")
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--views", help="a part's views folder with albedo/ and normal/ passes")
+    what.add_argument("--bike", help="a trained bike folder: fit every part on its views (views/PART), e.g. "
+                                     "after bike-posed-train")
+    p.add_argument("--ply", help="with --views: the trained Gaussians (default OUT/bikes/ID/gaussians/PART.ply)")
     p.add_argument("--iterations", type=int, default=RelightFitConfig.iterations, help="optimisation steps (default %(default)s)")
     p.add_argument("--max-size", type=int, default=RelightFitConfig.max_size,
                    help="fit at most at this image size in px (default %(default)s)")
@@ -212,10 +266,15 @@ def run(args):
         raise UserError("--iterations must be >= 1")
     if args.max_size < 16:
         raise UserError("--max-size must be >= 16")
+    cfg = RelightFitConfig(iterations=args.iterations, max_size=args.max_size, progress=not args.quiet)
+    if args.bike:
+        if args.ply:
+            raise UserError("--ply goes with --views, not --bike")
+        if not os.path.isdir(args.bike):
+            raise UserError(f"bike folder not found: {args.bike}")
+        fit_bike(args.bike, cfg)
+        return 0
     if not os.path.isdir(args.views):
         raise UserError(f"views folder not found: {args.views}")
-    m = fit_file(args.views, args.ply, RelightFitConfig(iterations=args.iterations, max_size=args.max_size,
-                                                        progress=not args.quiet))
-    print(f"{m['path']}: albedo PSNR {m.get('heldout_albedo_psnr')} dB, normal error "
-          f"{m.get('heldout_normal_err_deg')} deg (held-out views), {m['wall_s']} s")
+    print(_summary(fit_file(args.views, args.ply, cfg)))
     return 0
