@@ -334,3 +334,34 @@ def test_shading_loss_sees_the_direction_of_the_composited_normal():
     assert float(shading_loss(turned, alpha, target, dirs)) > 0.05
     # half the coverage: the shading of what is there is half as bright
     assert float(shading_loss(target, alpha * 0.5, target, dirs)) > 0.05
+
+
+def test_relit_loss_shades_as_the_renderer_and_differentiates():
+    # the fit's differentiable display colour must be shading.shade's formula (what render_relit
+    # shows), and relit_loss must pull a turned normal back towards the pass's
+    from splatting.relight.fit import _display, relit_loss
+    from splatting.relight.shading import random_light, shade
+    from splatting.training.targets import crop_camera
+
+    gen = torch.Generator().manual_seed(5)
+    H, W = 9, 11
+    cam = ring_camera(40, orbit_centre=(0, 1, 0), size=64, focal=2084.97 * 64 / 512 * 2)
+    alpha = torch.rand(H, W, generator=gen) * 0.9 + 0.1
+    alb = torch.rand(H, W, 3, generator=gen) * 0.6 * alpha[..., None]
+    gl = torch.rand(H, W, 3, generator=gen) * 0.3 * alpha[..., None]
+    nrm = torch.nn.functional.normalize(torch.randn(H, W, 3, generator=gen), dim=-1) * alpha[..., None]
+    cam = crop_camera(cam, (20, 30, 20 + W, 30 + H))  # the fit's crop cameras: view directions off-centre
+    light = random_light(np.random.default_rng(4))
+    view = view_directions(cam)
+    sun = torch.tensor(light.sun_colour) * light.sun_strength
+    want = shade(alb, nrm, alpha, light, gl, view)
+    got = _display(alb, gl, nrm, alpha, light, view, sun, torch.tensor(light.sky))
+    torch.testing.assert_close(got, want, atol=1e-5, rtol=1e-4)
+    target = {"albedo": alb, "gloss": gl, "normal": nrm}
+    assert float(relit_loss((alb, nrm, gl), alpha, target, alpha, cam, light)) < 1e-6
+    turned = (nrm + 0.6 * torch.randn(H, W, 3, generator=gen)).requires_grad_(True)
+    loss = relit_loss((alb, turned, gl), alpha, target, alpha, cam, light)
+    assert float(loss.detach()) > 0.01
+    loss.backward()
+    stepped = (turned - 0.05 * turned.grad / turned.grad.abs().max()).detach()
+    assert float(relit_loss((alb, stepped, gl), alpha, target, alpha, cam, light)) < float(loss.detach())

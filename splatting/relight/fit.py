@@ -14,6 +14,7 @@ import os
 import time
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -23,7 +24,7 @@ from splatting.gaussians.container import read_ply
 from splatting.progress import Progress
 from splatting.relight.render import composite_features, prepare
 from splatting.gaussians.sh import C0
-from splatting.relight.shading import srgb_decode
+from splatting.relight.shading import HIGHLIGHT, ROUGHNESS, random_light, srgb_decode, srgb_encode, view_directions
 from splatting.rotations import quat_to_rotmat
 from splatting.training.targets import crop_box, crop_camera, split_views
 from splatting.training.trainer import DEFAULT_HOLDOUT
@@ -42,20 +43,27 @@ class RelightFitConfig:
     holdout: tuple = DEFAULT_HOLDOUT
     # weight of shading_loss (the normals judged by how they shade, not only as vectors); 0: off
     shading_loss: float = 1.0
+    # weight of relit_loss (every channel judged by the display colour it shades to under a random
+    # sun and sky, against the passes shaded alike); 0: off
+    relit_loss: float = 0.0
     seed: int = 0
     progress: bool = True
+
+
+def _resized(X, scale):
+    """(V, H, W, C) area-averaged by scale."""
+    if scale == 1.0:
+        return X.contiguous()
+    X = X.permute(0, 3, 1, 2)
+    X = F.interpolate(X, size=(round(X.shape[2] * scale), round(X.shape[3] * scale)), mode="area")
+    return X.permute(0, 2, 3, 1).contiguous()
 
 
 def load_pass_targets(views, scale):
     """{"albedo", "normal", "gloss"}: (V, H, W, 3) targets of views (premultiplied), resized by scale."""
     per_view = [bike_folder.read_passes(bike_folder.pass_paths(views.folder, name)) for name in views.names]
-    out = {}
-    for key in bike_folder.PASSES:
-        X = torch.stack([torch.from_numpy(v[key]) for v in per_view]).permute(0, 3, 1, 2)
-        if scale != 1.0:
-            X = F.interpolate(X, size=(round(X.shape[2] * scale), round(X.shape[3] * scale)), mode="area")
-        out[key] = X.permute(0, 2, 3, 1).contiguous()
-    return out
+    return {key: _resized(torch.stack([torch.from_numpy(v[key]) for v in per_view]), scale)
+            for key in bike_folder.PASSES}
 
 
 def initial_normals(g, items):
@@ -88,8 +96,10 @@ def _views_at(g, views, idx, targets, scale, margin=4, antialiased=False):
         cover = (targets["albedo"][i].abs().sum(-1) + (targets["normal"][i].abs().sum(-1) > 0.02)) > 0
         box = crop_box(cover.float(), margin)
         x0, y0, x1, y1 = box
-        out.append((prepare(g, crop_camera(cam, box), antialiased),
-                    {k: t[i, y0:y1, x0:x1] for k, t in targets.items()}))
+        crop = crop_camera(cam, box)
+        prep = prepare(g, crop, antialiased)
+        prep["camera"] = crop  # relit_loss's view directions
+        out.append((prep, {k: t[i, y0:y1, x0:x1] for k, t in targets.items()}))
     return out
 
 
@@ -114,6 +124,37 @@ def shading_loss(n, alpha, target, dirs):
     ct = (tu @ dirs.T).clamp_min(0.0)
     a, t = alpha[..., None], ta.clamp(0.0, 1.0)
     return ((cg * a - ct * t).abs().mean() + (cg ** SHADING_LOBE * a - ct ** SHADING_LOBE * t).abs().mean()) * 3
+
+
+def _display(albedo, gloss, normal, alpha, light, view, sun, sky):
+    """The display colour (premultiplied sRGB, (H, W, 3)) of premultiplied channels under a sun and
+    sky: shading.shade_linear's formula (Lambert + the damped GGX highlight, the sky on both) written
+    without its in-place operations, so that it differentiates."""
+    n = normal / normal.norm(dim=-1, keepdim=True).clamp_min(1e-6)
+    l = light.direction(n.dtype)
+    cos = (n @ l).clamp_min(0.0)[..., None]
+    h = F.normalize(view + l, dim=-1)
+    nh = (n * h).sum(-1, keepdim=True).clamp(0.0, 1.0)
+    nv = (n * view).sum(-1, keepdim=True).clamp_min(0.05)
+    a2 = ROUGHNESS ** 4
+    D = a2 / (4.0 * math.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2 * nv)
+    spec = torch.where(cos > 0, D * HIGHLIGHT, torch.zeros_like(D))
+    lin = albedo * (sun * cos / math.pi + sky) + gloss * (sun * spec + sky)
+    a = alpha[..., None]
+    return srgb_encode(lin / a.clamp_min(1e-3)) * a
+
+
+def relit_loss(feats, alpha, target, target_alpha, camera, light):
+    """L1 between the display colours the composited channels (albedo, normal, gloss: premultiplied)
+    and the passes shade to under `light` (bike_relit's metric, without the shadows, which the
+    passes of a part rendered alone do not have), in the crop camera's pixels."""
+    view = view_directions(camera, feats[0].dtype)
+    sun = torch.as_tensor(light.sun_colour, dtype=feats[0].dtype) * light.sun_strength
+    sky = torch.as_tensor(light.sky, dtype=feats[0].dtype)
+    mine = _display(feats[0], feats[2], feats[1], alpha, light, view, sun, sky)
+    with torch.no_grad():
+        theirs = _display(target["albedo"], target["gloss"], target["normal"], target_alpha, light, view, sun, sky)
+    return (mine - theirs).abs().mean()
 
 
 def _psnr(a, b):
@@ -147,6 +188,8 @@ def fit_relight(g, views, cfg: RelightFitConfig = None, antialiased=False):
     torch.manual_seed(cfg.seed)
     scale = min(1.0, cfg.max_size / max(views.height, views.width))
     targets = load_pass_targets(views, scale)
+    if cfg.relit_loss:  # the passes' own coverage (the views' alpha), for their display colour
+        targets["alpha"] = _resized(views.images[..., 3:], scale)[..., 0]
     train_idx, hold_idx = split_views(views, cfg.holdout)
     tr = _views_at(g, views, train_idx, targets, scale, antialiased=antialiased)
     ho = _views_at(g, views, hold_idx, targets, scale, antialiased=antialiased) if hold_idx else []
@@ -158,6 +201,7 @@ def fit_relight(g, views, cfg: RelightFitConfig = None, antialiased=False):
     opt = torch.optim.Adam([albedo_logit, gloss_logit, normal_raw], lr=cfg.lr)
     gen = torch.Generator().manual_seed(cfg.seed)
     dir_gen = torch.Generator().manual_seed(cfg.seed + 1)  # its own stream: the view order stays the same
+    light_rng = np.random.default_rng(cfg.seed + 2)  # relit_loss's suns, a stream of their own too
     order, loss_v = [], float("nan")
     prog = Progress(cfg.progress)
     for it in range(1, cfg.iterations + 1):
@@ -170,6 +214,9 @@ def fit_relight(g, views, cfg: RelightFitConfig = None, antialiased=False):
         if cfg.shading_loss:
             dirs = F.normalize(torch.randn(SHADING_DIRECTIONS, 3, generator=dir_gen), dim=-1)
             loss = loss + cfg.shading_loss * shading_loss(n, alpha, t["normal"], dirs)
+        if cfg.relit_loss:
+            loss = loss + cfg.relit_loss * relit_loss((a, n, gl), alpha, t, t["alpha"], prep["camera"],
+                                                      random_light(light_rng))
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
