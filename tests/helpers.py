@@ -245,3 +245,18 @@ def dense_opaque_scene(seed, n=60, sh_degree=1):
     means, quats, scales, opac, sh = random_scene(gen, n, sh_degree, spread=0.3)
     opac = 0.5 + 0.49 * torch.rand(n, generator=gen, dtype=torch.float64)
     return means, quats, scales * 2, opac, sh
+
+
+def level_grid(half, n, y):
+    """(n*n, 3) points of a square grid [-half, half]^2 in the horizontal plane at height y."""
+    xs = torch.linspace(-half, half, n)
+    X, Z = torch.meshgrid(xs, xs, indexing="ij")
+    return torch.stack([X.reshape(-1), torch.full((X.numel(),), float(y)), Z.reshape(-1)], 1)
+
+
+def axis_splats(means, scales, opacity_logit=4.0):
+    """Unrotated Gaussians at means with (N, 3) or (3,) scales, one opacity logit, black degree-0 SH."""
+    n = len(means)
+    scales = torch.as_tensor(scales, dtype=torch.float32).expand(n, 3)
+    return Gaussians(means, torch.tensor([[1.0, 0.0, 0.0, 0.0]]).expand(n, 4).contiguous(), torch.log(scales),
+                     torch.full((n,), float(opacity_logit)), torch.zeros(n, 1, 3))

@@ -14,7 +14,7 @@ from splatting.raster.camera import ring_camera
 from splatting.relight.bike import RelightableBike
 from splatting.relight.render import composite_features, prepare, relit_static, render_relit
 from splatting.relight.shading import Light, ggx_sun, lambert_reference, shade, shade_linear, srgb_encode, view_directions
-from helpers import make_bike, mat_vec, random_pose, ref_part_R
+from helpers import axis_splats, level_grid, make_bike, mat_vec, random_pose, ref_part_R
 
 
 def test_lambert_by_hand():
@@ -303,18 +303,9 @@ def test_sky_visibility_under_a_roof():
     # a 1 m floor of flat Gaussians facing up and a 0.4 m roof 0.1 m above its centre: under the
     # roof's middle it hides ~sin^2(63 deg) = 0.8 of the cosine-weighted sky; far from it, nothing;
     # the roof's top sees the whole sky
-    xs = torch.linspace(-0.5, 0.5, 41)
-    X, Z = torch.meshgrid(xs, xs, indexing="ij")
-    floor = torch.stack([X.reshape(-1), torch.zeros(X.numel()), Z.reshape(-1)], 1)
-    rs = torch.linspace(-0.2, 0.2, 17)
-    X, Z = torch.meshgrid(rs, rs, indexing="ij")
-    roof = torch.stack([X.reshape(-1), torch.full((X.numel(),), 0.1), Z.reshape(-1)], 1)
-    means = torch.cat([floor, roof])
-    n = len(means)
-    scales = torch.tensor([[0.02, 0.002, 0.02]]).expand(n, 3)
-    g = Gaussians(means, torch.tensor([[1.0, 0.0, 0.0, 0.0]]).expand(n, 4).contiguous(), torch.log(scales),
-                  torch.full((n,), 4.0), torch.zeros(n, 1, 3))
-    up = torch.tensor([[0.0, 1.0, 0.0]]).expand(n, 3)
+    floor, roof = level_grid(0.5, 41, 0.0), level_grid(0.2, 17, 0.1)
+    g = axis_splats(torch.cat([floor, roof]), [0.02, 0.002, 0.02])
+    up = torch.tensor([[0.0, 1.0, 0.0]]).expand(len(g), 3)
     vis = sky_visibility(g, up)
     r = floor[:, [0, 2]].norm(dim=-1)
     assert float(vis[: len(floor)][r < 0.05].max()) < 0.3

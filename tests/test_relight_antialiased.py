@@ -14,7 +14,7 @@ from splatting.gaussians.container import Gaussians
 from splatting.raster.camera import ring_camera
 from splatting.relight.render import composite_features, prepare, render_relit
 from splatting.relight.shading import Light
-from helpers import make_bike
+from helpers import axis_splats, level_grid, make_bike
 
 FOCAL = 2084.97 * 64 / 512 * 2
 
@@ -109,18 +109,10 @@ def test_shadow_maps_draw_antialiased_gaussians_with_the_filter():
     # with the filter the specks keep their few-percent coverage and the sun passes
     from splatting.relight.shadow import sky_visibility, sun_visibility
 
-    xs = torch.linspace(-0.5, 0.5, 21)
-    X, Z = torch.meshgrid(xs, xs, indexing="ij")
-    plane = torch.stack([X.reshape(-1), torch.zeros(X.numel()), Z.reshape(-1)], 1)
-    ds = torch.linspace(-0.3, 0.3, 101)
-    DX, DZ = torch.meshgrid(ds, ds, indexing="ij")
-    dust = torch.stack([DX.reshape(-1), torch.full((DX.numel(),), 0.3), DZ.reshape(-1)], 1)
-    means = torch.cat([plane, dust])
-    n = len(means)
-    scales = torch.cat([torch.tensor([[0.03, 0.002, 0.03]]).expand(len(plane), 3),
-                        torch.full((len(dust), 3), 0.0005)])
-    g = Gaussians(means, torch.tensor([[1.0, 0.0, 0.0, 0.0]]).expand(n, 4).contiguous(), torch.log(scales),
-                  torch.full((n,), 5.0), torch.zeros(n, 1, 3))
+    plane, dust = level_grid(0.5, 21, 0.0), level_grid(0.3, 101, 0.3)
+    n = len(plane) + len(dust)
+    g = axis_splats(torch.cat([plane, dust]), torch.cat([torch.tensor([[0.03, 0.002, 0.03]]).expand(len(plane), 3),
+                                                         torch.full((len(dust), 3), 0.0005)]), 5.0)
     under = (plane[:, 0].abs() < 0.2) & (plane[:, 2].abs() < 0.2)
     light = Light(sun_direction=(0.0, 1.0, 0.0))
     plain = sun_visibility(g, light)[: len(plane)][under]
