@@ -260,3 +260,23 @@ def axis_splats(means, scales, opacity_logit=4.0):
     scales = torch.as_tensor(scales, dtype=torch.float32).expand(n, 3)
     return Gaussians(means, torch.tensor([[1.0, 0.0, 0.0, 0.0]]).expand(n, 4).contiguous(), torch.log(scales),
                      torch.full((n,), float(opacity_logit)), torch.zeros(n, 1, 3))
+
+
+def pass_views(g, albedo, normal, gloss, antialiased=False):
+    """Five 64 px ring views (azimuth -30..30 deg, orbit centre (0, 1, 0)) of Gaussians g whose
+    render passes are composited from known channels: (Views, {"albedo", "normal", "gloss"}:
+    stacked targets), for the relight fit (patch fit.load_pass_targets to return the targets)."""
+    from splatting.raster.camera import ring_camera
+    from splatting.relight.render import composite_features, prepare
+    from splatting.training.views import Views
+
+    cams = [ring_camera(a, orbit_centre=(0, 1, 0), size=64, focal=2084.97 * 64 / 512 * 2, name=f"camera{i:04d}")
+            for i, a in enumerate((-30, -15, 0, 15, 30))]
+    targets, imgs = {"albedo": [], "normal": [], "gloss": []}, []
+    for c in cams:
+        (a, n, gl), alpha = composite_features(prepare(g, c, antialiased), [albedo, normal, gloss])
+        for k, x in zip(("albedo", "normal", "gloss"), (a, n, gl)):
+            targets[k].append(x)
+        imgs.append(torch.cat([a, alpha[..., None]], -1))
+    views = Views(cams, torch.stack(imgs), [c.name for c in cams], "<memory>")
+    return views, {k: torch.stack(x) for k, x in targets.items()}

@@ -14,7 +14,7 @@ from splatting.raster.camera import ring_camera
 from splatting.relight.bike import RelightableBike
 from splatting.relight.render import composite_features, prepare, relit_static, render_relit
 from splatting.relight.shading import Light, ggx_sun, lambert_reference, shade, shade_linear, srgb_encode, view_directions
-from helpers import axis_splats, level_grid, make_bike, mat_vec, random_pose, ref_part_R
+from helpers import axis_splats, level_grid, make_bike, pass_views, mat_vec, random_pose, ref_part_R
 
 
 def test_lambert_by_hand():
@@ -126,35 +126,19 @@ def _flat_patch(n_side=14, seed=0):
                      torch.randn(n, 1, 3, generator=g) * 0.1)
 
 
-def test_fit_recovers_albedo_and_normals():
+def test_fit_recovers_albedo_and_normals(monkeypatch):
+    import splatting.relight.fit as fit
     from splatting.relight.fit import RelightFitConfig, fit_relight
-    from splatting.training.views import Views
 
     g = _flat_patch()
     n = len(g)
     true_alb = torch.where(g.means[:, :1] > 0, torch.tensor([0.7, 0.2, 0.1]), torch.tensor([0.1, 0.3, 0.6]))
     true_nrm = torch.tensor([0.0, 0.0, -1.0]).repeat(n, 1)
-    cams = [ring_camera(a, orbit_centre=(0, 1, 0), size=64, focal=2084.97 * 64 / 512 * 2, name=f"camera{i:04d}")
-            for i, a in enumerate((-30, -15, 0, 15, 30))]
     true_gl = torch.where(g.means[:, 1:2] > 1, torch.tensor([0.3, 0.3, 0.3]), torch.tensor([0.05, 0.05, 0.05]))
-    targets, imgs = {"albedo": [], "normal": [], "gloss": []}, []
-    for c in cams:
-        prep = prepare(g, c)
-        (a, nn_, gl), alpha = composite_features(prep, [true_alb, true_nrm, true_gl])
-        for k, x in zip(("albedo", "normal", "gloss"), (a, nn_, gl)):
-            targets[k].append(x)
-        imgs.append(torch.cat([a, alpha[..., None]], -1))
-    views = Views(cams, torch.stack(imgs), [f"camera{i:04d}" for i in range(len(cams))], "<memory>")
-
-    import splatting.relight.fit as fit
-
-    orig = fit.load_pass_targets
-    fit.load_pass_targets = lambda v, s: {k: torch.stack(x) for k, x in targets.items()}
-    try:
-        feats, m = fit_relight(g, views, RelightFitConfig(iterations=150, holdout=(2,), progress=False))
-        alb, nrm = feats["albedo"], feats["normal"]
-    finally:
-        fit.load_pass_targets = orig
+    views, targets = pass_views(g, true_alb, true_nrm, true_gl)
+    monkeypatch.setattr(fit, "load_pass_targets", lambda v, s: targets)
+    feats, m = fit_relight(g, views, RelightFitConfig(iterations=150, holdout=(2,), progress=False))
+    alb, nrm = feats["albedo"], feats["normal"]
     vis = (g.means[:, 0].abs() < 0.45) & ((g.means[:, 1] - 1).abs() < 0.45)  # edge splats: partial coverage
     assert (alb[vis] - true_alb[vis]).abs().max() < 0.05
     assert (feats["gloss"][vis] - true_gl[vis]).abs().max() < 0.05

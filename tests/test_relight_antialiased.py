@@ -14,7 +14,7 @@ from splatting.gaussians.container import Gaussians
 from splatting.raster.camera import ring_camera
 from splatting.relight.render import composite_features, prepare, render_relit
 from splatting.relight.shading import Light
-from helpers import axis_splats, level_grid, make_bike
+from helpers import axis_splats, level_grid, make_bike, pass_views
 
 FOCAL = 2084.97 * 64 / 512 * 2
 
@@ -66,35 +66,21 @@ def test_fit_composites_through_the_mip_filter_as_the_render():
         prepare(g, cam, mask[:-1])
 
 
-def test_fit_of_antialiased_gaussians_recovers_their_albedo():
+def test_fit_of_antialiased_gaussians_recovers_their_albedo(monkeypatch):
     # passes rendered from needles drawn with the filter: fitted through it the albedo comes back;
     # fitted without it (the old fit) the coverage is too large and the albedo comes out dark
     import splatting.relight.fit as fit
     from splatting.relight.fit import RelightFitConfig, fit_relight
-    from splatting.training.views import Views
 
     g = _spokes(seed=3)
     n = len(g)
     true_alb = torch.where(g.means[:, :1] > 0, torch.tensor([0.7, 0.5, 0.2]), torch.tensor([0.2, 0.4, 0.6]))
-    true_nrm = torch.tensor([0.0, 0.0, -1.0]).repeat(n, 1)
-    true_gl = torch.full((n, 3), 0.1)
-    cams = [ring_camera(a, orbit_centre=(0, 1, 0), size=64, focal=FOCAL, name=f"camera{i:04d}")
-            for i, a in enumerate((-30, -15, 0, 15, 30))]
-    targets, imgs = {"albedo": [], "normal": [], "gloss": []}, []
-    for c in cams:
-        (a, nn_, gl), alpha = composite_features(prepare(g, c, True), [true_alb, true_nrm, true_gl])
-        for k, x in zip(("albedo", "normal", "gloss"), (a, nn_, gl)):
-            targets[k].append(x)
-        imgs.append(torch.cat([a, alpha[..., None]], -1))
-    views = Views(cams, torch.stack(imgs), [f"camera{i:04d}" for i in range(len(cams))], "<memory>")
-    orig = fit.load_pass_targets
-    fit.load_pass_targets = lambda v, s: {k: torch.stack(x) for k, x in targets.items()}
-    try:
-        cfg = RelightFitConfig(iterations=150, holdout=(2,), progress=False, shading_loss=0.0)
-        with_aa, m = fit_relight(g, views, cfg, antialiased=True)
-        without, _ = fit_relight(g, views, cfg, antialiased=False)
-    finally:
-        fit.load_pass_targets = orig
+    views, targets = pass_views(g, true_alb, torch.tensor([0.0, 0.0, -1.0]).repeat(n, 1), torch.full((n, 3), 0.1),
+                                antialiased=True)
+    monkeypatch.setattr(fit, "load_pass_targets", lambda v, s: targets)
+    cfg = RelightFitConfig(iterations=150, holdout=(2,), progress=False, shading_loss=0.0)
+    with_aa, m = fit_relight(g, views, cfg, antialiased=True)
+    without, _ = fit_relight(g, views, cfg, antialiased=False)
     inner = g.means[:, :2].sub(torch.tensor([0.0, 1.0])).norm(dim=-1).lt(0.3)  # not the spokes' ends
     assert m["antialiased"] is True and m["heldout_albedo_psnr"] > 35
     err_aa = (with_aa["albedo"][inner] - true_alb[inner]).abs().mean()
