@@ -119,6 +119,8 @@ def _run_fit(*args):
 def test_relight_fit_bike_bad_input(tmp_path):
     r = _run_fit("--bike", str(tmp_path / "nope"))
     assert r.returncode == 2 and "bike folder not found" in r.stderr and r.stderr.count("\n") == 1
+    r = _run_fit("--bike", str(tmp_path), "--relit-loss", "-1")
+    assert r.returncode == 2 and "--relit-loss must be >= 0" in r.stderr and r.stderr.count("\n") == 1
     r = _run_fit("--bike", str(tmp_path), "--views", str(tmp_path))
     assert r.returncode == 2 and "not allowed with" in r.stderr and r.stderr.count("\n") == 1
     d = make_bike(tmp_path)
