@@ -111,6 +111,6 @@ def sky_visibility(g, normals, directions=SKY_DIRECTIONS, size=SKY_SIZE, bias_px
     num, den = torch.zeros(len(g)), torch.zeros(len(g))
     for d in sphere_directions(directions):
         w = (n @ d.float()).clamp_min_(0.0)
-        num += w * sun_visibility(g, Light(sun_direction=tuple(d.tolist())), size, bias_px, antialiased)
+        num += w * sun_visibility(g, Light(sun_direction=tuple(d.tolist())), size, bias_px, antialiased=antialiased)
         den += w
     return (num / den.clamp_min(1e-6)).clamp_(0.0, 1.0)
