@@ -54,7 +54,7 @@ def prepare_bike(work, size=SIZE, progress=print):
     from cyclist_formats import bike_folder
     from splatting.training.trainer import TrainConfig, train
 
-    from splatting.relight.fit import BIKE_RELIT_LOSS, RelightFitConfig, fit_file
+    from splatting.relight.fit import bike_fit_config, fit_file
 
     train_stats = {}
     for part in PARTS:
@@ -64,7 +64,7 @@ def prepare_bike(work, size=SIZE, progress=print):
                 bike_folder.read_relight(ply)
                 continue
             except bike_folder.UserError:
-                m = fit_file(bike_folder.views_dir(bike, part), ply, RelightFitConfig(relit_loss=BIKE_RELIT_LOSS))
+                m = fit_file(bike_folder.views_dir(bike, part), ply, bike_fit_config())
                 train_stats[part] = {k: m.get(k) for k in ("wall_s", "heldout_albedo_psnr", "heldout_gloss_psnr",
                                                            "heldout_normal_err_deg")}
                 progress(f"  bike_relit: {part} relight refit {train_stats[part]}")
@@ -176,9 +176,9 @@ def coverage_cost(gt_png, rgb, alpha, box):
 
 def fit_missing(bike, progress=print):
     """Relight-fit the parts of a trained bike whose PART.relight.npz is missing (relight-fit --bike's
-    settings: the relit loss on); {part: fit metrics}."""
+    settings: bike_fit_config); {part: fit metrics}."""
     from cyclist_formats import bike_folder
-    from splatting.relight.fit import BIKE_RELIT_LOSS, RelightFitConfig, fit_file
+    from splatting.relight.fit import bike_fit_config, fit_file
 
     stats = {}
     for part in PARTS:
@@ -186,7 +186,7 @@ def fit_missing(bike, progress=print):
         try:
             bike_folder.read_relight(ply)
         except bike_folder.UserError:
-            m = fit_file(bike_folder.views_dir(bike, part), ply, RelightFitConfig(relit_loss=BIKE_RELIT_LOSS))
+            m = fit_file(bike_folder.views_dir(bike, part), ply, bike_fit_config())
             stats[part] = {k: m.get(k) for k in ("wall_s", "heldout_albedo_psnr", "heldout_gloss_psnr",
                                                  "heldout_normal_err_deg")}
             progress(f"  bike_relit: {part} relight fit {stats[part]}")

@@ -148,3 +148,24 @@ def test_relight_fit_reads_the_mip_filter_from_the_parts(tmp_path):
     with open(os.path.join(gp, "crank.json"), "w") as f:
         json.dump({"config": {"antialiased": True}}, f)
     assert bike_parts(d) == ["frame", "steering", "crank"]
+
+
+def test_relight_fit_defaults_differ_for_a_bike_and_a_views_folder(tmp_path, monkeypatch):
+    # --bike: a bike's parts (BIKE_ITERATIONS steps, the relit loss on); --views: one part or an
+    # avatar (the config's defaults: the relit loss shades with the bike's roughness, so off)
+    import argparse
+
+    import splatting.relight.fit as fit
+
+    seen = []
+    monkeypatch.setattr(fit, "fit_bike", lambda d, cfg: seen.append(cfg) or {})
+    monkeypatch.setattr(fit, "fit_file", lambda v, p, cfg: seen.append(cfg) or {"path": "x", "wall_s": 0})
+    p = argparse.ArgumentParser()
+    fit.add_arguments(p)
+    for argv in (["--bike", str(tmp_path)], ["--views", str(tmp_path)], ["--bike", str(tmp_path), "--iterations", "7",
+                                                                          "--relit-loss", "0"]):
+        assert fit.run(p.parse_args(argv)) == 0
+    bike, views, given = seen
+    assert (bike.iterations, bike.relit_loss) == (fit.BIKE_ITERATIONS, fit.BIKE_RELIT_LOSS) == (150, 3.0)
+    assert (views.iterations, views.relit_loss) == (fit.RelightFitConfig.iterations, 0.0)
+    assert (given.iterations, given.relit_loss) == (7, 0.0)
