@@ -54,7 +54,7 @@ def prepare_bike(work, size=SIZE, progress=print):
     from cyclist_formats import bike_folder
     from splatting.training.trainer import TrainConfig, train
 
-    from splatting.relight.fit import fit_file
+    from splatting.relight.fit import bike_fit_config, fit_file
 
     train_stats = {}
     for part in PARTS:
@@ -64,7 +64,7 @@ def prepare_bike(work, size=SIZE, progress=print):
                 bike_folder.read_relight(ply)
                 continue
             except bike_folder.UserError:
-                m = fit_file(bike_folder.views_dir(bike, part), ply)
+                m = fit_file(bike_folder.views_dir(bike, part), ply, bike_fit_config())
                 train_stats[part] = {k: m.get(k) for k in ("wall_s", "heldout_albedo_psnr", "heldout_gloss_psnr",
                                                            "heldout_normal_err_deg")}
                 progress(f"  bike_relit: {part} relight refit {train_stats[part]}")
@@ -175,9 +175,10 @@ def coverage_cost(gt_png, rgb, alpha, box):
 
 
 def fit_missing(bike, progress=print):
-    """Relight-fit the parts of a trained bike whose PART.relight.npz is missing; {part: fit metrics}."""
+    """Relight-fit the parts of a trained bike whose PART.relight.npz is missing (relight-fit --bike's
+    settings: bike_fit_config); {part: fit metrics}."""
     from cyclist_formats import bike_folder
-    from splatting.relight.fit import fit_file
+    from splatting.relight.fit import bike_fit_config, fit_file
 
     stats = {}
     for part in PARTS:
@@ -185,7 +186,7 @@ def fit_missing(bike, progress=print):
         try:
             bike_folder.read_relight(ply)
         except bike_folder.UserError:
-            m = fit_file(bike_folder.views_dir(bike, part), ply)
+            m = fit_file(bike_folder.views_dir(bike, part), ply, bike_fit_config())
             stats[part] = {k: m.get(k) for k in ("wall_s", "heldout_albedo_psnr", "heldout_gloss_psnr",
                                                  "heldout_normal_err_deg")}
             progress(f"  bike_relit: {part} relight fit {stats[part]}")
@@ -244,8 +245,10 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
 
     rb = RelightableBike.load(bike)
     ring, _ = load_cameras(os.path.join(bike_folder.views_dir(bike, "frame"), "cameras.json"))
-    # the mip filter is for rendering below the training resolution (at 512 px it cost IoU 0.952 -> 0.889)
-    aa = size < ring[0].width
+    # the mip filter is for rendering below the training resolution (at 512 px it cost IoU 0.952 -> 0.889),
+    # and for parts trained with it (BikeModel.antialiased: baked, relit and their shadow maps alike)
+    trained_aa = rb.model.antialiased
+    aa = trained_aa or size < ring[0].width
     t = time.time()
     sky = rb.sky_visibility()  # once per bike (the sky's occlusion; shadow.sky_visibility), not timed per render
     sky_s = time.time() - t
@@ -259,13 +262,13 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
             tb, tr, ts = [], [], []
             for _ in range(repeats):  # interleaved, so load changes hit all alike
                 a = time.perf_counter()
-                baked = render_gaussians(g, cam)
+                baked = render_gaussians(g, cam, antialiased=trained_aa)
                 b = time.perf_counter()
                 flat = render_relit(g, albedo, normals, cam, light, gloss, antialiased=aa, static=rb.static,
-                                    sky_visibility=sky)
+                                    sky_visibility=sky, shadow_antialiased=trained_aa)
                 c2 = time.perf_counter()
                 relit = render_relit(g, albedo, normals, cam, light, gloss, shadows=True, antialiased=aa,
-                                     static=rb.static, sky_visibility=sky)
+                                     static=rb.static, sky_visibility=sky, shadow_antialiased=trained_aa)
                 ts.append(time.perf_counter() - c2)
                 tr.append(c2 - b)
                 tb.append(b - a)
@@ -295,6 +298,7 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
                              # the geometry's share: the relit colour under Blender's own coverage
                              "blender_coverage_box_psnr_mean": mean("relit_box_psnr_blender_coverage"),
                              "mask_disagreement_err_share_mean": mean("mask_disagreement_err_share"), "size_px": size, "bike": os.path.basename(bike), "gaussians": len(rb.model),
+                             "antialiased": trained_aa,
                              "prepare_s": round(prep_s, 1), "sky_visibility_s": round(sky_s, 1),
                              "train": train_stats}
     results["relight_render_overhead"] = overhead

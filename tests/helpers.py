@@ -245,3 +245,38 @@ def dense_opaque_scene(seed, n=60, sh_degree=1):
     means, quats, scales, opac, sh = random_scene(gen, n, sh_degree, spread=0.3)
     opac = 0.5 + 0.49 * torch.rand(n, generator=gen, dtype=torch.float64)
     return means, quats, scales * 2, opac, sh
+
+
+def level_grid(half, n, y):
+    """(n*n, 3) points of a square grid [-half, half]^2 in the horizontal plane at height y."""
+    xs = torch.linspace(-half, half, n)
+    X, Z = torch.meshgrid(xs, xs, indexing="ij")
+    return torch.stack([X.reshape(-1), torch.full((X.numel(),), float(y)), Z.reshape(-1)], 1)
+
+
+def axis_splats(means, scales, opacity_logit=4.0):
+    """Unrotated Gaussians at means with (N, 3) or (3,) scales, one opacity logit, black degree-0 SH."""
+    n = len(means)
+    scales = torch.as_tensor(scales, dtype=torch.float32).expand(n, 3)
+    return Gaussians(means, torch.tensor([[1.0, 0.0, 0.0, 0.0]]).expand(n, 4).contiguous(), torch.log(scales),
+                     torch.full((n,), float(opacity_logit)), torch.zeros(n, 1, 3))
+
+
+def pass_views(g, albedo, normal, gloss, antialiased=False):
+    """Five 64 px ring views (azimuth -30..30 deg, orbit centre (0, 1, 0)) of Gaussians g whose
+    render passes are composited from known channels: (Views, {"albedo", "normal", "gloss"}:
+    stacked targets), for the relight fit (patch fit.load_pass_targets to return the targets)."""
+    from splatting.raster.camera import ring_camera
+    from splatting.relight.render import composite_features, prepare
+    from splatting.training.views import Views
+
+    cams = [ring_camera(a, orbit_centre=(0, 1, 0), size=64, focal=2084.97 * 64 / 512 * 2, name=f"camera{i:04d}")
+            for i, a in enumerate((-30, -15, 0, 15, 30))]
+    targets, imgs = {"albedo": [], "normal": [], "gloss": []}, []
+    for c in cams:
+        (a, n, gl), alpha = composite_features(prepare(g, c, antialiased), [albedo, normal, gloss])
+        for k, x in zip(("albedo", "normal", "gloss"), (a, n, gl)):
+            targets[k].append(x)
+        imgs.append(torch.cat([a, alpha[..., None]], -1))
+    views = Views(cams, torch.stack(imgs), [c.name for c in cams], "<memory>")
+    return views, {k: torch.stack(x) for k, x in targets.items()}

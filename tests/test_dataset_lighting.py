@@ -221,3 +221,37 @@ def test_relit_street_scene_on_a_photo(assets, tmp_path, monkeypatch):
     road = (cover < 1e-3) & (after < before).any(-1)
     assert road.sum() > 50  # the shadows land on the road ...
     assert ((after < before).any(-1) <= (cover < 0.999)).all()  # ... never on what an instance covers
+
+
+def test_shadow_maps_draw_an_antialiased_bike_with_the_filter(assets, monkeypatch):
+    # a bike whose parts were trained with the mip filter casts its shadows (sun map) and hides its
+    # sky through the filter, its rider as trained; a plain bike draws none of it with the filter
+    import json
+
+    from splatting.relight import shadow
+    d = os.path.join(assets, "rlaa")
+    if not os.path.isdir(d):
+        make_bike(assets, "rlaa", n=300, sh_degree=1)
+        plys = [os.path.join(d, "gaussians", p + ".ply") for p in ("frame", "steering", "crank")]
+        _relight_files(plys)
+        for ply in plys:
+            with open(ply[:-4] + ".json", "w") as f:
+                json.dump({"config": {"antialiased": True}}, f)
+    calls = {"sun": [], "sky": []}
+    real_sun, real_sky = shadow.sun_visibility, shadow.sky_visibility
+    monkeypatch.setattr(shadow, "sun_visibility", lambda g, light, *a, antialiased=False, **k:
+                        calls["sun"].append((len(g), antialiased)) or real_sun(g, light, *a, antialiased=antialiased, **k))
+    monkeypatch.setattr(shadow, "sky_visibility", lambda g, n, *a, antialiased=False, **k:
+                        calls["sky"].append(antialiased) or real_sky(g, n, *a, antialiased=antialiased, **k))
+    for bike, want in (("rl", False), ("rlaa", True)):
+        calls["sun"].clear()
+        calls["sky"].clear()
+        _sample(_cfg(assets, bikes=[bike]), 1)
+        assert calls["sky"] and all(a is want for a in calls["sky"])
+        scene = [(n, aa) for n, aa in calls["sun"] if n > 1500]  # the cyclist's sun map (the sky's are the bike's alone)
+        assert scene
+        for n, aa in scene:
+            if not want:
+                assert aa is False
+            else:  # the bike's Gaussians (first, 3 x ~300), not the rider's 1500
+                assert torch.is_tensor(aa) and len(aa) == n and 800 < int(aa.sum()) < 1000 and not bool(aa[-1])

@@ -14,7 +14,7 @@ from splatting.raster.camera import ring_camera
 from splatting.relight.bike import RelightableBike
 from splatting.relight.render import composite_features, prepare, relit_static, render_relit
 from splatting.relight.shading import Light, ggx_sun, lambert_reference, shade, shade_linear, srgb_encode, view_directions
-from helpers import make_bike, mat_vec, random_pose, ref_part_R
+from helpers import axis_splats, level_grid, make_bike, pass_views, mat_vec, random_pose, ref_part_R
 
 
 def test_lambert_by_hand():
@@ -126,35 +126,19 @@ def _flat_patch(n_side=14, seed=0):
                      torch.randn(n, 1, 3, generator=g) * 0.1)
 
 
-def test_fit_recovers_albedo_and_normals():
+def test_fit_recovers_albedo_and_normals(monkeypatch):
+    import splatting.relight.fit as fit
     from splatting.relight.fit import RelightFitConfig, fit_relight
-    from splatting.training.views import Views
 
     g = _flat_patch()
     n = len(g)
     true_alb = torch.where(g.means[:, :1] > 0, torch.tensor([0.7, 0.2, 0.1]), torch.tensor([0.1, 0.3, 0.6]))
     true_nrm = torch.tensor([0.0, 0.0, -1.0]).repeat(n, 1)
-    cams = [ring_camera(a, orbit_centre=(0, 1, 0), size=64, focal=2084.97 * 64 / 512 * 2, name=f"camera{i:04d}")
-            for i, a in enumerate((-30, -15, 0, 15, 30))]
     true_gl = torch.where(g.means[:, 1:2] > 1, torch.tensor([0.3, 0.3, 0.3]), torch.tensor([0.05, 0.05, 0.05]))
-    targets, imgs = {"albedo": [], "normal": [], "gloss": []}, []
-    for c in cams:
-        prep = prepare(g, c)
-        (a, nn_, gl), alpha = composite_features(prep, [true_alb, true_nrm, true_gl])
-        for k, x in zip(("albedo", "normal", "gloss"), (a, nn_, gl)):
-            targets[k].append(x)
-        imgs.append(torch.cat([a, alpha[..., None]], -1))
-    views = Views(cams, torch.stack(imgs), [f"camera{i:04d}" for i in range(len(cams))], "<memory>")
-
-    import splatting.relight.fit as fit
-
-    orig = fit.load_pass_targets
-    fit.load_pass_targets = lambda v, s: {k: torch.stack(x) for k, x in targets.items()}
-    try:
-        feats, m = fit_relight(g, views, RelightFitConfig(iterations=150, holdout=(2,), progress=False))
-        alb, nrm = feats["albedo"], feats["normal"]
-    finally:
-        fit.load_pass_targets = orig
+    views, targets = pass_views(g, true_alb, true_nrm, true_gl)
+    monkeypatch.setattr(fit, "load_pass_targets", lambda v, s: targets)
+    feats, m = fit_relight(g, views, RelightFitConfig(iterations=150, holdout=(2,), progress=False))
+    alb, nrm = feats["albedo"], feats["normal"]
     vis = (g.means[:, 0].abs() < 0.45) & ((g.means[:, 1] - 1).abs() < 0.45)  # edge splats: partial coverage
     assert (alb[vis] - true_alb[vis]).abs().max() < 0.05
     assert (feats["gloss"][vis] - true_gl[vis]).abs().max() < 0.05
@@ -347,18 +331,9 @@ def test_sky_visibility_under_a_roof():
     # a 1 m floor of flat Gaussians facing up and a 0.4 m roof 0.1 m above its centre: under the
     # roof's middle it hides ~sin^2(63 deg) = 0.8 of the cosine-weighted sky; far from it, nothing;
     # the roof's top sees the whole sky
-    xs = torch.linspace(-0.5, 0.5, 41)
-    X, Z = torch.meshgrid(xs, xs, indexing="ij")
-    floor = torch.stack([X.reshape(-1), torch.zeros(X.numel()), Z.reshape(-1)], 1)
-    rs = torch.linspace(-0.2, 0.2, 17)
-    X, Z = torch.meshgrid(rs, rs, indexing="ij")
-    roof = torch.stack([X.reshape(-1), torch.full((X.numel(),), 0.1), Z.reshape(-1)], 1)
-    means = torch.cat([floor, roof])
-    n = len(means)
-    scales = torch.tensor([[0.02, 0.002, 0.02]]).expand(n, 3)
-    g = Gaussians(means, torch.tensor([[1.0, 0.0, 0.0, 0.0]]).expand(n, 4).contiguous(), torch.log(scales),
-                  torch.full((n,), 4.0), torch.zeros(n, 1, 3))
-    up = torch.tensor([[0.0, 1.0, 0.0]]).expand(n, 3)
+    floor, roof = level_grid(0.5, 41, 0.0), level_grid(0.2, 17, 0.1)
+    g = axis_splats(torch.cat([floor, roof]), [0.02, 0.002, 0.02])
+    up = torch.tensor([[0.0, 1.0, 0.0]]).expand(len(g), 3)
     vis = sky_visibility(g, up)
     r = floor[:, [0, 2]].norm(dim=-1)
     assert float(vis[: len(floor)][r < 0.05].max()) < 0.3
@@ -378,3 +353,34 @@ def test_shading_loss_sees_the_direction_of_the_composited_normal():
     assert float(shading_loss(turned, alpha, target, dirs)) > 0.05
     # half the coverage: the shading of what is there is half as bright
     assert float(shading_loss(target, alpha * 0.5, target, dirs)) > 0.05
+
+
+def test_relit_loss_shades_as_the_renderer_and_differentiates():
+    # the fit's differentiable display colour must be shading.shade's formula (what render_relit
+    # shows), and relit_loss must pull a turned normal back towards the pass's
+    from splatting.relight.fit import _display, relit_loss
+    from splatting.relight.shading import random_light, shade
+    from splatting.training.targets import crop_camera
+
+    gen = torch.Generator().manual_seed(5)
+    H, W = 9, 11
+    cam = ring_camera(40, orbit_centre=(0, 1, 0), size=64, focal=2084.97 * 64 / 512 * 2)
+    alpha = torch.rand(H, W, generator=gen) * 0.9 + 0.1
+    alb = torch.rand(H, W, 3, generator=gen) * 0.6 * alpha[..., None]
+    gl = torch.rand(H, W, 3, generator=gen) * 0.3 * alpha[..., None]
+    nrm = torch.nn.functional.normalize(torch.randn(H, W, 3, generator=gen), dim=-1) * alpha[..., None]
+    cam = crop_camera(cam, (20, 30, 20 + W, 30 + H))  # the fit's crop cameras: view directions off-centre
+    light = random_light(np.random.default_rng(4))
+    view = view_directions(cam)
+    sun = torch.tensor(light.sun_colour) * light.sun_strength
+    want = shade(alb, nrm, alpha, light, gl, view)
+    got = _display(alb, gl, nrm, alpha, light, view, sun, torch.tensor(light.sky))
+    torch.testing.assert_close(got, want, atol=1e-5, rtol=1e-4)
+    target = {"albedo": alb, "gloss": gl, "normal": nrm}
+    assert float(relit_loss((alb, nrm, gl), alpha, target, alpha, cam, light)) < 1e-6
+    turned = (nrm + 0.6 * torch.randn(H, W, 3, generator=gen)).requires_grad_(True)
+    loss = relit_loss((alb, turned, gl), alpha, target, alpha, cam, light)
+    assert float(loss.detach()) > 0.01
+    loss.backward()
+    stepped = (turned - 0.05 * turned.grad / turned.grad.abs().max()).detach()
+    assert float(relit_loss((alb, stepped, gl), alpha, target, alpha, cam, light)) < float(loss.detach())

@@ -200,7 +200,12 @@ class RelitSample:
         vis = None
         if self.shadows:
             from splatting.relight.shadow import sun_visibility
-            vis = sun_visibility(g, self.light)
+            aa = False  # the shadow map draws a bike trained with the mip filter with it (its rider as trained)
+            bike_model = self.ch.bike(self.assets, bike).model
+            if bike_model.antialiased:
+                aa = torch.arange(len(trained)) < len(bike_model)  # the bike's Gaussians come first
+                aa = aa if idx is None else aa.index_select(0, idx)
+            vis = sun_visibility(g, self.light, antialiased=aa)
         self.channels[k] = (alb + gl, relight_features(nrm, gl, rough, vis, sky))
 
     def cast_shadows(self, rgb, L, camera, footprints, heights, opacity):

@@ -59,5 +59,6 @@ class RelightableBike:
             from splatting.relight.shadow import sky_visibility
 
             g = self.model.pose(torch.zeros(8, dtype=torch.float64)).gaussians
-            self._sky = sky_visibility(g.map(lambda x: x.contiguous()), self.normals)
+            self._sky = sky_visibility(g.map(lambda x: x.contiguous()), self.normals,
+                                       antialiased=self.model.antialiased)  # drawn as trained
         return self._sky

@@ -10,18 +10,28 @@ from typing import NamedTuple, Optional
 import torch
 
 from splatting.gaussians.sh import rgb_to_sh0
-from splatting.raster.sparse import composite, intersect, project
+from splatting.raster.sparse import aa_compensation, composite, intersect, project
 from splatting.relight.shading import HIGHLIGHT, ROUGHNESS, Light, _shade_cm, _view_directions_cm
 
 LUMA = torch.tensor([0.2126, 0.7152, 0.0722])  # Rec. 709 luminance of linear RGB
 
 
-def prepare(g, camera):
-    """Projection + pair list of Gaussians g for camera (no grad): what every channel reuses."""
+def prepare(g, camera, antialiased=False, eps2d=0.3):
+    """Projection + pair list of Gaussians g for camera (no grad): what every channel reuses.
+    antialiased: the rasterizer's mip filter (rasterize(antialiased=...): a bool, or a (N,) bool mask
+    of the Gaussians it applies to), for Gaussians trained with it: their opacities are scaled by the
+    filter's compensation as the rasterizer does, or the fit composites other alphas than the render."""
     with torch.no_grad():
         means = g.means.float().contiguous()
         opac = g.opacities.float().contiguous()
-        m2, conics, z, radii, boxes = project(means, g.quats.float(), g.scales.float(), camera)
+        m2, conics, z, radii, boxes = project(means, g.quats.float(), g.scales.float(), camera, eps2d=eps2d)
+        if torch.is_tensor(antialiased) or antialiased:
+            comp = aa_compensation(conics, eps2d)
+            if torch.is_tensor(antialiased):
+                if antialiased.shape != opac.shape:
+                    raise ValueError(f"prepare: antialiased mask {tuple(antialiased.shape)} for {len(opac)} Gaussians")
+                comp = torch.where(antialiased, comp, torch.ones_like(comp))
+            opac = (opac * comp).contiguous()
         pairs = intersect(m2, conics, opac, z, boxes, radii, camera.width, camera.height)
     return {"m2": m2, "conics": conics, "opac": opac, "z": z, "pairs": pairs, "H": camera.height, "W": camera.width}
 
@@ -180,7 +190,7 @@ def shade_flags(gloss, rough_channel=False, shadows=False, sky_channel=False):
 @torch.no_grad()
 def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
                  shadows=False, antialiased=True, static=None, reflectance=False, sky_visibility=None, normal=False,
-                 fused=None):
+                 fused=None, shadow_antialiased=False):
     """Gaussians g with per-Gaussian linear albedo (N, 3), world-frame unit normals (N, 3) and optionally
     a linear glossy colour (N, 3) under a light -> dict rgb (H, W, 3) display colour premultiplied
     (over black), alpha, with normal=True the composited normal and with reflectance=True the
@@ -198,7 +208,9 @@ def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness
     (RelightableBike.static): albedo and gloss are then not read; None derives it here.
     sky_visibility (N,): each Gaussian's share of the sky (splatting/relight/shadow.py
     sky_visibility; a bike's: RelightableBike.sky_visibility), one more composited channel; None:
-    the sky reaches everything."""
+    the sky reaches everything.  shadow_antialiased: the mip filter in the sun's shadow map
+    (shadow.sun_visibility), for Gaussians trained with it (BikeModel.antialiased; a bool or (N,)
+    mask) whatever the view's `antialiased` (which also serves rendering below the training size)."""
     from splatting.gaussians.container import Gaussians
     from splatting.raster.sparse import render_gaussians
 
@@ -212,7 +224,7 @@ def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness
     vis = None
     if shadows:
         from splatting.relight.shadow import sun_visibility
-        vis = sun_visibility(g, light)
+        vis = sun_visibility(g, light, antialiased=shadow_antialiased)
     gr = Gaussians(g.means, g.quats, g.log_scales, g.opacity_logits, static.sh)
     parts = relight_feature_parts(normals, static.gloss_luma, visibility=vis, sky_visibility=sky_visibility)
     gloss_on, sky_on = static.gloss_luma is not None, sky_visibility is not None

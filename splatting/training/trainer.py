@@ -288,7 +288,8 @@ def train(views_dir, out_ply=None, config: TrainConfig = None, relight=False):
         from splatting.relight.fit import RelightFitConfig, fit_relight
 
         feats, metrics["relight"] = fit_relight(g, views, RelightFitConfig(holdout=cfg.holdout, seed=cfg.seed,
-                                                                           progress=cfg.progress))
+                                                                           progress=cfg.progress),
+                                                antialiased=cfg.antialiased)
         write_relight(out_ply, **{k: v.numpy() for k, v in feats.items()})
     write_ply(g, out_ply)
     write_json(os.path.splitext(out_ply)[0] + ".json", metrics)
