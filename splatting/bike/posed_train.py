@@ -56,10 +56,11 @@ class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (trai
     denoise: str = "FAST"
     seed: int = 0
     crop_margin_px: int = 8
-    sh_degree: int = 1           # 1: the fine-tune adds degree-1 SH (view-dependent colour), rotated with each part
+    sh_degree: int = 1           # 1 (2): the fine-tune adds degree-1 (and 2) SH (view-dependent colour), rotated with each part
     lr_shN: float = 2.5e-3       # the band-1 coefficients' rate (the DC's; INRIA's /20 gained less)
     densify: bool = False        # adaptive density control per part in the first half (docs/training.md)
     densify_max: int = 30000     # ... up to this many Gaussians per part
+    lr_decay: float = 1.0        # every rate ends at this fraction of its start, exponentially (1: constant)
     progress: bool = True
 
 
@@ -158,8 +159,8 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
 
     if model.sh_degree != 0:
         raise UserError(f"bike-posed-train handles SH degree 0 parts (the training default), got {model.sh_degree}")
-    if cfg.sh_degree not in (0, 1):
-        raise UserError(f"bike-posed-train: sh_degree must be 0 or 1, got {cfg.sh_degree}")
+    if cfg.sh_degree not in (0, 1, 2):
+        raise UserError(f"bike-posed-train: sh_degree must be 0, 1 or 2, got {cfg.sh_degree}")
     t0 = time.time()
     gen = torch.Generator().manual_seed(cfg.seed)
     torch.manual_seed(cfg.seed)
@@ -179,7 +180,7 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
              {"means": c.means, "quats": c.quats, "log_scales": c.log_scales, "opacity_logits": c.opacity_logits,
               "sh0": c.sh}.items()}
         if cfg.sh_degree:  # starts view-independent
-            p["shN"] = torch.nn.Parameter(torch.zeros(e - a, 3, 3, dtype=c.sh.dtype))
+            p["shN"] = torch.nn.Parameter(torch.zeros(e - a, (cfg.sh_degree + 1) ** 2 - 1, 3, dtype=c.sh.dtype))
         parts_p[name] = p
         opts[name] = torch.optim.Adam([{"params": [p[k]], "lr": lrs[k], "name": k} for k in p], lr=0.0, eps=1e-15)
         if cfg.densify:
@@ -187,11 +188,11 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
             dens[name] = DensifyStrategy(_densify_config(cfg), float((m.max(0).values - m.min(0).values).norm()))
     aa = model.antialiased
 
-    from splatting.gaussians.sh_rotation import sh_band_matrices
+    from splatting.gaussians.sh_rotation import BANDS, sh_band_matrices
 
     def world(rig):
         """The canonical parameters moved by one pose's per-part rigid transforms (differentiable):
-        means, rotations and, with degree 1, the band-1 SH coefficients (c' = D_1 c per part)."""
+        means, rotations and, with degree >= 1, the higher bands' SH coefficients (c'_l = D_l c_l per part)."""
         ms, qs, ss = [], [], []
         for name in model.part_names:
             p = parts_p[name]
@@ -205,7 +206,8 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
             ms.append(p["means"] @ R.T + t)
             qs.append(p["quats"] @ L.T)
             if "shN" in p:
-                ss.append(torch.einsum("ij,njc->nic", sh_band_matrices(R, 1)[0], p["shN"]))
+                ss.append(torch.cat([torch.einsum("ij,njc->nic", D, p["shN"][:, BANDS[l][0] - 1:BANDS[l][1] - 1])
+                                     for l, D in enumerate(sh_band_matrices(R, cfg.sh_degree), start=1)], 1))
         return torch.cat(ms), torch.cat(qs), (torch.cat(ss) if ss else None)
 
     def render(rig, cam, bg):
@@ -254,6 +256,10 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
                 and (g2d is None or bool(torch.isfinite(g2d).all()))):
             for o in opts.values():
                 o.step()
+                if cfg.lr_decay != 1.0:  # the next step's rates: lr0 * lr_decay ** (it / iterations)
+                    f = cfg.lr_decay ** (it / cfg.iterations)
+                    for grp in o.param_groups:
+                        grp["lr"] = lrs[grp["name"]] * f
             if dens and g2d is not None:
                 a = 0
                 for name in model.part_names:  # each part's slice of the composed render
@@ -311,7 +317,8 @@ def done_with(bike_dir, cfg: PosedTrainConfig):
     if not isinstance(m, dict) or not isinstance(m.get("config"), dict):
         return None
     # fine-tunes recorded before --densify existed ran without it: still this config when it is off
-    have = {"densify": False, "densify_max": PosedTrainConfig.densify_max, **m["config"]}
+    # and before --lr-decay with constant rates
+    have = {"densify": False, "densify_max": PosedTrainConfig.densify_max, "lr_decay": 1.0, **m["config"]}
     return m if have == want and not newer else None
 
 
@@ -362,12 +369,15 @@ def add_arguments(p):
     p.add_argument("--poses", type=int, default=d.poses, help="posed whole-bike renders (default %(default)s)")
     p.add_argument("--iterations", type=int, default=d.iterations, help="fine-tuning steps (default %(default)s)")
     p.add_argument("--samples", type=int, default=d.samples, help="Cycles samples of the posed renders (default %(default)s)")
-    p.add_argument("--sh-degree", type=int, choices=(0, 1), default=d.sh_degree,
-                   help="1: add view-dependent (degree-1 SH) colour in the fine-tune (default %(default)s)")
+    p.add_argument("--sh-degree", type=int, choices=(0, 1, 2), default=d.sh_degree,
+                   help="1 or 2: add view-dependent (degree-1 or 2 SH) colour in the fine-tune (default %(default)s)")
     p.add_argument("--densify", action="store_true",
                    help="grow each part's Gaussians (adaptive density control) in the first half of the fine-tune")
     p.add_argument("--densify-max", type=int, default=d.densify_max,
                    help="with --densify: most Gaussians per part (default %(default)s)")
+    p.add_argument("--lr-decay", type=float, default=d.lr_decay,
+                   help="every learning rate decays exponentially to this fraction of its start by the last "
+                        "step (default %(default)s: constant)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
 
 
@@ -379,6 +389,7 @@ def check_args(args):
     checks.count("iterations", args.iterations, hi=10_000_000)
     checks.count("samples", args.samples, hi=1 << 16)
     checks.count("densify-max", args.densify_max, hi=10_000_000)
+    checks.number("lr-decay", args.lr_decay, 0.0, 1.0, lo_open=True)
     for p in ("frame", "steering"):
         if not os.path.isfile(os.path.join(args.bike, "gaussians", p + ".ply")):
             raise UserError(f"{args.bike} has no trained gaussians/{p}.ply (python -m splatting train first)")
@@ -386,6 +397,7 @@ def check_args(args):
 
 def run(args):
     cfg = PosedTrainConfig(poses=args.poses, iterations=args.iterations, samples=args.samples, sh_degree=args.sh_degree,
-                           densify=args.densify, densify_max=args.densify_max, progress=not args.quiet)
+                           densify=args.densify, densify_max=args.densify_max, lr_decay=args.lr_decay,
+                           progress=not args.quiet)
     train_bike_posed(args.bike, cfg)
     return 0
