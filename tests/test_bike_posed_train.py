@@ -84,10 +84,12 @@ def test_fine_tuning_through_the_pose_recovers_the_posed_bike(scene):
         assert len(parts[p]) == e - a
 
 
-def test_lr_decay_follows_its_schedule(scene, monkeypatch):
+@pytest.mark.parametrize("tail", [0, 8])
+def test_lr_decay_follows_its_schedule(scene, monkeypatch, tail):
     """--lr-decay d: step k (1-based) of N runs every group at lr0 * d ** ((k - 1) / N): the first at
-    the start rates, the rates falling exponentially; 1.0 keeps them constant. Checked on the rates
-    Adam actually steps with (densification on, which replaces the groups' tensors)."""
+    the start rates, the rates falling exponentially; 1.0 keeps them constant. With --lr-tail T the
+    rates stay at lr0 until the last T steps and fall as d ** (share of the tail done). Checked on
+    the rates Adam actually steps with (densification on, which replaces the groups' tensors)."""
     d, jobs = scene
     seen = []
     step = torch.optim.Adam.step
@@ -98,7 +100,7 @@ def test_lr_decay_follows_its_schedule(scene, monkeypatch):
 
     monkeypatch.setattr(torch.optim.Adam, "step", spy)
     n, decay = 20, 0.01
-    cfg = PosedTrainConfig(poses=len(jobs), iterations=n, lr_decay=decay, densify=True, progress=False)
+    cfg = PosedTrainConfig(poses=len(jobs), iterations=n, lr_decay=decay, lr_tail=tail, densify=True, progress=False)
     _, m = fine_tune(BikeModel.load(d), os.path.join(d, "views", "whole"), jobs, cfg)
     assert m["config"]["lr_decay"] == decay
     parts = 3
@@ -108,7 +110,10 @@ def test_lr_decay_follows_its_schedule(scene, monkeypatch):
         for i in range(parts):
             got, lr0 = seen[k * parts + i], first[i]
             for name in lr0:
-                assert got[name] == pytest.approx(lr0[name] * decay ** (k / n), rel=1e-9), (k, name)
+                want = decay ** (k / n) if not tail else decay ** (max(0, k - (n - tail)) / tail)
+                assert got[name] == pytest.approx(lr0[name] * want, rel=1e-9), (k, name)
+    if tail:  # constant up to the tail, then falling
+        assert seen[(n - tail) * parts]["sh0"] == first[0]["sh0"] > seen[(n - tail + 1) * parts]["sh0"]
     assert seen[-1]["sh0"] < 0.02 * seen[0]["sh0"]
     seen.clear()
     fine_tune(BikeModel.load(d), os.path.join(d, "views", "whole"), jobs,
@@ -152,6 +157,7 @@ def test_cli_refuses_bad_input(tmp_path):
                       (["--bike", str(tmp_path), "--poses", "2"], "poses"),
                       (["--bike", str(tmp_path), "--lr-decay", "0"], "lr-decay"),
                       (["--bike", str(tmp_path), "--lr-decay", "1.5"], "lr-decay"),
+                      (["--bike", str(tmp_path), "--iterations", "10", "--lr-tail", "11"], "lr-tail"),
                       (["--bike", str(tmp_path)], "frame.ply")):
         r = subprocess.run([sys.executable, "-m", "splatting", "bike-posed-train"] + [a.strip() for a in args],
                            capture_output=True, text=True, env=env, cwd=ROOT)
