@@ -112,6 +112,43 @@ def test_fine_tuning_through_the_pose_recovers_the_posed_bike(scene):
         assert len(parts[p]) == e - a
 
 
+@pytest.mark.parametrize("tail", [0, 8])
+def test_lr_decay_follows_its_schedule(scene, monkeypatch, tail):
+    """--lr-decay d: step k (1-based) of N runs every group at lr0 * d ** ((k - 1) / N): the first at
+    the start rates, the rates falling exponentially; 1.0 keeps them constant. With --lr-tail T the
+    rates stay at lr0 until the last T steps and fall as d ** (share of the tail done). Checked on
+    the rates Adam actually steps with (densification on, which replaces the groups' tensors)."""
+    d, jobs = scene
+    seen = []
+    step = torch.optim.Adam.step
+
+    def spy(self, *a, **k):
+        seen.append({g["name"]: g["lr"] for g in self.param_groups})
+        return step(self, *a, **k)
+
+    monkeypatch.setattr(torch.optim.Adam, "step", spy)
+    n, decay = 20, 0.01
+    cfg = PosedTrainConfig(poses=len(jobs), iterations=n, lr_decay=decay, lr_tail=tail, densify=True, progress=False)
+    _, m = fine_tune(BikeModel.load(d), os.path.join(d, "views", "whole"), jobs, cfg)
+    assert m["config"]["lr_decay"] == decay
+    parts = 3
+    assert len(seen) == n * parts  # one Adam per part, every step accepted
+    first = seen[:parts]
+    for k in range(n):
+        for i in range(parts):
+            got, lr0 = seen[k * parts + i], first[i]
+            for name in lr0:
+                want = decay ** (k / n) if not tail else decay ** (max(0, k - (n - tail)) / tail)
+                assert got[name] == pytest.approx(lr0[name] * want, rel=1e-9), (k, name)
+    if tail:  # constant up to the tail, then falling
+        assert seen[(n - tail) * parts]["sh0"] == first[0]["sh0"] > seen[(n - tail + 1) * parts]["sh0"]
+    assert seen[-1]["sh0"] < 0.02 * seen[0]["sh0"]
+    seen.clear()
+    fine_tune(BikeModel.load(d), os.path.join(d, "views", "whole"), jobs,
+              PosedTrainConfig(poses=len(jobs), iterations=5, progress=False))
+    assert all(s == seen[i % parts] for i, s in enumerate(seen)) and len(seen) == 5 * parts
+
+
 def test_done_with_reads_the_config(tmp_path):
     d = make_bike(tmp_path, sh_degree=0)
     assert done_with(d, PosedTrainConfig()) is None
@@ -123,6 +160,13 @@ def test_done_with_reads_the_config(tmp_path):
         json.dump({"config": c}, f)
     assert done_with(d, PosedTrainConfig(progress=False)) is not None
     assert done_with(d, PosedTrainConfig(iterations=cfg.iterations + 1)) is None
+    assert done_with(d, PosedTrainConfig(lr_decay=0.1)) is None
+    # a record from before --lr-decay (no key) ran at constant rates
+    c.pop("lr_decay")
+    with open(os.path.join(d, "gaussians", "posed_train.json"), "w") as f:
+        json.dump({"config": c}, f)
+    assert done_with(d, PosedTrainConfig(lr_decay=1.0)) is not None
+    assert done_with(d, PosedTrainConfig(lr_decay=0.5)) is None
     # a part retrained after the fine-tune (its file newer than posed_train.json): fine-tune again
     t = os.path.getmtime(os.path.join(d, "gaussians", "posed_train.json"))
     os.utime(os.path.join(d, "gaussians", "steering.ply"), (t + 5, t + 5))
@@ -139,6 +183,9 @@ def test_cli_refuses_bad_input(tmp_path):
     env = dict(os.environ, PYTHONPATH=ROOT)
     for args, msg in (([" --bike", str(tmp_path / "none")], "not found"),
                       (["--bike", str(tmp_path), "--poses", "2"], "poses"),
+                      (["--bike", str(tmp_path), "--lr-decay", "0"], "lr-decay"),
+                      (["--bike", str(tmp_path), "--lr-decay", "1.5"], "lr-decay"),
+                      (["--bike", str(tmp_path), "--iterations", "10", "--lr-tail", "11"], "lr-tail"),
                       (["--bike", str(tmp_path)], "frame.ply")):
         r = subprocess.run([sys.executable, "-m", "splatting", "bike-posed-train"] + [a.strip() for a in args],
                            capture_output=True, text=True, env=env, cwd=ROOT)
@@ -176,14 +223,17 @@ def test_reruns_start_from_the_rest_trained_parts(scene, tmp_path):
     assert open(os.path.join(g, "crank_rest.ply"), "rb").read() == orig["crank"]
 
 
-def test_degree_one_fine_tune_rotates_its_sh_as_bike_model_does(scene):
-    """With sh_degree=1 the fine-tune adds band-1 SH and rotates it with each part; BikeModel.pose
-    (its own SH rotation) must draw the fine-tuned parts exactly as the fine-tune scored them."""
+@pytest.mark.parametrize("degree", [1, 2])
+def test_view_dependent_fine_tune_rotates_its_sh_as_bike_model_does(scene, degree):
+    """With sh_degree=1 (2) the fine-tune adds band-1 (and band-2) SH and rotates it with each part;
+    BikeModel.pose (its own SH rotation) must draw the fine-tuned parts exactly as the fine-tune
+    scored them (a band rotated wrongly, or not at all, moves the held-out score)."""
     d, jobs = scene
     start = BikeModel.load(d)
-    cfg = PosedTrainConfig(poses=len(jobs), iterations=40, lr_sh0=2e-2, sh_degree=1, progress=False)
+    cfg = PosedTrainConfig(poses=len(jobs), iterations=40, lr_sh0=2e-2, lr_shN=2e-2, sh_degree=degree, progress=False)
     parts, m = fine_tune(start, os.path.join(d, "views", "whole"), jobs, cfg)
-    assert all(g.sh.shape[1] == 4 for g in parts.values())
+    assert all(g.sh.shape[1] == (degree + 1) ** 2 for g in parts.values())
+    assert all(float(g.sh[:, (degree * degree):].abs().max()) > 1e-3 for g in parts.values())  # the top band was fitted
     ps = _held_out_psnr_of_bike_model(d, start, parts, jobs)
     assert abs(ps - m["held_out_box_psnr_after"]) < 0.05, (ps, m)
 

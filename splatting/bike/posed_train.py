@@ -58,10 +58,12 @@ class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (trai
     denoise: str = "FAST"
     seed: int = 0
     crop_margin_px: int = 8
-    sh_degree: int = 1           # 1: the fine-tune adds degree-1 SH (view-dependent colour), rotated with each part
+    sh_degree: int = 1           # 1 (2): the fine-tune adds degree-1 (and 2) SH (view-dependent colour), rotated with each part
     lr_shN: float = 2.5e-3       # the band-1 coefficients' rate (the DC's; INRIA's /20 gained less)
     densify: bool = False        # adaptive density control per part in the first half (docs/training.md)
     densify_max: int = 30000     # ... up to this many Gaussians per part
+    lr_decay: float = 1.0        # every rate ends at this fraction of its start, exponentially (1: constant) ...
+    lr_tail: int = 0             # ... falling over the last lr_tail steps only (0: over the whole fine-tune)
     progress: bool = True
 
 
@@ -161,8 +163,8 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
 
     if model.sh_degree != 0:
         raise UserError(f"bike-posed-train handles SH degree 0 parts (the training default), got {model.sh_degree}")
-    if cfg.sh_degree not in (0, 1):
-        raise UserError(f"bike-posed-train: sh_degree must be 0 or 1, got {cfg.sh_degree}")
+    if cfg.sh_degree not in (0, 1, 2):
+        raise UserError(f"bike-posed-train: sh_degree must be 0, 1 or 2, got {cfg.sh_degree}")
     t0 = time.time()
     gen = torch.Generator().manual_seed(cfg.seed)
     torch.manual_seed(cfg.seed)
@@ -182,7 +184,7 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
              {"means": c.means, "quats": c.quats, "log_scales": c.log_scales, "opacity_logits": c.opacity_logits,
               "sh0": c.sh}.items()}
         if cfg.sh_degree:  # starts view-independent
-            p["shN"] = torch.nn.Parameter(torch.zeros(e - a, 3, 3, dtype=c.sh.dtype))
+            p["shN"] = torch.nn.Parameter(torch.zeros(e - a, (cfg.sh_degree + 1) ** 2 - 1, 3, dtype=c.sh.dtype))
         parts_p[name] = p
         opts[name] = torch.optim.Adam([{"params": [p[k]], "lr": lrs[k], "name": k} for k in p], lr=0.0, eps=1e-15)
         if cfg.densify:
@@ -190,11 +192,11 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
             dens[name] = DensifyStrategy(_densify_config(cfg), float((m.max(0).values - m.min(0).values).norm()))
     aa = model.antialiased
 
-    from splatting.gaussians.sh_rotation import sh_band_matrices
+    from splatting.gaussians.sh_rotation import BANDS, sh_band_matrices
 
     def world(rig):
         """The canonical parameters moved by one pose's per-part rigid transforms (differentiable):
-        means, rotations and, with degree 1, the band-1 SH coefficients (c' = D_1 c per part)."""
+        means, rotations and, with degree >= 1, the higher bands' SH coefficients (c'_l = D_l c_l per part)."""
         ms, qs, ss = [], [], []
         for name in model.part_names:
             p = parts_p[name]
@@ -208,7 +210,8 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
             ms.append(p["means"] @ R.T + t)
             qs.append(p["quats"] @ L.T)
             if "shN" in p:
-                ss.append(torch.einsum("ij,njc->nic", sh_band_matrices(R, 1)[0], p["shN"]))
+                ss.append(torch.cat([torch.einsum("ij,njc->nic", D, p["shN"][:, BANDS[l][0] - 1:BANDS[l][1] - 1])
+                                     for l, D in enumerate(sh_band_matrices(R, cfg.sh_degree), start=1)], 1))
         return torch.cat(ms), torch.cat(qs), (torch.cat(ss) if ss else None)
 
     def render(rig, cam, bg):
@@ -257,6 +260,10 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
                 and (g2d is None or bool(torch.isfinite(g2d).all()))):
             for o in opts.values():
                 o.step()
+                if cfg.lr_decay != 1.0:  # the next step's rates (lr_rate_factor)
+                    f = lr_rate_factor(cfg, it)
+                    for grp in o.param_groups:
+                        grp["lr"] = lrs[grp["name"]] * f
             if dens and g2d is not None:
                 a = 0
                 for name in model.part_names:  # each part's slice of the composed render
@@ -289,6 +296,14 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
                    "loss": round(loss_v, 5), "wall_s": round(wall, 1), "antialiased": aa}
 
 
+def lr_rate_factor(cfg: PosedTrainConfig, it):
+    """The rates' factor after step `it` (for step it + 1): 1 until the tail, then lr_decay ** (the
+    share of the tail done), reaching lr_decay at the last step.  Decaying over the whole fine-tune
+    cost 0.19 dB, a low-rate tail after constant rates gained (docs/training.md, round 4)."""
+    tail = cfg.lr_tail if 0 < cfg.lr_tail < cfg.iterations else cfg.iterations
+    return cfg.lr_decay ** (max(0, it - (cfg.iterations - tail)) / tail)
+
+
 def _densify_config(cfg: PosedTrainConfig):
     """The trainer's rules, run over the first half of the fine-tune (the second settles what was
     added); no visual-hull pruning (the posed views' silhouettes move with the pose) and no opacity
@@ -314,7 +329,8 @@ def done_with(bike_dir, cfg: PosedTrainConfig):
     if not isinstance(m, dict) or not isinstance(m.get("config"), dict):
         return None
     # fine-tunes recorded before --densify existed ran without it: still this config when it is off
-    have = {"densify": False, "densify_max": PosedTrainConfig.densify_max, **m["config"]}
+    # and before --lr-decay with constant rates
+    have = {"densify": False, "densify_max": PosedTrainConfig.densify_max, "lr_decay": 1.0, "lr_tail": 0, **m["config"]}
     return m if have == want and not newer else None
 
 
@@ -370,12 +386,18 @@ def add_arguments(p):
     p.add_argument("--poses", type=int, default=d.poses, help="posed whole-bike renders (default %(default)s)")
     p.add_argument("--iterations", type=int, default=d.iterations, help="fine-tuning steps (default %(default)s)")
     p.add_argument("--samples", type=int, default=d.samples, help="Cycles samples of the posed renders (default %(default)s)")
-    p.add_argument("--sh-degree", type=int, choices=(0, 1), default=d.sh_degree,
-                   help="1: add view-dependent (degree-1 SH) colour in the fine-tune (default %(default)s)")
+    p.add_argument("--sh-degree", type=int, choices=(0, 1, 2), default=d.sh_degree,
+                   help="1 or 2: add view-dependent (degree-1 or 2 SH) colour in the fine-tune (default %(default)s)")
     p.add_argument("--densify", action="store_true",
                    help="grow each part's Gaussians (adaptive density control) in the first half of the fine-tune")
     p.add_argument("--densify-max", type=int, default=d.densify_max,
                    help="with --densify: most Gaussians per part (default %(default)s)")
+    p.add_argument("--lr-decay", type=float, default=d.lr_decay,
+                   help="every learning rate decays exponentially to this fraction of its start by the last "
+                        "step (default %(default)s: constant)")
+    p.add_argument("--lr-tail", type=int, default=d.lr_tail,
+                   help="with --lr-decay: constant rates, then the decay over the last N steps only "
+                        "(default %(default)s: over the whole fine-tune)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
 
 
@@ -387,6 +409,8 @@ def check_args(args):
     checks.count("iterations", args.iterations, hi=10_000_000)
     checks.count("samples", args.samples, hi=1 << 16)
     checks.count("densify-max", args.densify_max, hi=10_000_000)
+    checks.number("lr-decay", args.lr_decay, 0.0, 1.0, lo_open=True)
+    checks.integer("lr-tail", args.lr_tail, 0, args.iterations)
     for p in ("frame", "steering"):
         f = p + ("_rest.ply" if args.from_rest else ".ply")
         if not os.path.isfile(os.path.join(args.bike, "gaussians", f)):
@@ -395,6 +419,7 @@ def check_args(args):
 
 def run(args):
     cfg = PosedTrainConfig(poses=args.poses, iterations=args.iterations, samples=args.samples, sh_degree=args.sh_degree,
-                           densify=args.densify, densify_max=args.densify_max, progress=not args.quiet)
+                           densify=args.densify, densify_max=args.densify_max, lr_decay=args.lr_decay,
+                           lr_tail=args.lr_tail, progress=not args.quiet)
     train_bike_posed(args.bike, cfg, from_rest=args.from_rest)
     return 0

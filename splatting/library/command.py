@@ -46,7 +46,7 @@ def add_arguments(p):
     f.add_argument("--posed-iterations", type=int, default=None, help="fine-tune steps (default: bike-posed-train's)")
     f.add_argument("--posed-samples", type=int, default=None,
                    help="Cycles samples of the posed renders (default: --samples when given, else bike-posed-train's)")
-    f.add_argument("--posed-sh-degree", type=int, choices=(0, 1), default=None,
+    f.add_argument("--posed-sh-degree", type=int, choices=(0, 1, 2), default=None,
                    help="SH degree of the fine-tuned parts (default: bike-posed-train's)")
     q = p.add_argument_group("quality floor (assets below it are marked unusable)")
     q.add_argument("--min-part-psnr", type=float, default=manifest.FLOORS["min_part_psnr"])
