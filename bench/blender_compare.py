@@ -263,10 +263,10 @@ def run_compare(bike_dir, out_dir, n_poses=12, size=512, seed=0, spp=SPP, refere
 def trained_antialiased(bike_dir):
     """Whether the bike's parts were trained with antialiased splatting (BikeModel's rule: their
     training JSONs; parts that disagree are an error)."""
-    from splatting.bike.model import MAIN_PARTS, SUB_PARTS, trained_antialiased as parts_antialiased
+    from splatting.bike.model import present_parts, trained_antialiased as parts_antialiased
 
     gdir = os.path.join(bike_dir, "gaussians")
-    return parts_antialiased(gdir, [p for p in MAIN_PARTS + SUB_PARTS if os.path.isfile(os.path.join(gdir, p + ".ply"))])
+    return parts_antialiased(gdir, present_parts(gdir))
 
 
 # -- outputs ---------------------------------------------------------------------------------------

@@ -223,6 +223,12 @@ class BikeModel:
         return res[0] if single else res
 
 
+def present_parts(gdir):
+    """The part names (BikeModel's order: MAIN_PARTS then SUB_PARTS) that have a <part>.ply in a
+    bike's gaussians/ folder gdir."""
+    return [p for p in MAIN_PARTS + SUB_PARTS if os.path.isfile(os.path.join(gdir, p + ".ply"))]
+
+
 def trained_antialiased(gdir, names):
     """Whether the parts in gdir were trained with antialiased splatting: their <part>.json
     "config", else <part>_rest.json (a part fine-tuned by the library's posed stage: its training

@@ -67,7 +67,7 @@ def check_assets(cfg):
     one UserError naming the first asset without them and the command that makes them."""
     if not relit(cfg):
         return
-    from splatting.bike.model import MAIN_PARTS, SUB_PARTS
+    from splatting.bike.model import present_parts
     from splatting.cyclist.assets import bike_dir, has_trained_gaussians
     from splatting.rider.avatar import PLY_NAME, SKINNING_NAME
     if cfg["synthetic_assets"] == "always":
@@ -78,9 +78,9 @@ def check_assets(cfg):
         if not has_trained_gaussians(d):
             raise _err("mode", f"relit: bike {b!r} has no trained Gaussians in {d}/gaussians (stand-ins carry no "
                                f"relight channels); train it with `python -m splatting train`, then relight-fit")
-        for p in MAIN_PARTS + SUB_PARTS:
+        for p in present_parts(os.path.join(d, "gaussians")):
             ply = bike_folder.gaussians_path(d, p)
-            if os.path.isfile(ply) and not os.path.isfile(bike_folder.relight_path(ply)):
+            if not os.path.isfile(bike_folder.relight_path(ply)):
                 raise _err("mode", f"relit: bike {b!r} part {p!r} has no relight channels "
                                    f"({bike_folder.relight_path(ply)}); make them with `python -m splatting relight-fit "
                                    f"--views {os.path.join(d, 'views', p)}`")

@@ -321,15 +321,7 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
         visible = radii > 0
     if means2d.requires_grad:
         means2d.retain_grad()
-    if torch.is_tensor(antialiased):
-        if antialiased.shape != opacities.shape:
-            raise ValueError(f"rasterize: antialiased mask {tuple(antialiased.shape)} for {tuple(opacities.shape)} "
-                             "Gaussians")
-        if bool(antialiased.any()):
-            comp = aa_compensation(conics, eps2d)
-            opacities = opacities * torch.where(antialiased.to(comp.device), comp, torch.ones_like(comp))
-    elif antialiased:
-        opacities = opacities * aa_compensation(conics, eps2d)
+    opacities = antialias_opacities(opacities, conics, eps2d, antialiased, "rasterize")
     if features is not None and not torch.is_tensor(features):  # parts
         features = list(features)
         nf = sum(f.shape[1] for f in features)
@@ -375,6 +367,22 @@ def _group_alpha_torch(means2d, conics, opacities, depths, radii, boxes, groups,
             pairs = intersect(*sel, W, H)
             _, out[q], _ = composite(sel[0], sel[1], sel[2], sel[0].new_zeros(len(i), 1), sel[3], None, pairs, H, W)
     return out
+
+
+def antialias_opacities(opacities, conics, eps2d, antialiased, who="rasterize"):
+    """opacities (N,) x the mip filter's compensation (aa_compensation) where antialiased says: a
+    bool for all Gaussians, or a (N,) bool mask (each asset drawn as it was trained).  Shared by
+    rasterize and the relight fit's fixed pair list (splatting/relight/render.py prepare), so both
+    composite the same alphas."""
+    if torch.is_tensor(antialiased):
+        if antialiased.shape != opacities.shape:
+            raise ValueError(f"{who}: antialiased mask {tuple(antialiased.shape)} for {tuple(opacities.shape)} "
+                             "Gaussians")
+        if not bool(antialiased.any()):
+            return opacities
+        comp = aa_compensation(conics, eps2d)
+        return opacities * torch.where(antialiased.to(comp.device), comp, torch.ones_like(comp))
+    return opacities * aa_compensation(conics, eps2d) if antialiased else opacities
 
 
 def aa_compensation(conics, eps2d):

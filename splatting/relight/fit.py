@@ -284,10 +284,10 @@ def bike_parts(bike_dir):
     """The parts of a trained bike folder to fit: those with gaussians/<part>.ply (BikeModel's parts),
     each needing its views folder with the passes; refuses a bike whose parts disagree on the mip
     filter (BikeModel.load's rule) before any work."""
-    from splatting.bike.model import MAIN_PARTS, SUB_PARTS, trained_antialiased as parts_antialiased
+    from splatting.bike.model import present_parts, trained_antialiased as parts_antialiased
 
     gdir = os.path.join(bike_dir, "gaussians")
-    parts = [p for p in MAIN_PARTS + SUB_PARTS if os.path.isfile(os.path.join(gdir, p + ".ply"))]
+    parts = present_parts(gdir)
     if "frame" not in parts:
         raise UserError(f"{bike_dir}: no trained gaussians/frame.ply")
     for p in parts:

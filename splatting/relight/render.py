@@ -10,7 +10,7 @@ from typing import NamedTuple, Optional
 import torch
 
 from splatting.gaussians.sh import rgb_to_sh0
-from splatting.raster.sparse import aa_compensation, composite, intersect, project
+from splatting.raster.sparse import antialias_opacities, composite, intersect, project
 from splatting.relight.shading import HIGHLIGHT, ROUGHNESS, Light, _shade_cm, _view_directions_cm
 
 LUMA = torch.tensor([0.2126, 0.7152, 0.0722])  # Rec. 709 luminance of linear RGB
@@ -25,13 +25,7 @@ def prepare(g, camera, antialiased=False, eps2d=0.3):
         means = g.means.float().contiguous()
         opac = g.opacities.float().contiguous()
         m2, conics, z, radii, boxes = project(means, g.quats.float(), g.scales.float(), camera, eps2d=eps2d)
-        if torch.is_tensor(antialiased) or antialiased:
-            comp = aa_compensation(conics, eps2d)
-            if torch.is_tensor(antialiased):
-                if antialiased.shape != opac.shape:
-                    raise ValueError(f"prepare: antialiased mask {tuple(antialiased.shape)} for {len(opac)} Gaussians")
-                comp = torch.where(antialiased, comp, torch.ones_like(comp))
-            opac = (opac * comp).contiguous()
+        opac = antialias_opacities(opac, conics, eps2d, antialiased, "prepare").contiguous()
         pairs = intersect(m2, conics, opac, z, boxes, radii, camera.width, camera.height)
     return {"m2": m2, "conics": conics, "opac": opac, "z": z, "pairs": pairs, "H": camera.height, "W": camera.width}
 
