@@ -54,21 +54,14 @@ def prepare_bike(work, size=SIZE, progress=print):
     from cyclist_formats import bike_folder
     from splatting.training.trainer import TrainConfig, train
 
-    from splatting.relight.fit import bike_fit_config, fit_file
-
     train_stats = {}
     for part in PARTS:
         ply = bike_folder.gaussians_path(bike, part)
         if os.path.isfile(ply):  # trained before: (re)fit the relight channels only if they are missing or stale
-            try:
-                bike_folder.read_relight(ply)
-                continue
-            except bike_folder.UserError:
-                m = fit_file(bike_folder.views_dir(bike, part), ply, bike_fit_config())
-                train_stats[part] = {k: m.get(k) for k in ("wall_s", "heldout_albedo_psnr", "heldout_gloss_psnr",
-                                                           "heldout_normal_err_deg")}
-                progress(f"  bike_relit: {part} relight refit {train_stats[part]}")
-                continue
+            st = _fit_if_missing(bike, part, progress)
+            if st is not None:
+                train_stats[part] = st
+            continue
         cfg = TrainConfig(iterations=ITERATIONS, progress=False, eval_every=100)
         cfg.densify.max_gaussians = MAX_GAUSSIANS
         cfg.densify.stop = ITERATIONS // 2
@@ -177,20 +170,29 @@ def coverage_cost(gt_png, rgb, alpha, box):
 def fit_missing(bike, progress=print):
     """Relight-fit the parts of a trained bike whose PART.relight.npz is missing (relight-fit --bike's
     settings: bike_fit_config); {part: fit metrics}."""
+    stats = {}
+    for part in PARTS:
+        st = _fit_if_missing(bike, part, progress)
+        if st is not None:
+            stats[part] = st
+    return stats
+
+
+def _fit_if_missing(bike, part, progress=print):
+    """Relight-fit one trained part (bike_fit_config) unless its PART.relight.npz reads; its fit
+    metrics, or None when it was there."""
     from cyclist_formats import bike_folder
     from splatting.relight.fit import bike_fit_config, fit_file
 
-    stats = {}
-    for part in PARTS:
-        ply = bike_folder.gaussians_path(bike, part)
-        try:
-            bike_folder.read_relight(ply)
-        except bike_folder.UserError:
-            m = fit_file(bike_folder.views_dir(bike, part), ply, bike_fit_config())
-            stats[part] = {k: m.get(k) for k in ("wall_s", "heldout_albedo_psnr", "heldout_gloss_psnr",
-                                                 "heldout_normal_err_deg")}
-            progress(f"  bike_relit: {part} relight fit {stats[part]}")
-    return stats
+    ply = bike_folder.gaussians_path(bike, part)
+    try:
+        bike_folder.read_relight(ply)
+        return None
+    except bike_folder.UserError:
+        m = fit_file(bike_folder.views_dir(bike, part), ply, bike_fit_config())
+    st = {k: m.get(k) for k in ("wall_s", "heldout_albedo_psnr", "heldout_gloss_psnr", "heldout_normal_err_deg")}
+    progress(f"  bike_relit: {part} relight fit {st}")
+    return st
 
 
 def run_bench(results, out_dir, n_poses=6):
