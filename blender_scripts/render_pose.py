@@ -32,12 +32,16 @@ def main(argv):
                    help="OpenImageDenoise (default: the renderer's, FAST)")
     p.add_argument("--keypoints-out", help="write the armature's posed keypoints (canonical frame) here")
     p.add_argument("--samples", type=int, default=None)
+    p.add_argument("--threads", type=int, default=None,
+                   help="Cycles CPU threads (default: the renderer's, 2); the image does not depend on it")
     p.add_argument("--lights", choices=["follow", "world"], default="follow",
                    help="sun lights move with the bike's global pose (default) or stay in the world")
     args = p.parse_args(argv)
     from cyclist_formats import checks
     checks.input_dir("bike", args.bike)
     checks.count("samples", args.samples, hi=1 << 16)
+    if args.threads is not None:
+        checks.threads("threads", args.threads)
     if args.batch:
         if args.pose or args.camera or args.out or args.keypoints_out:
             raise UserError("--batch replaces --pose, --camera, --out and --keypoints-out")
@@ -58,6 +62,8 @@ def main(argv):
         s = replace(s, samples=args.samples)
     if args.denoise:
         s = replace(s, denoise=args.denoise)
+    if args.threads:
+        s = replace(s, threads=args.threads)
     if not args.batch:
         pose = render_pose.parse_pose(args.pose)
         render_pose.render_pose(args.bike, pose, args.camera, args.out, args.keypoints_out, s, args.lights == "follow")

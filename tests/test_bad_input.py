@@ -177,6 +177,7 @@ SCRIPT_CASES = [
     ["render_pose.py", "--bike", "a_folder", "--batch", "a_file.txt"],  # not a JSON list of jobs
     ["render_pose.py", "--bike", "a_folder", "--batch", "empty.yaml", "--out", "g.png"],
     ["render_pose.py", "--bike", "a_folder"],  # neither --pose/--camera/--out nor --batch
+    ["render_pose.py", "--bike", "a_folder", "--pose", "0,0,0,0,0,0,0,0", "--camera", "c.json:camera0000", "--out", "g.png", "--threads", "0"],
     ["render_rider.py", "--mesh", "mesh.ply", "--out", "a_file.txt"],
     ["render_rider.py", "--mesh", "mesh.ply", "--out", "rv", "--threads", "0"],
     ["import_splats.py", "--ply", "mesh.ply", "--size", "100000"],

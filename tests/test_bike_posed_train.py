@@ -186,6 +186,7 @@ def test_cli_refuses_bad_input(tmp_path):
                       (["--bike", str(tmp_path), "--lr-decay", "0"], "lr-decay"),
                       (["--bike", str(tmp_path), "--lr-decay", "1.5"], "lr-decay"),
                       (["--bike", str(tmp_path), "--iterations", "10", "--lr-tail", "11"], "lr-tail"),
+                      (["--bike", str(tmp_path), "--render-threads", "0"], "render-threads"),
                       (["--bike", str(tmp_path)], "frame.ply")):
         r = subprocess.run([sys.executable, "-m", "splatting", "bike-posed-train"] + [a.strip() for a in args],
                            capture_output=True, text=True, env=env, cwd=ROOT)
@@ -279,6 +280,8 @@ with open(sys.argv[0] + ".log", "a") as f:
     for j in jobs:
         Image.new("RGBA", (4, 4)).save(j["out"])
         f.write(j["out"] + "\\n")
+with open(sys.argv[0] + ".args", "w") as f:
+    f.write(" ".join(sys.argv[1:]))
 """
 
 
@@ -316,6 +319,9 @@ def test_renders_of_another_pose_are_rendered_again(tmp_path, monkeypatch):
     assert rendered(PosedTrainConfig(poses=8)) == ["posed_003.png"]
     assert len(rendered(PosedTrainConfig(poses=8, samples=64))) == 8  # other settings: all again
     assert rendered(PosedTrainConfig(poses=10, samples=64)) == ["posed_008.png", "posed_009.png"]
+    assert "--threads" not in (tmp_path / "fake_render.py.args").read_text().split()  # Blender's default
+    posed_train.render_posed_views(str(d), str(out), PosedTrainConfig(poses=11, samples=64), log=lambda s: None, threads=1)
+    assert "--threads 1" in (tmp_path / "fake_render.py.args").read_text()
 
 
 def test_densify_grows_each_part_up_to_its_cap(scene):

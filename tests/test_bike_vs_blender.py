@@ -140,3 +140,23 @@ def test_render_pose_oracle_keypoints_on_mask(bike_dir, tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "theta_s_deg" in r.stderr
     assert not bad.exists()
+
+
+def test_render_pose_pixels_do_not_depend_on_threads(bike_dir, tmp_path):
+    """--threads only spreads Cycles' work: 1 and 2 threads give the same pixels (denoised as by
+    default), which is why the library's tasks may render with one thread and no record keeps it."""
+    from PIL import Image
+
+    from cyclist_formats import ring
+
+    (tmp_path / "cams.json").write_text(json.dumps(ring.ring([0.0, 0.5, 0.0], size=96)))
+    script = os.path.join(ROOT, "blender_scripts", "render_pose.py")
+    px = []
+    for t in (1, 2):
+        out = tmp_path / f"t{t}.png"
+        r = subprocess.run([sys.executable, script, "--bike", str(bike_dir), "--pose", "20,-10,0,15,0,0,0,0",
+                            "--camera", f"{tmp_path / 'cams.json'}:camera0002", "--out", str(out),
+                            "--samples", "8", "--threads", str(t)], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr[-2000:]
+        px.append(np.asarray(Image.open(out)))
+    assert px[0][..., 3].any() and np.array_equal(px[0], px[1])

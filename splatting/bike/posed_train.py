@@ -78,8 +78,10 @@ def training_poses(n):
     return np.concatenate([p for p, _ in blocks])[:n], np.concatenate([c for _, c in blocks])[:n]
 
 
-def render_posed_views(bike_dir, out_dir, cfg: PosedTrainConfig, log=print):
-    """out_dir/posed_NNN.png for every training pose (resumable) and out_dir/poses.json. Returns the jobs."""
+def render_posed_views(bike_dir, out_dir, cfg: PosedTrainConfig, log=print, threads=None):
+    """out_dir/posed_NNN.png for every training pose (resumable) and out_dir/poses.json. Returns the jobs.
+    threads: Blender's CPU threads (None: its default, 2); Cycles' pixels do not depend on it, so it is
+    no part of the config record."""
     poses, cams = training_poses(cfg.poses)
     cam_file = os.path.abspath(os.path.join(bike_dir, "views", "whole", "cameras.json"))
     if not os.path.isfile(cam_file):
@@ -121,7 +123,7 @@ def render_posed_views(bike_dir, out_dir, cfg: PosedTrainConfig, log=print):
         job_file = os.path.join(out_dir, "jobs.json")
         write_json(job_file, todo)
         cmd = [sys.executable, RENDER_SCRIPT, "--bike", bike_dir, "--batch", job_file, "--samples", str(cfg.samples),
-               "--denoise", cfg.denoise]
+               "--denoise", cfg.denoise] + (["--threads", str(threads)] if threads else [])
         log(f"bike-posed-train: rendering {len(todo)} posed views ({cfg.samples} spp)")
         env = dict(os.environ, PYTHONPATH=str(paths.ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
         r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
@@ -334,10 +336,11 @@ def done_with(bike_dir, cfg: PosedTrainConfig):
     return m if have == want and not newer else None
 
 
-def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print, from_rest=False):
+def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print, from_rest=False, render_threads=None):
     """Render the posed views, fine-tune, write the parts (rest-trained copies kept). Returns the metrics.
     from_rest: start from gaussians/<part>_rest.ply (and its .json) as they are, never copying onto
-    them (the library's train tasks own those files; a killed run's <part>.ply is only overwritten)."""
+    them (the library's train tasks own those files; a killed run's <part>.ply is only overwritten).
+    render_threads: the posed renders' Blender threads (render_posed_views)."""
     from cyclist_formats.atomic import write_json
     from splatting.bike.model import BikeModel
     from splatting.gaussians.container import write_ply
@@ -360,7 +363,7 @@ def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print, from_res
 
     model = BikeModel({p: read_ply(f) for p, f in start.items()}, model_keypoints_doc(bike_dir), model.meta,
                       source=bike_dir, antialiased=model.antialiased)
-    jobs = render_posed_views(bike_dir, os.path.join(bike_dir, "views", "posed"), cfg, log)
+    jobs = render_posed_views(bike_dir, os.path.join(bike_dir, "views", "posed"), cfg, log, render_threads)
     parts, metrics = fine_tune(model, os.path.join(bike_dir, "views", "whole"), jobs, cfg)
     for p, g in parts.items():
         write_ply(g, os.path.join(gdir, p + ".ply"))  # the same Gaussians in the same order (with --densify: the grown and pruned set)
@@ -398,6 +401,8 @@ def add_arguments(p):
     p.add_argument("--lr-tail", type=int, default=d.lr_tail,
                    help="with --lr-decay: constant rates, then the decay over the last N steps only "
                         "(default %(default)s: over the whole fine-tune)")
+    p.add_argument("--render-threads", type=int,
+                   help="Blender's CPU threads for the posed renders (default: its own, 2); the fine-tune uses one")
     p.add_argument("--quiet", action="store_true", help="no progress line")
 
 
@@ -411,6 +416,8 @@ def check_args(args):
     checks.count("densify-max", args.densify_max, hi=10_000_000)
     checks.number("lr-decay", args.lr_decay, 0.0, 1.0, lo_open=True)
     checks.integer("lr-tail", args.lr_tail, 0, args.iterations)
+    if args.render_threads is not None:
+        checks.threads("render-threads", args.render_threads)
     for p in ("frame", "steering"):
         f = p + ("_rest.ply" if args.from_rest else ".ply")
         if not os.path.isfile(os.path.join(args.bike, "gaussians", f)):
@@ -421,5 +428,5 @@ def run(args):
     cfg = PosedTrainConfig(poses=args.poses, iterations=args.iterations, samples=args.samples, sh_degree=args.sh_degree,
                            densify=args.densify, densify_max=args.densify_max, lr_decay=args.lr_decay,
                            lr_tail=args.lr_tail, progress=not args.quiet)
-    train_bike_posed(args.bike, cfg, from_rest=args.from_rest)
+    train_bike_posed(args.bike, cfg, from_rest=args.from_rest, render_threads=args.render_threads)
     return 0

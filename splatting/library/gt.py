@@ -32,7 +32,7 @@ def render_blender(bike_dir, pose, cam_index, out_png, samples=None):
     cams = os.path.join(bike_dir, "views", "whole", "cameras.json")
     cmd = [sys.executable, os.path.join(ROOT, "blender_scripts", "render_pose.py"), "--bike", bike_dir,
            "--pose", ",".join(f"{v:.6f}" for v in pose), "--camera", f"{cams}:camera{int(cam_index):04d}",
-           "--out", out_png]
+           "--out", out_png, "--threads", "1"]  # the gt task declares one CPU; Cycles' pixels do not depend on it
     if samples:
         cmd += ["--samples", str(samples)]
     env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))

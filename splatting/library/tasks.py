@@ -125,7 +125,8 @@ def run_posed(task, root, s):
     gdir = os.path.join(task.bike_dir, "gaussians")
     cmd = [sys.executable, "-m", "splatting", "bike-posed-train", "--bike", task.bike_dir, "--from-rest",
            "--poses", str(s["posed_poses"]), "--iterations", str(s["posed_iterations"]),
-           "--samples", str(s["posed_samples"]), "--sh-degree", str(s["posed_sh_degree"]), "--quiet"]
+           "--samples", str(s["posed_samples"]), "--sh-degree", str(s["posed_sh_degree"]), "--quiet",
+           "--render-threads", "1"]  # the task declares one CPU
     t = time.time()
     _run(cmd, f"posed fine-tune of {task.asset}")
     wall = time.time() - t
