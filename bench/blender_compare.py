@@ -29,13 +29,11 @@ import time
 
 import numpy as np
 
+# the converged reference every Gaussian benchmark scores against
+from bench.compare import REFERENCE_ADAPTIVE, REFERENCE_SAMPLES as REFERENCE_SPP
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SPP = (1, 2, 4, 8, 16)
-REFERENCE_SPP = 512
-# Cycles' adaptive sampling stops a pixel once its noise estimate is below this: the reference's
-# flat, converged pixels cost far fewer than 512 samples (0.005 ~ 46 dB of per-pixel noise, far
-# below the 28-36 dB differences being measured); 0 turns it off (every pixel 512 samples)
-REFERENCE_ADAPTIVE = 0.005
 # recorded in the references' job.json: references rendered before render.setup_lighting placed its
 # suns at once were lit from straight above (the workers read the suns before any update), so a
 # job.json without this value is another job and its references are rendered again

@@ -4,7 +4,7 @@ One procedural bike, its frame/steering/crank rendered at SIZE px from the 36-vi
 albedo and normal passes, each part trained small (MAX_GAUSSIANS, ITERATIONS) with the relight fit;
 then for the same random poses and ring cameras as bike_gt (bench/bike_gt.sample_poses) and one
 random sun + sky per pose (splatting/relight/shading.random_light), Blender renders the articulated
-mesh lit by that sun (render_pose with lights not following the bike) and the Gaussians render
+mesh lit by that sun (render_pose with lights not following the bike; converged: bench/compare.REFERENCE) and the Gaussians render
 twice: relit (albedo + normal shaded per pixel) and baked (today's colours, trained under the studio
 lights).  Keys: bike_relit = {box_psnr_mean, iou_mean, poses, baked_box_psnr_mean, baked_iou_mean},
 relight_render_overhead = relit / baked render time - 1 (median of interleaved repeats per pose).
@@ -27,7 +27,6 @@ PARTS = ("frame", "steering", "crank")
 SIZE = 256             # the small bike's training views (when no trained bike is given)
 GT_SIZE = 256          # the comparison
 RENDER_SAMPLES = 4      # the training views (denoise off: Debian's 3.4 has no OIDN)
-GT_SAMPLES = 16         # the ground truth
 ITERATIONS = 600
 MAX_GAUSSIANS = 4000
 
@@ -138,7 +137,7 @@ def blender_worker(job_path):
 
     with open(job_path) as f:
         job = json.load(f)
-    s = replace(render.RenderSettings(), samples=job["samples"], threads=1)
+    s = replace(render.RenderSettings(), threads=1, **job["reference"])
     for i, (pose, cam, light) in enumerate(zip(job["poses"], job["cameras"], job["lights"])):
         out = os.path.join(job["out"], f"gt_{i:03d}.png")
         if os.path.isfile(out):
@@ -214,8 +213,7 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
     import torch
 
     from bench.bike_gt import sample_poses
-    from bench.compare import side_by_side, write_table
-    from bench.compare import score_png
+    from bench.compare import REFERENCE, renders_for, score_png, side_by_side, write_table
     from cyclist_formats import bike_folder
     from splatting.raster.camera import load_cameras
     from splatting.raster.sparse import render_gaussians
@@ -234,16 +232,17 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
     poses, cams = sample_poses(n_poses, seed)
     rng = np.random.default_rng(seed + 16)
     lights = [random_light(rng) for _ in range(n_poses)]
-    gt_dir = os.path.join(work, f"gt_{os.path.basename(bike)}_{size}")
-    os.makedirs(gt_dir, exist_ok=True)
-    job = {"bike": bike, "poses": poses.tolist(), "cameras": ring_camera_files(bike, cams, size, gt_dir), "out": gt_dir,
-           "samples": GT_SAMPLES, "lights": [light_json(l) for l in lights]}
+    key = {"bike": bike, "poses": poses.tolist(), "cameras": cams.tolist(), "size": size, "reference": REFERENCE,
+           "lights": [light_json(l) for l in lights]}
+    gt_dir = renders_for(os.path.join(work, f"gt_{os.path.basename(bike)}_{size}"), key)
+    job = dict(key, cameras=ring_camera_files(bike, cams, size, gt_dir), out=gt_dir)
     job_path = os.path.join(gt_dir, "job.json")
     with open(job_path, "w") as f:
         json.dump(job, f)
     t = time.time()
     _run([__file__, "--worker", job_path], "blender ground truth")
-    progress(f"  bike_relit: {n_poses} Blender renders at {size} px ({time.time() - t:.0f} s)")
+    progress(f"  bike_relit: {n_poses} Blender renders at {size} px, {REFERENCE['samples']} samples "
+             f"({time.time() - t:.0f} s)")
 
     rb = RelightableBike.load(bike)
     ring, _ = load_cameras(os.path.join(bike_folder.views_dir(bike, "frame"), "cameras.json"))
@@ -294,7 +293,7 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
                  zoom=max(1, 384 // size))
     overhead = float(np.median(np.asarray(t_relit) / np.asarray(t_baked)) - 1)
     shadow_overhead = float(np.median(np.asarray(t_shadow) / np.asarray(t_baked)) - 1)
-    results["bike_relit"] = {"poses": len(rows), "box_psnr_mean": mean("relit_box_psnr"), "iou_mean": mean("relit_iou"),
+    results["bike_relit"] = {"poses": len(rows), "reference": REFERENCE, "box_psnr_mean": mean("relit_box_psnr"), "iou_mean": mean("relit_iou"),
                              "baked_box_psnr_mean": mean("baked_box_psnr"), "baked_iou_mean": mean("baked_iou"),
                              "noshadow_box_psnr_mean": mean("noshadow_box_psnr"),
                              # the geometry's share: the relit colour under Blender's own coverage

@@ -19,7 +19,6 @@ import sys
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-GT_SAMPLES = 16
 
 
 def blender_worker(job_path):
@@ -31,9 +30,11 @@ def blender_worker(job_path):
 
     from bench.relight import sun_and_sky
 
+    from bench.compare import REFERENCE
+
     with open(job_path) as f:
         jobs = json.load(f)
-    s = replace(render.RenderSettings(), samples=GT_SAMPLES, threads=1)
+    s = replace(render.RenderSettings(), threads=1, **REFERENCE)
     for i, job in enumerate(jobs):
         if os.path.isfile(job["out"]):
             continue
@@ -45,7 +46,7 @@ def blender_worker(job_path):
 def run(results, out_dir, avatar_dir=None, n_poses=12, seed=0, progress=print):
     import torch
 
-    from bench.compare import score_png, side_by_side, write_table
+    from bench.compare import REFERENCE, renders_for, score_png, side_by_side, write_table
     from bench.relight import light_json
     from bench.rider import RIDER_ID, posed_batch, posed_jobs, sample_poses
     from cyclist_formats import bike_folder
@@ -76,8 +77,10 @@ def run(results, out_dir, avatar_dir=None, n_poses=12, seed=0, progress=print):
     rot, root = posed_batch(rider, theta_p, theta_s, yaw)
     rng = np.random.default_rng(seed + 17)
     lights = [random_light(rng) for _ in range(n_poses)]
-    gt_dir = os.path.join(out_dir, "rider_relit")
-    os.makedirs(gt_dir, exist_ok=True)
+    key = {"rider": ra.avatar.rider_id or RIDER_ID,  # Blender renders the roster body, not the avatar
+           "theta_p": theta_p.tolist(), "theta_s": theta_s.tolist(), "yaw": yaw.tolist(), "cameras": cams.tolist(),
+           "reference": REFERENCE, "lights": [light_json(light) for light in lights]}
+    gt_dir = renders_for(os.path.join(out_dir, "rider_relit"), key)
     jobs, cameras, job_file = posed_jobs(rider, rot, root, cams, gt_dir, [{"light": light_json(light)} for light in lights])
     r = subprocess.run([sys.executable, os.path.abspath(__file__), "--worker", job_file], cwd=ROOT)
     if r.returncode:
@@ -102,7 +105,7 @@ def run(results, out_dir, avatar_dir=None, n_poses=12, seed=0, progress=print):
                     shots.append((gt_rgb, rgb, box))
             rows.append(row)
     mean = lambda k: float(np.mean([r[k] for r in rows]))  # noqa: E731
-    results["rider_relit"] = {"poses": len(rows), "box_psnr_mean": mean("relit_box_psnr"), "iou_mean": mean("relit_iou"),
+    results["rider_relit"] = {"poses": len(rows), "reference": REFERENCE, "box_psnr_mean": mean("relit_box_psnr"), "iou_mean": mean("relit_iou"),
                               "baked_box_psnr_mean": mean("baked_box_psnr"), "baked_iou_mean": mean("baked_iou"),
                               "noshadow_box_psnr_mean": mean("noshadow_box_psnr"), "size_px": cameras[0].width, "gaussians": len(ra.avatar)}
     if fit:

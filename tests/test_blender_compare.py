@@ -134,3 +134,19 @@ def test_cli_rejects_bad_input(tmp_path):
         lines = r.stderr.strip().splitlines()
         assert len(lines) == 1 and word in lines[0], r.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_renders_for_keeps_renders_of_the_same_key_only(tmp_path):
+    """The relit benches' Blender renders are reused only for the poses, lights and reference
+    settings they were made for: another key deletes them (the workers skip existing files)."""
+    from bench.compare import REFERENCE, renders_for
+
+    key = {"poses": [[1.0, 2.0]], "reference": REFERENCE}
+    d = renders_for(str(tmp_path / "gt"), key)
+    (tmp_path / "gt" / "gt_000.png").write_bytes(b"x")
+    (tmp_path / "gt" / "camera_000.json").write_text("{}")
+    assert renders_for(d, dict(key)) == d and (tmp_path / "gt" / "gt_000.png").exists()  # same key: kept
+    renders_for(d, dict(key, reference=dict(REFERENCE, samples=16)))  # e.g. the old 16-sample ground truth
+    assert not (tmp_path / "gt" / "gt_000.png").exists() and (tmp_path / "gt" / "camera_000.json").exists()
+    assert json.loads((tmp_path / "gt" / "key.json").read_text())["reference"]["samples"] == 16
+    assert REFERENCE == {"samples": 512, "adaptive_threshold": 0.005, "denoise": "NONE"}
