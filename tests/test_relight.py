@@ -402,6 +402,15 @@ def test_view_normals_of_a_tube_turn_with_the_view():
     torch.testing.assert_close(view_normals(torch.zeros(n, 3), B, means, cam), want, atol=1e-5, rtol=0)
     n0 = torch.nn.functional.normalize(torch.randn(n, 3, generator=gen), dim=-1)
     torch.testing.assert_close(view_normals(n0, torch.zeros(n, 3, 3), means, cam), n0, atol=1e-6, rtol=0)
+    # the render's path (float32, no gradient: csrc/shade.cpp) against the fit's (torch, float64)
+    B = torch.randn(n, 3, 3, generator=gen)
+    c_path = view_normals(n0, B, means, cam)
+    torch_path = view_normals(n0.double(), B.double(), means.double(), cam)
+    assert c_path.dtype == torch.float32 and torch_path.dtype == torch.float64
+    torch.testing.assert_close(c_path.double(), torch_path, atol=1e-5, rtol=0)
+    Bg = B.clone().requires_grad_(True)  # with a gradient wanted: the torch path, differentiable
+    view_normals(n0, Bg, means, cam).sum().backward()
+    assert Bg.grad is not None and float(Bg.grad.abs().sum()) > 0
 
 
 def test_view_normals_turn_with_their_part(tmp_path):
