@@ -493,3 +493,24 @@ def test_fit_learns_the_view_dependent_normal_of_a_tube(monkeypatch, view_normal
         assert m["heldout_normal_err_deg"] < 3
     else:
         assert m["heldout_normal_err_deg"] > 6
+
+
+def test_fit_of_sh_degree_2_parts_reads_only_their_base_colour(monkeypatch):
+    # fine-tuned parts may carry SH degree 2 (issue 14's best bike): the relight fit starts the
+    # albedo from the DC colour only, so the view-dependent bands change nothing in its channels
+    import splatting.relight.fit as fit
+    from splatting.relight.fit import RelightFitConfig, fit_relight
+
+    g0 = _flat_patch()
+    n = len(g0)
+    bands = torch.randn(n, 8, 3, generator=torch.Generator().manual_seed(3)) * 0.3
+    g2 = Gaussians(g0.means, g0.quats, g0.log_scales, g0.opacity_logits, torch.cat([g0.sh, bands], 1))
+    assert g2.sh_degree == 2
+    views, targets = pass_views(g0, torch.full((n, 3), 0.4), torch.tensor([0.0, 0.0, -1.0]).repeat(n, 1),
+                                torch.full((n, 3), 0.04))
+    monkeypatch.setattr(fit, "load_pass_targets", lambda v, s: targets)
+    cfg = RelightFitConfig(iterations=20, holdout=(2,), progress=False, view_normals=True, relit_loss=3.0)
+    f0, _ = fit_relight(g0, views, cfg)
+    f2, _ = fit_relight(g2, views, cfg)
+    for k in ("albedo", "normal", "gloss", "normal_view"):
+        assert torch.equal(f0[k], f2[k]), k
