@@ -46,6 +46,8 @@ BIKE_ITERATIONS = 150
 # steering 14.0 -> 5.8 deg); box PSNR (offline, 32-sample EXRs) seed 0 29.73 -> 29.86, seed 1
 # 29.19 -> 29.29 dB (docs/relighting.md)
 BIKE_VIEW_NORMALS = True
+# RelightFitConfig.view_normal_penalty (weight of mean(B^2))
+VIEW_NORMAL_PENALTY = 0.05
 
 
 def bike_fit_config(**kw):
@@ -75,6 +77,10 @@ class RelightFitConfig:
     # is normalize(n + B v), B (N, 3, 3) fitted too (render.view_normals: a Gaussian across a thin
     # tube shows the mean normal of the tube's visible half, which turns with the view)
     view_normals: bool = False
+    # weight of mean(B^2) in the loss: the ring's views see each Gaussian from one elevation, so B is
+    # pinned only along those directions; the smallest B that explains them turns the normals less
+    # for the directions a posed part (a turned crank or fork, another camera) shows it from
+    view_normal_penalty: float = VIEW_NORMAL_PENALTY
     seed: int = 0
     progress: bool = True
 
@@ -257,6 +263,8 @@ def fit_relight(g, views, cfg: RelightFitConfig = None, antialiased=False):
         if cfg.shading_loss:
             dirs = F.normalize(torch.randn(SHADING_DIRECTIONS, 3, generator=dir_gen), dim=-1)
             loss = loss + cfg.shading_loss * shading_loss(n, alpha, t["normal"], dirs)
+        if normal_view is not None and cfg.view_normal_penalty:
+            loss = loss + cfg.view_normal_penalty * normal_view.square().mean()
         if cfg.relit_loss:
             loss = loss + cfg.relit_loss * relit_loss((a, n, gl), alpha, t, t["alpha"], prep["camera"],
                                                       random_light(light_rng))
