@@ -225,7 +225,8 @@ def _evaluate(feats, items, means):
 
 def fit_relight(g, views, cfg: RelightFitConfig = None, antialiased=False):
     """Gaussians g (trained on views) -> ({"albedo", "normal", "gloss"}: (N, 3); colours linear, normals
-    unit; with cfg.view_normals also "normal_view" (N, 3, 3): render.view_normals), metrics).  antialiased: g was trained with the rasterizer's mip filter (and is rendered
+    unit; with cfg.view_normals also "normal_view" (N, 3, 3): render.view_normals), metrics).
+    antialiased: g was trained with the rasterizer's mip filter (and is rendered
     with it: BikeModel.antialiased), so its fixed geometry is composited with it too: without it a
     sub-pixel spoke Gaussian covers ~0.3 px^2 at its full opacity, not its own footprint, and the
     channels are fitted under the wrong coverage."""
