@@ -461,6 +461,23 @@ def test_view_normals_file_round_trip_and_refusals(tmp_path):
         bike_folder.read_relight(p, n=5)
 
 
+def _tube_passes(monkeypatch):
+    """_tube() and its ring views whose normal pass is the tube's visible half's mean normal: the
+    view direction across the axis (y), so it turns with the view; the fit reads those targets."""
+    import splatting.relight.fit as fit
+
+    g = _tube()
+    n = len(g)
+
+    def across(cam):
+        v = cam.centre.float().reshape(1, 3) - g.means
+        return torch.nn.functional.normalize(v * torch.tensor([1.0, 0.0, 1.0]), dim=-1)
+
+    views, targets = pass_views(g, torch.full((n, 3), 0.5), across, torch.full((n, 3), 0.04))
+    monkeypatch.setattr(fit, "load_pass_targets", lambda v, s: targets)
+    return g, views
+
+
 def _tube(n=24):
     """A vertical row of round splats at x = z = 0 (a tube seen across), y 0.6..1.4."""
     y = torch.linspace(0.6, 1.4, n)
@@ -474,18 +491,9 @@ def test_fit_learns_the_view_dependent_normal_of_a_tube(monkeypatch, view_normal
     # passes whose normal is the tube's visible half's mean normal (the view direction across the
     # axis, so it turns 60 deg over the ring's views): one normal per Gaussian cannot follow it,
     # the view-dependent ones do, on the held-out view too
-    import splatting.relight.fit as fit
     from splatting.relight.fit import RelightFitConfig, fit_relight
 
-    g = _tube()
-    n = len(g)
-
-    def across(cam):
-        v = cam.centre.float().reshape(1, 3) - g.means
-        return torch.nn.functional.normalize(v * torch.tensor([1.0, 0.0, 1.0]), dim=-1)
-
-    views, targets = pass_views(g, torch.full((n, 3), 0.5), across, torch.full((n, 3), 0.04))
-    monkeypatch.setattr(fit, "load_pass_targets", lambda v, s: targets)
+    g, views = _tube_passes(monkeypatch)
     feats, m = fit_relight(g, views, RelightFitConfig(iterations=150, holdout=(1,), progress=False,
                                                      shading_loss=0.0, view_normals=view_normals))
     assert ("normal_view" in feats) is view_normals
@@ -498,18 +506,9 @@ def test_fit_learns_the_view_dependent_normal_of_a_tube(monkeypatch, view_normal
 def test_view_normal_penalty_keeps_the_smallest_turn_that_explains_the_views(monkeypatch):
     # the ring's views pin B only along the directions they see the tube from; the penalty on
     # mean(B^2) keeps B small where the views leave it free, at little cost in the views
-    import splatting.relight.fit as fit
     from splatting.relight.fit import RelightFitConfig, fit_relight
 
-    g = _tube()
-    n = len(g)
-
-    def across(cam):
-        v = cam.centre.float().reshape(1, 3) - g.means
-        return torch.nn.functional.normalize(v * torch.tensor([1.0, 0.0, 1.0]), dim=-1)
-
-    views, targets = pass_views(g, torch.full((n, 3), 0.5), across, torch.full((n, 3), 0.04))
-    monkeypatch.setattr(fit, "load_pass_targets", lambda v, s: targets)
+    g, views = _tube_passes(monkeypatch)
     size, err = {}, {}
     for w in (0.0, 0.05):
         feats, m = fit_relight(g, views, RelightFitConfig(iterations=150, holdout=(1,), progress=False, shading_loss=0.0,
