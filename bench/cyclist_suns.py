@@ -66,7 +66,7 @@ def blender_worker(job_path):
 
 def posed_cyclist(bike_dir, avatar_dir):
     """-> (posed Gaussians, reflectance, world normals, gloss, roughness, sky visibility (per Gaussian),
-    rider body, IK rotations, root)."""
+    rider body, IK rotations, root, the bike's world normal_view (its Gaussians come first) or None)."""
     import torch
 
     from splatting.cyclist.compose import Cyclist
@@ -87,7 +87,8 @@ def posed_cyclist(bike_dir, avatar_dir):
     alb, gl = torch.cat([rb.albedo, ra.albedo]), torch.cat([rb.gloss, ra.gloss])
     rough = torch.cat([torch.full((len(rb.albedo),), ROUGHNESS), torch.full((len(ra.albedo),), float(RIDER_ROUGHNESS))])
     sky = torch.cat([rb.sky_visibility(), torch.ones(len(ra.albedo))])  # as relit datasets: riders see the whole sky
-    return frame.gaussians, alb + gl, nrm, gl, rough, sky, load_rider(ra.avatar.rider_id), rot, root
+    return (frame.gaussians, alb + gl, nrm, gl, rough, sky, load_rider(ra.avatar.rider_id), rot, root,
+            rb.posed_normal_view(pose))
 
 
 def render_relit_cyclist(g, refl, nrm, gl, rough, sky, camera, light):
@@ -133,9 +134,12 @@ def main():
     from splatting.rider.body import export_rider, pose_vertices
 
     torch.set_num_threads(1)
-    g, refl, nrm, gl, rough, sky, rider, rot, root = posed_cyclist(a.bike, a.avatar)
+    g, refl, nrm, gl, rough, sky, rider, rot, root, nview = posed_cyclist(a.bike, a.avatar)
     lo, hi = g.means.min(0).values.double(), g.means.max(0).values.double()
     cam = ring_camera(CAMERA_AZIMUTH, tuple(float(x) for x in (lo + hi) / 2), name="camera_suns")
+    if nview is not None:  # a bike fitted with view-dependent normals: turned to this camera
+        from splatting.relight.render import view_normals
+        nrm = torch.cat([view_normals(nrm[:len(nview)], nview, g.means[:len(nview)].float(), cam), nrm[len(nview):]])
     os.makedirs(a.work, exist_ok=True)
     mesh = os.path.join(a.work, "rider_posed.ply")
     export_rider(rider, mesh, vertices=pose_vertices(rider, rot.double(), root.double())[0])

@@ -259,6 +259,7 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
             cam = ring[int(c)]
             cam = cam.scaled(size / cam.width) if cam.width != size else cam
             posed, albedo, normals, gloss = rb.pose(torch.tensor(pose, dtype=torch.float64))
+            nview = rb.posed_normal_view(torch.tensor(pose, dtype=torch.float64))  # per pose, like the normals
             g = posed.gaussians.map(lambda x: x.contiguous())
             tb, tr, ts = [], [], []
             for _ in range(repeats):  # interleaved, so load changes hit all alike
@@ -266,10 +267,11 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
                 baked = render_gaussians(g, cam, antialiased=trained_aa)
                 b = time.perf_counter()
                 flat = render_relit(g, albedo, normals, cam, light, gloss, antialiased=aa, static=rb.static,
-                                    sky_visibility=sky, shadow_antialiased=trained_aa)
+                                    sky_visibility=sky, shadow_antialiased=trained_aa, normal_view=nview)
                 c2 = time.perf_counter()
                 relit = render_relit(g, albedo, normals, cam, light, gloss, shadows=True, antialiased=aa,
-                                     static=rb.static, sky_visibility=sky, shadow_antialiased=trained_aa)
+                                     static=rb.static, sky_visibility=sky, shadow_antialiased=trained_aa,
+                                     normal_view=nview)
                 ts.append(time.perf_counter() - c2)
                 tr.append(c2 - b)
                 tb.append(b - a)

@@ -261,33 +261,47 @@ def read_passes(paths):
 
 # Relightable Gaussians: beside gaussians/<part>.ply, gaussians/<part>.relight.npz holds "albedo" (N, 3)
 # linear diffuse colour, "gloss" (N, 3) linear glossy colour and "normal" (N, 3) unit normals in the
-# part's canonical frame, float32, row i belonging to the PLY's Gaussian i.
+# part's canonical frame, float32, row i belonging to the PLY's Gaussian i.  Optionally "normal_view"
+# (N, 3, 3), same frame: view-dependent normals, Gaussian i's normal seen from the unit direction v
+# (from it to the camera) being normalize(normal_i + normal_view_i @ v) (docs/relighting.md).
 RELIGHT_KEYS = ("albedo", "normal", "gloss")
+RELIGHT_VIEW_KEY = "normal_view"
 
 
 def relight_path(ply_path):
     return os.path.splitext(os.fspath(ply_path))[0] + ".relight.npz"
 
 
-def write_relight(ply_path, albedo, normal, gloss):
+def write_relight(ply_path, albedo, normal, gloss, normal_view=None):
     path = relight_path(ply_path)
+    arrays = {k: np.asarray(v, np.float32) for k, v in zip(RELIGHT_KEYS, (albedo, normal, gloss))}
+    if normal_view is not None:
+        arrays[RELIGHT_VIEW_KEY] = np.asarray(normal_view, np.float32)
+        if arrays[RELIGHT_VIEW_KEY].shape != (len(arrays["normal"]), 3, 3):
+            raise ValueError(f"normal_view {arrays[RELIGHT_VIEW_KEY].shape} != ({len(arrays['normal'])}, 3, 3)")
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as f:
-            np.savez(f, **{k: np.asarray(v, np.float32) for k, v in zip(RELIGHT_KEYS, (albedo, normal, gloss))})
+            np.savez(f, **arrays)
     return path
 
 
 def read_relight(ply_path, n=None):
-    """-> {"albedo", "normal", "gloss"}: (N, 3) float32; UserError when missing or not matching n Gaussians."""
+    """-> {"albedo", "normal", "gloss"}: (N, 3) float32, and "normal_view" (N, 3, 3) when the file has
+    view-dependent normals; UserError when missing or not matching n Gaussians."""
     path = relight_path(ply_path)
     if not os.path.isfile(path):
         raise UserError(f"{path}: missing (fit it with `python -m splatting relight-fit`)")
     try:
         with np.load(path) as z:
             out = {k: z[k] for k in RELIGHT_KEYS}
+            view = z[RELIGHT_VIEW_KEY] if RELIGHT_VIEW_KEY in z.files else None
     except (OSError, KeyError, ValueError) as e:
         raise UserError(f"{path}: unreadable relight file ({e})") from None
     shapes = {k: v.shape for k, v in out.items()}
     if any(s != ((n if n is not None else s[0]), 3) for s in shapes.values()) or len(set(shapes.values())) != 1:
         raise UserError(f"{path}: arrays {shapes} do not match {n} Gaussians")
+    if view is not None:
+        if view.shape != (len(out["normal"]), 3, 3):
+            raise UserError(f"{path}: {RELIGHT_VIEW_KEY} {view.shape} does not match {len(out['normal'])} Gaussians")
+        out[RELIGHT_VIEW_KEY] = view
     return out

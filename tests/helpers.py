@@ -265,7 +265,8 @@ def axis_splats(means, scales, opacity_logit=4.0):
 def pass_views(g, albedo, normal, gloss, antialiased=False):
     """Five 64 px ring views (azimuth -30..30 deg, orbit centre (0, 1, 0)) of Gaussians g whose
     render passes are composited from known channels: (Views, {"albedo", "normal", "gloss"}:
-    stacked targets), for the relight fit (patch fit.load_pass_targets to return the targets)."""
+    stacked targets), for the relight fit (patch fit.load_pass_targets to return the targets).
+    normal may be a function of the camera (view-dependent normals) -> (N, 3)."""
     from splatting.raster.camera import ring_camera
     from splatting.relight.render import composite_features, prepare
     from splatting.training.views import Views
@@ -274,7 +275,8 @@ def pass_views(g, albedo, normal, gloss, antialiased=False):
             for i, a in enumerate((-30, -15, 0, 15, 30))]
     targets, imgs = {"albedo": [], "normal": [], "gloss": []}, []
     for c in cams:
-        (a, n, gl), alpha = composite_features(prepare(g, c, antialiased), [albedo, normal, gloss])
+        nrm = normal(c) if callable(normal) else normal
+        (a, n, gl), alpha = composite_features(prepare(g, c, antialiased), [albedo, nrm, gloss])
         for k, x in zip(("albedo", "normal", "gloss"), (a, n, gl)):
             targets[k].append(x)
         imgs.append(torch.cat([a, alpha[..., None]], -1))

@@ -255,3 +255,34 @@ def test_shadow_maps_draw_an_antialiased_bike_with_the_filter(assets, monkeypatc
                 assert aa is False
             else:  # the bike's Gaussians (first, 3 x ~300), not the rider's 1500
                 assert torch.is_tensor(aa) and len(aa) == n and 800 < int(aa.sum()) < 1000 and not bool(aa[-1])
+
+
+def test_relit_bike_with_view_normals_turns_them_to_the_dataset_camera(assets, tmp_path, monkeypatch):
+    # a bike fitted with view-dependent normals (relight.npz "normal_view") is shaded with them
+    # turned to the sample's camera; normal_view 0 shades as the plain normals
+    import shutil
+
+    from splatting.relight import render
+    root = str(tmp_path / "a")
+    shutil.copytree(assets, root)
+    plys = [os.path.join(root, "rl", "gaussians", p + ".ply") for p in ("frame", "steering", "crank")]
+    base, _, _, _ = _sample(_cfg(root), 1)
+    g = torch.Generator().manual_seed(9)
+    for view in ("zero", "random"):
+        for ply in plys:
+            r = bike_folder.read_relight(ply)
+            n = len(r["normal"])
+            B = np.zeros((n, 3, 3)) if view == "zero" else torch.randn(n, 3, 3, generator=g).numpy() * 3
+            bike_folder.write_relight(ply, r["albedo"], r["normal"], r["gloss"], B)
+        calls = []
+        real = render.view_normals
+        monkeypatch.setattr(render, "view_normals", lambda n, b, m, c: calls.append((len(n), c)) or real(n, b, m, c))
+        rgb, img, _, _ = _sample(_cfg(root), 1)
+        monkeypatch.setattr(render, "view_normals", real)
+        assert calls and all(k == sum(len(bike_folder.read_relight(p)["normal"]) for p in plys) for k, _ in calls)
+        np.testing.assert_allclose(calls[0][1].R.double().numpy(), np.asarray(img["camera"]["R"]), atol=1e-6)
+        diff = np.abs(rgb.astype(int) - base.astype(int))
+        if view == "zero":
+            assert diff.max() <= 1
+        else:
+            assert (diff.max(-1) > 2).mean() > 0.005

@@ -384,3 +384,156 @@ def test_relit_loss_shades_as_the_renderer_and_differentiates():
     loss.backward()
     stepped = (turned - 0.05 * turned.grad / turned.grad.abs().max()).detach()
     assert float(relit_loss((alb, stepped, gl), alpha, target, alpha, cam, light)) < float(loss.detach())
+
+
+def test_view_normals_of_a_tube_turn_with_the_view():
+    # normal_view = k (I - a a^T), normal 0: the mean normal of a tube's visible half, the view
+    # direction's part across the axis a; normal_view 0 leaves the normals as they are
+    from splatting.relight.render import view_normals
+
+    gen = torch.Generator().manual_seed(2)
+    n = 50
+    means = torch.randn(n, 3, generator=gen) * 0.2 + torch.tensor([0.0, 1.0, 0.0])
+    a = torch.nn.functional.normalize(torch.randn(n, 3, generator=gen), dim=-1)
+    B = 2.0 * (torch.eye(3) - a[:, :, None] * a[:, None, :])
+    cam = ring_camera(70, orbit_centre=(0, 1, 0), size=64)
+    v = torch.nn.functional.normalize(cam.centre.float().reshape(1, 3) - means, dim=-1)
+    want = torch.nn.functional.normalize(v - (v * a).sum(-1, keepdim=True) * a, dim=-1)
+    torch.testing.assert_close(view_normals(torch.zeros(n, 3), B, means, cam), want, atol=1e-5, rtol=0)
+    n0 = torch.nn.functional.normalize(torch.randn(n, 3, generator=gen), dim=-1)
+    torch.testing.assert_close(view_normals(n0, torch.zeros(n, 3, 3), means, cam), n0, atol=1e-6, rtol=0)
+    # the render's path (float32, no gradient: csrc/shade.cpp) against the fit's (torch, float64)
+    B = torch.randn(n, 3, 3, generator=gen)
+    c_path = view_normals(n0, B, means, cam)
+    torch_path = view_normals(n0.double(), B.double(), means.double(), cam)
+    assert c_path.dtype == torch.float32 and torch_path.dtype == torch.float64
+    torch.testing.assert_close(c_path.double(), torch_path, atol=1e-5, rtol=0)
+    Bg = B.clone().requires_grad_(True)  # with a gradient wanted: the torch path, differentiable
+    view_normals(n0, Bg, means, cam).sum().backward()
+    assert Bg.grad is not None and float(Bg.grad.abs().sum()) > 0
+
+
+def test_view_normals_turn_with_their_part(tmp_path):
+    # posed_normal_view (R B R^T per part) in the world equals the part's own normal seen from the
+    # camera's direction turned into the part's frame, turned back: n_w = R normalize(n + B R^T v)
+    from splatting.gaussians.container import read_ply
+    from splatting.relight.render import view_normals
+
+    d = make_bike(tmp_path)
+    g = torch.Generator().manual_seed(1)
+    for part in ("frame", "steering", "crank"):
+        n = len(read_ply(bike_folder.gaussians_path(d, part)))
+        bike_folder.write_relight(bike_folder.gaussians_path(d, part), torch.rand(n, 3).numpy(),
+                                  torch.nn.functional.normalize(torch.randn(n, 3, generator=g), dim=-1).numpy(),
+                                  torch.rand(n, 3).numpy(), torch.randn(n, 3, 3, generator=g).numpy())
+    bike = RelightableBike.load(d)
+    assert bike.normal_view is not None and bike.normal_view.shape == (len(bike.model), 3, 3)
+    cam = ring_camera(120, orbit_centre=(0, 0.5, 0), size=64)
+    rng = np.random.default_rng(7)
+    for _ in range(2):
+        pose = torch.tensor(random_pose(rng), dtype=torch.float64)
+        posed, _, world, _ = bike.pose(pose)
+        means = posed.gaussians.means.float()
+        got = view_normals(world, bike.posed_normal_view(pose), means, cam)
+        v = torch.nn.functional.normalize(cam.centre.float().reshape(1, 3) - means, dim=-1)
+        T = bike.model.part_transforms(pose)
+        for name, (a, e) in zip(bike.model.part_names, bike.model.ranges):
+            R = T[name][0, :3, :3].float()
+            own = torch.nn.functional.normalize(
+                bike.normals[a:e] + torch.einsum("nij,nj->ni", bike.normal_view[a:e], v[a:e] @ R), dim=-1)
+            torch.testing.assert_close(got[a:e], own @ R.T, atol=2e-5, rtol=0)
+
+
+def test_view_normals_file_round_trip_and_refusals(tmp_path):
+    d = make_bike(tmp_path)
+    p = bike_folder.gaussians_path(d, "frame")
+    z = np.zeros((5, 3))
+    bike_folder.write_relight(p, z, z, z)
+    assert "normal_view" not in bike_folder.read_relight(p, n=5)  # optional: a plain fit has none
+    B = np.arange(45, dtype=np.float32).reshape(5, 3, 3)
+    bike_folder.write_relight(p, z, z, z, B)
+    np.testing.assert_array_equal(bike_folder.read_relight(p, n=5)["normal_view"], B)
+    with pytest.raises(ValueError, match="normal_view"):
+        bike_folder.write_relight(p, z, z, z, B[:4])
+    with open(bike_folder.relight_path(p), "wb") as f:
+        np.savez(f, albedo=z, normal=z, gloss=z, normal_view=B[:, :2])
+    with pytest.raises(bike_folder.UserError, match="normal_view"):
+        bike_folder.read_relight(p, n=5)
+
+
+def _tube_passes(monkeypatch):
+    """_tube() and its ring views whose normal pass is the tube's visible half's mean normal: the
+    view direction across the axis (y), so it turns with the view; the fit reads those targets."""
+    import splatting.relight.fit as fit
+
+    g = _tube()
+    n = len(g)
+
+    def across(cam):
+        v = cam.centre.float().reshape(1, 3) - g.means
+        return torch.nn.functional.normalize(v * torch.tensor([1.0, 0.0, 1.0]), dim=-1)
+
+    views, targets = pass_views(g, torch.full((n, 3), 0.5), across, torch.full((n, 3), 0.04))
+    monkeypatch.setattr(fit, "load_pass_targets", lambda v, s: targets)
+    return g, views
+
+
+def _tube(n=24):
+    """A vertical row of round splats at x = z = 0 (a tube seen across), y 0.6..1.4."""
+    y = torch.linspace(0.6, 1.4, n)
+    means = torch.stack([torch.zeros(n), y, torch.zeros(n)], 1)
+    ls = torch.log(torch.tensor([0.05, 0.04, 0.05])).repeat(n, 1)
+    return Gaussians(means, torch.tensor([1.0, 0, 0, 0]).repeat(n, 1), ls, torch.full((n,), 3.0), torch.zeros(n, 1, 3))
+
+
+@pytest.mark.parametrize("view_normals", [False, True])
+def test_fit_learns_the_view_dependent_normal_of_a_tube(monkeypatch, view_normals):
+    # passes whose normal is the tube's visible half's mean normal (the view direction across the
+    # axis, so it turns 60 deg over the ring's views): one normal per Gaussian cannot follow it,
+    # the view-dependent ones do, on the held-out view too
+    from splatting.relight.fit import RelightFitConfig, fit_relight
+
+    g, views = _tube_passes(monkeypatch)
+    feats, m = fit_relight(g, views, RelightFitConfig(iterations=150, holdout=(1,), progress=False,
+                                                     shading_loss=0.0, view_normals=view_normals))
+    assert ("normal_view" in feats) is view_normals
+    if view_normals:
+        assert m["heldout_normal_err_deg"] < 3
+    else:
+        assert m["heldout_normal_err_deg"] > 6
+
+
+def test_view_normal_penalty_keeps_the_smallest_turn_that_explains_the_views(monkeypatch):
+    # the ring's views pin B only along the directions they see the tube from; the penalty on
+    # mean(B^2) keeps B small where the views leave it free, at little cost in the views
+    from splatting.relight.fit import RelightFitConfig, fit_relight
+
+    g, views = _tube_passes(monkeypatch)
+    size, err = {}, {}
+    for w in (0.0, 0.05):
+        feats, m = fit_relight(g, views, RelightFitConfig(iterations=150, holdout=(1,), progress=False, shading_loss=0.0,
+                                                         view_normals=True, view_normal_penalty=w))
+        size[w], err[w] = float(feats["normal_view"].square().mean()), m["heldout_normal_err_deg"]
+    assert size[0.05] < 0.7 * size[0.0]
+    assert err[0.05] < 4
+
+
+def test_fit_of_sh_degree_2_parts_reads_only_their_base_colour(monkeypatch):
+    # fine-tuned parts may carry SH degree 2 (issue 14's best bike): the relight fit starts the
+    # albedo from the DC colour only, so the view-dependent bands change nothing in its channels
+    import splatting.relight.fit as fit
+    from splatting.relight.fit import RelightFitConfig, fit_relight
+
+    g0 = _flat_patch()
+    n = len(g0)
+    bands = torch.randn(n, 8, 3, generator=torch.Generator().manual_seed(3)) * 0.3
+    g2 = Gaussians(g0.means, g0.quats, g0.log_scales, g0.opacity_logits, torch.cat([g0.sh, bands], 1))
+    assert g2.sh_degree == 2
+    views, targets = pass_views(g0, torch.full((n, 3), 0.4), torch.tensor([0.0, 0.0, -1.0]).repeat(n, 1),
+                                torch.full((n, 3), 0.04))
+    monkeypatch.setattr(fit, "load_pass_targets", lambda v, s: targets)
+    cfg = RelightFitConfig(iterations=20, holdout=(2,), progress=False, view_normals=True, relit_loss=3.0)
+    f0, _ = fit_relight(g0, views, cfg)
+    f2, _ = fit_relight(g2, views, cfg)
+    for k in ("albedo", "normal", "gloss", "normal_view"):
+        assert torch.equal(f0[k], f2[k]), k

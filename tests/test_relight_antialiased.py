@@ -163,9 +163,12 @@ def test_relight_fit_defaults_differ_for_a_bike_and_a_views_folder(tmp_path, mon
     p = argparse.ArgumentParser()
     fit.add_arguments(p)
     for argv in (["--bike", str(tmp_path)], ["--views", str(tmp_path)], ["--bike", str(tmp_path), "--iterations", "7",
-                                                                          "--relit-loss", "0"]):
+                                                                          "--relit-loss", "0", "--no-view-normals"],
+                 ["--views", str(tmp_path), "--view-normals"]):
         assert fit.run(p.parse_args(argv)) == 0
-    bike, views, given = seen
+    bike, views, given, views_vn = seen
     assert (bike.iterations, bike.relit_loss) == (fit.BIKE_ITERATIONS, fit.BIKE_RELIT_LOSS) == (150, 3.0)
-    assert (views.iterations, views.relit_loss) == (fit.RelightFitConfig.iterations, 0.0)
-    assert (given.iterations, given.relit_loss) == (7, 0.0)
+    assert bike.view_normals is fit.BIKE_VIEW_NORMALS is True
+    assert (views.iterations, views.relit_loss, views.view_normals) == (fit.RelightFitConfig.iterations, 0.0, False)
+    assert (given.iterations, given.relit_loss, given.view_normals) == (7, 0.0, False)
+    assert views_vn.view_normals is True

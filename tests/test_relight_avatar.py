@@ -66,3 +66,8 @@ def test_load_reads_the_relight_file_beside_rider_ply(avatar, tmp_path):
     np.testing.assert_allclose(ra.albedo.numpy(), alb, rtol=1e-6)
     with pytest.raises(ValueError):
         RelightableAvatar(av, ra.albedo[:-1], ra.normals, ra.gloss)
+    # view-dependent normals (a bike's) are refused, not silently dropped
+    bike_folder.write_relight(folder / "rider.ply", alb, np.tile([0.0, 1.0, 0.0], (n, 1)), np.zeros((n, 3)),
+                              np.zeros((n, 3, 3)))
+    with pytest.raises(bike_folder.UserError, match="view-dependent"):
+        RelightableAvatar.load(folder)

@@ -281,7 +281,7 @@ def make_sample(cfg, index, assets):
                                     lod_cfg["compensate"], frame.ids)
                 slot = slot.index_select(0, idx)
         if relit is not None:
-            relit.instance(k, inst["bike"], inst["rider"], frame.gaussians, looked, g, idx)
+            relit.instance(k, inst["bike"], inst["rider"], frame.gaussians, looked, g, idx, cam)
         # a bike whose parts were trained antialiased is drawn so (its rider and the rest as trained)
         bike_aa = (frame.ids != RIDER_ID) & bool(assets.bikes[inst["bike"]].antialiased)
         aa.append(bike_aa if idx is None else bike_aa.index_select(0, idx))

@@ -169,7 +169,7 @@ class RelitSample:
         if getattr(assets, "relight_channels", None) is None:
             assets.relight_channels = _Channels()
         self.assets, self.ch = assets, assets.relight_channels
-        self.normals, self.channels = {}, {}
+        self.normals, self.normal_view, self.channels = {}, {}, {}
 
     def posed(self, bike, rider, js, poses):
         """After Cyclist.pose of the instances js (poses (B, 8)): their world normals (bike parts then
@@ -178,19 +178,25 @@ class RelitSample:
         ra = self.ch.rider(self.assets, rider) if rider is not None else None
         rot = self.assets.avatars[rider].rotations if rider is not None else None
         for b, j in enumerate(js):
-            n = rb.posed_normals(torch.as_tensor(np.asarray(poses[b]), dtype=torch.float64))
+            pose = torch.as_tensor(np.asarray(poses[b]), dtype=torch.float64)
+            n = rb.posed_normals(pose)
+            self.normal_view[j] = rb.posed_normal_view(pose)  # the bike's view-dependent normals, or None
             if ra is not None:
                 n = torch.cat([n, ra.posed_normals(rot[b])])
             self.normals[j] = n
 
-    def instance(self, k, bike, rider, trained, looked, g, idx):
+    def instance(self, k, bike, rider, trained, looked, g, idx, camera):
         """Instance k's channels: trained = its posed Gaussians, looked = after the appearance look
         (the look's change of each Gaussian's colour goes into its albedo, in linear light),
-        g = what is rendered (after the level of detail, idx its rows of looked, or None)."""
+        g = what is rendered (after the level of detail, idx its rows of looked, or None), seen by
+        camera (a bike fitted with view-dependent normals turns them to it)."""
         from splatting.gaussians.sh import C0
-        from splatting.relight.render import relight_features
+        from splatting.relight.render import relight_features, view_normals
         alb, gl, rough, sky = self.ch.static(self.assets, bike, rider)
         nrm = self.normals[k]
+        if self.normal_view.get(k) is not None:  # the bike's Gaussians come first
+            nb = len(self.normal_view[k])
+            nrm = torch.cat([view_normals(nrm[:nb], self.normal_view[k], trained.means[:nb].float(), camera), nrm[nb:]])
         if looked is not trained:
             before = _srgb_decode((C0 * trained.sh[:, 0] + 0.5).float()).clamp_min(1e-3)
             after = _srgb_decode((C0 * looked.sh[:, 0] + 0.5).float())

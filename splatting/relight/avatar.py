@@ -36,7 +36,11 @@ class RelightableAvatar:
     @classmethod
     def of(cls, avatar, folder):
         """The relight channels of folder's avatar (PLY_NAME's .relight.npz) for its loaded avatar."""
-        r = bike_folder.read_relight(os.path.join(folder, PLY_NAME), n=len(avatar))
+        path = os.path.join(folder, PLY_NAME)
+        r = bike_folder.read_relight(path, n=len(avatar))
+        if bike_folder.RELIGHT_VIEW_KEY in r:  # posing turns normals by skinning only: refuse, not drop
+            raise bike_folder.UserError(f"{bike_folder.relight_path(path)}: view-dependent normals are for bikes' "
+                                        "parts; fit the avatar without --view-normals")
         return cls(avatar, *(torch.from_numpy(r[k]) for k in ("albedo", "normal", "gloss")))
 
     def posed_normals(self, rotations):

@@ -11,12 +11,16 @@ from splatting.relight.render import relit_static
 
 
 class RelightableBike:
-    def __init__(self, model: BikeModel, albedo, normals, gloss=None):
-        """albedo, normals, gloss: (N, 3) in the model's Gaussian order (model.part_names, model.ranges)."""
+    def __init__(self, model: BikeModel, albedo, normals, gloss=None, normal_view=None):
+        """albedo, normals, gloss: (N, 3) in the model's Gaussian order (model.part_names, model.ranges);
+        normal_view: None, or (N, 3, 3) view-dependent normals in the parts' frames (render.view_normals)."""
         gloss = torch.zeros_like(albedo) if gloss is None else gloss
         if any(x.shape != (len(model), 3) for x in (albedo, normals, gloss)):
             raise ValueError(f"albedo {tuple(albedo.shape)} / normals {tuple(normals.shape)} / gloss "
                              f"{tuple(gloss.shape)} != ({len(model)}, 3)")
+        if normal_view is not None and normal_view.shape != (len(model), 3, 3):
+            raise ValueError(f"normal_view {tuple(normal_view.shape)} != ({len(model)}, 3, 3)")
+        self.normal_view = None if normal_view is None else normal_view.float()
         self.model = model
         self.albedo = albedo.float()
         self.gloss = gloss.float()
@@ -34,7 +38,11 @@ class RelightableBike:
         parts = [bike_folder.read_relight(bike_folder.gaussians_path(bike_dir, name), n=e - a)
                  for name, (a, e) in zip(model.part_names, model.ranges)]
         cat = lambda k: torch.cat([torch.from_numpy(p[k]) for p in parts])  # noqa: E731
-        return cls(model, cat("albedo"), cat("normal"), cat("gloss"))
+        view = None
+        if any(bike_folder.RELIGHT_VIEW_KEY in p for p in parts):  # a part fitted without: view-independent
+            view = torch.cat([torch.from_numpy(p[bike_folder.RELIGHT_VIEW_KEY]) if bike_folder.RELIGHT_VIEW_KEY in p
+                              else torch.zeros(len(p["normal"]), 3, 3) for p in parts])
+        return cls(model, cat("albedo"), cat("normal"), cat("gloss"), view)
 
     def posed_normals(self, pose):
         """(8,) pose -> world-frame normals (N, 3)."""
@@ -43,6 +51,18 @@ class RelightableBike:
         for name, (a, e) in zip(self.model.part_names, self.model.ranges):
             R = T[name][0, :3, :3].to(self.normals.dtype)
             out[a:e] = self.normals[a:e] @ R.T
+        return out
+
+    def posed_normal_view(self, pose):
+        """(8,) pose -> world-frame normal_view (N, 3, 3) (R B R^T per part), for render_relit(normal_view=);
+        None for a bike fitted without view-dependent normals."""
+        if self.normal_view is None:
+            return None
+        T = self.model.part_transforms(pose)
+        out = torch.empty_like(self.normal_view)
+        for name, (a, e) in zip(self.model.part_names, self.model.ranges):
+            R = T[name][0, :3, :3].to(self.normal_view.dtype)
+            out[a:e] = R @ self.normal_view[a:e] @ R.T
         return out
 
     def pose(self, pose):

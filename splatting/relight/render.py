@@ -181,10 +181,47 @@ def shade_flags(gloss, rough_channel=False, shadows=False, sky_channel=False):
     return int(gloss) | 2 * int(rough_channel) | 4 * int(shadows) | 16 * int(sky_channel)
 
 
+def view_normals(normals, normal_view, means, camera):
+    """View-dependent normals: (N, 3) normalize(normals + normal_view @ v), v each Gaussian's unit
+    direction to the camera's centre (N, 3).  normal_view (N, 3, 3) in the normals' frame
+    (RelightableBike.posed_normal_view: world).  Why: a Gaussian across a thin tube shows the mean
+    normal of the tube's visible half, which turns with the view: for a cylinder of axis a it is
+    normalize((I - a a^T) v), which normal_view = k (I - a a^T) gives exactly; a flat splat has
+    normal_view = 0 (fit.RelightFitConfig.view_normals, docs/relighting.md).  Without gradients on
+    float32 CPU tensors one C pass (csrc/shade.cpp rl_view_normals_f32: ~10x faster than the torch
+    operations, which the fit differentiates)."""
+    c = camera.centre.to(means.dtype).reshape(1, 3)
+    xs = (normals, normal_view, means)
+    if all(x.dtype == torch.float32 and x.device.type == "cpu" for x in xs) and not (
+            torch.is_grad_enabled() and any(x.requires_grad for x in xs)):
+        return _view_normals_c(*xs, c)
+    v = c - means
+    v = v / v.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    n = torch.baddbmm(normals.to(means.dtype)[:, :, None], normal_view.to(means.dtype), v[:, :, None])[:, :, 0]
+    return n / n.norm(dim=-1, keepdim=True).clamp_min(1e-6)
+
+
+_VN = None
+
+
+def _view_normals_c(normals, normal_view, means, c):
+    import ctypes
+
+    global _VN
+    if _VN is None:
+        from splatting.raster import build
+        _VN = build.load().rl_view_normals_f32
+        _VN.argtypes, _VN.restype = [ctypes.c_int64] + [ctypes.c_void_p] * 5, None
+    normals, normal_view, means, c = (x.contiguous() for x in (normals, normal_view, means, c))
+    out = torch.empty_like(normals)
+    _VN(len(normals), normals.data_ptr(), normal_view.data_ptr(), means.data_ptr(), c.data_ptr(), out.data_ptr())
+    return out
+
+
 @torch.no_grad()
 def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
                  shadows=False, antialiased=True, static=None, reflectance=False, sky_visibility=None, normal=False,
-                 fused=None, shadow_antialiased=False):
+                 fused=None, shadow_antialiased=False, normal_view=None):
     """Gaussians g with per-Gaussian linear albedo (N, 3), world-frame unit normals (N, 3) and optionally
     a linear glossy colour (N, 3) under a light -> dict rgb (H, W, 3) display colour premultiplied
     (over black), alpha, with normal=True the composited normal and with reflectance=True the
@@ -204,7 +241,9 @@ def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness
     sky_visibility; a bike's: RelightableBike.sky_visibility), one more composited channel; None:
     the sky reaches everything.  shadow_antialiased: the mip filter in the sun's shadow map
     (shadow.sun_visibility), for Gaussians trained with it (BikeModel.antialiased; a bool or (N,)
-    mask) whatever the view's `antialiased` (which also serves rendering below the training size)."""
+    mask) whatever the view's `antialiased` (which also serves rendering below the training size).
+    normal_view (N, 3, 3) world frame (RelightableBike.posed_normal_view): view-dependent normals,
+    view_normals(normals, normal_view, g.means, camera); None: normals as they are."""
     from splatting.gaussians.container import Gaussians
     from splatting.raster.sparse import render_gaussians
 
@@ -215,6 +254,8 @@ def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness
     static = relit_static(albedo, gloss) if static is None else static
     if static.sh.shape != (len(g), 1, 3):
         raise ValueError(f"render_relit: static channels for {static.sh.shape[0]} Gaussians, not {len(g)}")
+    if normal_view is not None:
+        normals = view_normals(normals, normal_view, g.means, camera)
     vis = None
     if shadows:
         from splatting.relight.shadow import sun_visibility

@@ -301,3 +301,23 @@ extern "C" int rl_shade_tile_f32(const float* acc, int Cf, const float* T, int t
 extern "C" int rl_shade_tile_channels(int32_t flags) {
     return 3 + 3 + bool(flags & 1) + bool(flags & 2) + bool(flags & 4) + bool(flags & 16);
 }
+
+// View-dependent normals (splatting/relight/render.py view_normals, its no-grad float32 path):
+// out_i = normalize(n_i + B_i v_i), v_i = normalize(c - mu_i) the unit direction from Gaussian i to
+// the camera's centre c; n, mu, out (N, 3), B (N, 3, 3) row-major, all contiguous.  One pass over
+// the Gaussians instead of ~10 torch operations (80k Gaussians: ~1.8 ms as torch operations).
+extern "C" void rl_view_normals_f32(int64_t N, const float* n, const float* B, const float* mu, const float* c,
+                                    float* out) {
+    const float cx = c[0], cy = c[1], cz = c[2];
+    for (int64_t i = 0; i < N; ++i) {
+        float vx = cx - mu[3 * i], vy = cy - mu[3 * i + 1], vz = cz - mu[3 * i + 2];
+        const float r = 1.0f / std::sqrt(std::max(vx * vx + vy * vy + vz * vz, 1e-24f));
+        vx *= r; vy *= r; vz *= r;
+        const float* b = B + 9 * i;
+        const float ox = n[3 * i] + b[0] * vx + b[1] * vy + b[2] * vz;
+        const float oy = n[3 * i + 1] + b[3] * vx + b[4] * vy + b[5] * vz;
+        const float oz = n[3 * i + 2] + b[6] * vx + b[7] * vy + b[8] * vz;
+        const float s = 1.0f / std::sqrt(std::max(ox * ox + oy * oy + oz * oz, 1e-12f));
+        out[3 * i] = ox * s; out[3 * i + 1] = oy * s; out[3 * i + 2] = oz * s;
+    }
+}
