@@ -21,6 +21,9 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+POSES = 20  # the ground-truth check's random poses (seed 0); bike_relit scores the same ones
+
+
 def sample_poses(n, seed=0):
     rng = np.random.default_rng(seed)
     poses = np.stack([
@@ -96,7 +99,7 @@ def compare(bike_dir, poses, cams, gt_dir):
     return rows, renders
 
 
-def run(results, out_dir, n_poses=20, seed=0, samples=16):
+def run(results, out_dir, n_poses=POSES, seed=0, samples=16):
     bike_dir = find_bike(os.path.join(out_dir, "bikes"))
     if bike_dir is None:
         print("  bike_gt: no bike with trained part Gaussians under", os.path.join(out_dir, "bikes"), "- skipped")

@@ -194,7 +194,7 @@ def _fit_if_missing(bike, part, progress=print):
     return st
 
 
-def run_bench(results, out_dir, n_poses=6):
+def run_bench(results, out_dir, n_poses=None):
     """`make bench`: bike_gt's trained bike (out/bench/bikes, 512 px views) when it has the passes,
     compared at 256 px; otherwise the small bike built here."""
     from bench.bike_gt import find_bike
@@ -208,11 +208,12 @@ def run_bench(results, out_dir, n_poses=6):
     return run(results, out_dir, n_poses, bike=bike)
 
 
-def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None, progress=print):
-    """bike: a trained bike folder (views with passes, gaussians/); None builds the small one."""
+def run(results, out_dir, n_poses=None, seed=0, size=GT_SIZE, repeats=5, bike=None, progress=print):
+    """bike: a trained bike folder (views with passes, gaussians/); None builds the small one.
+    n_poses None: bike_gt's poses (bench/bike_gt.POSES, the issue's "same random poses")."""
     import torch
 
-    from bench.bike_gt import sample_poses
+    from bench.bike_gt import POSES, sample_poses
     from bench.compare import REFERENCE, renders_for, score_png, side_by_side, write_table
     from cyclist_formats import bike_folder
     from splatting.raster.camera import load_cameras
@@ -229,6 +230,7 @@ def run(results, out_dir, n_poses=6, seed=0, size=GT_SIZE, repeats=5, bike=None,
     else:
         bike, train_stats = os.path.abspath(bike), fit_missing(bike, progress)
     prep_s = time.time() - t0
+    n_poses = n_poses or POSES
     poses, cams = sample_poses(n_poses, seed)
     rng = np.random.default_rng(seed + 16)
     lights = [random_light(rng) for _ in range(n_poses)]
@@ -330,7 +332,7 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser(description="relit bike vs Blender under random suns (worker runs under bpy)")
     ap.add_argument("--worker", metavar="JOB_JSON")
     ap.add_argument("--out", help="bench output folder (standalone run)")
-    ap.add_argument("--poses", type=int, default=6)
+    ap.add_argument("--poses", type=int, help="random poses (default: bike_gt's, 20)")
     ap.add_argument("--size", type=int, default=GT_SIZE, help="comparison image size in px (default %(default)s)")
     ap.add_argument("--bike", help="a trained bike folder (views with passes + gaussians/); default: build a small one")
     a = ap.parse_args()
@@ -342,7 +344,7 @@ if __name__ == "__main__":
         sys.path.insert(0, ROOT)
         if a.bike and not os.path.isfile(os.path.join(a.bike, "gaussians", "frame.ply")):
             sys.exit(f"error: {a.bike}: no trained gaussians/frame.ply")
-        if a.poses < 1 or not 16 <= a.size <= 4096:
+        if (a.poses is not None and a.poses < 1) or not 16 <= a.size <= 4096:
             sys.exit("error: --poses must be >= 1 and --size in 16..4096")
         res = {}
         run(res, a.out, n_poses=a.poses, size=a.size, bike=a.bike)
