@@ -64,6 +64,8 @@ class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (trai
     densify_max: int = 30000     # ... up to this many Gaussians per part
     lr_decay: float = 1.0        # every rate ends at this fraction of its start, exponentially (1: constant) ...
     lr_tail: int = 0             # ... falling over the last lr_tail steps only (0: over the whole fine-tune)
+    eps2d: float = 0.3           # the splats' screen-space low-pass (px^2) the fine-tune renders with; the bike
+                                 # keeps it (posed_train.json) and every renderer draws its parts with it
     progress: bool = True
 
 
@@ -220,7 +222,7 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
         sh = sh0 if sh1 is None else torch.cat([sh0, sh1], 1)
         cat = lambda k, f: torch.cat([f(parts_p[n][k]) for n in model.part_names])  # noqa: E731
         return rasterize(m, q, cat("log_scales", torch.exp), cat("opacity_logits", torch.sigmoid), sh,
-                         cam, background=bg, antialiased=aa)
+                         cam, background=bg, antialiased=aa, eps2d=cfg.eps2d)
 
     n_train = len(jobs) - HELD_OUT
 
@@ -330,7 +332,9 @@ def done_with(bike_dir, cfg: PosedTrainConfig):
         return None
     # fine-tunes recorded before --densify existed ran without it: still this config when it is off
     # and before --lr-decay with constant rates
-    have = {"densify": False, "densify_max": PosedTrainConfig.densify_max, "lr_decay": 1.0, "lr_tail": 0, **m["config"]}
+    # and before --eps2d with rasterize's 0.3
+    have = {"densify": False, "densify_max": PosedTrainConfig.densify_max, "lr_decay": 1.0, "lr_tail": 0,
+            "eps2d": 0.3, **m["config"]}
     return m if have == want and not newer else None
 
 
@@ -398,6 +402,10 @@ def add_arguments(p):
     p.add_argument("--lr-tail", type=int, default=d.lr_tail,
                    help="with --lr-decay: constant rates, then the decay over the last N steps only "
                         "(default %(default)s: over the whole fine-tune)")
+    p.add_argument("--eps2d", type=float, default=d.eps2d,
+                   help="screen-space low-pass variance in px^2 added to every splat in the fine-tune and kept "
+                        "with the bike for every later render (default %(default)s; Cycles' 1.5 px "
+                        "Blackman-Harris pixel filter has variance 0.173)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
 
 
@@ -411,6 +419,7 @@ def check_args(args):
     checks.count("densify-max", args.densify_max, hi=10_000_000)
     checks.number("lr-decay", args.lr_decay, 0.0, 1.0, lo_open=True)
     checks.integer("lr-tail", args.lr_tail, 0, args.iterations)
+    checks.positive("eps2d", args.eps2d, 10.0)
     for p in ("frame", "steering"):
         f = p + ("_rest.ply" if args.from_rest else ".ply")
         if not os.path.isfile(os.path.join(args.bike, "gaussians", f)):
@@ -420,6 +429,6 @@ def check_args(args):
 def run(args):
     cfg = PosedTrainConfig(poses=args.poses, iterations=args.iterations, samples=args.samples, sh_degree=args.sh_degree,
                            densify=args.densify, densify_max=args.densify_max, lr_decay=args.lr_decay,
-                           lr_tail=args.lr_tail, progress=not args.quiet)
+                           lr_tail=args.lr_tail, eps2d=args.eps2d, progress=not args.quiet)
     train_bike_posed(args.bike, cfg, from_rest=args.from_rest)
     return 0
