@@ -295,7 +295,7 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
                    "config": cfg_d, "poses": len(jobs), "held_out_poses": HELD_OUT,
                    "held_out_box_psnr_before": before[0], "held_out_iou_before": before[1],
                    "held_out_box_psnr_after": after[0], "held_out_iou_after": after[1],
-                   "loss": round(loss_v, 5), "wall_s": round(wall, 1), "antialiased": aa}
+                   "loss": round(loss_v, 5), "wall_s": round(wall, 1), "antialiased": aa, "eps2d": cfg.eps2d}
 
 
 def lr_rate_factor(cfg: PosedTrainConfig, it):
@@ -363,7 +363,7 @@ def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print, from_res
     from splatting.gaussians.container import read_ply
 
     model = BikeModel({p: read_ply(f) for p, f in start.items()}, model_keypoints_doc(bike_dir), model.meta,
-                      source=bike_dir, antialiased=model.antialiased)
+                      source=bike_dir, antialiased=model.antialiased, eps2d=model.eps2d)
     jobs = render_posed_views(bike_dir, os.path.join(bike_dir, "views", "posed"), cfg, log)
     parts, metrics = fine_tune(model, os.path.join(bike_dir, "views", "whole"), jobs, cfg)
     for p, g in parts.items():
@@ -379,6 +379,18 @@ def model_keypoints_doc(bike_dir):
     from cyclist_formats import bike_folder
 
     return bike_folder.read_json(os.path.join(bike_dir, "keypoints.json"), "keypoints.json")
+
+
+def fine_tuned_eps2d(gdir):
+    """(eps2d, {part: Gaussians}) of gaussians/posed_train.json: the low-pass its fine-tune
+    rendered with (config "eps2d"; 0.3 in records from before --eps2d) and the parts it wrote, or
+    None without a record (BikeModel reads each part's filter with it)."""
+    from splatting.raster.sparse import EPS2D
+
+    m = read_json_or_none(os.path.join(gdir, "posed_train.json"))
+    if not isinstance(m, dict) or not isinstance(m.get("config"), dict) or not isinstance(m.get("gaussians"), dict):
+        return None
+    return m["config"].get("eps2d", EPS2D), m["gaussians"]
 
 
 def add_arguments(p):

@@ -24,6 +24,9 @@ from splatting.gaussians.sh import eval_sh
 from splatting.rotations import quat_to_rotmat  # noqa: F401  (re-exported for the projection)
 
 ALPHA_MIN = 1.0 / 255.0
+# the screen-space low-pass (px^2) rasterize adds by default, and the filter of every trained model
+# that records none (parts, fine-tuned bikes and avatars made before the filter was recorded)
+EPS2D = 0.3
 ALPHA_MAX = 0.99
 T_MIN = 1e-4
 CHUNK_PAIRS = 1 << 16  # candidate pairs per front-to-back chunk in intersect() (2^15..2^16 measured best)
@@ -49,7 +52,29 @@ def check_eps2d(eps2d, n, who="rasterize"):
     return float(eps2d)
 
 
-def project(means, quats, scales, camera, near=0.01, eps2d=0.3):
+def eps2d_where(mask, a, b):
+    """The eps2d of a scene of two kinds of Gaussians: a where mask (N,) bool, b elsewhere (a bike's
+    filter and its rider's).  One number when they agree or one kind is absent: rasterize's scalar
+    path, the renders of before bit for bit."""
+    a, b = float(a), float(b)
+    if a == b or not bool(mask.any()):
+        return b
+    if bool(mask.all()):
+        return a
+    return torch.where(mask, torch.tensor(a, dtype=torch.float64), torch.tensor(b, dtype=torch.float64))
+
+
+def eps2d_cat(parts):
+    """[(count, eps2d number or (count,) tensor), ...] in the scene's order -> the eps2d of their
+    concatenation: one number when all are the same number (the scalar path), else a (N,) tensor."""
+    nums = {float(e) for _, e in parts if not torch.is_tensor(e)}
+    if all(not torch.is_tensor(e) for _, e in parts) and len(nums) <= 1:
+        return nums.pop() if nums else EPS2D
+    return torch.cat([e.detach().to(torch.float64) if torch.is_tensor(e) else torch.full((n,), float(e), dtype=torch.float64)
+                      for n, e in parts])
+
+
+def project(means, quats, scales, camera, near=0.01, eps2d=EPS2D):
     """EWA projection (eps2d: a number or a (N,) tensor, check_eps2d). Returns means2d (N,2), conics (N,3) = (a,b,c) of the inverse 2D covariance,
     depths (N,) camera z, radii (N,) long (3 sigma of the largest eigenvalue, 0 = culled),
     boxes (N,4) long pixel ranges [u0, u1, v0, v1] inclusive (empty when u1 < u0)."""
@@ -302,7 +327,7 @@ def composite(means2d, conics, opacities, colors, depths, background, pairs, H, 
 
 
 def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_degree=None,
-              near=0.01, eps2d=0.3, features=None, antialiased=False, backend=None, groups=None, depth=True,
+              near=0.01, eps2d=EPS2D, features=None, antialiased=False, backend=None, groups=None, depth=True,
               shade=None):
     """Render N Gaussians into camera. See the module docstring for shapes.
 
