@@ -4,7 +4,6 @@ records one); a scene composing models of different filters draws each with its 
 import json
 import os
 
-import numpy as np
 import pytest
 import torch
 
