@@ -179,10 +179,31 @@ def test_done_with_reads_the_config(tmp_path):
     assert done_with(d, PosedTrainConfig()) is None
 
 
-def test_sh_degree_above_zero_is_refused(tmp_path):
-    d = make_bike(tmp_path, sh_degree=1)
+@pytest.mark.parametrize("have,want", [(1, 2), (2, 1), (3, 2), (1, 0)])
+def test_parts_of_another_sh_degree_are_refused(tmp_path, have, want):
+    d = make_bike(tmp_path, sh_degree=have)
     with pytest.raises(UserError, match="SH degree 0"):
-        fine_tune(BikeModel.load(d), str(tmp_path), [], PosedTrainConfig(progress=False))
+        fine_tune(BikeModel.load(d), str(tmp_path), [], PosedTrainConfig(sh_degree=want, progress=False))
+
+
+def test_a_fine_tuned_bike_continues_from_its_own_sh(scene, tmp_path):
+    """Parts of the fine-tune's own --sh-degree (an earlier fine-tune's output) are continued:
+    every coefficient starts where it was, so the held-out score before the steps is the
+    continued bike's as BikeModel draws it."""
+    d, jobs = scene
+    start = BikeModel.load(d)
+    cfg = PosedTrainConfig(poses=len(jobs), iterations=30, sh_degree=2, lr_shN=2e-2, progress=False)
+    parts, m = fine_tune(start, os.path.join(d, "views", "whole"), jobs, cfg)
+    b = str(tmp_path / "bike")
+    import shutil
+    shutil.copytree(d, b, ignore=shutil.ignore_patterns("posed_train.json", "*_rest.ply"))
+    for p, g in parts.items():
+        write_ply(g, os.path.join(b, "gaussians", p + ".ply"))
+    again = BikeModel.load(b)
+    assert again.sh_degree == 2 and again.canonical.sh[:, 1:].abs().max() > 0
+    _, m2 = fine_tune(again, os.path.join(d, "views", "whole"), jobs, PosedTrainConfig(**dict(
+        vars(cfg), iterations=1)))
+    assert m2["held_out_box_psnr_before"] == m["held_out_box_psnr_after"], (m, m2)
 
 
 def test_cli_refuses_bad_input(tmp_path):

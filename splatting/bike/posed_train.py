@@ -20,7 +20,9 @@ renders (rigid transforms move a Gaussian's centre, they leave its pixel gradien
 writes OUT/bikes/ID/gaussians/<part>.ply in place (the rest-trained ones kept as <part>_rest.ply)
 and gaussians/posed_train.json (config, held-out-pose scores before/after); with --from-rest (the
 library's posed:<bike> task) it starts from gaussians/<part>_rest.{ply,json} as the library's train
-tasks left them and never writes those.  Training poses come
+tasks left them and never writes those.  Parts of the fine-tune's own --sh-degree (a fine-tuned
+bike's, copied without its posed_train.json) are continued from where they are, every SH band
+included (e.g. a few low-rate steps at another --eps2d).  Training poses come
 from seeds 1000, 1001, ... of splatting.library.gt.sample_poses (48 a seed): never the checks' poses
 (seed 0).
 """
@@ -163,10 +165,11 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
     from splatting.training.trainer import finite_grads, rgba_loss
     from splatting.training.views import load_views
 
-    if model.sh_degree != 0:
-        raise UserError(f"bike-posed-train handles SH degree 0 parts (the training default), got {model.sh_degree}")
     if cfg.sh_degree not in (0, 1, 2):
         raise UserError(f"bike-posed-train: sh_degree must be 0, 1 or 2, got {cfg.sh_degree}")
+    if model.sh_degree not in (0, cfg.sh_degree):
+        raise UserError(f"bike-posed-train starts from SH degree 0 parts (the training default) or continues "
+                        f"parts of its own --sh-degree {cfg.sh_degree}, got SH degree {model.sh_degree}")
     t0 = time.time()
     gen = torch.Generator().manual_seed(cfg.seed)
     torch.manual_seed(cfg.seed)
@@ -184,9 +187,10 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
     for name, (a, e) in zip(model.part_names, model.ranges):
         p = {k: torch.nn.Parameter(v[a:e].detach().clone().contiguous()) for k, v in
              {"means": c.means, "quats": c.quats, "log_scales": c.log_scales, "opacity_logits": c.opacity_logits,
-              "sh0": c.sh}.items()}
-        if cfg.sh_degree:  # starts view-independent
-            p["shN"] = torch.nn.Parameter(torch.zeros(e - a, (cfg.sh_degree + 1) ** 2 - 1, 3, dtype=c.sh.dtype))
+              "sh0": c.sh[:, :1]}.items()}
+        if cfg.sh_degree:  # starts view-independent, or where an earlier fine-tune of this degree left it
+            p["shN"] = torch.nn.Parameter(c.sh[a:e, 1:].detach().clone().contiguous() if model.sh_degree else
+                                          torch.zeros(e - a, (cfg.sh_degree + 1) ** 2 - 1, 3, dtype=c.sh.dtype))
         parts_p[name] = p
         opts[name] = torch.optim.Adam([{"params": [p[k]], "lr": lrs[k], "name": k} for k in p], lr=0.0, eps=1e-15)
         if cfg.densify:
