@@ -6,7 +6,7 @@ composed part Gaussians with the project's rasterizer and the articulated mesh w
 (blender_scripts/render_pose.py's core, lights following the bike), then compare mask IoU
 (alpha > 0.5), PSNR (RGB on black, whole 512² image), box PSNR (the union of both masks' box + 8 px,
 as blender_compare) and the posed keypoints. The Gaussians are drawn antialiased when their parts were
-trained so (BikeModel.antialiased).
+trained so (BikeModel.antialiased), with the low-pass they were trained with (BikeModel.eps2d).
 Key: bike_gt = {poses, iou_mean, psnr_mean, iou_min, psnr_min, box_psnr_mean, box_psnr_min}; table and worst-case picture
 beside results.json.
 """
@@ -83,7 +83,7 @@ def compare(bike_dir, poses, cams, gt_dir):
     with torch.no_grad():
         for i, (pose, cam) in enumerate(zip(poses, cams)):
             posed = model.pose(torch.tensor(pose, dtype=torch.float64))
-            out = render_gaussians(posed.gaussians, ring[int(cam)], antialiased=model.antialiased)
+            out = render_gaussians(posed.gaussians, ring[int(cam)], antialiased=model.antialiased, eps2d=model.eps2d)
             rgb = out["rgb"].clamp(0, 1).numpy()
             alpha = out["alpha"].numpy()
             gt_rgb, m_gt = load_rgba(os.path.join(gt_dir, f"gt_{i:03d}.png"))

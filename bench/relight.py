@@ -266,14 +266,15 @@ def run(results, out_dir, n_poses=None, seed=0, size=GT_SIZE, repeats=5, bike=No
             tb, tr, ts = [], [], []
             for _ in range(repeats):  # interleaved, so load changes hit all alike
                 a = time.perf_counter()
-                baked = render_gaussians(g, cam, antialiased=trained_aa)
+                baked = render_gaussians(g, cam, antialiased=trained_aa, eps2d=rb.model.eps2d)
                 b = time.perf_counter()
                 flat = render_relit(g, albedo, normals, cam, light, gloss, antialiased=aa, static=rb.static,
-                                    sky_visibility=sky, shadow_antialiased=trained_aa, normal_view=nview)
+                                    sky_visibility=sky, shadow_antialiased=trained_aa, normal_view=nview,
+                                    eps2d=rb.model.eps2d)
                 c2 = time.perf_counter()
                 relit = render_relit(g, albedo, normals, cam, light, gloss, shadows=True, antialiased=aa,
                                      static=rb.static, sky_visibility=sky, shadow_antialiased=trained_aa,
-                                     normal_view=nview)
+                                     normal_view=nview, eps2d=rb.model.eps2d)
                 ts.append(time.perf_counter() - c2)
                 tr.append(c2 - b)
                 tb.append(b - a)

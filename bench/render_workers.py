@@ -121,7 +121,8 @@ class GaussianScene:
         with torch.no_grad():
             t0 = time.perf_counter()
             posed = self.model.pose(torch.tensor(pose, dtype=torch.float64))
-            o = render_gaussians(posed.gaussians, cam, antialiased=self.antialiased)
+            o = render_gaussians(posed.gaussians, cam, antialiased=self.antialiased,
+                                 eps2d=self.model.eps2d)  # the low-pass the parts were trained with
             rgba = torch.cat([o["rgb"], o["alpha"][..., None]], -1)
             # straight alpha like Blender's PNG: colour / alpha where something was hit
             rgba[..., :3] /= o["alpha"].clamp_min(1e-6)[..., None]

@@ -87,9 +87,10 @@ def run(results, bikes_dir="out/bikes", bike=None, part="frame", budgets=BUDGETS
 
 # -- fidelity against a clean reference ------------------------------------------------------------
 
-def clean_fidelity(g, reference_dir, antialiased=False):
+def clean_fidelity(g, reference_dir, antialiased=False, eps2d=0.3):
     """Mean box PSNR and mask IoU of Gaussians g over the cameras that have an image in
-    reference_dir (a views folder: cameras.json + rgba/cameraNNNN/0000.png), and the count."""
+    reference_dir (a views folder: cameras.json + rgba/cameraNNNN/0000.png), and the count.
+    antialiased, eps2d: as g was trained (TrainConfig)."""
     import numpy as np
     import torch
 
@@ -106,7 +107,7 @@ def clean_fidelity(g, reference_dir, antialiased=False):
             continue
         ref, m_ref = load_rgba(path)
         with torch.no_grad():
-            o = render_gaussians(g, cam, antialiased=antialiased)
+            o = render_gaussians(g, cam, antialiased=antialiased, eps2d=eps2d)
         img = o["rgb"].clamp(0, 1).double().numpy()
         m = o["alpha"].numpy() > 0.5
         x0, y0, x1, y1 = union_box(m, m_ref, pad=8)
@@ -159,7 +160,7 @@ def run_fidelity(specs, reference_dir, png, threads=1, out_json=None):
         print(f"train_chart: {spec['label']} ...", flush=True)
         load0 = os.getloadavg()[0]
         g, m = train_views(load_views(spec["views"]), cfg)
-        box, iou, n = clean_fidelity(g, reference_dir, cfg.antialiased)
+        box, iou, n = clean_fidelity(g, reference_dir, cfg.antialiased, cfg.eps2d)
         r = {"spec": spec, "label": spec["label"], "clean_box_psnr": box, "clean_iou": iou, "reference_views": n,
              "psnr_crop": m["psnr_crop"], "gaussians": m["gaussians"], "wall_s": m["wall_s"], "iterations": m["iterations"],
              "stopped": m["stopped"], "load_1min": [round(load0, 2), round(os.getloadavg()[0], 2)]}
@@ -230,7 +231,7 @@ def bike_fidelity(bike_dir, reference_dir, model=None):
     for i, pose in enumerate(job["poses"]):
         with torch.no_grad():
             o = render_gaussians(model.pose(torch.tensor(pose, dtype=torch.float64)).gaussians, from_numpy(*cams[i]),
-                                 antialiased=model.antialiased)
+                                 antialiased=model.antialiased, eps2d=model.eps2d)  # drawn as trained
         a = o["alpha"].clamp(0, 1)
         rgba = torch.cat([(o["rgb"] / a.clamp_min(1e-6)[..., None]).clamp(0, 1), a[..., None]], -1)
         from PIL import Image
@@ -252,7 +253,8 @@ def bike_fidelity(bike_dir, reference_dir, model=None):
             with open(js) as f:
                 wall += float(json.load(f).get("wall_s", 0.0))
     return {"box_psnr": float(np.mean(ps)), "iou": float(np.mean(ious)), "poses": len(ps), "train_wall_s": wall,
-            "gaussians": len(model)}
+            "gaussians": len(model), "eps2d": model.eps2d,
+            "per_pose": [{"box_psnr": round(float(p), 4), "iou": round(float(i), 5)} for p, i in zip(ps, ious)]}
 
 
 def draw_bike_fidelity(rows, png, title=""):

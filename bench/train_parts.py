@@ -36,8 +36,13 @@ def find_bike(bikes_dir, bike=None):
 _RUNTIME_FIELDS = ("progress", "threads", "time_budget_s")
 
 
+# config fields added since, with the value every part trained before them had
+_ADDED_FIELDS = {"eps2d": 0.3}
+
+
 def same_recipe(a, b):
     """Two trainer config dicts (PART.json "config") describe the same training."""
+    a, b = {**_ADDED_FIELDS, **a}, {**_ADDED_FIELDS, **b}
     return {k: v for k, v in a.items() if k not in _RUNTIME_FIELDS} == {k: v for k, v in b.items() if k not in _RUNTIME_FIELDS}
 
 

@@ -73,6 +73,9 @@ SPLATTING_CASES = [
     # impossible numbers
     [*TRAIN, "--iterations", "0"],
     [*TRAIN, "--time-budget-s", "-5"],
+    [*TRAIN, "--eps2d", "0"],
+    [*TRAIN, "--eps2d", "nan"],
+    [*TRAIN, "--eps2d", "-0.3"],
     [*TRAIN, "--max-gaussians", "1000000000000"],
     [*TRAIN, "--threads", "0"],
     [*TRAIN, "--holdout", "-1"],

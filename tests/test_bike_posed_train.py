@@ -167,16 +167,43 @@ def test_done_with_reads_the_config(tmp_path):
         json.dump({"config": c}, f)
     assert done_with(d, PosedTrainConfig(lr_decay=1.0)) is not None
     assert done_with(d, PosedTrainConfig(lr_decay=0.5)) is None
+    # a record from before --eps2d (no key) rendered with rasterize's 0.3
+    c.pop("eps2d")
+    with open(os.path.join(d, "gaussians", "posed_train.json"), "w") as f:
+        json.dump({"config": c}, f)
+    assert done_with(d, PosedTrainConfig(eps2d=0.3)) is not None
+    assert done_with(d, PosedTrainConfig(eps2d=0.173)) is None
     # a part retrained after the fine-tune (its file newer than posed_train.json): fine-tune again
     t = os.path.getmtime(os.path.join(d, "gaussians", "posed_train.json"))
     os.utime(os.path.join(d, "gaussians", "steering.ply"), (t + 5, t + 5))
     assert done_with(d, PosedTrainConfig()) is None
 
 
-def test_sh_degree_above_zero_is_refused(tmp_path):
-    d = make_bike(tmp_path, sh_degree=1)
+@pytest.mark.parametrize("have,want", [(1, 2), (2, 1), (3, 2), (1, 0)])
+def test_parts_of_another_sh_degree_are_refused(tmp_path, have, want):
+    d = make_bike(tmp_path, sh_degree=have)
     with pytest.raises(UserError, match="SH degree 0"):
-        fine_tune(BikeModel.load(d), str(tmp_path), [], PosedTrainConfig(progress=False))
+        fine_tune(BikeModel.load(d), str(tmp_path), [], PosedTrainConfig(sh_degree=want, progress=False))
+
+
+def test_a_fine_tuned_bike_continues_from_its_own_sh(scene, tmp_path):
+    """Parts of the fine-tune's own --sh-degree (an earlier fine-tune's output) are continued:
+    every coefficient starts where it was, so the held-out score before the steps is the
+    continued bike's as BikeModel draws it."""
+    d, jobs = scene
+    start = BikeModel.load(d)
+    cfg = PosedTrainConfig(poses=len(jobs), iterations=30, sh_degree=2, lr_shN=2e-2, progress=False)
+    parts, m = fine_tune(start, os.path.join(d, "views", "whole"), jobs, cfg)
+    b = str(tmp_path / "bike")
+    import shutil
+    shutil.copytree(d, b, ignore=shutil.ignore_patterns("posed_train.json", "*_rest.ply"))
+    for p, g in parts.items():
+        write_ply(g, os.path.join(b, "gaussians", p + ".ply"))
+    again = BikeModel.load(b)
+    assert again.sh_degree == 2 and again.canonical.sh[:, 1:].abs().max() > 0
+    _, m2 = fine_tune(again, os.path.join(d, "views", "whole"), jobs, PosedTrainConfig(**dict(
+        vars(cfg), iterations=1)))
+    assert m2["held_out_box_psnr_before"] == m["held_out_box_psnr_after"], (m, m2)
 
 
 def test_cli_refuses_bad_input(tmp_path):
@@ -187,6 +214,9 @@ def test_cli_refuses_bad_input(tmp_path):
                       (["--bike", str(tmp_path), "--lr-decay", "1.5"], "lr-decay"),
                       (["--bike", str(tmp_path), "--iterations", "10", "--lr-tail", "11"], "lr-tail"),
                       (["--bike", str(tmp_path), "--render-threads", "0"], "render-threads"),
+                      (["--bike", str(tmp_path), "--eps2d", "0"], "eps2d"),
+                      (["--bike", str(tmp_path), "--eps2d", "nan"], "eps2d"),
+                      (["--bike", str(tmp_path), "--eps2d", "inf"], "eps2d"),
                       (["--bike", str(tmp_path)], "frame.ply")):
         r = subprocess.run([sys.executable, "-m", "splatting", "bike-posed-train"] + [a.strip() for a in args],
                            capture_output=True, text=True, env=env, cwd=ROOT)
@@ -367,3 +397,29 @@ def test_cli_refuses_a_bad_densify_cap(tmp_path):
                        capture_output=True, text=True, env=env, cwd=ROOT)
     assert r.returncode == 2 and "densify-max" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
 
+
+
+def test_the_fine_tune_renders_with_its_eps2d_and_the_bike_keeps_it(scene, tmp_path, monkeypatch):
+    """--eps2d: the fine-tune draws (and scores) with it, posed_train.json records it, and
+    BikeModel.load reads it back for the parts the fine-tune wrote."""
+    import shutil
+
+    from splatting.bike.posed_train import train_bike_posed
+
+    d, jobs = scene
+    scores = {}
+    for eps in (0.3, 0.173):
+        _, m = fine_tune(BikeModel.load(d), os.path.join(d, "views", "whole"), jobs,
+                         PosedTrainConfig(poses=len(jobs), iterations=1, eps2d=eps, progress=False))
+        assert m["eps2d"] == eps and m["config"]["eps2d"] == eps
+        scores[eps] = m["held_out_box_psnr_before"]
+    assert scores[0.3] != scores[0.173]  # the held-out renders used it
+    b = str(tmp_path / "bike")
+    shutil.copytree(d, b, ignore=shutil.ignore_patterns("posed_train.json", "*_rest.ply"))
+    assert BikeModel.load(b).eps2d == 0.3  # parts that record no filter: 0.3
+    jobs_b = [dict(j, out=j["out"].replace(d, b)) for j in jobs]
+    import splatting.bike.posed_train as pt
+    monkeypatch.setattr(pt, "render_posed_views", lambda *a, **k: jobs_b)  # the scene's renders stand in for Blender's
+    train_bike_posed(b, PosedTrainConfig(poses=len(jobs), iterations=2, eps2d=0.173, progress=False), log=lambda m: None)
+    assert BikeModel.load(b).eps2d == 0.173
+    assert BikeModel.load(b, suffix="_rest").eps2d == 0.3  # the rest-trained start keeps its own

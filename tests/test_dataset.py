@@ -194,10 +194,9 @@ def test_bike_only_mode_and_backgrounds(tmp_path):
     assert background("noise", 7, 32).std() > 0.01
 
 
-def test_a_bike_trained_antialiased_is_drawn_antialiased(tmp_path):
-    """The dataset draws a bike whose parts' training JSON says "antialiased" with the mip filter
-    (BikeModel.antialiased, per Gaussian: the rider stays as trained): the same parts marked plain
-    give another image, and marked antialiased again the same image as the first antialiased run."""
+def _images_of_a_bike_recording(tmp_path, configs):
+    """One dataset image per training-JSON "config" written for every part of the same trained
+    (synthetic) bike: what the dataset draws from what its parts record."""
     import json
 
     import torch
@@ -217,14 +216,31 @@ def test_a_bike_trained_antialiased_is_drawn_antialiased(tmp_path):
     for p, g in parts.items():
         write_ply(g, os.path.join(d, "gaussians", p + ".ply"))
     images = []
-    for k, aa in enumerate((True, False, True)):
+    for k, cfg in enumerate(configs):
         for p in parts:
             with open(os.path.join(d, "gaussians", p + ".json"), "w") as f:
-                json.dump({"config": {"antialiased": aa}}, f)
+                json.dump({"config": cfg}, f)
         out = str(tmp_path / f"out{k}")
         generate(validate(small_config(str(tmp_path), count=1, synthetic_assets="auto")), out, log=lambda m: None,
                  progress=False)
         (name,) = sorted(os.listdir(os.path.join(out, "images")))
         images.append(np.asarray(Image.open(os.path.join(out, "images", name)), dtype=np.int16))
+    return images
+
+
+def test_a_bike_trained_antialiased_is_drawn_antialiased(tmp_path):
+    """The dataset draws a bike whose parts' training JSON says "antialiased" with the mip filter
+    (BikeModel.antialiased, per Gaussian: the rider stays as trained): the same parts marked plain
+    give another image, and marked antialiased again the same image as the first antialiased run."""
+    images = _images_of_a_bike_recording(tmp_path, [{"antialiased": aa} for aa in (True, False, True)])
     assert np.array_equal(images[0], images[2])
     assert np.abs(images[0] - images[1]).max() > 20
+
+
+def test_a_bike_is_drawn_with_the_low_pass_it_was_trained_with(tmp_path):
+    """The dataset draws a bike with the eps2d its parts' training JSON records (BikeModel.eps2d,
+    per Gaussian beside its rider at 0.3): 0.173 gives another image than 0.3, and 0.3 written
+    out the same image as parts that record none (the renders of before, bit for bit)."""
+    images = _images_of_a_bike_recording(tmp_path, ({"eps2d": 0.173}, {}, {"eps2d": 0.3}))
+    assert np.array_equal(images[1], images[2])
+    assert np.abs(images[0] - images[1]).max() > 5

@@ -223,27 +223,38 @@ def test_relit_street_scene_on_a_photo(assets, tmp_path, monkeypatch):
     assert ((after < before).any(-1) <= (cover < 0.999)).all()  # ... never on what an instance covers
 
 
-def test_shadow_maps_draw_an_antialiased_bike_with_the_filter(assets, monkeypatch):
-    # a bike whose parts were trained with the mip filter casts its shadows (sun map) and hides its
-    # sky through the filter, its rider as trained; a plain bike draws none of it with the filter
+def _bike_recording(assets, name, config):
+    """A relight-ready bike `name` whose parts' training JSONs hold `config` (made once per module)."""
     import json
-
-    from splatting.relight import shadow
-    d = os.path.join(assets, "rlaa")
+    d = os.path.join(assets, name)
     if not os.path.isdir(d):
-        make_bike(assets, "rlaa", n=300, sh_degree=1)
+        make_bike(assets, name, n=300, sh_degree=1)
         plys = [os.path.join(d, "gaussians", p + ".ply") for p in ("frame", "steering", "crank")]
         _relight_files(plys)
         for ply in plys:
             with open(ply[:-4] + ".json", "w") as f:
-                json.dump({"config": {"antialiased": True}}, f)
+                json.dump({"config": config}, f)
+    return name
+
+
+def _spy_on_maps(monkeypatch, kw, default):
+    """{"sun": [(Gaussians, kw) of every sun map], "sky": [kw of every sky visibility]}, filled as
+    the renders call them."""
+    from splatting.relight import shadow
     calls = {"sun": [], "sky": []}
     real_sun, real_sky = shadow.sun_visibility, shadow.sky_visibility
-    monkeypatch.setattr(shadow, "sun_visibility", lambda g, light, *a, antialiased=False, **k:
-                        calls["sun"].append((len(g), antialiased)) or real_sun(g, light, *a, antialiased=antialiased, **k))
-    monkeypatch.setattr(shadow, "sky_visibility", lambda g, n, *a, antialiased=False, **k:
-                        calls["sky"].append(antialiased) or real_sky(g, n, *a, antialiased=antialiased, **k))
-    for bike, want in (("rl", False), ("rlaa", True)):
+    monkeypatch.setattr(shadow, "sun_visibility", lambda g, light, *a, **k:
+                        calls["sun"].append((len(g), k.get(kw, default))) or real_sun(g, light, *a, **k))
+    monkeypatch.setattr(shadow, "sky_visibility", lambda g, n, *a, **k:
+                        calls["sky"].append(k.get(kw, default)) or real_sky(g, n, *a, **k))
+    return calls
+
+
+def test_shadow_maps_draw_an_antialiased_bike_with_the_filter(assets, monkeypatch):
+    # a bike whose parts were trained with the mip filter casts its shadows (sun map) and hides its
+    # sky through the filter, its rider as trained; a plain bike draws none of it with the filter
+    calls = _spy_on_maps(monkeypatch, "antialiased", False)
+    for bike, want in (("rl", False), (_bike_recording(assets, "rlaa", {"antialiased": True}), True)):
         calls["sun"].clear()
         calls["sky"].clear()
         _sample(_cfg(assets, bikes=[bike]), 1)
@@ -286,3 +297,22 @@ def test_relit_bike_with_view_normals_turns_them_to_the_dataset_camera(assets, t
             assert diff.max() <= 1
         else:
             assert (diff.max(-1) > 2).mean() > 0.005
+
+
+def test_shadow_maps_draw_each_model_with_its_own_low_pass(assets, monkeypatch):
+    # a bike whose parts record eps2d 0.173 casts its shadows (sun map) and hides its sky with it,
+    # its rider with the avatar's 0.3; a bike that records none draws everything at 0.3 (one number)
+    calls = _spy_on_maps(monkeypatch, "eps2d", 0.3)
+    for bike, want in (("rl", 0.3), (_bike_recording(assets, "rleps", {"eps2d": 0.173}), 0.173)):
+        calls["sun"].clear()
+        calls["sky"].clear()
+        _sample(_cfg(assets, bikes=[bike]), 1)
+        assert calls["sky"] and all(e == want for e in calls["sky"])
+        scene = [(n, e) for n, e in calls["sun"] if n > 1500]  # the cyclist's sun map
+        assert scene
+        for n, e in scene:
+            if want == 0.3:
+                assert e == 0.3 and not torch.is_tensor(e)
+            else:  # the bike's Gaussians (first, 3 x ~300) at 0.173, the rider's 1500 at 0.3
+                assert torch.is_tensor(e) and len(e) == n and 800 < int((e == 0.173).sum()) < 1000
+                assert bool((e[-1500:] == 0.3).all())

@@ -153,6 +153,17 @@ def test_one_pass_amodal_alphas_equal_each_slot_rendered_alone(seed):
     assert (mixed["amodal"][big][0] == want[0]).all() and mixed["amodal"][big][1] == want[1]
 
 
+def _two_slots_far_apart(seed_a, seed_b, shrink):
+    """Two 150-Gaussian models, their scales / exp(shrink), one in each half of a 160 x 96 view:
+    (Gaussians, slots 1 | 2, camera)."""
+    from splatting.gaussians.container import Gaussians
+    a, b = _scene(seed_a, n=150), _scene(seed_b, n=150)
+    a = Gaussians(a.means * 0.3 - torch.tensor([1.6, 0.0, 0.0]), a.quats, a.log_scales - shrink, a.opacity_logits, a.sh)
+    b = Gaussians(b.means * 0.3 + torch.tensor([1.6, 0.0, 0.0]), b.quats, b.log_scales - shrink, b.opacity_logits, b.sh)
+    return Gaussians.cat([a, b]), torch.tensor([1] * 150 + [2] * 150), look_at_camera((0.0, 0.0, 9.0), width=160,
+                                                                                  height=96, focal=90.0)
+
+
 @pytest.mark.parametrize("amodal_max_px", [None, 24])
 def test_antialiased_mask_draws_each_slot_as_it_was_trained(amodal_max_px):
     """render_scene(antialiased=mask): a bike trained with the mip filter beside a rider trained
@@ -160,13 +171,7 @@ def test_antialiased_mask_draws_each_slot_as_it_was_trained(amodal_max_px):
     filter on (slot 1) or off (slot 2) for everything; a mask of the wrong length is refused."""
     torch.set_num_threads(1)
     from splatting.cyclist.scene_render import render_scene
-    from splatting.gaussians.container import Gaussians
-    a, b = _scene(4, n=150), _scene(5, n=150)
-    a = Gaussians(a.means * 0.3 - torch.tensor([1.6, 0.0, 0.0]), a.quats, a.log_scales - 1.5, a.opacity_logits, a.sh)
-    b = Gaussians(b.means * 0.3 + torch.tensor([1.6, 0.0, 0.0]), b.quats, b.log_scales - 1.5, b.opacity_logits, b.sh)
-    g = Gaussians.cat([a, b])
-    slots = torch.tensor([1] * 150 + [2] * 150)
-    cam = look_at_camera((0.0, 0.0, 9.0), width=160, height=96, focal=90.0)
+    g, slots, cam = _two_slots_far_apart(4, 5, 1.5)
     mask = slots == 1
     kw = dict(amodal_slots=(1, 2), amodal_max_px=amodal_max_px)
     mixed = render_scene(g, slots, 3, cam, antialiased=mask, **kw)
@@ -180,3 +185,25 @@ def test_antialiased_mask_draws_each_slot_as_it_was_trained(amodal_max_px):
         assert np.abs(on["amodal"][s][0] - off["amodal"][s][0]).max() > 0.02  # the amodal alphas follow it too
     with pytest.raises(ValueError, match="antialiased mask"):
         render_scene(g, slots, 3, cam, antialiased=mask[:10], **kw)
+
+
+@pytest.mark.parametrize("amodal_max_px", [None, 24])
+def test_per_gaussian_eps2d_draws_each_slot_with_its_own_filter(amodal_max_px):
+    """render_scene(eps2d=(N,)): a bike at Cycles' 0.173 px^2 beside a rider at 0.3, far apart on
+    screen: each one's pixels and amodal alpha (one pass or reduced resolution) are those of a
+    render with its value for everything."""
+    torch.set_num_threads(1)
+    from splatting.cyclist.scene_render import render_scene
+    g, slots, cam = _two_slots_far_apart(6, 7, 2.5)
+    eps = torch.where(slots == 1, 0.173, 0.3).double()
+    kw = dict(amodal_slots=(1, 2), amodal_max_px=amodal_max_px, antialiased=True)
+    mixed = render_scene(g, slots, 3, cam, eps2d=eps, **kw)
+    lo, hi = (render_scene(g, slots, 3, cam, eps2d=e, **kw) for e in (0.173, 0.3))
+    left = np.s_[:, :80]
+    np.testing.assert_allclose(mixed["alpha"][left], lo["alpha"][left], atol=1e-6)
+    np.testing.assert_allclose(mixed["alpha"][:, 80:], hi["alpha"][:, 80:], atol=1e-6)
+    np.testing.assert_allclose(mixed["rgb"][left], lo["rgb"][left], atol=1e-6)
+    assert np.abs(lo["alpha"][left] - hi["alpha"][left]).max() > 0.01  # the filter matters here
+    for s, want in ((1, lo), (2, hi)):
+        np.testing.assert_allclose(mixed["amodal"][s][0], want["amodal"][s][0], atol=1e-6)
+        assert np.abs(lo["amodal"][s][0] - hi["amodal"][s][0]).max() > 0.01  # the amodal alphas follow it too

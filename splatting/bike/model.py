@@ -27,6 +27,7 @@ from cyclist_formats import bike_folder
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, read_ply
 from splatting.gaussians.sh_rotation import BANDS, sh_band_matrices
+from splatting.raster.sparse import EPS2D
 
 MAIN_PARTS = ("frame", "steering", "crank")
 SUB_PARTS = ("front_wheel", "rear_wheel", "pedal_left", "pedal_right")
@@ -68,14 +69,18 @@ class BikeModel:
         names += [p for p in SUB_PARTS if os.path.isfile(os.path.join(gdir, p + suffix + ".ply"))]
         parts = {p: read_ply(os.path.join(gdir, p + suffix + ".ply")) for p in names}
         return cls(parts, kp_doc, meta, sh_degree=sh_degree, source=bike_dir,
-                   antialiased=trained_antialiased(gdir, [p + suffix for p in names]))
+                   antialiased=trained_antialiased(gdir, [p + suffix for p in names]),
+                   eps2d=trained_eps2d(gdir, {p: len(g) for p, g in parts.items()}, fine_tuned=suffix == ""))
 
-    def __init__(self, parts, keypoints_doc, meta, sh_degree=None, source="<memory>", antialiased=False):
+    def __init__(self, parts, keypoints_doc, meta, sh_degree=None, source="<memory>", antialiased=False, eps2d=EPS2D):
         """parts: {part name: Gaussians}; keypoints_doc: the keypoints.json object; meta: meta.json.
         antialiased: the parts were trained with antialiased splatting, so they must be rendered
-        with it (rasterize(antialiased=model.antialiased)); load() reads it from the parts' metrics."""
+        with it (rasterize(antialiased=model.antialiased)); eps2d: the screen-space low-pass (px^2)
+        they were trained with, drawn with it too (rasterize(eps2d=), per Gaussian in a scene with
+        other models); load() reads both from the parts' metrics."""
         self.source = source
         self.antialiased = bool(antialiased)
+        self.eps2d = check_model_eps2d(eps2d, source)
         self.meta = meta
         self.bike_id = str(meta.get("bike_id", ""))
         self.has_crank = "crank" in parts
@@ -229,6 +234,51 @@ def present_parts(gdir):
     return [p for p in MAIN_PARTS + SUB_PARTS if os.path.isfile(os.path.join(gdir, p + ".ply"))]
 
 
+def check_model_eps2d(v, source):
+    """A model's recorded eps2d: a finite number > 0 (UserError naming the source otherwise)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        raise UserError(f"{source}: eps2d (the splats' low-pass the model was trained with) must be a "
+                        f"finite number > 0, got {v!r}")
+    return float(v)
+
+
+def _part_config(gdir, p):
+    """<part>.json's "config" (else <part>_rest.json's: a part fine-tuned by the library's posed
+    stage keeps its training metrics with the rest-trained part); None without metrics."""
+    js = os.path.join(gdir, p + ".json")
+    if not os.path.isfile(js):
+        js = os.path.join(gdir, p + "_rest.json")
+    if not os.path.isfile(js):
+        return None
+    doc = bike_folder.read_json(js, f"{p}.json")
+    cfg = doc.get("config") if isinstance(doc, dict) else None
+    return cfg if isinstance(cfg, dict) else None
+
+
+def trained_eps2d(gdir, counts, fine_tuned=True):
+    """The screen-space low-pass (px^2) the parts in gdir ({name: Gaussians in its .ply}) were last
+    trained with: with fine_tuned, a part that bike-posed-train wrote (gaussians/posed_train.json
+    records it with this many Gaussians; counted, not dated: a copied folder keeps no file times)
+    has the fine-tune's (splatting.bike.posed_train.fine_tuned_eps2d), any other its <part>.json
+    "config" "eps2d" (trainer.TrainConfig); EPS2D (0.3) where nothing records one (assets made
+    before the filter was recorded were all trained at 0.3).  Parts that disagree are an error, as
+    for the mip filter: a bike is one model, drawn with one filter."""
+    from splatting.bike.posed_train import fine_tuned_eps2d
+
+    posed = fine_tuned_eps2d(gdir) if fine_tuned else None
+    vals = {}
+    for p, n in counts.items():
+        if posed is not None and posed[1].get(p) == n:
+            vals[p] = check_model_eps2d(posed[0], os.path.join(gdir, "posed_train.json"))
+        else:
+            cfg = _part_config(gdir, p)
+            vals[p] = check_model_eps2d((cfg or {}).get("eps2d", EPS2D), os.path.join(gdir, p + ".json"))
+    if len(set(vals.values())) > 1:
+        raise UserError(f"{gdir}: parts trained with different eps2d ({', '.join(f'{p}: {v}' for p, v in vals.items())}); "
+                        "retrain or fine-tune them with one value")
+    return next(iter(vals.values()), EPS2D)
+
+
 def trained_antialiased(gdir, names):
     """Whether the parts in gdir were trained with antialiased splatting: their <part>.json
     "config", else <part>_rest.json (a part fine-tuned by the library's posed stage: its training
@@ -237,15 +287,8 @@ def trained_antialiased(gdir, names):
     bike lost ~2 dB, docs/training.md)."""
     flags = {}
     for p in names:
-        js = os.path.join(gdir, p + ".json")
-        if not os.path.isfile(js):
-            js = os.path.join(gdir, p + "_rest.json")
-        if os.path.isfile(js):
-            doc = bike_folder.read_json(js, f"{p}.json")
-            cfg = doc.get("config") if isinstance(doc, dict) else None
-            flags[p] = bool(cfg.get("antialiased", False)) if isinstance(cfg, dict) else False
-        else:
-            flags[p] = False
+        cfg = _part_config(gdir, p)
+        flags[p] = bool(cfg.get("antialiased", False)) if cfg is not None else False
     if len(set(flags.values())) > 1:
         raise UserError(f"{gdir}: parts trained with and without antialiasing "
                         f"({', '.join(f'{p}: {v}' for p, v in flags.items())}); retrain them with one setting")

@@ -20,7 +20,9 @@ renders (rigid transforms move a Gaussian's centre, they leave its pixel gradien
 writes OUT/bikes/ID/gaussians/<part>.ply in place (the rest-trained ones kept as <part>_rest.ply)
 and gaussians/posed_train.json (config, held-out-pose scores before/after); with --from-rest (the
 library's posed:<bike> task) it starts from gaussians/<part>_rest.{ply,json} as the library's train
-tasks left them and never writes those.  Training poses come
+tasks left them and never writes those.  Parts of the fine-tune's own --sh-degree (a fine-tuned
+bike's, copied without its posed_train.json) are continued from where they are, every SH band
+included (e.g. a few low-rate steps at another --eps2d).  Training poses come
 from seeds 1000, 1001, ... of splatting.library.gt.sample_poses (48 a seed): never the checks' poses
 (seed 0).
 """
@@ -64,6 +66,8 @@ class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (trai
     densify_max: int = 30000     # ... up to this many Gaussians per part
     lr_decay: float = 1.0        # every rate ends at this fraction of its start, exponentially (1: constant) ...
     lr_tail: int = 0             # ... falling over the last lr_tail steps only (0: over the whole fine-tune)
+    eps2d: float = 0.3           # the splats' screen-space low-pass (px^2) the fine-tune renders with; the bike
+                                 # keeps it (posed_train.json) and every renderer draws its parts with it
     progress: bool = True
 
 
@@ -163,10 +167,11 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
     from splatting.training.trainer import finite_grads, rgba_loss
     from splatting.training.views import load_views
 
-    if model.sh_degree != 0:
-        raise UserError(f"bike-posed-train handles SH degree 0 parts (the training default), got {model.sh_degree}")
     if cfg.sh_degree not in (0, 1, 2):
         raise UserError(f"bike-posed-train: sh_degree must be 0, 1 or 2, got {cfg.sh_degree}")
+    if model.sh_degree not in (0, cfg.sh_degree):
+        raise UserError(f"bike-posed-train starts from SH degree 0 parts (the training default) or continues "
+                        f"parts of its own --sh-degree {cfg.sh_degree}, got SH degree {model.sh_degree}")
     t0 = time.time()
     gen = torch.Generator().manual_seed(cfg.seed)
     torch.manual_seed(cfg.seed)
@@ -184,9 +189,10 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
     for name, (a, e) in zip(model.part_names, model.ranges):
         p = {k: torch.nn.Parameter(v[a:e].detach().clone().contiguous()) for k, v in
              {"means": c.means, "quats": c.quats, "log_scales": c.log_scales, "opacity_logits": c.opacity_logits,
-              "sh0": c.sh}.items()}
-        if cfg.sh_degree:  # starts view-independent
-            p["shN"] = torch.nn.Parameter(torch.zeros(e - a, (cfg.sh_degree + 1) ** 2 - 1, 3, dtype=c.sh.dtype))
+              "sh0": c.sh[:, :1]}.items()}
+        if cfg.sh_degree:  # starts view-independent, or where an earlier fine-tune of this degree left it
+            p["shN"] = torch.nn.Parameter(c.sh[a:e, 1:].detach().clone().contiguous() if model.sh_degree else
+                                          torch.zeros(e - a, (cfg.sh_degree + 1) ** 2 - 1, 3, dtype=c.sh.dtype))
         parts_p[name] = p
         opts[name] = torch.optim.Adam([{"params": [p[k]], "lr": lrs[k], "name": k} for k in p], lr=0.0, eps=1e-15)
         if cfg.densify:
@@ -222,7 +228,7 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
         sh = sh0 if sh1 is None else torch.cat([sh0, sh1], 1)
         cat = lambda k, f: torch.cat([f(parts_p[n][k]) for n in model.part_names])  # noqa: E731
         return rasterize(m, q, cat("log_scales", torch.exp), cat("opacity_logits", torch.sigmoid), sh,
-                         cam, background=bg, antialiased=aa)
+                         cam, background=bg, antialiased=aa, eps2d=cfg.eps2d)
 
     n_train = len(jobs) - HELD_OUT
 
@@ -295,7 +301,7 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
                    "config": cfg_d, "poses": len(jobs), "held_out_poses": HELD_OUT,
                    "held_out_box_psnr_before": before[0], "held_out_iou_before": before[1],
                    "held_out_box_psnr_after": after[0], "held_out_iou_after": after[1],
-                   "loss": round(loss_v, 5), "wall_s": round(wall, 1), "antialiased": aa}
+                   "loss": round(loss_v, 5), "wall_s": round(wall, 1), "antialiased": aa, "eps2d": cfg.eps2d}
 
 
 def lr_rate_factor(cfg: PosedTrainConfig, it):
@@ -332,7 +338,9 @@ def done_with(bike_dir, cfg: PosedTrainConfig):
         return None
     # fine-tunes recorded before --densify existed ran without it: still this config when it is off
     # and before --lr-decay with constant rates
-    have = {"densify": False, "densify_max": PosedTrainConfig.densify_max, "lr_decay": 1.0, "lr_tail": 0, **m["config"]}
+    # and before --eps2d with rasterize's 0.3
+    have = {"densify": False, "densify_max": PosedTrainConfig.densify_max, "lr_decay": 1.0, "lr_tail": 0,
+            "eps2d": 0.3, **m["config"]}
     return m if have == want and not newer else None
 
 
@@ -362,7 +370,7 @@ def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print, from_res
     from splatting.gaussians.container import read_ply
 
     model = BikeModel({p: read_ply(f) for p, f in start.items()}, model_keypoints_doc(bike_dir), model.meta,
-                      source=bike_dir, antialiased=model.antialiased)
+                      source=bike_dir, antialiased=model.antialiased, eps2d=model.eps2d)
     jobs = render_posed_views(bike_dir, os.path.join(bike_dir, "views", "posed"), cfg, log, render_threads)
     parts, metrics = fine_tune(model, os.path.join(bike_dir, "views", "whole"), jobs, cfg)
     for p, g in parts.items():
@@ -378,6 +386,18 @@ def model_keypoints_doc(bike_dir):
     from cyclist_formats import bike_folder
 
     return bike_folder.read_json(os.path.join(bike_dir, "keypoints.json"), "keypoints.json")
+
+
+def fine_tuned_eps2d(gdir):
+    """(eps2d, {part: Gaussians}) of gaussians/posed_train.json: the low-pass its fine-tune
+    rendered with (config "eps2d"; 0.3 in records from before --eps2d) and the parts it wrote, or
+    None without a record (BikeModel reads each part's filter with it)."""
+    from splatting.raster.sparse import EPS2D
+
+    m = read_json_or_none(os.path.join(gdir, "posed_train.json"))
+    if not isinstance(m, dict) or not isinstance(m.get("config"), dict) or not isinstance(m.get("gaussians"), dict):
+        return None
+    return m["config"].get("eps2d", EPS2D), m["gaussians"]
 
 
 def add_arguments(p):
@@ -401,6 +421,10 @@ def add_arguments(p):
     p.add_argument("--lr-tail", type=int, default=d.lr_tail,
                    help="with --lr-decay: constant rates, then the decay over the last N steps only "
                         "(default %(default)s: over the whole fine-tune)")
+    p.add_argument("--eps2d", type=float, default=d.eps2d,
+                   help="screen-space low-pass variance in px^2 added to every splat in the fine-tune and kept "
+                        "with the bike for every later render (default %(default)s; Cycles' 1.5 px "
+                        "Blackman-Harris pixel filter has variance 0.173)")
     p.add_argument("--render-threads", type=int,
                    help="Blender's CPU threads for the posed renders (default: its own, 2); the fine-tune uses one")
     p.add_argument("--quiet", action="store_true", help="no progress line")
@@ -416,6 +440,7 @@ def check_args(args):
     checks.count("densify-max", args.densify_max, hi=10_000_000)
     checks.number("lr-decay", args.lr_decay, 0.0, 1.0, lo_open=True)
     checks.integer("lr-tail", args.lr_tail, 0, args.iterations)
+    checks.positive("eps2d", args.eps2d, 10.0)
     if args.render_threads is not None:
         checks.threads("render-threads", args.render_threads)
     for p in ("frame", "steering"):
@@ -427,6 +452,6 @@ def check_args(args):
 def run(args):
     cfg = PosedTrainConfig(poses=args.poses, iterations=args.iterations, samples=args.samples, sh_degree=args.sh_degree,
                            densify=args.densify, densify_max=args.densify_max, lr_decay=args.lr_decay,
-                           lr_tail=args.lr_tail, progress=not args.quiet)
+                           lr_tail=args.lr_tail, eps2d=args.eps2d, progress=not args.quiet)
     train_bike_posed(args.bike, cfg, from_rest=args.from_rest, render_threads=args.render_threads)
     return 0

@@ -64,6 +64,15 @@ def saddle_slide(bike):
     return (mask, u) if mask.any() else (None, None)
 
 
+def frame_eps2d(ids, bike, avatar):
+    """rasterize's eps2d for a cyclist frame's Gaussians (ids: CyclistFrame.ids): each model drawn
+    with the low-pass it was trained with (BikeModel.eps2d, RiderAvatar.eps2d); one number when
+    they agree (the scalar path, the renders of before), else one per Gaussian."""
+    from splatting.raster.sparse import eps2d_where
+
+    return eps2d_where(ids != IDS["rider"], bike.eps2d, bike.eps2d if avatar is None else avatar.eps2d)
+
+
 class Cyclist:
     def __init__(self, bike, avatar=None, ik_iterations=50):
         self.bike, self.avatar, self.ik_iterations = bike, avatar, int(ik_iterations)

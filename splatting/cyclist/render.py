@@ -31,18 +31,19 @@ def orbit_camera(azimuth_deg, elevation_deg=0.0, distance=12.0, centre=(0.0, 0.0
 
 
 @torch.no_grad()
-def render_layers(g, ids, camera, antialiased=False):
+def render_layers(g, ids, camera, antialiased=False, eps2d=0.3):
     """Gaussians g (N) with instance ids (N,) int in 1..4 -> dict of float32 numpy arrays:
     rgb (H, W, 3) premultiplied (over black), alpha (H, W), depth (H, W) expected camera z
     (0 where alpha is 0), ids (H, W) uint8.  antialiased: the bike's parts were trained with the
-    mip filter (BikeModel.antialiased), so its Gaussians (not the rider's) are drawn with it."""
+    mip filter (BikeModel.antialiased), so its Gaussians (not the rider's) are drawn with it.
+    eps2d: rasterize's, a number or one per Gaussian (compose.frame_eps2d: each model's own)."""
     onehot = torch.zeros(len(g), 3)
     bike = ids < IDS["rider"]
     onehot[bike, (ids[bike] - 1).long()] = 1.0
     # one rasterization: the frame/steering/crank one-hot rides along as feature channels (measured
     # 3.6 s -> 0.23 s per 512² frame at 50k Gaussians against compositing the pair list twice)
     out = rasterize(g.means.float(), g.quats.float(), g.scales.float(), g.opacities.float(), g.sh.float(), camera,
-                    features=onehot, antialiased=bike & bool(antialiased))
+                    features=onehot, antialiased=bike & bool(antialiased), eps2d=eps2d)
     rgb, alpha, depth, w3 = out["rgb"], out["alpha"], out["depth"], out["features"]
     weights = torch.cat([w3, (alpha - w3.sum(-1))[..., None]], -1)
     idmap = (weights.argmax(-1) + 1).to(torch.uint8)

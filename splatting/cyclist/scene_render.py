@@ -82,22 +82,25 @@ def union(boxes):
     return u0, v0, u1 - u0, v1 - v0
 
 
-def _subset_alpha(t, idx, camera, crop, max_px=None, antialiased=False):
+def _subset_alpha(t, idx, camera, crop, max_px=None, antialiased=False, eps2d=0.3):
     """Alpha of the Gaussians idx of the tensors t alone inside crop, as (alpha (h, w) numpy,
     (u0, v0)).  max_px: when the crop is larger, it is rendered at max_px / size of the resolution
-    (the full-size 0.3 px^2 low-pass in small pixels: the same alpha field, sampled coarser) and
+    (the full-size eps2d px^2 low-pass in small pixels: the same alpha field, sampled coarser) and
     resampled bilinearly at the full-size pixel centres, so its mask edge is exact to about
     1 / scale pixels; None = full resolution."""
     means, quats, scales, opac = (x.index_select(0, idx) for x in t)
     aa = antialiased.index_select(0, idx) if torch.is_tensor(antialiased) else antialiased
+    eps2d = eps2d.index_select(0, idx) if torch.is_tensor(eps2d) else eps2d
     dc = torch.zeros(len(idx), 1, 3)  # colour is not needed: alpha only
     u0, v0, w, h = crop
     cam = cropped_camera(camera, crop)
     if max_px is None or max(w, h) <= max_px:
-        return rasterize(means, quats, scales, opac, dc, cam, sh_degree=0, antialiased=aa)["alpha"].numpy(), (u0, v0)
+        return rasterize(means, quats, scales, opac, dc, cam, sh_degree=0, antialiased=aa,
+                         eps2d=eps2d)["alpha"].numpy(), (u0, v0)
     f = max_px / max(w, h)
     small = cam.scaled(f)
-    a = rasterize(means, quats, scales, opac, dc, small, sh_degree=0, eps2d=0.3 * f * f, antialiased=aa)["alpha"]
+    # each Gaussian's own low-pass, in the small pixels (a number or per Gaussian alike)
+    a = rasterize(means, quats, scales, opac, dc, small, sh_degree=0, eps2d=eps2d * f * f, antialiased=aa)["alpha"]
     lw, lh = small.width, small.height
     xs = f * (torch.arange(w, dtype=torch.float32) + 0.5) - 0.5  # full-size pixel centres, small-pixel coords
     ys = f * (torch.arange(h, dtype=torch.float32) + 0.5) - 0.5
@@ -129,7 +132,8 @@ def _argmax_channels(feat):
 
 
 @torch.no_grad()
-def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None, features=None, antialiased=False):
+def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None, features=None, antialiased=False,
+                 eps2d=0.3):
     """Gaussians g (N), slots (N,) long in 0..n_slots-1, camera -> dict:
     rgb (H, W, 3) premultiplied, alpha (H, W), depth (H, W) expected camera z (0 where alpha is 0),
     label (H, W) int16 (-1 where alpha <= 0.5), amodal {slot: (alpha crop, (u0, v0)) or None}
@@ -138,7 +142,9 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None,
     splatting/relight/scene.py); then also "features" (h, w, n_slots + F): the slots' weights and
     the features inside "crop" (u0, v0, w, h), the union of the slot boxes (None: nothing seen).
     antialiased: rasterize's mip filter, for all Gaussians (bool) or those of a (N,) bool mask (the
-    bikes whose parts were trained with it: BikeModel.antialiased), amodal alphas included."""
+    bikes whose parts were trained with it: BikeModel.antialiased), amodal alphas included.
+    eps2d: rasterize's low-pass, a number or one per Gaussian (each model its own: BikeModel.eps2d,
+    RiderAvatar.eps2d), amodal alphas included."""
     H, W = camera.height, camera.width
     t = (g.means.float(), g.quats.float(), g.scales.float(), g.opacities.float())
     boxes = slot_boxes(t[0], t[2], slots, n_slots, camera)
@@ -164,7 +170,7 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None,
         if one_pass:
             groups = (group_of[slots.long()], len(one_pass))
         out = rasterize(*t, g.sh.float(), cropped_camera(camera, crop), features=onehot, groups=groups,
-                        antialiased=antialiased)
+                        antialiased=antialiased, eps2d=eps2d)
         feats = out["features"]
         a_c = out["alpha"]
         sl = np.s_[v0:v0 + h, u0:u0 + w]
@@ -184,7 +190,7 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None,
             amodal[s] = out["group_alpha"][one_pass.index(s), v:v + bh, u:u + bw].numpy(), (bu, bv)
         else:
             amodal[s] = _subset_alpha(t, torch.nonzero(slots == s).squeeze(1), camera, boxes[s], amodal_max_px,
-                                      antialiased)
+                                      antialiased, eps2d)
     L = {"rgb": rgb, "alpha": alpha, "depth": d, "label": label, "amodal": amodal, "boxes": boxes}
     if features is not None:
         L.update(features=feats, crop=crop)

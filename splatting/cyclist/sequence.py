@@ -88,7 +88,7 @@ def render_sequence(cyc, poses, views, out, size=512, elevation=0.0, distance=12
     from splatting.bike.model import KEYPOINTS
     from splatting.gaussians.container import write_ply
     from splatting.rider.kinematics import JOINT_NAMES
-    from splatting.cyclist.compose import frame_record, take_fit
+    from splatting.cyclist.compose import frame_eps2d, frame_record, take_fit
     from splatting.cyclist.render import keypoint_visibility, orbit_camera, project_points, render_layers, rgba_image
 
     n = poses.shape[0]
@@ -112,7 +112,8 @@ def render_sequence(cyc, poses, views, out, size=512, elevation=0.0, distance=12
         for i, fr in zip(idx, frames):
             for az, cam in cams.items():
                 d = os.path.join(out, view_name(az))
-                L = render_layers(fr.gaussians, fr.ids, cam, antialiased=cyc.bike.antialiased)
+                L = render_layers(fr.gaussians, fr.ids, cam, antialiased=cyc.bike.antialiased,
+                                  eps2d=frame_eps2d(fr.ids, cyc.bike, cyc.avatar))
                 _save_png(os.path.join(d, f"{i:05d}.png"), rgba_image(L))
                 _save_png(os.path.join(d, f"{i:05d}_mask.png"), L["ids"])
                 _save_png(os.path.join(d, f"{i:05d}_depth.png"),

@@ -16,7 +16,7 @@ from cyclist_formats.instances import RIDER_ID
 from splatting.bike.model import KEYPOINTS as BIKE_KEYPOINTS
 from splatting.cyclist import appearance, lod
 from splatting.cyclist.assets import bike_dir, load_avatar, load_bike
-from splatting.cyclist.compose import Cyclist
+from splatting.cyclist.compose import Cyclist, frame_eps2d
 from splatting.cyclist.render import keypoint_visibility, orbit_camera, over, project_points, to_uint8
 from splatting.cyclist.scene_render import MASK_ALPHA, render_scene, union
 from splatting.dataset import camera_presets, kitti, lighting, png
@@ -26,6 +26,7 @@ from splatting.dataset.labels import BoxMask, annotation, vehicle_class
 from splatting.dataset.person_keypoints import COCO17_TOLERANCE_M, PersonKeypoints, RecordingAvatar
 from splatting.dataset.street import draw_street
 from splatting.gaussians.container import Gaussians
+from splatting.raster.sparse import EPS2D, eps2d_cat
 
 
 class Assets:
@@ -259,7 +260,7 @@ def make_sample(cfg, index, assets):
     H, W = cam.height, cam.width
     bg_kind = d["background"]["kind"]
 
-    parts, slots, boxes, keeps, aa = [], [], [], [], []
+    parts, slots, boxes, keeps, aa, eps = [], [], [], [], [], []
     lod_cfg = cfg["lod"]
     looks = []
     for k, (inst, frame, _) in enumerate(frames):
@@ -285,6 +286,10 @@ def make_sample(cfg, index, assets):
         # a bike whose parts were trained antialiased is drawn so (its rider and the rest as trained)
         bike_aa = (frame.ids != RIDER_ID) & bool(assets.bikes[inst["bike"]].antialiased)
         aa.append(bike_aa if idx is None else bike_aa.index_select(0, idx))
+        # and each model with the low-pass it was trained with (bike and rider may differ)
+        cyc = assets.cyclists[(inst["bike"], inst["rider"])]
+        e = frame_eps2d(frame.ids, cyc.bike, cyc.avatar)
+        eps.append((len(g), e if idx is None or not torch.is_tensor(e) else e.index_select(0, idx)))
         parts.append(g)
         slots.append(slot)
     b = cfg["backgrounds"]
@@ -302,11 +307,12 @@ def make_sample(cfg, index, assets):
     if parts:
         aa += [torch.zeros(len(p), dtype=torch.bool) for p in parts[len(aa):]]  # shadows, scene: as trained
         aa = torch.cat(aa) if any(bool(m.any()) for m in aa) else False
+        eps = eps2d_cat(eps + [(len(p), EPS2D) for p in parts[len(eps):]])  # shadows, scene: rasterize's default
         if relit is None:
             L = render_scene(Gaussians.cat(parts), torch.cat(slots), n_slots, cam, range(1, n_slots), cfg["amodal_max_px"],
-                             antialiased=aa)
+                             antialiased=aa, eps2d=eps)
         else:
-            L = relit.render(parts, torch.cat(slots), n_slots, cam, range(1, n_slots), cfg["amodal_max_px"], aa)
+            L = relit.render(parts, torch.cat(slots), n_slots, cam, range(1, n_slots), cfg["amodal_max_px"], aa, eps)
     else:
         L = {"rgb": np.zeros((H, W, 3), np.float32), "alpha": np.zeros((H, W), np.float32),
              "depth": np.zeros((H, W), np.float32), "label": np.full((H, W), -1, np.int16), "amodal": {},

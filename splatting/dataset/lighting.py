@@ -205,13 +205,17 @@ class RelitSample:
             alb, gl, rough, sky, nrm = (x.index_select(0, idx) for x in (alb, gl, rough, sky, nrm))
         vis = None
         if self.shadows:
+            from splatting.raster.sparse import eps2d_where
             from splatting.relight.shadow import sun_visibility
             aa = False  # the shadow map draws a bike trained with the mip filter with it (its rider as trained)
             bike_model = self.ch.bike(self.assets, bike).model
+            is_bike = torch.arange(len(trained)) < len(bike_model)  # the bike's Gaussians come first
+            is_bike = is_bike if idx is None else is_bike.index_select(0, idx)
             if bike_model.antialiased:
-                aa = torch.arange(len(trained)) < len(bike_model)  # the bike's Gaussians come first
-                aa = aa if idx is None else aa.index_select(0, idx)
-            vis = sun_visibility(g, self.light, antialiased=aa)
+                aa = is_bike
+            # each model with its own low-pass (rider: its avatar's)
+            rider_eps = self.assets.avatars[rider].eps2d if rider is not None else bike_model.eps2d
+            vis = sun_visibility(g, self.light, antialiased=aa, eps2d=eps2d_where(is_bike, bike_model.eps2d, rider_eps))
         self.channels[k] = (alb + gl, relight_features(nrm, gl, rough, vis, sky))
 
     def cast_shadows(self, rgb, L, camera, footprints, heights, opacity):
@@ -230,12 +234,12 @@ class RelitSample:
         out[m] = np.clip(np.round(rgb[m].astype(np.float32) * keep[m][:, None]), 0, 255).astype(np.uint8)
         return out
 
-    def render(self, parts, slots, n_slots, camera, amodal_slots, amodal_max_px, antialiased=False):
+    def render(self, parts, slots, n_slots, camera, amodal_slots, amodal_max_px, antialiased=False, eps2d=0.3):
         """render_scene's layers with the instances (the first len(self.channels) parts) relit."""
         from splatting.relight.scene import render_scene_relit
         ch = [self.channels[k] for k in range(len(self.channels))]
         return render_scene_relit(parts, ch, slots, n_slots, camera, self.light, self.shadows, amodal_slots,
-                                  amodal_max_px, antialiased)
+                                  amodal_max_px, antialiased, eps2d)
 
     def record(self, camera):
         R = camera.R.double().numpy()

@@ -64,7 +64,7 @@ def ground_truth(bike_dir, out_dir, n_poses=3, samples=None, seed=0):
         gt = np.asarray(Image.open(gt_png).convert("RGBA")).astype(np.float64) / 255
         with torch.no_grad():
             out = render_gaussians(model.pose(torch.tensor(pose, dtype=torch.float64)).gaussians, ring[int(cam)],
-                                   antialiased=model.antialiased)
+                                   antialiased=model.antialiased, eps2d=model.eps2d)
         rgb, alpha = out["rgb"].clamp(0, 1).double().numpy(), out["alpha"].double().numpy()
         gt_rgb, m_gt, m = gt[..., :3] * gt[..., 3:4], gt[..., 3] > 0.5, alpha > 0.5
         rows.append({"pose": [round(float(v), 3) for v in pose], "camera": int(cam),

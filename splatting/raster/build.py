@@ -90,9 +90,9 @@ def load():
             f = getattr(lib, f"gs_backward_{sfx}")
             f.argtypes, f.restype = [i64, i64, p, p, i32, i32, i32, i32, p, p, p, p, p, p, p, p, i32, p, p, p, p, p, p, p, p, p, p], None
             f = getattr(lib, f"gs_preprocess_fwd_{sfx}")
-            f.argtypes, f.restype = [i64, p, p, p, i32, i32, p, p, p, p, i32, i32, i32, p, p, p, p, p, p, p], None
+            f.argtypes, f.restype = [i64, p, p, p, i32, i32, p, p, p, p, p, i32, i32, i32, p, p, p, p, p, p, p], None
             f = getattr(lib, f"gs_preprocess_bwd_{sfx}")
-            f.argtypes, f.restype = [i64, p, p, p, i32, i32, p, p, p, p, i32, i32, i32, p, p, p, p, p, p, p, p, p], None
+            f.argtypes, f.restype = [i64, p, p, p, i32, i32, p, p, p, p, p, i32, i32, i32, p, p, p, p, p, p, p, p, p], None
         _lib = lib
     return _lib
 

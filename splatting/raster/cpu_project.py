@@ -4,7 +4,9 @@ OpenMP pass forward and one backward, instead of ~60 small torch autograd ops.
 
 preprocess(means, quats, scales, sh, camera, sh_degree, near, eps2d) -> means2d (N,2),
 conics (N,3), depths (N,), colors (N,3), radii (N,) long, boxes (N,4) long, visible (N,) bool
-(radii > 0); differentiable in means, quats, scales and sh. Culled Gaussians (radius 0) get no
+(radii > 0); differentiable in means, quats, scales and sh. eps2d: a number, or a (N,) tensor (one
+low-pass per Gaussian, handed to the C++ as a pointer; a number goes with the camera, so the
+scalar path is unchanged). Culled Gaussians (radius 0) get no
 gradient (they are never drawn). Gradients of outputs nobody used reach the C++ as null pointers
 (set_materialize_grads(False)), not as zero tensors: each torch op between the C calls is a
 serial step, and at 2 threads under OMP_WAIT_POLICY=PASSIVE a parallel one also wakes the other
@@ -25,7 +27,7 @@ def _nptr(t):
     return None if t is None else t.data_ptr()
 
 
-def _camera_args(camera, near, eps2d):
+def _camera_args(camera, near, eps2d):  # eps2d: the number (0 when per Gaussian: unused)
     R = camera.R.detach().to("cpu", torch.float64).contiguous()
     T = camera.T.detach().to("cpu", torch.float64).contiguous()
     (fx, _, cx), (_, fy, cy) = camera.K.detach().to("cpu", torch.float64).tolist()[:2]
@@ -35,7 +37,7 @@ def _camera_args(camera, near, eps2d):
 
 class _Preprocess(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, means, quats, scales, sh, camera, nb, near, eps2d):
+    def forward(ctx, means, quats, scales, sh, camera, nb, near, eps2d, eps):
         lib = build.load()
         dt = means.dtype
         sfx = _SUFFIX[dt]
@@ -43,34 +45,35 @@ class _Preprocess(torch.autograd.Function):
         n = means.shape[0]
         m, q, s, f = (t.detach().to(dt).contiguous() for t in (means, quats, scales, sh))
         R, T, intr = _camera_args(camera, near, eps2d)
+        eps = None if eps is None else eps.to(dt).contiguous()
         means2d, conics = torch.empty(n, 2, dtype=dt), torch.empty(n, 3, dtype=dt)
         depths, colors = torch.empty(n, dtype=dt), torch.empty(n, 3, dtype=dt)
         radii, boxes = torch.empty(n, dtype=torch.int64), torch.empty(n, 4, dtype=torch.int64)
         visible = torch.empty(n, dtype=torch.bool)
         getattr(lib, f"gs_preprocess_fwd_{sfx}")(n, _ptr(R), _ptr(T), _ptr(intr), camera.width, camera.height,
-                                                 _ptr(m), _ptr(q), _ptr(s), _ptr(f), f.shape[1], nb, nt,
-                                                 _ptr(means2d), _ptr(conics), _ptr(depths), _ptr(colors),
+                                                 _ptr(m), _ptr(q), _ptr(s), _ptr(f), _nptr(eps), f.shape[1], nb,
+                                                 nt, _ptr(means2d), _ptr(conics), _ptr(depths), _ptr(colors),
                                                  _ptr(radii), _ptr(boxes), _ptr(visible))
         ctx.mark_non_differentiable(radii, boxes, visible)
         ctx.set_materialize_grads(False)
         ctx.save_for_backward(m, q, s, f, radii)
-        ctx.cam = (R, T, intr, camera.width, camera.height, nb)
+        ctx.cam = (R, T, intr, camera.width, camera.height, nb, eps)
         ctx.dtypes = (means.dtype, quats.dtype, scales.dtype, sh.dtype)
         return means2d, conics, depths, colors, radii, boxes, visible
 
     @staticmethod
     def backward(ctx, g_m2, g_cn, g_z, g_col, _r, _b, _v):
         m, q, s, f, radii = ctx.saved_tensors
-        R, T, intr, W, H, nb = ctx.cam
+        R, T, intr, W, H, nb, eps = ctx.cam
         dt = m.dtype
         n = m.shape[0]
         g = [None if t is None else t.to(dt).contiguous() for t in (g_m2, g_cn, g_z, g_col)]
         gm, gq, gs, gf = torch.empty_like(m), torch.empty_like(q), torch.empty_like(s), torch.empty_like(f)
         getattr(build.load(), f"gs_preprocess_bwd_{_SUFFIX[dt]}")(
-            n, _ptr(R), _ptr(T), _ptr(intr), W, H, _ptr(m), _ptr(q), _ptr(s), _ptr(f), f.shape[1], nb,
+            n, _ptr(R), _ptr(T), _ptr(intr), W, H, _ptr(m), _ptr(q), _ptr(s), _ptr(f), _nptr(eps), f.shape[1], nb,
             max(1, torch.get_num_threads()), _ptr(radii), *map(_nptr, g), _ptr(gm), _ptr(gq), _ptr(gs), _ptr(gf))
         dm, dq, ds, df = ctx.dtypes
-        return gm.to(dm), gq.to(dq), gs.to(ds), gf.to(df), None, None, None, None
+        return gm.to(dm), gq.to(dq), gs.to(ds), gf.to(df), None, None, None, None, None
 
 
 def preprocess(means, quats, scales, sh, camera, sh_degree=None, near=0.01, eps2d=0.3):
@@ -85,4 +88,9 @@ def preprocess(means, quats, scales, sh, camera, sh_degree=None, near=0.01, eps2
     nb = (degree + 1) ** 2
     if not 0 <= degree <= 3 or nb > k:
         raise ValueError(f"sh_degree {degree} needs {nb} SH coefficients (have {k}, degrees 0-3)")
-    return _Preprocess.apply(means, quats, scales, sh, camera, nb, float(near), float(eps2d))
+    from splatting.raster.sparse import check_eps2d
+
+    eps2d = check_eps2d(eps2d, means.shape[0], "preprocess")
+    per = torch.is_tensor(eps2d)
+    return _Preprocess.apply(means, quats, scales, sh, camera, nb, float(near), 0.0 if per else eps2d,
+                             eps2d if per else None)

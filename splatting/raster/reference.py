@@ -23,7 +23,7 @@ def _rotmat(q):
 def project_reference(means, quats, scales, camera, near=0.01, eps2d=0.3):
     """Stage 1, per Gaussian, float64: means2d (N, 2), conics (N, 3) = (a, b, c) of the inverse 2D
     covariance, z (N,), radii (N,) long (0 = culled: behind `near` or degenerate), and the
-    antialiasing factor det(S) / det(S + eps2d I) (N,)."""
+    antialiasing factor det(S) / det(S + eps2d I) (N,).  eps2d: a number or one per Gaussian (N,)."""
     f64 = lambda t: t.detach().to("cpu", torch.float64)
     means, quats, scales = map(f64, (means, quats, scales))
     R, T, K = f64(camera.R), f64(camera.T), f64(camera.K)
@@ -48,7 +48,8 @@ def project_reference(means, quats, scales, camera, near=0.01, eps2d=0.3):
         Rq = _rotmat(quats[i])
         cov3 = Rq @ torch.diag(scales[i] ** 2) @ Rq.T
         cov2_raw = J @ R @ cov3 @ R.T @ J.T
-        cov2 = cov2_raw + eps2d * torch.eye(2, dtype=torch.float64)
+        e = float(eps2d[i]) if torch.is_tensor(eps2d) else eps2d
+        cov2 = cov2_raw + e * torch.eye(2, dtype=torch.float64)
         det = torch.linalg.det(cov2).item()
         if det <= 0:
             continue

@@ -3,6 +3,8 @@
 One entry point, `rasterize(...)`; see docs/rasterizer.md. Shapes (N Gaussians, K SH coeffs):
   means (N,3) world, quats (N,4) wxyz (normalised here), scales (N,3) std devs,
   opacities (N,) in [0,1], sh (N,K,3); camera: splatting.raster.camera.Camera.
+eps2d: the screen-space low-pass (px^2) added to every projected covariance: a number, or a (N,)
+tensor (each Gaussian its own: a scene composing models trained with different filters).
 Returns a dict: rgb (H,W,3), alpha (H,W), depth (H,W), means2d (N,2) pixel coords (retain_grad'ed
 when it requires grad: the densifier reads its .grad), radii (N,) long, visible (N,) bool.
 depth = sum_i w_i z_i with w_i = alpha_i T_i and z_i the camera z: NOT divided by alpha (the
@@ -22,16 +24,64 @@ from splatting.gaussians.sh import eval_sh
 from splatting.rotations import quat_to_rotmat  # noqa: F401  (re-exported for the projection)
 
 ALPHA_MIN = 1.0 / 255.0
+# the screen-space low-pass (px^2) rasterize adds by default, and the filter of every trained model
+# that records none (parts, fine-tuned bikes and avatars made before the filter was recorded)
+EPS2D = 0.3
 ALPHA_MAX = 0.99
 T_MIN = 1e-4
 CHUNK_PAIRS = 1 << 16  # candidate pairs per front-to-back chunk in intersect() (2^15..2^16 measured best)
 
 
-def project(means, quats, scales, camera, near=0.01, eps2d=0.3):
-    """EWA projection. Returns means2d (N,2), conics (N,3) = (a,b,c) of the inverse 2D covariance,
+def check_eps2d(eps2d, n, who="rasterize"):
+    """eps2d as the rasterizer takes it: a finite number >= 0 for every Gaussian (returned as a
+    float), or a (n,) floating tensor of them, one per Gaussian (returned detached: a model's filter
+    is a constant, not a parameter).  Anything else is a ValueError naming who asked."""
+    if torch.is_tensor(eps2d):
+        if tuple(eps2d.shape) != (n,) or not eps2d.is_floating_point():
+            raise ValueError(f"{who}: eps2d must be a number or a ({n},) floating tensor (one per Gaussian), "
+                             f"got a {tuple(eps2d.shape)} {eps2d.dtype} tensor")
+        e = eps2d.detach()
+        if not bool(torch.isfinite(e).all()) or bool((e < 0).any()):
+            bad = e[~(torch.isfinite(e) & (e >= 0))][0]
+            raise ValueError(f"{who}: eps2d must be finite and >= 0 for every Gaussian, got {float(bad)}")
+        return e
+    if isinstance(eps2d, bool) or not isinstance(eps2d, (int, float)):
+        raise ValueError(f"{who}: eps2d must be a number or a ({n},) floating tensor, got {type(eps2d).__name__}")
+    if not math.isfinite(eps2d) or eps2d < 0:
+        raise ValueError(f"{who}: eps2d must be finite and >= 0, got {eps2d}")
+    return float(eps2d)
+
+
+def eps2d_where(mask, a, b):
+    """The eps2d of a scene of two kinds of Gaussians: a where mask (N,) bool, b elsewhere (a bike's
+    filter and its rider's).  One number when they agree or one kind is absent: rasterize's scalar
+    path, the renders of before bit for bit."""
+    a, b = float(a), float(b)
+    if a == b or not bool(mask.any()):
+        return b
+    if bool(mask.all()):
+        return a
+    return torch.where(mask, torch.tensor(a, dtype=torch.float64), torch.tensor(b, dtype=torch.float64))
+
+
+def eps2d_cat(parts):
+    """[(count, eps2d number or (count,) tensor), ...] in the scene's order -> the eps2d of their
+    concatenation: one number when all are the same number (the scalar path), else a (N,) tensor."""
+    nums = {float(e) for _, e in parts if not torch.is_tensor(e)}
+    if all(not torch.is_tensor(e) for _, e in parts) and len(nums) <= 1:
+        return nums.pop() if nums else EPS2D
+    return torch.cat([e.detach().to(torch.float64) if torch.is_tensor(e) else torch.full((n,), float(e), dtype=torch.float64)
+                      for n, e in parts])
+
+
+def project(means, quats, scales, camera, near=0.01, eps2d=EPS2D):
+    """EWA projection (eps2d: a number or a (N,) tensor, check_eps2d). Returns means2d (N,2), conics (N,3) = (a,b,c) of the inverse 2D covariance,
     depths (N,) camera z, radii (N,) long (3 sigma of the largest eigenvalue, 0 = culled),
     boxes (N,4) long pixel ranges [u0, u1, v0, v1] inclusive (empty when u1 < u0)."""
     dt, dev = means.dtype, means.device
+    eps2d = check_eps2d(eps2d, means.shape[0], "project")
+    if torch.is_tensor(eps2d):
+        eps2d = eps2d.to(dev, dt)
     R = camera.R.to(dev, dt)
     T = camera.T.to(dev, dt)
     fx, fy = float(camera.K[0, 0]), float(camera.K[1, 1])
@@ -277,7 +327,7 @@ def composite(means2d, conics, opacities, colors, depths, background, pairs, H, 
 
 
 def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_degree=None,
-              near=0.01, eps2d=0.3, features=None, antialiased=False, backend=None, groups=None, depth=True,
+              near=0.01, eps2d=EPS2D, features=None, antialiased=False, backend=None, groups=None, depth=True,
               shade=None):
     """Render N Gaussians into camera. See the module docstring for shapes.
 
@@ -305,6 +355,7 @@ def rasterize(means, quats, scales, opacities, sh, camera, background=None, sh_d
     None: "tiles" for CPU tensors, "torch" otherwise. out["backend"] says which one ran."""
     H, W = camera.height, camera.width
     backend = resolve_backend(backend, means)
+    eps2d = check_eps2d(eps2d, means.shape[0])
     if shade is not None and (backend != "tiles" or depth):
         raise ValueError("rasterize: shade needs the tiled back end and depth=False")
     if backend == "tiles":  # projection + SH fused in C++ (splatting/raster/cpu_project.py)
@@ -373,7 +424,9 @@ def antialias_opacities(opacities, conics, eps2d, antialiased, who="rasterize"):
     """opacities (N,) x the mip filter's compensation (aa_compensation) where antialiased says: a
     bool for all Gaussians, or a (N,) bool mask (each asset drawn as it was trained).  Shared by
     rasterize and the relight fit's fixed pair list (splatting/relight/render.py prepare), so both
-    composite the same alphas."""
+    composite the same alphas.  eps2d: the number or (N,) tensor the conics were projected with."""
+    if torch.is_tensor(eps2d):
+        eps2d = eps2d.to(conics)
     if torch.is_tensor(antialiased):
         if antialiased.shape != opacities.shape:
             raise ValueError(f"{who}: antialiased mask {tuple(antialiased.shape)} for {tuple(opacities.shape)} "
@@ -388,7 +441,8 @@ def antialias_opacities(opacities, conics, eps2d, antialiased, who="rasterize"):
 def aa_compensation(conics, eps2d):
     """sqrt(det S / det(S + eps2d I)) from the conic (S + eps2d I)^-1 = [[A, B], [B, C]]:
     S + eps2d I = [[C, -B], [-B, A]] / d with d = AC - B^2, so det(S + eps2d I) = 1 / d and
-    det S = (C/d - eps2d)(A/d - eps2d) - B^2/d^2. 0 where S is degenerate (culled anyway)."""
+    det S = (C/d - eps2d)(A/d - eps2d) - B^2/d^2. 0 where S is degenerate (culled anyway).
+    eps2d: a number or a (N,) tensor (per Gaussian, as the conics were projected)."""
     A, B, C = conics.unbind(-1)
     d = A * C - B * B
     d = torch.where(d > 0, d, torch.ones_like(d))

@@ -80,5 +80,5 @@ class RelightableBike:
 
             g = self.model.pose(torch.zeros(8, dtype=torch.float64)).gaussians
             self._sky = sky_visibility(g.map(lambda x: x.contiguous()), self.normals,
-                                       antialiased=self.model.antialiased)  # drawn as trained
+                                       antialiased=self.model.antialiased, eps2d=self.model.eps2d)  # drawn as trained
         return self._sky

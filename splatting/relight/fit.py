@@ -125,7 +125,7 @@ def initial_normals(g, items):
     return torch.where(vote[:, None] < 0, -n, n)
 
 
-def _views_at(g, views, idx, targets, scale, margin=4, antialiased=False):
+def _views_at(g, views, idx, targets, scale, margin=4, antialiased=False, eps2d=0.3):
     """Per view: fixed projection + pairs in the cropped camera (with the mip filter when the
     Gaussians were trained with it), and the cropped targets."""
     out = []
@@ -135,7 +135,7 @@ def _views_at(g, views, idx, targets, scale, margin=4, antialiased=False):
         box = crop_box(cover.float(), margin)
         x0, y0, x1, y1 = box
         crop = crop_camera(cam, box)
-        prep = prepare(g, crop, antialiased)
+        prep = prepare(g, crop, antialiased, eps2d)
         prep["camera"] = crop  # relit_loss's and view_normals' view directions
         out.append((prep, {k: t[i, y0:y1, x0:x1] for k, t in targets.items()}))
     return out
@@ -223,13 +223,14 @@ def _evaluate(feats, items, means):
             "heldout_normal_err_deg": round(sum(ang) / len(ang), 2) if ang else None}
 
 
-def fit_relight(g, views, cfg: RelightFitConfig = None, antialiased=False):
+def fit_relight(g, views, cfg: RelightFitConfig = None, antialiased=False, eps2d=0.3):
     """Gaussians g (trained on views) -> ({"albedo", "normal", "gloss"}: (N, 3); colours linear, normals
     unit; with cfg.view_normals also "normal_view" (N, 3, 3): render.view_normals), metrics).
     antialiased: g was trained with the rasterizer's mip filter (and is rendered
     with it: BikeModel.antialiased), so its fixed geometry is composited with it too: without it a
     sub-pixel spoke Gaussian covers ~0.3 px^2 at its full opacity, not its own footprint, and the
-    channels are fitted under the wrong coverage."""
+    channels are fitted under the wrong coverage.  eps2d: the low-pass g was trained with (and is
+    drawn with: BikeModel.eps2d), for the same reason."""
     cfg = cfg or RelightFitConfig()
     t0 = time.time()
     torch.manual_seed(cfg.seed)
@@ -238,8 +239,8 @@ def fit_relight(g, views, cfg: RelightFitConfig = None, antialiased=False):
     if cfg.relit_loss:  # the passes' own coverage (the views' alpha), for their display colour
         targets["alpha"] = _resized(views.images[..., 3:], scale)[..., 0]
     train_idx, hold_idx = split_views(views, cfg.holdout)
-    tr = _views_at(g, views, train_idx, targets, scale, antialiased=antialiased)
-    ho = _views_at(g, views, hold_idx, targets, scale, antialiased=antialiased) if hold_idx else []
+    tr = _views_at(g, views, train_idx, targets, scale, antialiased=antialiased, eps2d=eps2d)
+    ho = _views_at(g, views, hold_idx, targets, scale, antialiased=antialiased, eps2d=eps2d) if hold_idx else []
 
     base = srgb_decode(g.sh[:, 0].float() * C0 + 0.5).clamp(0.02, 0.98)  # SH0 -> colour
     albedo_logit = torch.nn.Parameter(torch.logit(base))
@@ -312,9 +313,13 @@ def fit_file(views_dir, ply_path=None, cfg: RelightFitConfig = None):
     if missing:
         raise UserError(f"{views_dir}: {len(missing)} views lack the albedo/normal passes (e.g. {missing[0]}); "
                         "render them again with render_views")
+    from splatting.bike.model import trained_eps2d
+
     aa = trained_antialiased(ply_path)
     g = read_ply(ply_path)
-    feats, metrics = fit_relight(g, views, cfg, antialiased=aa)
+    stem = os.path.splitext(os.path.basename(ply_path))[0]
+    feats, metrics = fit_relight(g, views, cfg, antialiased=aa,
+                                 eps2d=trained_eps2d(os.path.dirname(ply_path), {stem: len(g)}))
     metrics["path"] = bike_folder.write_relight(ply_path, **{k: v.numpy() for k, v in feats.items()})
     return metrics
 

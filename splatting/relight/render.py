@@ -221,7 +221,7 @@ def _view_normals_c(normals, normal_view, means, c):
 @torch.no_grad()
 def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
                  shadows=False, antialiased=True, static=None, reflectance=False, sky_visibility=None, normal=False,
-                 fused=None, shadow_antialiased=False, normal_view=None):
+                 fused=None, shadow_antialiased=False, normal_view=None, eps2d=0.3):
     """Gaussians g with per-Gaussian linear albedo (N, 3), world-frame unit normals (N, 3) and optionally
     a linear glossy colour (N, 3) under a light -> dict rgb (H, W, 3) display colour premultiplied
     (over black), alpha, with normal=True the composited normal and with reflectance=True the
@@ -243,7 +243,9 @@ def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness
     (shadow.sun_visibility), for Gaussians trained with it (BikeModel.antialiased; a bool or (N,)
     mask) whatever the view's `antialiased` (which also serves rendering below the training size).
     normal_view (N, 3, 3) world frame (RelightableBike.posed_normal_view): view-dependent normals,
-    view_normals(normals, normal_view, g.means, camera); None: normals as they are."""
+    view_normals(normals, normal_view, g.means, camera); None: normals as they are.
+    eps2d: rasterize's low-pass, a number or (N,), as g was trained (BikeModel.eps2d), view and
+    shadow map alike."""
     from splatting.gaussians.container import Gaussians
     from splatting.raster.sparse import render_gaussians
 
@@ -259,7 +261,7 @@ def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness
     vis = None
     if shadows:
         from splatting.relight.shadow import sun_visibility
-        vis = sun_visibility(g, light, antialiased=shadow_antialiased)
+        vis = sun_visibility(g, light, antialiased=shadow_antialiased, eps2d=eps2d)
     gr = Gaussians(g.means, g.quats, g.log_scales, g.opacity_logits, static.sh)
     parts = relight_feature_parts(normals, static.gloss_luma, visibility=vis, sky_visibility=sky_visibility)
     gloss_on, sky_on = static.gloss_luma is not None, sky_visibility is not None
@@ -274,10 +276,10 @@ def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness
         spec = TileShade(shade_params(camera, light, roughness, highlight),
                          shade_flags(gloss_on, False, shadows, sky_on), features=normal)
         r = render_gaussians(gr, camera, features=parts, sh_degree=0, antialiased=antialiased, depth=False,
-                             backend="tiles", shade=spec)
+                             backend="tiles", shade=spec, eps2d=eps2d)
         out = {"rgb": r["rgb"], "alpha": r["alpha"]}
     else:
-        r = render_gaussians(gr, camera, features=parts, sh_degree=0, antialiased=antialiased, depth=False)
+        r = render_gaussians(gr, camera, features=parts, sh_degree=0, antialiased=antialiased, depth=False, eps2d=eps2d)
         rgb = shade_composited(r["rgb"], r["features"], r["alpha"], camera, light, gloss_on, False, shadows,
                                roughness, highlight, in_place=not reflectance, sky_channel=sky_on)
         out = {"rgb": rgb, "alpha": r["alpha"]}

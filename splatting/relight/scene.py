@@ -20,12 +20,12 @@ from splatting.relight.render import shade_composited
 
 @torch.no_grad()
 def render_scene_relit(parts, channels, slots, n_slots, camera, light, shadows, amodal_slots=(), amodal_max_px=None,
-                       antialiased=False):
+                       antialiased=False, eps2d=0.3):
     """parts: list of Gaussians, of which the first len(channels) are relit with channels
     [(reflectance (n, 3), relight_features(normals, gloss, roughness, visibility, sky_visibility) (n, C))]
     (one layout for all); the rest baked.  Slot 0 must hold the baked parts only.  -> render_scene's
     dict and relit_cover (H, W): the relit parts' coverage.  antialiased: as render_scene's (a mask
-    over the concatenated parts)."""
+    over the concatenated parts); eps2d: as render_scene's (a number or one per Gaussian)."""
     C = channels[0][1].shape[1] if channels else 0
     gs, feats = [], []
     for i, g in enumerate(parts):
@@ -38,7 +38,7 @@ def render_scene_relit(parts, channels, slots, n_slots, camera, light, shadows, 
             gs.append(g)
             feats.append(torch.zeros(len(g), 3 + C))
     L = render_scene(Gaussians.cat(gs), slots, n_slots, camera, amodal_slots, amodal_max_px, features=torch.cat(feats),
-                     antialiased=antialiased)
+                     antialiased=antialiased, eps2d=eps2d)
     F, crop = L.pop("features"), L.pop("crop")
     L["relit_cover"] = np.zeros(L["alpha"].shape, np.float32)  # the relit parts' coverage, full frame
     if crop is not None and channels:

@@ -41,15 +41,16 @@ def sun_camera(means, light, size=SIZE, distance_radii=100.0):
 
 
 @torch.no_grad()
-def sun_visibility(g, light, size=SIZE, bias_px=BIAS_PX, antialiased=False):
+def sun_visibility(g, light, size=SIZE, bias_px=BIAS_PX, antialiased=False, eps2d=0.3):
     """(N,) in [0, 1]: how much of the sun reaches each Gaussian's centre.  antialiased: the mip
     filter in the map (rasterize's bool or (N,) mask) for Gaussians trained with it
     (BikeModel.antialiased): drawn without it, their sub-pixel spokes and cables would grow to
-    0.3 px^2 blobs at full opacity and cast more shadow than they have."""
+    0.3 px^2 blobs at full opacity and cast more shadow than they have.  eps2d: rasterize's, as g
+    was trained (a number or (N,))."""
     from splatting.raster.sparse import render_gaussians
 
     cam, px_m = sun_camera(g.means, light, size)
-    r = render_gaussians(g, cam, sh_degree=0, antialiased=antialiased)
+    r = render_gaussians(g, cam, sh_degree=0, antialiased=antialiased, eps2d=eps2d)
     # the first surface: the expected depth of the map pixel (rasterizer's depth / alpha) where it
     # is mostly covered; uncovered pixels light everything behind them
     depth = torch.where(r["alpha"] > 0.5, r["depth"] / r["alpha"].clamp_min(1e-6), torch.full_like(r["alpha"], float("inf")))
@@ -99,18 +100,20 @@ def sphere_directions(n):
 
 
 @torch.no_grad()
-def sky_visibility(g, normals, directions=SKY_DIRECTIONS, size=SKY_SIZE, bias_px=SKY_BIAS_PX, antialiased=False):
+def sky_visibility(g, normals, directions=SKY_DIRECTIONS, size=SKY_SIZE, bias_px=SKY_BIAS_PX, antialiased=False,
+                   eps2d=0.3):
     """(N,) in [0, 1]: the share of a uniform sky that reaches each Gaussian, cosine-weighted about
     its normal (what Cycles' AO pass measures): sun_visibility from `directions` directions over
     the sphere, each weighted by max(0, n.d).  normals (N, 3) unit, the frame of g's means.  For a
     uniform sky it depends on the object's shape only, not on where the object is turned, so a
-    bike computes it once (RelightableBike.sky_visibility).  antialiased: as sun_visibility's."""
+    bike computes it once (RelightableBike.sky_visibility).  antialiased, eps2d: as sun_visibility's."""
     from splatting.relight.shading import Light
 
     n = normals.float()
     num, den = torch.zeros(len(g)), torch.zeros(len(g))
     for d in sphere_directions(directions):
         w = (n @ d.float()).clamp_min_(0.0)
-        num += w * sun_visibility(g, Light(sun_direction=tuple(d.tolist())), size, bias_px, antialiased=antialiased)
+        num += w * sun_visibility(g, Light(sun_direction=tuple(d.tolist())), size, bias_px, antialiased=antialiased,
+                                  eps2d=eps2d)
         den += w
     return (num / den.clamp_min(1e-6)).clamp_(0.0, 1.0)

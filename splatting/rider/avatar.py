@@ -124,6 +124,7 @@ class RiderAvatar:
     rest_joints: torch.Tensor   # (24, 3) float32, SMPL order
     rider_id: str = ""
     method: str = SKINNING_METHOD
+    eps2d: float = 0.3          # the splats' low-pass it was trained with (rider.json config; absent: 0.3)
 
     def __post_init__(self):
         n = len(self.gaussians)
@@ -208,6 +209,7 @@ class RiderAvatar:
 
     @classmethod
     def load(cls, folder):
+        """rider.ply + skinning.npz; eps2d from rider.json (trained_eps2d)."""
         ply, npz = os.path.join(folder, PLY_NAME), os.path.join(folder, SKINNING_NAME)
         for p in (ply, npz):
             if not os.path.isfile(p):
@@ -226,4 +228,18 @@ class RiderAvatar:
             raise UserError(f"{npz}: weights are {w.shape} but {ply} holds {len(g)} Gaussians (expected ({len(g)}, 24))")
         if not (np.isfinite(w).all() and np.isfinite(j).all()):
             raise UserError(f"{npz}: non-finite values")
-        return cls(g, torch.from_numpy(w), torch.from_numpy(j), rider_id, method)
+        return cls(g, torch.from_numpy(w), torch.from_numpy(j), rider_id, method, trained_eps2d(folder))
+
+
+def trained_eps2d(folder):
+    """The screen-space low-pass (px^2) an avatar's Gaussians were trained with: rider.json's
+    "config" "eps2d" (the trainer's record; rider-posed-train fine-tunes with the same value),
+    0.3 for avatars trained before it was recorded or without metrics."""
+    from cyclist_formats.atomic import read_json_or_none
+    from splatting.bike.model import check_model_eps2d
+    from splatting.raster.sparse import EPS2D
+
+    m = read_json_or_none(os.path.join(folder, "rider.json"))
+    cfg = m.get("config") if isinstance(m, dict) else None
+    return check_model_eps2d(cfg.get("eps2d", EPS2D) if isinstance(cfg, dict) else EPS2D,
+                             os.path.join(folder, "rider.json"))

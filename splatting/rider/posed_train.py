@@ -142,7 +142,7 @@ def fine_tune(avatar, rest_views_dir, posed_folders, cfg: PosedTrainConfig):
         cam = crop_camera(cams[v], boxes[v])
         m, q, sh = posed(s)
         out = rasterize(m, q, torch.exp(params["log_scales"]), torch.sigmoid(params["opacity_logits"]), sh, cam,
-                        background=bg)
+                        background=bg, eps2d=avatar.eps2d)  # the filter it was trained with
         gt = img[v, :, y0:y1, x0:x1].permute(1, 2, 0)
         return out, gt
 

@@ -65,6 +65,7 @@ def config_from_args(args):
     checks.gaussians("max_gaussians", args.densify_max_gaussians)
     checks.threads("threads", args.threads)
     checks.integer("seed", args.seed, 0)
+    checks.positive("eps2d", args.eps2d, 10.0)
     cfg = TrainConfig(progress=not args.quiet)
     for path, _ in _cli_fields():
         v = getattr(args, "_".join(path))

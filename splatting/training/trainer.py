@@ -40,6 +40,10 @@ class TrainConfig:
     # mip-splatting's 2D filter with opacity compensation (raster/sparse.py); a model trained with it
     # must be rendered with it (its PART.json config says so)
     antialiased: bool = field(default=False, metadata={"help": "antialiased splatting in training and evaluation"})
+    # the splats' screen-space low-pass (px^2, rasterize's eps2d); the part is drawn with it ever
+    # after (PART.json config; absent: 0.3). Cycles' 1.5 px Blackman-Harris pixel filter: 0.173
+    eps2d: float = field(default=0.3, metadata={"help": "screen-space low-pass variance (px^2) added to every "
+                                                         "splat in training, kept with the part for every render"})
     # 1 by default: on the shared 2-core machine 2 threads ran 4-7x slower per iteration
     # (oversubscription), see docs/training.md; None leaves torch's default
     threads: int = field(default=1, metadata={"help": "torch.set_num_threads (1: measured fastest on 2 shared cores)"})
@@ -95,14 +99,14 @@ def gaussians_of(params) -> Gaussians:
                      torch.cat([params["sh0"], params["shN"]], 1))
 
 
-def _render(params, cam, background=None, sh_degree=None, antialiased=False):
+def _render(params, cam, background=None, sh_degree=None, antialiased=False, eps2d=0.3):
     return rasterize(params["means"], params["quats"], torch.exp(params["log_scales"]),
                      torch.sigmoid(params["opacity_logits"]), torch.cat([params["sh0"], params["shN"]], 1),
-                     cam, background=background, sh_degree=sh_degree, antialiased=antialiased)
+                     cam, background=background, sh_degree=sh_degree, antialiased=antialiased, eps2d=eps2d)
 
 
 @torch.no_grad()
-def evaluate(g_or_params, targets: Targets, background=(1.0, 1.0, 1.0), crop=False, antialiased=False):
+def evaluate(g_or_params, targets: Targets, background=(1.0, 1.0, 1.0), crop=False, antialiased=False, eps2d=0.3):
     """Held-out quality on RGB composited over `background` (white: the NeRF-synthetic convention).
     crop=False: whole images (the reported numbers); crop=True: the object's box only (cheaper)."""
     params = _params_from(g_or_params) if isinstance(g_or_params, Gaussians) else g_or_params
@@ -116,7 +120,7 @@ def evaluate(g_or_params, targets: Targets, background=(1.0, 1.0, 1.0), crop=Fal
             cam = crop_camera(cam, boxes[i])
             gt = gt[y0:y1, x0:x1]
         gt_rgb = gt[..., :3] + (1 - gt[..., 3:]) * bg
-        out = _render(params, cam, background=bg, antialiased=antialiased)
+        out = _render(params, cam, background=bg, antialiased=antialiased, eps2d=eps2d)
         pred = out["rgb"].clamp(0, 1)
         ps.append(psnr(pred, gt_rgb))
         ss.append(float(ssim(pred, gt_rgb)))
@@ -191,7 +195,7 @@ def train_views(views: Views, cfg: TrainConfig):
         x0, y0, x1, y1 = boxes[v]
         cam = crop_camera(cams[v], boxes[v])
         gt = img[v, :, y0:y1, x0:x1].permute(1, 2, 0)
-        out = _render(params, cam, sh_degree=cfg.sh_degree, antialiased=cfg.antialiased)
+        out = _render(params, cam, sh_degree=cfg.sh_degree, antialiased=cfg.antialiased, eps2d=cfg.eps2d)
         loss = rgba_loss(out, gt, torch.rand(3, generator=gen), cfg.lambda_dssim)  # a random background
 
         ok = bool(torch.isfinite(loss))
@@ -211,7 +215,7 @@ def train_views(views: Views, cfg: TrainConfig):
         dens.post_backward(it, params, opt, out["means2d"].grad, out["radii"], cams[v].width, cams[v].height)
 
         if ho is not None and (it % cfg.eval_every == 0 or it == cfg.iterations):
-            last_psnr, _ = evaluate(params, ho, crop=True, antialiased=cfg.antialiased)
+            last_psnr, _ = evaluate(params, ho, crop=True, antialiased=cfg.antialiased, eps2d=cfg.eps2d)
             history.append([it, round(time.time() - t0, 2), round(last_psnr, 3), len(params["means"])])
             if last_psnr > best + cfg.min_delta_db:
                 best, since_best = last_psnr, 0
@@ -239,6 +243,7 @@ def train_views(views: Views, cfg: TrainConfig):
         "stopped": stopped,
         "sh_degree": cfg.sh_degree,
         "antialiased": cfg.antialiased,
+        "eps2d": cfg.eps2d,
         "max_gaussians": cfg.densify.max_gaussians,
         "extent_m": round(extent, 4),
         "threads": torch.get_num_threads(),
@@ -250,8 +255,9 @@ def train_views(views: Views, cfg: TrainConfig):
         "config": config_dict(cfg),
     }
     if ho is not None:
-        metrics["psnr"], metrics["ssim"] = [round(x, 4) for x in evaluate(g, ho, antialiased=cfg.antialiased)]
-        metrics["psnr_crop"] = round(evaluate(g, ho, crop=True, antialiased=cfg.antialiased)[0], 4)
+        metrics["psnr"], metrics["ssim"] = [round(x, 4) for x in evaluate(g, ho, antialiased=cfg.antialiased,
+                                                                          eps2d=cfg.eps2d)]
+        metrics["psnr_crop"] = round(evaluate(g, ho, crop=True, antialiased=cfg.antialiased, eps2d=cfg.eps2d)[0], 4)
     metrics["eval_s"] = round(time.time() - t0 - train_wall, 2)
     return g, metrics
 
@@ -289,7 +295,7 @@ def train(views_dir, out_ply=None, config: TrainConfig = None, relight=False):
 
         feats, metrics["relight"] = fit_relight(g, views, RelightFitConfig(holdout=cfg.holdout, seed=cfg.seed,
                                                                            progress=cfg.progress),
-                                                antialiased=cfg.antialiased)
+                                                antialiased=cfg.antialiased, eps2d=cfg.eps2d)
         write_relight(out_ply, **{k: v.numpy() for k, v in feats.items()})
     write_ply(g, out_ply)
     write_json(os.path.splitext(out_ply)[0] + ".json", metrics)

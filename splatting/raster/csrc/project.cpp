@@ -5,6 +5,11 @@
 //
 // Culled Gaussians (z <= near or a degenerate 2D covariance) get radius 0 and no gradient: they
 // are never composited, so the compositor hands them none.
+//
+// The screen-space low-pass eps2d (px^2, added to the 2D covariance's diagonal) is the camera's
+// one number, or per Gaussian (eps: N values, or null for the camera's): a scene composes models
+// trained with different filters (docs/rasterizer.md). It is a constant, not a parameter: no
+// gradient flows to it.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -107,7 +112,8 @@ struct Geo {
 };
 
 template <typename S>
-__attribute__((always_inline)) inline void geometry(const Cam& cam, const S* mean, const S* quat, const S* scale, Geo<S>& g) {
+__attribute__((always_inline)) inline void geometry(const Cam& cam, const S* mean, const S* quat, const S* scale, S e,
+                                                    Geo<S>& g) {
   S R[9], T[3];
   for (int i = 0; i < 9; ++i) R[i] = (S)cam.R[i];
   for (int i = 0; i < 3; ++i) T[i] = (S)cam.T[i];
@@ -139,7 +145,6 @@ __attribute__((always_inline)) inline void geometry(const Cam& cam, const S* mea
     g.A0[k] = fx * iz * g.RM[k] - fx * g.tx * iz2 * g.RM[6 + k];
     g.A1[k] = fy * iz * g.RM[3 + k] - fy * g.ty * iz2 * g.RM[6 + k];
   }
-  const S e = (S)cam.eps2d;
   g.a = g.A0[0] * g.A0[0] + g.A0[1] * g.A0[1] + g.A0[2] * g.A0[2] + e;
   g.b = g.A0[0] * g.A1[0] + g.A0[1] * g.A1[1] + g.A0[2] * g.A1[2];
   g.c = g.A1[0] * g.A1[0] + g.A1[1] * g.A1[1] + g.A1[2] * g.A1[2] + e;
@@ -157,12 +162,12 @@ inline void direction(const Cam& cam, const S* mean, S* d, S& n) {
 // nb (the number of SH coefficients used) is a template constant: the SH loops unroll.
 template <typename S, int nb>
 void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, const S* scales, const S* sh,
-                    int K, int nt, S* means2d, S* conics, S* depths, S* colors, int64_t* radii,
+                    const S* eps, int K, int nt, S* means2d, S* conics, S* depths, S* colors, int64_t* radii,
                     int64_t* boxes, bool* visible) {
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 2048)  // a late thread delays by one block
   for (int64_t n = 0; n < N; ++n) {
     Geo<S> g;
-    geometry(cam, means + 3 * n, quats + 4 * n, scales + 3 * n, g);
+    geometry(cam, means + 3 * n, quats + 4 * n, scales + 3 * n, eps ? eps[n] : (S)cam.eps2d, g);
     const S u = (S)cam.fx * g.p[0] / g.zs + (S)cam.cx, v = (S)cam.fy * g.p[1] / g.zs + (S)cam.cy;
     means2d[2 * n] = u;
     means2d[2 * n + 1] = v;
@@ -202,7 +207,7 @@ void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, c
 // A null incoming gradient (an output nobody used) counts as zeros.
 template <typename S, int nb>
 void preprocess_bwd(int64_t N, const Cam& cam, const S* means, const S* quats, const S* scales, const S* sh,
-                    int K, int nt, const int64_t* radii, const S* g_means2d, const S* g_conics,
+                    const S* eps, int K, int nt, const int64_t* radii, const S* g_means2d, const S* g_conics,
                     const S* g_depths, const S* g_colors, S* g_means, S* g_quats, S* g_scales, S* g_sh) {
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 2048)  // a late thread delays by one block
   for (int64_t n = 0; n < N; ++n) {
@@ -246,7 +251,7 @@ void preprocess_bwd(int64_t N, const Cam& cam, const S* means, const S* quats, c
     }
     // ---- geometry
     Geo<S> g;
-    geometry(cam, means + 3 * n, quats + 4 * n, scales + 3 * n, g);
+    geometry(cam, means + 3 * n, quats + 4 * n, scales + 3 * n, eps ? eps[n] : (S)cam.eps2d, g);
     const S fx = (S)cam.fx, fy = (S)cam.fy, iz = g.iz, iz2 = iz * iz;
     S gp[3] = {0, 0, 0}, g_iz = 0, g_tx = 0, g_ty = 0;
     // means2d = (fx x / zs + cx, fy y / zs + cy)
@@ -335,24 +340,26 @@ extern "C" {
 
 // cam_R (9, row-major), cam_T (3), intr = (fx, fy, cx, cy, near, eps2d), all float64.
 // sh: (N, K, 3) contiguous; the first nb = (degree + 1)^2 coefficients are used.
+// eps2d: (N,) per-Gaussian low-pass, or null for intr's one value.
 #define GS_PRE_EXPORT(SUFFIX, S)                                                                   \
   void gs_preprocess_fwd_##SUFFIX(int64_t N, const double* R, const double* T, const double* intr, \
                                   int W, int H, const S* means, const S* quats, const S* scales,    \
-                                  const S* sh, int K, int nb, int nt, S* means2d, S* conics,        \
-                                  S* depths, S* colors, int64_t* radii, int64_t* boxes,             \
+                                  const S* sh, const S* eps2d, int K, int nb, int nt, S* means2d,   \
+                                  S* conics, S* depths, S* colors, int64_t* radii, int64_t* boxes,  \
                                   bool* visible) {                                                  \
     const Cam cam = make_cam(R, T, intr, W, H);                                                     \
-    SH_DISPATCH(nb, preprocess_fwd, S, N, cam, means, quats, scales, sh, K, nt, means2d, conics,      \
+    SH_DISPATCH(nb, preprocess_fwd, S, N, cam, means, quats, scales, sh, eps2d, K, nt, means2d, conics, \
                 depths, colors, radii, boxes, visible);                                             \
   }                                                                                                 \
   void gs_preprocess_bwd_##SUFFIX(int64_t N, const double* R, const double* T, const double* intr, \
                                   int W, int H, const S* means, const S* quats, const S* scales,    \
-                                  const S* sh, int K, int nb, int nt, const int64_t* radii,         \
+                                  const S* sh, const S* eps2d, int K, int nb, int nt,               \
+                                  const int64_t* radii,                                             \
                                   const S* g_means2d, const S* g_conics, const S* g_depths,         \
                                   const S* g_colors, S* g_means, S* g_quats, S* g_scales,           \
                                   S* g_sh) {                                                        \
     const Cam cam = make_cam(R, T, intr, W, H);                                                     \
-    SH_DISPATCH(nb, preprocess_bwd, S, N, cam, means, quats, scales, sh, K, nt, radii, g_means2d,    \
+    SH_DISPATCH(nb, preprocess_bwd, S, N, cam, means, quats, scales, sh, eps2d, K, nt, radii, g_means2d, \
                 g_conics, g_depths, g_colors, g_means, g_quats, g_scales, g_sh);                    \
   }
 
