@@ -449,9 +449,13 @@ def check_args(args):
             raise UserError(f"{args.bike} has no trained gaussians/{f} (python -m splatting train first)")
 
 
+def config_from_args(args):
+    """The PosedTrainConfig of a parsed command line (after check_args)."""
+    return PosedTrainConfig(poses=args.poses, iterations=args.iterations, samples=args.samples,
+                            sh_degree=args.sh_degree, densify=args.densify, densify_max=args.densify_max,
+                            lr_decay=args.lr_decay, lr_tail=args.lr_tail, eps2d=args.eps2d, progress=not args.quiet)
+
+
 def run(args):
-    cfg = PosedTrainConfig(poses=args.poses, iterations=args.iterations, samples=args.samples, sh_degree=args.sh_degree,
-                           densify=args.densify, densify_max=args.densify_max, lr_decay=args.lr_decay,
-                           lr_tail=args.lr_tail, eps2d=args.eps2d, progress=not args.quiet)
-    train_bike_posed(args.bike, cfg, from_rest=args.from_rest, render_threads=args.render_threads)
+    train_bike_posed(args.bike, config_from_args(args), from_rest=args.from_rest, render_threads=args.render_threads)
     return 0
