@@ -111,6 +111,7 @@ SPLATTING_CASES = [
     ["library build", "--out", "lib", "--min-iou", "2"],
     ["library build", "--out", "lib", "--posed-poses", "4"],  # 4 are held out: none left to train on
     ["library build", "--out", "lib", "--posed-iterations", "0"],
+    ["library build", "--out", "lib", "--recipe", "best"],
     ["library build", "--out", "lib", "--no-posed-train", "--posed-poses", "12"],
     # output paths that exist as a file, or lie under one
     ["train", "--views", f"{V}/good", "--out", "a_folder"],

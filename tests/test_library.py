@@ -147,6 +147,41 @@ def test_posed_task_refuses_a_fine_tune_run_with_another_config(tmp_path, monkey
     assert "--from-rest" in ran[0] and ran[0][ran[0].index("--poses") + 1] == "6"
 
 
+def test_fidelity_recipe_trains_antialiased_and_runs_its_fine_tune(tmp_path, monkeypatch):
+    """--recipe fidelity (splatting/bike/recipes.py): the train tasks pass --antialiased and the posed
+    task passes every recipe option, so the configuration bike-posed-train parses from its command
+    line is the recipe's (what run_posed checks against posed_train.json); the default recipe adds
+    no setting, so libraries built before the option still match."""
+    import argparse
+
+    from splatting.bike import posed_train
+    from splatting.bike.recipes import posed_config
+    from splatting.library import tasks
+    d = write_test_bike(str(tmp_path / "bikes"), "city_a")
+    fid, default = _settings(size=64, recipe="fidelity"), _settings(size=64)
+    assert fid["antialiased"] is True and "antialiased" not in default
+    assert "antialiased" in tasks.task_settings("train", fid) and "antialiased" not in tasks.task_settings("train", default)
+    assert fid["posed_eps2d"] == 0.173 and fid["posed_densify"] and fid["posed_iterations"] == 10000
+    assert _settings(size=64, recipe="fidelity", posed_iterations=50)["posed_iterations"] == 50  # options override
+    ran = []
+    monkeypatch.setattr(tasks, "_run", lambda cmd, what: ran.append(cmd) or "")
+    g = tasks.make_graph(str(tmp_path), {"city_a": d}, [])
+    train, posed = g[1], g[4]
+    with pytest.raises(FileNotFoundError):  # the fake run wrote no metrics: only the command matters
+        tasks.run_train(train, str(tmp_path), fid)
+    assert "--antialiased" in ran[-1]
+    with pytest.raises(FileNotFoundError):
+        tasks.run_train(train, str(tmp_path), default)
+    assert "--antialiased" not in ran[-1]
+    with pytest.raises(FileNotFoundError):
+        tasks.run_posed(posed, str(tmp_path), fid)
+    p = argparse.ArgumentParser()
+    posed_train.add_arguments(p)
+    cmd = ran[-1]
+    args = p.parse_args(cmd[cmd.index("bike-posed-train") + 1:])
+    assert posed_train.config_from_args(args) == posed_config("fidelity", samples=fid["posed_samples"], progress=False)
+
+
 def _manifest(tmp_path, gt_iou, part_psnr=30.0, complete=True):
     from splatting.library.manifest import FLOORS, build_manifest
     from splatting.library.tasks import make_graph

@@ -107,6 +107,8 @@ def run_train(task, root, s):
     cmd = [sys.executable, "-m", "splatting", "train", "--views", os.path.join(task.bike_dir, "views", task.part),
            "--out", out, "--iterations", str(s["iterations"]), "--max-gaussians", str(s["max_gaussians"]),
            "--time-budget-s", str(s["time_budget_s"]), "--seed", "0", "--threads", "1", "--quiet"]
+    if s.get("antialiased"):  # the fidelity recipe's parts (splatting/bike/recipes.py)
+        cmd.append("--antialiased")
     t = time.time()
     _run(cmd, f"training {task.asset}/{task.part}")
     wall = time.time() - t
@@ -126,7 +128,11 @@ def run_posed(task, root, s):
     cmd = [sys.executable, "-m", "splatting", "bike-posed-train", "--bike", task.bike_dir, "--from-rest",
            "--poses", str(s["posed_poses"]), "--iterations", str(s["posed_iterations"]),
            "--samples", str(s["posed_samples"]), "--sh-degree", str(s["posed_sh_degree"]), "--quiet",
-           "--render-threads", "1"]  # the task declares one CPU
+           "--render-threads", "1",  # the task declares one CPU
+           "--densify-max", str(s["posed_densify_max"]), "--lr-decay", repr(s["posed_lr_decay"]),
+           "--lr-tail", str(s["posed_lr_tail"]), "--eps2d", repr(s["posed_eps2d"])]
+    if s["posed_densify"]:
+        cmd.append("--densify")
     t = time.time()
     _run(cmd, f"posed fine-tune of {task.asset}")
     wall = time.time() - t
@@ -176,7 +182,7 @@ def run_avatar(task, root, s):
 RUNNERS = {"views": run_views, "train": run_train, "posed": run_posed, "gt": run_gt, "avatar": run_avatar}
 # the settings each kind depends on: a task is redone/refused only when these change.  "posed_*":
 # every posed_<field> setting (the fine-tune's whole configuration, command.posed_settings)
-_TRAIN = ("view_size", "samples", "iterations", "max_gaussians", "time_budget_s")
+_TRAIN = ("view_size", "samples", "iterations", "max_gaussians", "time_budget_s", "antialiased")
 SETTING_KEYS = {"views": ("view_size", "samples"),
                 "train": _TRAIN + ("posed_train",),  # where it writes: <part>_rest.ply or <part>.ply
                 "posed": _TRAIN + ("posed_train", "posed_*"),
@@ -186,10 +192,13 @@ SETTING_KEYS = {"views": ("view_size", "samples"),
 
 def task_settings(kind, settings):
     """The settings a task of this kind depends on.  With the posed stage off every posed key is
-    left out, so records written before the stage existed still match."""
+    left out, so records written before the stage existed still match; so is "antialiased" unless
+    the recipe trains so (records written before the fidelity recipe)."""
     out = {}
     for k in SETTING_KEYS[kind]:
         if k.startswith("posed_") and not settings.get("posed_train"):
+            continue
+        if k == "antialiased" and not settings.get(k):
             continue
         if k == "posed_*":
             out.update({n: v for n, v in sorted(settings.items()) if n.startswith("posed_") and n != "posed_train"})
