@@ -36,6 +36,33 @@ def test_slot_boxes_hold_every_pixel_the_slot_renders(seed):
         assert w * h <= 2.5 * (xs.ptp() + 1) * (ys.ptp() + 1) or (w, h) == (160, 96)
 
 
+def test_slot_boxes_widen_with_the_low_pass():
+    """A model drawn with a wide low-pass (eps2d 4 px^2: every splat 2 px wider in sigma) still
+    fits its boxes when slot_boxes is told its eps2d; the fixed 2 px margin would cut it."""
+    torch.set_num_threads(1)
+    from splatting.cyclist.scene_render import slot_boxes
+    from splatting.raster.sparse import render_gaussians
+    import dataclasses
+    g = _scene(4)
+    g = dataclasses.replace(g, log_scales=g.log_scales - 3.0)  # tiny: the low-pass sets their footprint
+    slots = torch.arange(len(g)) % 3
+    cam = look_at_camera((0.5, 1.0, 7.0), width=160, height=96, focal=90.0, cx=70.0, cy=40.0)
+    eps = torch.full((len(g),), 0.3)
+    eps[slots == 1] = 4.0  # one model with the wide filter: the max decides the margin
+    cut = 0
+    for boxes, must_hold in ((slot_boxes(g.means, g.scales, slots, 3, cam, eps2d=eps), True),
+                             (slot_boxes(g.means, g.scales, slots, 3, cam), False)):
+        a = render_gaussians(g[slots == 1], cam, eps2d=4.0)["alpha"].numpy()
+        ys, xs = np.nonzero(a > 1e-6)
+        u0, v0, w, h = boxes[1]
+        holds = xs.min() >= u0 and xs.max() < u0 + w and ys.min() >= v0 and ys.max() < v0 + h
+        if must_hold:
+            assert holds
+        else:
+            cut += not holds
+    assert cut == 1
+
+
 def test_slot_boxes_none_behind_camera_and_off_screen():
     from splatting.cyclist.scene_render import slot_boxes
     g = _scene(3, n=20)

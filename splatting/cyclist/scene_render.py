@@ -37,12 +37,13 @@ def cropped_camera(camera, crop):
     return Camera(camera.R, camera.T, K, int(w), int(h), camera.name)
 
 
-def slot_boxes(means, scales, slots, n_slots, camera, near=0.01):
+def slot_boxes(means, scales, slots, n_slots, camera, near=0.01, eps2d=0.3):
     """Conservative screen box (u0, v0, w, h) of every slot's Gaussians, clipped to the image; None
     where the slot has no Gaussian in front of the near plane or is off screen.  Each Gaussian
     reaches at most 3 sigma_max |J| <= 3 sigma_max f / z sqrt(1 + (x/z)^2 + (y/z)^2) pixels from its
-    projected mean (J the EWA Jacobian), plus the low-pass margin; the rasterizer culls means at
-    z <= near, so they are left out here too."""
+    projected mean (J the EWA Jacobian), plus the low-pass margin (3 sqrt(eps2d), eps2d a number or
+    one per Gaussian; at least BOX_MARGIN_PX); the rasterizer culls means at z <= near, so they are
+    left out here too."""
     H, W = camera.height, camera.width
     p = means.float() @ camera.R.float().T + camera.T.float()
     z = p[:, 2]
@@ -55,7 +56,9 @@ def slot_boxes(means, scales, slots, n_slots, camera, near=0.01):
     smax = torch.maximum(torch.maximum(sc[:, 0], sc[:, 1]), sc[:, 2])  # elementwise: max(1) over 3 columns is slower
     r = 3.0 * smax / zs * torch.sqrt(1 + x * x + y * y)
     # + 0.5 px for float32 rounding of pixel coordinates up to ~1e4
-    ru, rv = float(K[0, 0]) * r + BOX_MARGIN_PX + 0.5, float(K[1, 1]) * r + BOX_MARGIN_PX + 0.5
+    e = float(eps2d.max()) if torch.is_tensor(eps2d) else float(eps2d)
+    margin = max(BOX_MARGIN_PX, 3.0 * math.sqrt(max(e, 0.0)))  # a wider low-pass widens every splat more
+    ru, rv = float(K[0, 0]) * r + margin + 0.5, float(K[1, 1]) * r + margin + 0.5
     inf = torch.full_like(u, math.inf)
     idx = slots.long()
     lo = lambda a: torch.full((n_slots,), math.inf, dtype=a.dtype).scatter_reduce(0, idx, a, "amin")  # noqa: E731
@@ -147,7 +150,7 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None,
     RiderAvatar.eps2d), amodal alphas included."""
     H, W = camera.height, camera.width
     t = (g.means.float(), g.quats.float(), g.scales.float(), g.opacities.float())
-    boxes = slot_boxes(t[0], t[2], slots, n_slots, camera)
+    boxes = slot_boxes(t[0], t[2], slots, n_slots, camera, eps2d=eps2d)
     # numpy's zeros are calloc'ed pages (zeroed when first touched): the full-size images cost
     # only where the crop is written; everything per pixel is computed inside the crop
     rgb, alpha, d = np.zeros((H, W, 3), np.float32), np.zeros((H, W), np.float32), np.zeros((H, W), np.float32)
