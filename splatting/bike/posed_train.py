@@ -41,6 +41,7 @@ from cyclist_formats.atomic import read_json_or_none
 from cyclist_formats.errors import UserError
 from splatting import paths
 from splatting.progress import Progress
+from splatting.raster.sparse import EPS2D
 from splatting.training.trainer import FineTuneRates
 
 RENDER_SCRIPT = paths.blender_script("render_pose.py")
@@ -66,7 +67,7 @@ class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (trai
     densify_max: int = 30000     # ... up to this many Gaussians per part
     lr_decay: float = 1.0        # every rate ends at this fraction of its start, exponentially (1: constant) ...
     lr_tail: int = 0             # ... falling over the last lr_tail steps only (0: over the whole fine-tune)
-    eps2d: float = 0.3           # the splats' screen-space low-pass (px^2) the fine-tune renders with; the bike
+    eps2d: float = EPS2D         # the splats' screen-space low-pass (px^2) the fine-tune renders with; the bike
                                  # keeps it (posed_train.json) and every renderer draws its parts with it
     progress: bool = True
 
@@ -392,8 +393,6 @@ def fine_tuned_eps2d(gdir):
     """(eps2d, {part: Gaussians}) of gaussians/posed_train.json: the low-pass its fine-tune
     rendered with (config "eps2d"; 0.3 in records from before --eps2d) and the parts it wrote, or
     None without a record (BikeModel reads each part's filter with it)."""
-    from splatting.raster.sparse import EPS2D
-
     m = read_json_or_none(os.path.join(gdir, "posed_train.json"))
     if not isinstance(m, dict) or not isinstance(m.get("config"), dict) or not isinstance(m.get("gaussians"), dict):
         return None

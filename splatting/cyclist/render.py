@@ -13,7 +13,7 @@ import torch
 from cyclist_formats import instances
 from cyclist_formats import ring as formats_ring
 from splatting.raster.camera import RING_FOCAL, RING_SIZE, from_numpy
-from splatting.raster.sparse import rasterize
+from splatting.raster.sparse import EPS2D, rasterize
 
 IDS, ID_NAMES = instances.IDS, instances.ID_NAMES
 MASK_ALPHA = 0.5
@@ -31,7 +31,7 @@ def orbit_camera(azimuth_deg, elevation_deg=0.0, distance=12.0, centre=(0.0, 0.0
 
 
 @torch.no_grad()
-def render_layers(g, ids, camera, antialiased=False, eps2d=0.3):
+def render_layers(g, ids, camera, antialiased=False, eps2d=EPS2D):
     """Gaussians g (N) with instance ids (N,) int in 1..4 -> dict of float32 numpy arrays:
     rgb (H, W, 3) premultiplied (over black), alpha (H, W), depth (H, W) expected camera z
     (0 where alpha is 0), ids (H, W) uint8.  antialiased: the bike's parts were trained with the

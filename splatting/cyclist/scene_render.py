@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from splatting.raster.camera import Camera
-from splatting.raster.sparse import rasterize
+from splatting.raster.sparse import EPS2D, rasterize
 
 MASK_ALPHA = 0.5
 BOX_MARGIN_PX = 2.0  # >= 3 sqrt(eps2d = 0.3) = 1.64 px: the screen-space low-pass widens every splat
@@ -37,7 +37,7 @@ def cropped_camera(camera, crop):
     return Camera(camera.R, camera.T, K, int(w), int(h), camera.name)
 
 
-def slot_boxes(means, scales, slots, n_slots, camera, near=0.01, eps2d=0.3):
+def slot_boxes(means, scales, slots, n_slots, camera, near=0.01, eps2d=EPS2D):
     """Conservative screen box (u0, v0, w, h) of every slot's Gaussians, clipped to the image; None
     where the slot has no Gaussian in front of the near plane or is off screen.  Each Gaussian
     reaches at most 3 sigma_max |J| <= 3 sigma_max f / z sqrt(1 + (x/z)^2 + (y/z)^2) pixels from its
@@ -85,7 +85,7 @@ def union(boxes):
     return u0, v0, u1 - u0, v1 - v0
 
 
-def _subset_alpha(t, idx, camera, crop, max_px=None, antialiased=False, eps2d=0.3):
+def _subset_alpha(t, idx, camera, crop, max_px=None, antialiased=False, eps2d=EPS2D):
     """Alpha of the Gaussians idx of the tensors t alone inside crop, as (alpha (h, w) numpy,
     (u0, v0)).  max_px: when the crop is larger, it is rendered at max_px / size of the resolution
     (the full-size eps2d px^2 low-pass in small pixels: the same alpha field, sampled coarser) and
@@ -136,7 +136,7 @@ def _argmax_channels(feat):
 
 @torch.no_grad()
 def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None, features=None, antialiased=False,
-                 eps2d=0.3):
+                 eps2d=EPS2D):
     """Gaussians g (N), slots (N,) long in 0..n_slots-1, camera -> dict:
     rgb (H, W, 3) premultiplied, alpha (H, W), depth (H, W) expected camera z (0 where alpha is 0),
     label (H, W) int16 (-1 where alpha <= 0.5), amodal {slot: (alpha crop, (u0, v0)) or None}

@@ -19,6 +19,7 @@ import torch
 
 from cyclist_formats import bike_folder
 from cyclist_formats.errors import UserError
+from splatting.raster.sparse import EPS2D
 
 MODES = ("baked", "relit")
 TAG = 0x5A11  # separates the light's draws from the sample's other streams
@@ -234,7 +235,7 @@ class RelitSample:
         out[m] = np.clip(np.round(rgb[m].astype(np.float32) * keep[m][:, None]), 0, 255).astype(np.uint8)
         return out
 
-    def render(self, parts, slots, n_slots, camera, amodal_slots, amodal_max_px, antialiased=False, eps2d=0.3):
+    def render(self, parts, slots, n_slots, camera, amodal_slots, amodal_max_px, antialiased=False, eps2d=EPS2D):
         """render_scene's layers with the instances (the first len(self.channels) parts) relit."""
         from splatting.relight.scene import render_scene_relit
         ch = [self.channels[k] for k in range(len(self.channels))]

@@ -24,7 +24,7 @@ compositing); splatting.raster.reference renders the same image from the formula
 import torch
 
 from splatting.raster.camera import Camera
-from splatting.raster.sparse import rasterize
+from splatting.raster.sparse import EPS2D, rasterize
 
 
 def _cameras(viewmats, Ks, width, height):
@@ -48,7 +48,7 @@ def viewmat(camera):
 
 
 def rasterization(means, quats, scales, opacities, colors, viewmats, Ks, width, height, *, sh_degree=None,
-                  features=None, backgrounds=None, near=0.01, eps2d=0.3, backend=None):
+                  features=None, backgrounds=None, near=0.01, eps2d=EPS2D, backend=None):
     """Render N Gaussians into C cameras; see the module docstring for shapes."""
     cams = _cameras(viewmats, Ks, width, height)
     sh = colors

@@ -15,6 +15,7 @@ thread (docs/rasterizer.md).
 import torch
 
 from . import build
+from .sparse import EPS2D, check_eps2d
 
 _SUFFIX = {torch.float32: "f32", torch.float64: "f64"}
 
@@ -76,7 +77,7 @@ class _Preprocess(torch.autograd.Function):
         return gm.to(dm), gq.to(dq), gs.to(ds), gf.to(df), None, None, None, None, None
 
 
-def preprocess(means, quats, scales, sh, camera, sh_degree=None, near=0.01, eps2d=0.3):
+def preprocess(means, quats, scales, sh, camera, sh_degree=None, near=0.01, eps2d=EPS2D):
     """See the module docstring. CPU tensors, float32 or float64 (means' dtype)."""
     if any(t.device.type != "cpu" for t in (means, quats, scales, sh)):
         raise ValueError("the tiled rasterizer runs on CPU tensors; use backend='torch' for "
@@ -88,8 +89,6 @@ def preprocess(means, quats, scales, sh, camera, sh_degree=None, near=0.01, eps2
     nb = (degree + 1) ** 2
     if not 0 <= degree <= 3 or nb > k:
         raise ValueError(f"sh_degree {degree} needs {nb} SH coefficients (have {k}, degrees 0-3)")
-    from splatting.raster.sparse import check_eps2d
-
     eps2d = check_eps2d(eps2d, means.shape[0], "preprocess")
     per = torch.is_tensor(eps2d)
     return _Preprocess.apply(means, quats, scales, sh, camera, nb, float(near), 0.0 if per else eps2d,

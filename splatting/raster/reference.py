@@ -8,6 +8,7 @@ import math
 import torch
 
 from splatting.gaussians.sh import eval_sh
+from splatting.raster.sparse import EPS2D
 
 
 def _rotmat(q):
@@ -20,7 +21,7 @@ def _rotmat(q):
 
 
 @torch.no_grad()
-def project_reference(means, quats, scales, camera, near=0.01, eps2d=0.3):
+def project_reference(means, quats, scales, camera, near=0.01, eps2d=EPS2D):
     """Stage 1, per Gaussian, float64: means2d (N, 2), conics (N, 3) = (a, b, c) of the inverse 2D
     covariance, z (N,), radii (N,) long (0 = culled: behind `near` or degenerate), and the
     antialiasing factor det(S) / det(S + eps2d I) (N,).  eps2d: a number or one per Gaussian (N,)."""
@@ -112,7 +113,7 @@ def composite_reference(alphas, colors, z, radii, background=None):
 
 @torch.no_grad()
 def render_reference(means, quats, scales, opacities, sh, camera, background=None, sh_degree=None,
-                     near=0.01, eps2d=0.3, features=None, antialiased=False):
+                     near=0.01, eps2d=EPS2D, features=None, antialiased=False):
     """Same contract as rasterize() (rgb, alpha, depth, and features (H, W, F) when features (N, F)
     are given: composited like the colour, over a zero background), computed in float64 by the
     three stages above.  antialiased: opacity x sqrt(det S / det(S + eps2d I)), S the projected

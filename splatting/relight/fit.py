@@ -23,6 +23,7 @@ from cyclist_formats import bike_folder
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import read_ply
 from splatting.progress import Progress
+from splatting.raster.sparse import EPS2D
 from splatting.relight.render import composite_features, prepare, view_normals
 from splatting.gaussians.sh import C0
 from splatting.relight.shading import HIGHLIGHT, ROUGHNESS, random_light, srgb_decode, srgb_encode, view_directions
@@ -125,7 +126,7 @@ def initial_normals(g, items):
     return torch.where(vote[:, None] < 0, -n, n)
 
 
-def _views_at(g, views, idx, targets, scale, margin=4, antialiased=False, eps2d=0.3):
+def _views_at(g, views, idx, targets, scale, margin=4, antialiased=False, eps2d=EPS2D):
     """Per view: fixed projection + pairs in the cropped camera (with the mip filter when the
     Gaussians were trained with it), and the cropped targets."""
     out = []
@@ -223,7 +224,7 @@ def _evaluate(feats, items, means):
             "heldout_normal_err_deg": round(sum(ang) / len(ang), 2) if ang else None}
 
 
-def fit_relight(g, views, cfg: RelightFitConfig = None, antialiased=False, eps2d=0.3):
+def fit_relight(g, views, cfg: RelightFitConfig = None, antialiased=False, eps2d=EPS2D):
     """Gaussians g (trained on views) -> ({"albedo", "normal", "gloss"}: (N, 3); colours linear, normals
     unit; with cfg.view_normals also "normal_view" (N, 3, 3): render.view_normals), metrics).
     antialiased: g was trained with the rasterizer's mip filter (and is rendered

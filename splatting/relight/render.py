@@ -10,13 +10,13 @@ from typing import NamedTuple, Optional
 import torch
 
 from splatting.gaussians.sh import rgb_to_sh0
-from splatting.raster.sparse import antialias_opacities, composite, intersect, project
+from splatting.raster.sparse import EPS2D, antialias_opacities, composite, intersect, project
 from splatting.relight.shading import HIGHLIGHT, ROUGHNESS, Light, _shade_cm, _view_directions_cm
 
 LUMA = torch.tensor([0.2126, 0.7152, 0.0722])  # Rec. 709 luminance of linear RGB
 
 
-def prepare(g, camera, antialiased=False, eps2d=0.3):
+def prepare(g, camera, antialiased=False, eps2d=EPS2D):
     """Projection + pair list of Gaussians g for camera (no grad): what every channel reuses.
     antialiased: the rasterizer's mip filter (rasterize(antialiased=...): a bool, or a (N,) bool mask
     of the Gaussians it applies to), for Gaussians trained with it: their opacities are scaled by the
@@ -221,7 +221,7 @@ def _view_normals_c(normals, normal_view, means, c):
 @torch.no_grad()
 def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness=ROUGHNESS, highlight=HIGHLIGHT,
                  shadows=False, antialiased=True, static=None, reflectance=False, sky_visibility=None, normal=False,
-                 fused=None, shadow_antialiased=False, normal_view=None, eps2d=0.3):
+                 fused=None, shadow_antialiased=False, normal_view=None, eps2d=EPS2D):
     """Gaussians g with per-Gaussian linear albedo (N, 3), world-frame unit normals (N, 3) and optionally
     a linear glossy colour (N, 3) under a light -> dict rgb (H, W, 3) display colour premultiplied
     (over black), alpha, with normal=True the composited normal and with reflectance=True the

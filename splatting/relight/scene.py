@@ -15,12 +15,13 @@ import torch
 from splatting.cyclist.scene_render import cropped_camera, render_scene
 from splatting.gaussians.container import Gaussians
 from splatting.gaussians.sh import C0
+from splatting.raster.sparse import EPS2D
 from splatting.relight.render import shade_composited
 
 
 @torch.no_grad()
 def render_scene_relit(parts, channels, slots, n_slots, camera, light, shadows, amodal_slots=(), amodal_max_px=None,
-                       antialiased=False, eps2d=0.3):
+                       antialiased=False, eps2d=EPS2D):
     """parts: list of Gaussians, of which the first len(channels) are relit with channels
     [(reflectance (n, 3), relight_features(normals, gloss, roughness, visibility, sky_visibility) (n, C))]
     (one layout for all); the rest baked.  Slot 0 must hold the baked parts only.  -> render_scene's

@@ -13,6 +13,7 @@ import math
 import torch
 
 from splatting.raster.camera import Camera
+from splatting.raster.sparse import EPS2D
 
 SIZE = 256        # shadow map pixels (square)
 BIAS_PX = 2.0     # lit if no deeper than the first surface + this many map pixels
@@ -41,7 +42,7 @@ def sun_camera(means, light, size=SIZE, distance_radii=100.0):
 
 
 @torch.no_grad()
-def sun_visibility(g, light, size=SIZE, bias_px=BIAS_PX, antialiased=False, eps2d=0.3):
+def sun_visibility(g, light, size=SIZE, bias_px=BIAS_PX, antialiased=False, eps2d=EPS2D):
     """(N,) in [0, 1]: how much of the sun reaches each Gaussian's centre.  antialiased: the mip
     filter in the map (rasterize's bool or (N,) mask) for Gaussians trained with it
     (BikeModel.antialiased): drawn without it, their sub-pixel spokes and cables would grow to
@@ -101,7 +102,7 @@ def sphere_directions(n):
 
 @torch.no_grad()
 def sky_visibility(g, normals, directions=SKY_DIRECTIONS, size=SKY_SIZE, bias_px=SKY_BIAS_PX, antialiased=False,
-                   eps2d=0.3):
+                   eps2d=EPS2D):
     """(N,) in [0, 1]: the share of a uniform sky that reaches each Gaussian, cosine-weighted about
     its normal (what Cycles' AO pass measures): sun_visibility from `directions` directions over
     the sphere, each weighted by max(0, n.d).  normals (N, 3) unit, the frame of g's means.  For a

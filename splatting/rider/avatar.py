@@ -22,6 +22,7 @@ import torch
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, read_ply, write_ply
 from splatting.gaussians.sh_rotation import rotate_sh
+from splatting.raster.sparse import EPS2D
 from splatting.rotations import quat_mul, rotmat_to_quat_wxyz  # noqa: F401
 from splatting.rider.kinematics import forward_kinematics
 
@@ -124,7 +125,7 @@ class RiderAvatar:
     rest_joints: torch.Tensor   # (24, 3) float32, SMPL order
     rider_id: str = ""
     method: str = SKINNING_METHOD
-    eps2d: float = 0.3          # the splats' low-pass it was trained with (rider.json config; absent: 0.3)
+    eps2d: float = EPS2D        # the splats' low-pass it was trained with (rider.json config; absent: 0.3)
 
     def __post_init__(self):
         n = len(self.gaussians)
@@ -237,7 +238,6 @@ def trained_eps2d(folder):
     0.3 for avatars trained before it was recorded or without metrics."""
     from cyclist_formats.atomic import read_json_or_none
     from splatting.bike.model import check_model_eps2d
-    from splatting.raster.sparse import EPS2D
 
     m = read_json_or_none(os.path.join(folder, "rider.json"))
     cfg = m.get("config") if isinstance(m, dict) else None

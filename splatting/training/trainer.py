@@ -19,7 +19,7 @@ from cyclist_formats.atomic import write_json
 from splatting.training.strategy import STRATEGIES, DensifyConfig, make_strategy
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, write_ply
-from splatting.raster.sparse import rasterize
+from splatting.raster.sparse import EPS2D, rasterize
 from splatting.training.views import Views, load_views
 from splatting.training.metrics import psnr, ssim
 from splatting.training.targets import Targets, crop_camera, split_views  # noqa: F401
@@ -42,7 +42,7 @@ class TrainConfig:
     antialiased: bool = field(default=False, metadata={"help": "antialiased splatting in training and evaluation"})
     # the splats' screen-space low-pass (px^2, rasterize's eps2d); the part is drawn with it ever
     # after (PART.json config; absent: 0.3). Cycles' 1.5 px Blackman-Harris pixel filter: 0.173
-    eps2d: float = field(default=0.3, metadata={"help": "screen-space low-pass variance (px^2) added to every "
+    eps2d: float = field(default=EPS2D, metadata={"help": "screen-space low-pass variance (px^2) added to every "
                                                          "splat in training, kept with the part for every render"})
     # 1 by default: on the shared 2-core machine 2 threads ran 4-7x slower per iteration
     # (oversubscription), see docs/training.md; None leaves torch's default
@@ -99,14 +99,14 @@ def gaussians_of(params) -> Gaussians:
                      torch.cat([params["sh0"], params["shN"]], 1))
 
 
-def _render(params, cam, background=None, sh_degree=None, antialiased=False, eps2d=0.3):
+def _render(params, cam, background=None, sh_degree=None, antialiased=False, eps2d=EPS2D):
     return rasterize(params["means"], params["quats"], torch.exp(params["log_scales"]),
                      torch.sigmoid(params["opacity_logits"]), torch.cat([params["sh0"], params["shN"]], 1),
                      cam, background=background, sh_degree=sh_degree, antialiased=antialiased, eps2d=eps2d)
 
 
 @torch.no_grad()
-def evaluate(g_or_params, targets: Targets, background=(1.0, 1.0, 1.0), crop=False, antialiased=False, eps2d=0.3):
+def evaluate(g_or_params, targets: Targets, background=(1.0, 1.0, 1.0), crop=False, antialiased=False, eps2d=EPS2D):
     """Held-out quality on RGB composited over `background` (white: the NeRF-synthetic convention).
     crop=False: whole images (the reported numbers); crop=True: the object's box only (cheaper)."""
     params = _params_from(g_or_params) if isinstance(g_or_params, Gaussians) else g_or_params
