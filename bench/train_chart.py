@@ -216,7 +216,7 @@ def bike_fidelity(bike_dir, reference_dir, model=None):
 
     from bench.blender_compare import cameras, fidelity
     from cyclist_formats.atomic import atomic_path
-    from splatting.bike.model import BikeModel
+    from splatting.bike.model import BikeModel, part_metrics_path
     from splatting.raster.camera import from_numpy
     from splatting.raster.sparse import render_gaussians
 
@@ -245,11 +245,8 @@ def bike_fidelity(bike_dir, reference_dir, model=None):
     os.rmdir(tmpdir)
     wall = 0.0
     gdir = os.path.join(bike_dir, "gaussians")
-    for name in model.part_names + ["posed_train"]:
-        js = os.path.join(gdir, name + ".json")
-        if not os.path.isfile(js):  # a library-built bike keeps its part trainings' metrics as <part>_rest.json
-            js = os.path.join(gdir, name + "_rest.json")
-        if os.path.isfile(js):
+    for js in [part_metrics_path(gdir, name) for name in model.part_names] + [os.path.join(gdir, "posed_train.json")]:
+        if js is not None and os.path.isfile(js):
             with open(js) as f:
                 wall += float(json.load(f).get("wall_s", 0.0))
     return {"box_psnr": float(np.mean(ps)), "iou": float(np.mean(ious)), "poses": len(ps), "train_wall_s": wall,

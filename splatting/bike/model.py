@@ -242,13 +242,19 @@ def check_model_eps2d(v, source):
     return float(v)
 
 
+def part_metrics_path(gdir, p):
+    """A part's training metrics: gaussians/<part>.json, else <part>_rest.json (a part fine-tuned by
+    the library's posed stage keeps its training metrics with the rest-trained part); None without."""
+    for js in (os.path.join(gdir, p + ".json"), os.path.join(gdir, p + "_rest.json")):
+        if os.path.isfile(js):
+            return js
+    return None
+
+
 def _part_config(gdir, p):
-    """<part>.json's "config" (else <part>_rest.json's: a part fine-tuned by the library's posed
-    stage keeps its training metrics with the rest-trained part); None without metrics."""
-    js = os.path.join(gdir, p + ".json")
-    if not os.path.isfile(js):
-        js = os.path.join(gdir, p + "_rest.json")
-    if not os.path.isfile(js):
+    """The "config" of the part's training metrics (part_metrics_path); None without metrics."""
+    js = part_metrics_path(gdir, p)
+    if js is None:
         return None
     doc = bike_folder.read_json(js, f"{p}.json")
     cfg = doc.get("config") if isinstance(doc, dict) else None
