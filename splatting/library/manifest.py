@@ -66,9 +66,9 @@ def write_record(root, task_id, record):
     write_json(task_file(root, task_id), dict(record, task=task_id, finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())))
 
 
-def _differ(rec, settings):
-    old = rec.get("settings") or {}
-    return sorted(k for k in set(old) | set(settings) if old.get(k) != settings.get(k))
+def differ(old, new):
+    """The sorted keys whose values two settings dicts disagree on (a key one lacks counts)."""
+    return sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
 
 
 def check_settings(root, task_id, settings):
@@ -78,7 +78,7 @@ def check_settings(root, task_id, settings):
     if rec is None:
         return None
     if rec.get("settings") != settings:
-        raise UserError(f"task {task_id} in {root} was built with other settings ({', '.join(_differ(rec, settings))} "
+        raise UserError(f"task {task_id} in {root} was built with other settings ({', '.join(differ(rec.get('settings') or {}, settings))} "
                         f"differ); use another --out, or delete {task_file(root, task_id)} to rebuild it")
     return rec
 
@@ -90,7 +90,7 @@ def check_all_settings(root, task_settings):
     for tid, s in task_settings:
         rec = read_record(root, tid)
         if rec is not None and rec.get("settings") != s:
-            bad.append((tid, _differ(rec, s)))
+            bad.append((tid, differ(rec.get("settings") or {}, s)))
             if "posed_train" in bad[-1][1] and was_posed is None:
                 was_posed = bool((rec.get("settings") or {}).get("posed_train"))
     if not bad:

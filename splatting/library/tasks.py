@@ -142,7 +142,7 @@ def run_posed(task, root, s):
     # the record says which configuration made these parts: the one the subprocess really ran
     want = {k[len("posed_"):]: v for k, v in s.items() if k.startswith("posed_") and k != "posed_train"}
     have = m.get("config") or {}
-    diff = sorted(k for k in set(want) | set(have) if want.get(k) != have.get(k))
+    diff = manifest.differ(have, want)
     if diff:
         raise RuntimeError(f"bike-posed-train ran another configuration than the library's settings ({', '.join(diff)})")
     files = manifest.files_record(root, [os.path.join(gdir, p + ".ply") for p in bike_parts(task.bike_dir)] + [meta])
