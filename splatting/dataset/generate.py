@@ -281,15 +281,17 @@ def make_sample(cfg, index, assets):
                 g, idx = lod.reduce(g, assets.lod_order(inst["bike"], inst["rider"], g, frame.ids), keeps[-1],
                                     lod_cfg["compensate"], frame.ids)
                 slot = slot.index_select(0, idx)
-        if relit is not None:
-            relit.instance(k, inst["bike"], inst["rider"], frame.gaussians, looked, g, idx, cam)
         # a bike whose parts were trained antialiased is drawn so (its rider and the rest as trained)
-        bike_aa = (frame.ids != RIDER_ID) & bool(assets.bikes[inst["bike"]].antialiased)
+        bike_trained_aa = bool(assets.bikes[inst["bike"]].antialiased)
+        bike_aa = (frame.ids != RIDER_ID) & bike_trained_aa
         aa.append(bike_aa if idx is None else bike_aa.index_select(0, idx))
         # and each model with the low-pass it was trained with (bike and rider may differ)
         cyc = assets.cyclists[(inst["bike"], inst["rider"])]
         e = frame_eps2d(frame.ids, cyc.bike, cyc.avatar)
         eps.append((len(g), e if idx is None or not torch.is_tensor(e) else e.index_select(0, idx)))
+        if relit is not None:  # its sun's shadow map draws the instance as the view does
+            relit.instance(k, inst["bike"], inst["rider"], frame.gaussians, looked, g, idx, cam,
+                           aa[-1] if bike_trained_aa else False, eps[-1][1])
         parts.append(g)
         slots.append(slot)
     b = cfg["backgrounds"]

@@ -186,11 +186,13 @@ class RelitSample:
                 n = torch.cat([n, ra.posed_normals(rot[b])])
             self.normals[j] = n
 
-    def instance(self, k, bike, rider, trained, looked, g, idx, camera):
+    def instance(self, k, bike, rider, trained, looked, g, idx, camera, antialiased=False, eps2d=EPS2D):
         """Instance k's channels: trained = its posed Gaussians, looked = after the appearance look
         (the look's change of each Gaussian's colour goes into its albedo, in linear light),
         g = what is rendered (after the level of detail, idx its rows of looked, or None), seen by
-        camera (a bike fitted with view-dependent normals turns them to it)."""
+        camera (a bike fitted with view-dependent normals turns them to it).  antialiased, eps2d:
+        how g is drawn (rasterize's; the bike's mip filter and each model's low-pass), which its
+        shadow map draws it with too."""
         from splatting.gaussians.sh import C0
         from splatting.relight.render import relight_features, view_normals
         alb, gl, rough, sky = self.ch.static(self.assets, bike, rider)
@@ -206,17 +208,8 @@ class RelitSample:
             alb, gl, rough, sky, nrm = (x.index_select(0, idx) for x in (alb, gl, rough, sky, nrm))
         vis = None
         if self.shadows:
-            from splatting.raster.sparse import eps2d_where
             from splatting.relight.shadow import sun_visibility
-            aa = False  # the shadow map draws a bike trained with the mip filter with it (its rider as trained)
-            bike_model = self.ch.bike(self.assets, bike).model
-            is_bike = torch.arange(len(trained)) < len(bike_model)  # the bike's Gaussians come first
-            is_bike = is_bike if idx is None else is_bike.index_select(0, idx)
-            if bike_model.antialiased:
-                aa = is_bike
-            # each model with its own low-pass (rider: its avatar's)
-            rider_eps = self.assets.avatars[rider].eps2d if rider is not None else bike_model.eps2d
-            vis = sun_visibility(g, self.light, antialiased=aa, eps2d=eps2d_where(is_bike, bike_model.eps2d, rider_eps))
+            vis = sun_visibility(g, self.light, antialiased=antialiased, eps2d=eps2d)
         self.channels[k] = (alb + gl, relight_features(nrm, gl, rough, vis, sky))
 
     def cast_shadows(self, rgb, L, camera, footprints, heights, opacity):
