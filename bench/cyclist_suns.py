@@ -66,14 +66,15 @@ def blender_worker(job_path):
 
 def posed_cyclist(bike_dir, avatar_dir):
     """-> (posed Gaussians, reflectance, world normals, gloss, roughness, sky visibility (per Gaussian),
-    rider body, IK rotations, root, the bike's world normal_view (its Gaussians come first) or None)."""
+    rider body, IK rotations, root, the bike's world normal_view (its Gaussians come first) or None,
+    how to draw them: {"antialiased", "eps2d"} for rasterize, each model as it was trained)."""
     import torch
 
-    from splatting.cyclist.compose import Cyclist
+    from cyclist_formats.instances import IDS
+    from splatting.cyclist.compose import Cyclist, frame_eps2d
     from splatting.dataset.person_keypoints import RecordingAvatar
-    from splatting.relight.avatar import RIDER_ROUGHNESS, RelightableAvatar
+    from splatting.relight.avatar import RelightableAvatar, cyclist_static
     from splatting.relight.bike import RelightableBike
-    from splatting.relight.shading import ROUGHNESS
     from splatting.rider.roster import load_rider
 
     rb, ra = RelightableBike.load(bike_dir), RelightableAvatar.load(avatar_dir)
@@ -84,24 +85,27 @@ def posed_cyclist(bike_dir, avatar_dir):
     frame, = cyc.pose(pose)
     rot, root = rec.last
     nrm = torch.cat([rb.posed_normals(pose), ra.posed_normals(rec.rotations[0])])
-    alb, gl = torch.cat([rb.albedo, ra.albedo]), torch.cat([rb.gloss, ra.gloss])
-    rough = torch.cat([torch.full((len(rb.albedo),), ROUGHNESS), torch.full((len(ra.albedo),), float(RIDER_ROUGHNESS))])
-    sky = torch.cat([rb.sky_visibility(), torch.ones(len(ra.albedo))])  # as relit datasets: riders see the whole sky
+    alb, gl, rough, sky = cyclist_static(rb, ra)  # as relit datasets
+    # as the datasets draw a cyclist: the bike's mip filter if its parts were trained with it, and
+    # each model's own low-pass
+    draw = {"antialiased": (frame.ids != IDS["rider"]) & bool(rb.model.antialiased),
+            "eps2d": frame_eps2d(frame.ids, rb.model, ra.avatar)}
     return (frame.gaussians, alb + gl, nrm, gl, rough, sky, load_rider(ra.avatar.rider_id), rot, root,
-            rb.posed_normal_view(pose))
+            rb.posed_normal_view(pose), draw)
 
 
-def render_relit_cyclist(g, refl, nrm, gl, rough, sky, camera, light):
-    """One rasterization with the relight channels (reflectance as the colour), shaded per pixel."""
+def render_relit_cyclist(g, refl, nrm, gl, rough, sky, camera, light, antialiased, eps2d):
+    """One rasterization with the relight channels (reflectance as the colour), shaded per pixel;
+    antialiased, eps2d: rasterize's (posed_cyclist's draw), the sun's shadow map's too."""
     from splatting.gaussians.container import Gaussians
     from splatting.gaussians.sh import C0
     from splatting.raster.sparse import render_gaussians
     from splatting.relight.render import relight_features, shade_composited
     from splatting.relight.shadow import sun_visibility
 
-    feats = relight_features(nrm, gl, rough, sun_visibility(g, light), sky)
+    feats = relight_features(nrm, gl, rough, sun_visibility(g, light, antialiased=antialiased, eps2d=eps2d), sky)
     gr = Gaussians(g.means, g.quats, g.log_scales, g.opacity_logits, ((refl.float() - 0.5) / C0)[:, None, :].contiguous())
-    r = render_gaussians(gr, camera, features=feats, sh_degree=0)
+    r = render_gaussians(gr, camera, features=feats, sh_degree=0, antialiased=antialiased, eps2d=eps2d)
     rgb = shade_composited(r["rgb"], r["features"], r["alpha"], camera, light, gloss=True, rough_channel=True,
                            shadows=True, sky_channel=True)
     return rgb.numpy().astype(np.float64), r["alpha"].numpy().astype(np.float64)
@@ -127,24 +131,28 @@ def main():
     import torch
     from PIL import Image
 
-    from bench.compare import score_png
+    from bench.compare import renders_for, score_png
     from bench.relight import light_json
     from bench.relit_suns import SUNS, four_suns, write_camera
     from splatting.raster.camera import ring_camera
     from splatting.rider.body import export_rider, pose_vertices
 
     torch.set_num_threads(1)
-    g, refl, nrm, gl, rough, sky, rider, rot, root, nview = posed_cyclist(a.bike, a.avatar)
+    g, refl, nrm, gl, rough, sky, rider, rot, root, nview, draw = posed_cyclist(a.bike, a.avatar)
     lo, hi = g.means.min(0).values.double(), g.means.max(0).values.double()
     cam = ring_camera(CAMERA_AZIMUTH, tuple(float(x) for x in (lo + hi) / 2), name="camera_suns")
     if nview is not None:  # a bike fitted with view-dependent normals: turned to this camera
-        from splatting.relight.render import view_normals
-        nrm = torch.cat([view_normals(nrm[:len(nview)], nview, g.means[:len(nview)].float(), cam), nrm[len(nview):]])
+        from splatting.relight.render import leading_view_normals
+        nrm = leading_view_normals(nrm, nview, g.means, cam)
     os.makedirs(a.work, exist_ok=True)
     mesh = os.path.join(a.work, "rider_posed.ply")
     export_rider(rider, mesh, vertices=pose_vertices(rider, rot.double(), root.double())[0])
     cj = write_camera(cam, a.work)
     lights = four_suns()
+    # Blender's renders in a.work are reused only for this bike, rider, camera and suns
+    renders_for(a.work, {"bike": os.path.abspath(a.bike), "avatar": os.path.abspath(a.avatar), "pose": POSE,
+                         "camera": [cam.K.tolist(), cam.R.tolist(), cam.T.tolist()], "samples": SAMPLES,
+                         "lights": [light_json(l) for l in lights]})
     jp = os.path.join(a.work, "job.json")
     with open(jp, "w") as f:
         json.dump({"bike": os.path.abspath(a.bike), "mesh": mesh, "camera": f"{cj}:{cam.name}", "pose": POSE,
@@ -154,7 +162,7 @@ def main():
     top, bottom, rows = [], [], []
     for i, light in enumerate(lights):
         gt_png = os.path.join(a.work, f"gt_{i}.png")
-        rgb, alpha = render_relit_cyclist(g, refl, nrm, gl, rough, sky, cam, light)
+        rgb, alpha = render_relit_cyclist(g, refl, nrm, gl, rough, sky, cam, light, **draw)
         iou, ps, gt_rgb, _ = score_png(gt_png, rgb, alpha)
         rows.append({"elevation_deg": SUNS[i][0], "azimuth_deg": SUNS[i][1], "box_psnr": round(ps, 2), "iou": round(iou, 4)})
         gt = np.asarray(Image.open(gt_png).convert("RGBA")).astype(np.float64) / 255

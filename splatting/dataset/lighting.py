@@ -137,19 +137,9 @@ class _Channels:
         gloss, roughness and sky visibility, concatenated once rather than per image."""
         key = (bike, rider)
         if key not in self.statics:
-            from splatting.relight.avatar import RIDER_ROUGHNESS
-            from splatting.relight.shading import ROUGHNESS
-            rb = self.bike(assets, bike)
-            alb, gl = [rb.albedo], [rb.gloss]
-            rough = [torch.full((len(rb.albedo),), ROUGHNESS)]
-            sky = [rb.sky_visibility()]  # the bike's self-occlusion (once per bike and process)
-            if rider is not None:
-                ra = self.rider(assets, rider)
-                alb.append(ra.albedo)
-                gl.append(ra.gloss)
-                rough.append(torch.full((len(ra.albedo),), float(RIDER_ROUGHNESS)))
-                sky.append(torch.ones(len(ra.albedo)))  # riders: the whole sky (rider_relit's model)
-            self.statics[key] = tuple(torch.cat(x) for x in (alb, gl, rough, sky))
+            from splatting.relight.avatar import cyclist_static
+            self.statics[key] = cyclist_static(self.bike(assets, bike),
+                                               self.rider(assets, rider) if rider is not None else None)
         return self.statics[key]
 
 
@@ -194,12 +184,11 @@ class RelitSample:
         how g is drawn (rasterize's; the bike's mip filter and each model's low-pass), which its
         shadow map draws it with too."""
         from splatting.gaussians.sh import C0
-        from splatting.relight.render import relight_features, view_normals
+        from splatting.relight.render import leading_view_normals, relight_features
         alb, gl, rough, sky = self.ch.static(self.assets, bike, rider)
         nrm = self.normals[k]
         if self.normal_view.get(k) is not None:  # the bike's Gaussians come first
-            nb = len(self.normal_view[k])
-            nrm = torch.cat([view_normals(nrm[:nb], self.normal_view[k], trained.means[:nb].float(), camera), nrm[nb:]])
+            nrm = leading_view_normals(nrm, self.normal_view[k], trained.means, camera)
         if looked is not trained:
             before = _srgb_decode((C0 * trained.sh[:, 0] + 0.5).float()).clamp_min(1e-3)
             after = _srgb_decode((C0 * looked.sh[:, 0] + 0.5).float())

@@ -54,3 +54,20 @@ class RelightableAvatar:
         normals = self.posed_normals(out["rotations"])
         return [(Gaussians(out["means"][b], out["quats"][b], g.log_scales, g.opacity_logits, out["sh"][b]),
                  self.albedo, normals[b], self.gloss) for b in range(local_rotmats.shape[0])]
+
+
+def cyclist_static(rb, ra=None):
+    """The pose-invariant relight channels of a cyclist, the bike's Gaussians first, then the
+    rider's: (albedo (N, 3), gloss (N, 3), roughness (N,), sky visibility (N,)).  The bike keeps
+    shading.ROUGHNESS and its own sky visibility (RelightableBike.sky_visibility); a rider has
+    RIDER_ROUGHNESS and the whole sky (rider_relit's model)."""
+    from splatting.relight.shading import ROUGHNESS
+
+    alb, gl = [rb.albedo], [rb.gloss]
+    rough, sky = [torch.full((len(rb.albedo),), ROUGHNESS)], [rb.sky_visibility()]
+    if ra is not None:
+        alb.append(ra.albedo)
+        gl.append(ra.gloss)
+        rough.append(torch.full((len(ra.albedo),), float(RIDER_ROUGHNESS)))
+        sky.append(torch.ones(len(ra.albedo)))
+    return tuple(torch.cat(x) for x in (alb, gl, rough, sky))

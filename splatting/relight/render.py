@@ -201,6 +201,13 @@ def view_normals(normals, normal_view, means, camera):
     return n / n.norm(dim=-1, keepdim=True).clamp_min(1e-6)
 
 
+def leading_view_normals(normals, normal_view, means, camera):
+    """normals (N, 3) of a scene whose first len(normal_view) Gaussians (a cyclist's bike) have
+    view-dependent normals, those turned to camera (view_normals), the rest as they are."""
+    nb = len(normal_view)
+    return torch.cat([view_normals(normals[:nb], normal_view, means[:nb].float(), camera), normals[nb:]])
+
+
 _VN = None
 
 
