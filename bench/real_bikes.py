@@ -54,7 +54,7 @@ def check_bike(bike_dir, n_poses, seed, samples):
     with torch.no_grad():
         for i, (pose, cam) in enumerate(zip(poses, cams)):
             out = render_gaussians(model.pose(torch.tensor(pose, dtype=torch.float64)).gaussians, ring[int(cam)],
-                                   eps2d=model.eps2d)
+                                   antialiased=model.antialiased, eps2d=model.eps2d)  # drawn as trained
             rgb, alpha = out["rgb"].clamp(0, 1).numpy(), out["alpha"].numpy()
             gt_rgb, m_gt = load_rgba(os.path.join(gt_dir, f"gt_{i:03d}.png"))
             m = alpha > 0.5
