@@ -80,12 +80,10 @@ def read_keypoints(bike_dir_or_file):
 
 
 def has_crank(bike_dir):
-    """Whether a bike folder's rideable has pedals (meta.json "has_crank", true when absent); False
-    for a folder without a readable meta.json."""
-    try:
-        return bool(read_meta(bike_dir).get("has_crank", True))
-    except UserError:
-        return False
+    """Whether a bike folder's rideable has pedals (meta.json "has_crank", true when the key is
+    absent).  A missing or unreadable meta.json is a UserError naming it: read as "no crank" it made
+    `bikes: all` drop the bike from a cyclist dataset without a word."""
+    return bool(read_meta(bike_dir).get("has_crank", True))
 
 
 def parse_keypoints_doc(doc, has_crank=True, required=(), source="keypoints.json"):

@@ -150,6 +150,29 @@ def test_config_errors_name_the_field(tmp_path, patch, field):
     assert not os.path.exists(tmp_path / "o" / "annotations.json")
 
 
+@pytest.mark.parametrize("meta", ["{not json", None])
+def test_bikes_all_refuses_an_unreadable_meta_json(tmp_path, meta):
+    """`bikes: all` in cyclist mode keeps bikes with pedals; a bike whose meta.json is corrupt or
+    missing is an error naming that file, not a bike silently dropped as "no crank"."""
+    from splatting.cli import main
+    import contextlib
+    import io
+    write_test_bike(str(tmp_path))
+    bad = write_test_bike(str(tmp_path), "road_t")
+    os.remove(os.path.join(bad, "meta.json"))
+    if meta is not None:
+        with open(os.path.join(bad, "meta.json"), "w") as f:
+            f.write(meta)
+    path = write_yaml(str(tmp_path / "all.yaml"), small_config(str(tmp_path), bikes="all"))
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        rc = main(["dataset", "--config", path, "--out", str(tmp_path / "o")])
+    msg = err.getvalue().strip()
+    assert rc == 2 and len(msg.splitlines()) == 1, msg
+    assert os.path.join(bad, "meta.json") in msg, msg
+    assert not os.path.exists(tmp_path / "o" / "annotations.json")
+
+
 def test_bad_yaml_and_unknown_preset(tmp_path):
     from splatting.cli import main
     p = tmp_path / "x.yaml"
