@@ -10,7 +10,7 @@ OUT ?= out
 DEMO := $(OUT)/demo
 BLENDER ?= blender
 
-.PHONY: setup raster-lib test test-all demo bench bikes views library contact-sheet addon clean
+.PHONY: setup raster-lib test test-slow test-all demo bench bikes views library contact-sheet addon clean
 
 setup: $(STAMP) raster-lib
 
@@ -29,6 +29,12 @@ $(STAMP): requirements.txt pyproject.toml
 
 test: setup
 	$(PY) -m pytest
+
+# The tests `make test` deselects (pytest.ini): slow ones (minutes each: the library's kill/rerun/Ray
+# equivalence, the end-to-end blender_compare stage, real-model curation) and the add-on in a real
+# Blender window under xvfb-run.  CI runs it after `make test`.
+test-slow: setup
+	$(PY) -m pytest -m "slow or window"
 
 test-all: setup
 	$(PY) -m pytest -m ""

@@ -14,6 +14,7 @@ import pytest
 
 from addon.core.script import UserError
 from blender_scripts import build_addon
+from ci_needs import missing
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BLENDER = "/usr/bin/blender"
@@ -168,7 +169,7 @@ def test_with_numpy_no_message_and_operators_run(tmp_path):
 def test_debian_blender_without_numpy_legacy_addon(tmp_path):
     """Debian's Blender 3.4 with the add-on installed the legacy way, numpy hidden."""
     if not os.path.exists(BLENDER):
-        pytest.skip("no /usr/bin/blender")
+        missing("/usr/bin/blender")
     z = build_addon.build(str(tmp_path / "dist"))
     with zipfile.ZipFile(z) as f:  # what "Install add-on" does with a legacy zip
         f.extractall(tmp_path / "scripts" / "addons")

@@ -13,6 +13,8 @@ import zipfile
 
 import pytest
 
+from ci_needs import needs
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BLENDER = "/usr/bin/blender"
 
@@ -129,7 +131,7 @@ def model(tmp_path_factory):
     return path, sp
 
 
-@pytest.mark.skipif(not (os.path.exists(BLENDER) and shutil.which("xvfb-run")), reason="needs blender + xvfb-run")
+@needs(os.path.exists(BLENDER) and shutil.which("xvfb-run"), "/usr/bin/blender and xvfb-run")
 def test_panel_in_blender_window(tmp_path, model):
     from blender_scripts.build_addon import build
 

@@ -13,13 +13,15 @@ import os
 import numpy as np
 import pytest
 
+from ci_needs import needs
+
 bpy = pytest.importorskip("bpy")
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # the repository's sibling shared/ (main checkout) or the worktrees' grand-parent's one
 MODELS = next((p for p in (os.path.join(ROOT, "..", "shared", "models"), os.path.join(ROOT, "..", "..", "shared", "models"))
                if os.path.isdir(p)), None)
-needs_models = pytest.mark.skipif(MODELS is None, reason="shared real models (../shared/models) not present")
+needs_models = needs(MODELS is not None, "the shared real models (../shared/models)")
 
 TRUTH_PART = {"FrontWheel": 1, "Handle": 1, "Pedalier": 2, "Pedal_Left": 2, "Pedal_Right": 2}   # else frame (0)
 # expected kind per model: has a crank (bicycle) or not (kick scooter, motorcycle)
@@ -101,7 +103,7 @@ def test_real_model_curates_without_help(rel, tmp_path, fresh_scene):
 @needs_models
 @pytest.mark.slow
 @pytest.mark.blender_binary
-@pytest.mark.skipif(not os.path.exists("/usr/bin/blender"), reason="needs the Debian blender binary")
+@needs(os.path.exists("/usr/bin/blender"), "the Debian blender binary")
 def test_debian_blender_imports_gltf(tmp_path):
     """Debian's Blender 3.4 runs its glTF importer on the system numpy 1.24, which lacks the
     numpy.bool alias the importer calls: curate.py puts it back, so a .glb curates there too."""

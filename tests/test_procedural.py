@@ -12,6 +12,7 @@ import pytest
 from addon.core.procedural import layout
 from addon.core.procedural import spec as specs
 from addon.core.script import UserError
+from ci_needs import missing
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MAKE = os.path.join(ROOT, "blender_scripts", "make_bikes.py")
@@ -282,7 +283,7 @@ def test_save_and_open_bike_roundtrip(fresh_scene, tmp_path):
 def test_make_bikes_under_blender_34(tmp_path):
     blender = shutil.which("blender") or "/usr/bin/blender"
     if not os.path.exists(blender):
-        pytest.skip("Debian blender binary not installed")
+        missing("the Debian blender binary")
     out = tmp_path / "lib34"
     r = subprocess.run([blender, "-b", "--factory-startup", "-P", MAKE, "--", "--out", str(out), "--count", "1",
                         "--no-extras"], capture_output=True, text=True, timeout=300)

@@ -20,6 +20,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PY = sys.executable
 SCRIPT = os.path.join(ROOT, "blender_scripts", "render_views.py")
 from blender_helpers import _mask, check_keypoints_on_masks  # noqa: E402
+from ci_needs import missing  # noqa: E402
 
 FAST = ["--samples", "1", "--denoise", "NONE"]
 
@@ -191,7 +192,7 @@ def test_debian_blender_34_renders_views(tmp_path):
 
     blender = shutil.which("blender")
     if blender is None:
-        pytest.skip("Debian blender binary not installed")
+        missing("the Debian blender binary")
     for script, args in (("make_bikes.py", ["--out", str(tmp_path), "--count", "1", "--no-extras"]),
                          ("render_views.py", ["--bike", str(tmp_path / "bikes" / "road_00"), "--parts", "steering,crank",
                                               "--views", "0,13", "--samples", "2"])):

@@ -18,6 +18,7 @@ import torch
 from cyclist_formats import rider_file
 from cyclist_formats.errors import UserError
 from splatting.rider.kinematics import JOINT_NAMES, PARENTS
+from ci_needs import missing
 
 bpy = pytest.importorskip("bpy")
 
@@ -523,7 +524,7 @@ def test_debian_blender_34_imports_the_same_rider(models, imported, tmp_path):
     import shutil
     blender = shutil.which("blender")
     if blender is None:
-        pytest.skip("Debian blender binary not installed")
+        missing("the Debian blender binary")
     out = tmp_path / "r34.npz"
     r = cli("rider", "import", "--model", models["mixamo.glb"], "--id", "my_glb_rider", "--out", out, "--blender", blender)
     assert r.returncode == 0, r.stderr[-1500:]
