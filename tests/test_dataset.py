@@ -1,4 +1,5 @@
-"""`python -m splatting dataset`: COCO output that pycocotools loads and self-evaluates to 1.0,
+"""`python -m splatting dataset`: COCO output that pycocotools loads (its encoding self-evaluates to 1.0;
+masks, boxes and keypoints checked geometrically beside it),
 kill-and-resume gives identical bytes, config errors name the field."""
 import os
 import signal
@@ -31,7 +32,10 @@ def built(tmp_path_factory):
     return root, cfg, out
 
 
-def test_coco_loads_and_self_eval_is_perfect(built):
+def test_coco_encoding_loads_and_scores_itself_one(built):
+    """Proves the ENCODING (pycocotools loads the file, the categories, RLEs and keypoint sigmas, and
+    matches each annotation to itself), not the masks: the ground truth is scored against itself.
+    The geometry is checked beside it (test_masks_boxes_and_keypoints_are_consistent)."""
     from pycocotools.coco import COCO
     from pycocotools.cocoeval import COCOeval
     _, cfg, out = built

@@ -1,6 +1,7 @@
 """Labels (issue 13): COCO-17 person points from mesh vertices, sigmas in every keypoint category,
 the standard COCOeval runs for bbox, segm and keypoints (person and bicycle) and scores the ground
-truth against itself 1.0, every annotation carries the fields a loader expects."""
+truth against itself 1.0 (that proves the encoding; boxes, masks and points are checked geometrically
+beside it), every annotation carries the fields a loader expects."""
 import json
 import os
 
@@ -54,7 +55,10 @@ def test_person_category_is_coco17_with_cocos_sigmas_and_skeleton(street_set):
     assert parked and all(a["category_id"] == cats["bicycle"]["id"] for a in parked)
 
 
-def test_cocoeval_self_evaluation_is_one_for_boxes_masks_and_keypoints(street_set):
+def test_cocoeval_reads_the_encoding_ground_truth_scores_itself_one(street_set):
+    """Proves the ENCODING (pycocotools loads our RLEs, boxes, keypoints and sigmas and matches
+    each annotation to itself), not that the masks are right: the ground truth is scored against
+    itself.  The geometry is checked beside it (test_boxes_enclose_their_masks_and_points_sit_on_them)."""
     from pycocotools.coco import COCO
     from pycocotools.cocoeval import COCOeval
     gt = COCO(os.path.join(street_set, "annotations.json"))
@@ -70,6 +74,30 @@ def test_cocoeval_self_evaluation_is_one_for_boxes_masks_and_keypoints(street_se
         ev.params.kpt_oks_sigmas = np.array(cat["sigmas"])
         ev.evaluate(); ev.accumulate(); ev.summarize()
         assert ev.stats[0] == pytest.approx(1.0), name
+
+
+def test_boxes_enclose_their_masks_and_points_sit_on_them(street_set):
+    """Geometry, independent of COCOeval: each visible mask's tight box is its bbox, its area the
+    pixel count, the amodal mask covers the visible one, and visible keypoints lie in the image."""
+    from pycocotools import mask as mu
+    with open(os.path.join(street_set, "annotations.json")) as f:
+        doc = json.load(f)
+    size = {im["id"]: (im["height"], im["width"]) for im in doc["images"]}
+    assert doc["annotations"]
+    for a in doc["annotations"]:
+        m = mu.decode(a["segmentation"]).astype(bool)
+        assert m.shape == size[a["image_id"]] and m.any()
+        ys, xs = np.nonzero(m)
+        x, y, w, h = a["bbox"]
+        assert np.allclose((x, y, x + w, y + h), (xs.min(), ys.min(), xs.max() + 1, ys.max() + 1)), a["id"]
+        assert a["area"] == pytest.approx(m.sum(), abs=1)
+        if "segmentation_amodal" in a:
+            assert not (m & ~mu.decode(a["segmentation_amodal"]).astype(bool)).any(), a["id"]
+        if "keypoints" in a:
+            kp = np.array(a["keypoints"], float).reshape(-1, 3)
+            vis = kp[kp[:, 2] == 2]
+            H, W = size[a["image_id"]]
+            assert ((vis[:, 0] >= -0.5) & (vis[:, 0] <= W - 0.5) & (vis[:, 1] >= -0.5) & (vis[:, 1] <= H - 0.5)).all()
 
 
 def test_coco17_points_sit_on_the_rider():

@@ -251,7 +251,9 @@ def test_reduced_resolution_amodal_masks_match_the_full_ones(bikes, assets_for, 
     cfg = street_config(bikes)
     (_, _, full, _), _ = sample(cfg, assets_for(cfg))
     (_, _, small, _), _ = sample(dict(cfg, amodal_max_px=40), assets_for(cfg))
+    assert len(full) == len(small) > 0, (len(full), len(small))  # zip() would hide a missing annotation
     for a, b in zip(full, small):
+        assert (a["category_id"], a["instance"]) == (b["category_id"], b["instance"])
         ma, mb = decode(a["segmentation_amodal"]), decode(b["segmentation_amodal"])
         assert (decode(a["segmentation"]) == decode(b["segmentation"])).all()  # visible: untouched
         assert a["bbox_amodal"][3] > 50  # really larger than 40 px
