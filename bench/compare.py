@@ -17,8 +17,9 @@ REFERENCE = {"samples": REFERENCE_SAMPLES, "adaptive_threshold": REFERENCE_ADAPT
 
 def renders_for(gt_dir, key, prefix="gt_"):
     """gt_dir holding only renders made for `key` (a JSON-able dict: poses, cameras, lights, render
-    settings): when gt_dir/key.json records another key, its files starting with `prefix` are
-    deleted, so that a worker skipping existing files renders them again. Returns gt_dir."""
+    settings, the inputs' hashes and the code version: bench/provenance.py): when gt_dir/key.json records
+    another key, its files starting with `prefix` (a string or a tuple of them) are deleted, so that a
+    worker skipping existing files renders them again. Returns gt_dir."""
     import json
     import os
 

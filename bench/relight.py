@@ -167,8 +167,8 @@ def coverage_cost(gt_png, rgb, alpha, box):
 
 
 def fit_missing(bike, progress=print):
-    """Relight-fit the parts of a trained bike whose PART.relight.npz is missing (relight-fit --bike's
-    settings: bike_fit_config); {part: fit metrics}."""
+    """Relight-fit the parts of a trained bike whose PART.relight.npz is missing or stale (relight-fit
+    --bike's settings: bike_fit_config); {part: fit metrics}."""
     stats = {}
     for part in PARTS:
         st = _fit_if_missing(bike, part, progress)
@@ -178,17 +178,19 @@ def fit_missing(bike, progress=print):
 
 
 def _fit_if_missing(bike, part, progress=print):
-    """Relight-fit one trained part (bike_fit_config) unless its PART.relight.npz reads; its fit
-    metrics, or None when it was there."""
+    """Relight-fit one trained part (bike_fit_config) unless its PART.relight.npz reads and was made
+    from these Gaussians (file hash), views, settings and code (its .key.json, bench/provenance.py);
+    its fit metrics, or None when the fit there is current."""
+    from bench.provenance import relight_fit_is_current, write_key
     from cyclist_formats import bike_folder
     from splatting.relight.fit import bike_fit_config, fit_file
 
-    ply = bike_folder.gaussians_path(bike, part)
-    try:
-        bike_folder.read_relight(ply)
+    ply, views, cfg = bike_folder.gaussians_path(bike, part), bike_folder.views_dir(bike, part), bike_fit_config()
+    current, key_path, key = relight_fit_is_current(ply, views, cfg)
+    if current:
         return None
-    except bike_folder.UserError:
-        m = fit_file(bike_folder.views_dir(bike, part), ply, bike_fit_config())
+    m = fit_file(views, ply, cfg)
+    write_key(key_path, key)
     st = {k: m.get(k) for k in ("wall_s", "heldout_albedo_psnr", "heldout_gloss_psnr", "heldout_normal_err_deg")}
     progress(f"  bike_relit: {part} relight fit {st}")
     return st
@@ -200,12 +202,22 @@ def run_bench(results, out_dir, n_poses=None):
     from bench.bike_gt import find_bike
     from cyclist_formats import bike_folder
 
-    bike = find_bike(os.path.join(out_dir, "bikes"))
-    if bike and not all(os.path.isfile(bike_folder.pass_paths(bike_folder.views_dir(bike, p), "camera0000")["albedo"])
-                        for p in PARTS):
-        print(f"  bike_relit: {bike} has no albedo/normal passes (views rendered before them) - using a small bike")
+    bike, fallback = find_bike(os.path.join(out_dir, "bikes")), None
+    if bike is None:
+        fallback = f"no trained bike under {os.path.join(out_dir, 'bikes')}: the small bike built here"
+    elif not all(os.path.isfile(bike_folder.pass_paths(bike_folder.views_dir(bike, p), "camera0000")["albedo"])
+                 for p in PARTS):
+        fallback = f"{bike} has no albedo/normal passes (views rendered before them): the small bike built here"
         bike = None
-    return run(results, out_dir, n_poses, bike=bike)
+    if fallback:
+        print(f"  bike_relit: {fallback}")
+    rows = run(results, out_dir, n_poses, bike=bike)
+    if fallback:
+        from bench.provenance import record
+        for k in ("bike_relit", "relight_render_overhead", "relight_shadow_overhead", "relight_render_ms"):
+            if k in results:
+                record(results, k, fallback=fallback)
+    return rows
 
 
 def run(results, out_dir, n_poses=None, seed=0, size=GT_SIZE, repeats=5, bike=None, progress=print):
@@ -234,9 +246,12 @@ def run(results, out_dir, n_poses=None, seed=0, size=GT_SIZE, repeats=5, bike=No
     poses, cams = sample_poses(n_poses, seed)
     rng = np.random.default_rng(seed + 16)
     lights = [random_light(rng) for _ in range(n_poses)]
-    key = {"bike": bike, "poses": poses.tolist(), "cameras": cams.tolist(), "size": size, "reference": REFERENCE,
-           "lights": [light_json(l) for l in lights]}
+    from bench.provenance import RENDER_CODE, bike_assets, code_version, file_hash
+    key = {**bike_assets(bike), "frame_cameras": file_hash(os.path.join(bike_folder.views_dir(bike, "frame"), "cameras.json")),
+           "poses": poses.tolist(), "cameras": cams.tolist(), "size": size, "reference": REFERENCE,
+           "lights": [light_json(l) for l in lights], "code": code_version(*RENDER_CODE)}
     gt_dir = renders_for(os.path.join(work, f"gt_{os.path.basename(bike)}_{size}"), key)
+    reused = all(os.path.isfile(os.path.join(gt_dir, f"gt_{i:03d}.png")) for i in range(n_poses))
     job = dict(key, cameras=ring_camera_files(bike, cams, size, gt_dir), out=gt_dir)
     job_path = os.path.join(gt_dir, "job.json")
     with open(job_path, "w") as f:
@@ -307,6 +322,11 @@ def run(results, out_dir, n_poses=None, seed=0, size=GT_SIZE, repeats=5, bike=No
                              "antialiased": trained_aa,
                              "prepare_s": round(prep_s, 1), "sky_visibility_s": round(sky_s, 1),
                              "train": train_stats}
+    from bench.provenance import record
+    for k in ("bike_relit", "relight_render_overhead", "relight_shadow_overhead", "relight_render_ms"):
+        # Gaussians drawn and timed now; Blender's references and the parts' relight fits may be reused
+        record(results, k, "fresh", bike=bike, blender_renders="reused (same key)" if reused else "rendered",
+               relight_fits=f"fitted now: {sorted(train_stats)}" if train_stats else "reused (same key)")
     results["relight_render_overhead"] = overhead
     results["relight_shadow_overhead"] = shadow_overhead
     results["relight_render_ms"] = {"baked_median": 1000 * float(np.median(t_baked)),

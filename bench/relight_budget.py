@@ -215,10 +215,17 @@ def main():
     from bench.relight import light_json, ring_camera_files
     from splatting.relight.shading import random_light
 
-    os.makedirs(a.out, exist_ok=True)
+    from bench.compare import renders_for
+    from bench.provenance import RENDER_CODE, bike_assets, code_version, file_hash
+
     poses, cams = sample_poses(a.poses, a.seed)
     rng = np.random.default_rng(a.seed + 16)
     lights = [light_json(random_light(rng)) for _ in range(a.poses)]
+    # earlier passes in --out are reused only when made for this bike, poses, suns, size, samples and code
+    renders_for(a.out, {**bike_assets(a.bike), "poses": poses.tolist(), "cameras": cams.tolist(), "size": a.size,
+                        "frame_cameras": file_hash(os.path.join(a.bike, "views", "frame", "cameras.json")),
+                        "samples": a.samples, "lights": lights, "code": code_version(*RENDER_CODE)},
+                prefix=("passes_", "rgba_"))
     job = {"bike": os.path.abspath(a.bike), "poses": poses.tolist(), "out": os.path.abspath(a.out), "samples": a.samples,
            "cameras": ring_camera_files(a.bike, cams, a.size, a.out), "lights": lights, "split": a.split}
     jp = os.path.join(a.out, "budget_job.json")

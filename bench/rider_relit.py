@@ -47,12 +47,13 @@ def run(results, out_dir, avatar_dir=None, n_poses=12, seed=0, progress=print):
     import torch
 
     from bench.compare import REFERENCE, renders_for, score_png, side_by_side, write_table
+    from bench.provenance import RENDER_CODE, code_version, record, relight_fit_is_current, write_key
     from bench.relight import light_json
     from bench.rider import RIDER_ID, posed_batch, posed_jobs, sample_poses
     from cyclist_formats import bike_folder
     from splatting.raster.sparse import render_gaussians
     from splatting.relight.avatar import RIDER_ROUGHNESS, RelightableAvatar
-    from splatting.relight.fit import fit_file
+    from splatting.relight.fit import RelightFitConfig, fit_file
     from splatting.relight.render import render_relit
     from splatting.relight.shading import random_light
     from splatting.rider.avatar import PLY_NAME
@@ -65,10 +66,11 @@ def run(results, out_dir, avatar_dir=None, n_poses=12, seed=0, progress=print):
         build_avatar(RIDER_ID, avatar_dir, iterations=2000, time_budget_s=480)
     ply = os.path.join(avatar_dir, PLY_NAME)
     fit = None
-    try:
-        bike_folder.read_relight(ply)
-    except bike_folder.UserError:
+    # refit unless the fit there was made from these Gaussians (file hash), views, settings and code
+    current, key_path, fit_key = relight_fit_is_current(ply, os.path.join(avatar_dir, "views"), RelightFitConfig())
+    if not current:
         fit = fit_file(os.path.join(avatar_dir, "views"), ply)
+        write_key(key_path, fit_key)
         progress(f"  rider_relit: relight fit {fit}")
     ra = RelightableAvatar.load(avatar_dir)
     rider = load_rider(ra.avatar.rider_id or RIDER_ID)
@@ -79,8 +81,10 @@ def run(results, out_dir, avatar_dir=None, n_poses=12, seed=0, progress=print):
     lights = [random_light(rng) for _ in range(n_poses)]
     key = {"rider": ra.avatar.rider_id or RIDER_ID,  # Blender renders the roster body, not the avatar
            "theta_p": theta_p.tolist(), "theta_s": theta_s.tolist(), "yaw": yaw.tolist(), "cameras": cams.tolist(),
-           "reference": REFERENCE, "lights": [light_json(light) for light in lights]}
+           "reference": REFERENCE, "lights": [light_json(light) for light in lights],
+           "code": code_version(*RENDER_CODE, "splatting/rider")}   # the posed roster mesh comes from splatting/rider
     gt_dir = renders_for(os.path.join(out_dir, "rider_relit"), key)
+    reused = all(os.path.isfile(os.path.join(gt_dir, f"gt_{i:03d}.png")) for i in range(n_poses))
     jobs, cameras, job_file = posed_jobs(rider, rot, root, cams, gt_dir, [{"light": light_json(light)} for light in lights])
     r = subprocess.run([sys.executable, os.path.abspath(__file__), "--worker", job_file], cwd=ROOT)
     if r.returncode:
@@ -108,6 +112,9 @@ def run(results, out_dir, avatar_dir=None, n_poses=12, seed=0, progress=print):
     results["rider_relit"] = {"poses": len(rows), "reference": REFERENCE, "box_psnr_mean": mean("relit_box_psnr"), "iou_mean": mean("relit_iou"),
                               "baked_box_psnr_mean": mean("baked_box_psnr"), "baked_iou_mean": mean("baked_iou"),
                               "noshadow_box_psnr_mean": mean("noshadow_box_psnr"), "size_px": cameras[0].width, "gaussians": len(ra.avatar)}
+    record(results, "rider_relit", "fresh", avatar=os.path.abspath(avatar_dir),
+           blender_renders="reused (same key)" if reused else "rendered",
+           relight_fit="fitted now" if fit else "reused (same key)")
     if fit:
         results["rider_relit"]["relight_fit"] = {k: fit.get(k) for k in ("wall_s", "heldout_albedo_psnr",
                                                                           "heldout_normal_err_deg")}

@@ -1,7 +1,9 @@
 """`make bench`: measure every stage on this machine -> out/bench/results.json + report.md + charts.
 
 Each stage module exposes run(results, ...) and adds only the keys it measured in this run
-(docs/contract.md's benchmark contract); a stage that fails is reported and its keys stay absent.
+(docs/contract.md's benchmark contract); a stage that fails or skips is reported, its keys stay
+absent and report.md says "not measured: <reason>".  Every key carries its provenance
+(bench/provenance.py): fresh or reused, from which assets, with which fallback.
 """
 import argparse
 import importlib
@@ -14,6 +16,8 @@ import traceback
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
+
+from bench.provenance import META, not_measured, record  # noqa: E402
 
 # name -> (module, how to call run)
 STAGES = {
@@ -39,6 +43,9 @@ STAGES = {
     # gaussian_vs_blender_equal_fidelity: the trained bike vs Cycles/Workbench, interleaved (issue 14)
     "blender_compare": ("bench.blender_compare", lambda m, r, out: m.run(r, out)),
 }
+
+# stages that prepare inputs for later ones and measure nothing themselves
+PREPARES = {"views"}
 
 PAPER = {
     "render_view_s_median": "17–20 s per image",
@@ -81,17 +88,42 @@ def fmt(v):
     return str(v)
 
 
-def report(results, out_dir, timings):
+def fmt_provenance(p):
+    """'fresh' / 'reused (...)' plus the assets and fallbacks a key was measured with."""
+    if not p:
+        return "unrecorded"
+    rest = "; ".join(f"{k}: {fmt(v)}" for k, v in p.items() if k != "status")
+    return p.get("status", "unrecorded") + (f" ({rest})" if rest else "")
+
+
+def report_lines(results, timings):
+    """report.md's lines.  Values may be fresh or reused (the provenance column says which), so no
+    column claims "this run"; a target key nobody measured, and every key a stage skipped or failed,
+    is a "not measured: <reason>" row."""
+    prov, skipped = results.get("provenance", {}), results.get("not_measured", {})
     lines = ["# Benchmark report", "", f"Machine: {platform.machine()}, {os.cpu_count()} cores, "
-             f"Python {platform.python_version()}; measured {time.strftime('%Y-%m-%d %H:%M')}.", "",
-             "| key | this run | target | paper |", "| --- | --- | --- | --- |"]
+             f"Python {platform.python_version()}; written {time.strftime('%Y-%m-%d %H:%M')}.", "",
+             "| key | value | provenance | target | paper |", "| --- | --- | --- | --- | --- |"]
     for k, v in results.items():
-        lines.append(f"| `{k}` | {fmt(v)} | {TARGETS.get(k, '')} | {PAPER.get(k, '')} |")
+        if k not in META:
+            lines.append(f"| `{k}` | {fmt(v)} | {fmt_provenance(prov.get(k))} | {TARGETS.get(k, '')} | {PAPER.get(k, '')} |")
+    for k, why in skipped.items():
+        if k not in results:
+            lines.append(f"| `{k}` | not measured: {why} | | {TARGETS.get(k, '')} | {PAPER.get(k, '')} |")
+    for k in TARGETS:
+        if k not in results and k not in skipped and not any(x.startswith(k) for x in results):
+            lines.append(f"| `{k}` | not measured: no stage of this run reported it | | {TARGETS[k]} | {PAPER.get(k, '')} |")
     if results.get("train_parts"):
-        lines += ["", "## Per-part training (held-out views)", "", "| bike | part | PSNR | SSIM | Gaussians | wall s |",
-                  "| --- | --- | --- | --- | --- | --- |"]
+        lines += ["", "## Per-part training (held-out views)", "", "| bike | part | PSNR | SSIM | Gaussians | wall s | provenance |",
+                  "| --- | --- | --- | --- | --- | --- | --- |"]
         for r in results["train_parts"]:
-            lines.append(f"| {r['bike']} | {r['part']} | {r['psnr']:.2f} | {r['ssim']:.4f} | {r['gaussians']} | {r['wall_s']:.0f} |")
+            lines.append(f"| {r['bike']} | {r['part']} | {r['psnr']:.2f} | {r['ssim']:.4f} | {r['gaussians']} | {r['wall_s']:.0f} "
+                         f"| {'reused' if r.get('reused') else 'fresh'} |")
+    return lines
+
+
+def report(results, out_dir, timings):
+    lines = report_lines(results, timings)
     if results.get("blender_compare") and os.path.isfile(os.path.join(out_dir, "blender_compare_table.md")):
         with open(os.path.join(out_dir, "blender_compare_table.md")) as f:
             lines += ["", "## Gaussians vs Blender (blender_compare)", "", f.read().rstrip()]
@@ -119,11 +151,19 @@ def main(argv=None):
         mod_name, call = STAGES[name]
         print(f"== bench stage {name}", flush=True)
         t = time.time()
+        before = set(results)
+        skipped_before = len(results.get("not_measured", {}))
         try:
             call(importlib.import_module(mod_name), results, args.out)
-        except Exception:
+        except Exception as e:
             traceback.print_exc()
             failed.append(name)
+            not_measured(results, f"stage {name}", f"failed: {type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}")
+        added = [k for k in results if k not in before and k not in META]
+        for k in added:  # a stage that read a value back records it as reused itself
+            record(results, k, results.get("provenance", {}).get(k, {}).get("status", "fresh"), stage=name)
+        if name not in failed and name not in PREPARES and not added and len(results.get("not_measured", {})) == skipped_before:
+            not_measured(results, f"stage {name}", "the stage added no key (see its log)")
         timings[name] = time.time() - t
         tmp = os.path.join(args.out, ".results.json.tmp")
         with open(tmp, "w") as f:
