@@ -187,6 +187,7 @@ def run_compare(bike_dir, out_dir, n_poses=12, size=512, seed=0, spp=SPP, refere
                 workbench=True, antialiased=None, progress=print):
     """The interleaved run. Returns (rows, per-pose records)."""
     from bench.bike_gt import sample_poses
+    from bench.provenance import RENDER_CODE, bike_assets, code_version, file_hash
     from cyclist_formats.atomic import write_json
 
     if antialiased is None:
@@ -198,7 +199,10 @@ def run_compare(bike_dir, out_dir, n_poses=12, size=512, seed=0, spp=SPP, refere
     os.makedirs(ref_dir, exist_ok=True)
     job = {"bike": os.path.abspath(bike_dir), "poses": poses.tolist(), "cameras": cam_ids.tolist(), "size": size,
            "reference_spp": reference_spp, "reference_adaptive": REFERENCE_ADAPTIVE,
-           "lighting": REFERENCE_LIGHTING}
+           "lighting": REFERENCE_LIGHTING,
+           # references are reused only for the same bike files, ring cameras and render code
+           "assets": bike_assets(bike_dir), "ring_cameras": file_hash(os.path.join(bike_dir, "views", "whole", "cameras.json")),
+           "code": code_version(*RENDER_CODE)}
     job_path = os.path.join(ref_dir, "job.json")
     if not (os.path.isfile(job_path) and json.load(open(job_path)) == job):
         for f in os.listdir(ref_dir):  # references of another job
@@ -333,16 +337,31 @@ def find_bike(bikes_dirs):
 def run(results, out_dir, bike_dir=None, n_poses=12, size=512, seed=0, spp=SPP, reference_spp=REFERENCE_SPP,
         workbench=True, png=None, progress=print, tag=""):
     """tag: a suffix for the table, per-pose JSON and chart (a Gaussians-only rerun beside a full one)."""
-    bike_dir = bike_dir or find_bike([os.path.join(out_dir, "bikes"), os.path.join(ROOT, "out", "demo", "bikes")])
+    from bench.provenance import not_measured, record
+
+    fallback = None
+    if bike_dir is None:  # the bench's own trained bike; the demo's only as a recorded fallback
+        own, demo = os.path.join(out_dir, "bikes"), os.path.join(ROOT, "out", "demo", "bikes")
+        bike_dir = find_bike([own])
+        if bike_dir is None:
+            bike_dir = find_bike([demo])
+            if bike_dir is not None:
+                fallback = f"no trained bike under {own}: used the demo's {bike_dir}"
+                progress(f"blender_compare: {fallback}")
     if bike_dir is None:
-        print("blender_compare: no trained bike (bike.blend + gaussians/frame.ply, steering.ply) under "
-              f"{out_dir}/bikes or out/demo/bikes - skipped")
+        why = (f"no trained bike (bike.blend + gaussians/frame.ply, steering.ply) under {out_dir}/bikes "
+               "or out/demo/bikes")
+        print(f"blender_compare: {why} - skipped")
+        for k in ("blender_compare", "bike_fidelity", "gaussian_vs_blender_equal_fidelity"):
+            not_measured(results, k, why)
         return None
+    bike_dir = os.path.abspath(bike_dir)
     t = time.time()
     load0 = os.getloadavg()[0]
     rows, recs = run_compare(bike_dir, out_dir, n_poses, size, seed, spp, reference_spp, workbench, progress=progress)
     ratio, match = equal_fidelity(rows)
-    results["blender_compare"] = {"bike": os.path.basename(os.path.normpath(bike_dir)), "poses": n_poses, "size": size,
+    results["blender_compare"] = {"bike": os.path.basename(os.path.normpath(bike_dir)), "bike_dir": bike_dir,
+                                  "bike_fallback": fallback, "poses": n_poses, "size": size,
                                   "reference_spp": reference_spp, "reference_adaptive": REFERENCE_ADAPTIVE, "load_1min": [round(load0, 2), round(os.getloadavg()[0], 2)],
                                   "rows": rows}
     ours = next(r for r in rows if r["method"] == GAUSS)
@@ -352,6 +371,11 @@ def run(results, out_dir, bike_dir=None, n_poses=12, size=512, seed=0, spp=SPP, 
     if ratio is not None:
         results["gaussian_vs_blender_equal_fidelity"] = ratio
         results["gaussian_vs_blender_match"] = match
+    else:
+        not_measured(results, "gaussian_vs_blender_equal_fidelity", "no Cycles setting brackets the Gaussians' box PSNR")
+    for k in ("blender_compare", "bike_fidelity", "gaussian_vs_blender_equal_fidelity", "gaussian_vs_blender_match"):
+        if k in results:
+            record(results, k, "fresh", bike=bike_dir, **({"fallback": fallback} if fallback else {}))
     from bench.compare import write_table
     from cyclist_formats.atomic import write_json
 

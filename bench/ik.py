@@ -31,21 +31,30 @@ HEIGHTS = np.round(np.arange(1.50, 1.951, 0.05), 2)
 STROKE = [[a, 0, 0, 0, 0, 0, 0, 0] for a in range(0, 360, 30)]  # a whole pedal stroke, 12 frames
 
 
+LIBRARY_SOURCE = ["not read yet"]   # where library_bikes found its bikes (recorded with the keys)
+
+
 def library_bikes(bikes_dir=None):
-    """[(bike_id, keypoints, saddle height)] of the bicycles in out/bikes, or generated specs."""
+    """[(bike_id, keypoints, saddle height)] of the bicycles in out/bikes (LIBRARY_SOURCE says which),
+    or generated specs.  A bike folder whose meta.json or keypoints.json does not read is an error
+    naming it (it was skipped silently, so the charts' bike set could shrink unseen)."""
+    from cyclist_formats.bike_folder import read_json, read_meta
+
     bikes_dir = bikes_dir or os.path.join(ROOT, "out", "bikes")
     out = []
     if os.path.isdir(bikes_dir):
         for b in sorted(os.listdir(bikes_dir)):
-            try:
-                with open(os.path.join(bikes_dir, b, "meta.json")) as f:
-                    meta = json.load(f)
-                with open(os.path.join(bikes_dir, b, "keypoints.json")) as f:
-                    kp = json.load(f)["keypoints"]
-            except (OSError, ValueError, KeyError):
+            d = os.path.join(bikes_dir, b)
+            if not os.path.isdir(d) or b.startswith("."):   # files, temporary folders
                 continue
+            meta = read_meta(d)
+            kp = read_json(os.path.join(d, "keypoints.json"), "bike keypoints.json").get("keypoints")
+            if not isinstance(kp, dict):
+                raise ValueError(f"{os.path.join(d, 'keypoints.json')}: no \"keypoints\" object")
             if meta.get("rideable", "bicycle") == "bicycle" and meta.get("has_crank", True):
                 out.append((b, kp))
+    LIBRARY_SOURCE[0] = f"bicycles of {os.path.abspath(bikes_dir)}" if out else \
+        f"generated specs (no bicycle under {os.path.abspath(bikes_dir)})"
     if not out:  # no library on disk: the same generator make_bikes uses, two bikes per style
         from addon.core.procedural import layout, spec
         out = [(f"{s}_{n:02d}", layout.keypoints(spec.sample_spec(s, n, 0))) for s in CHART_STYLES for n in range(2)]
@@ -178,6 +187,9 @@ def run(results, out_dir=None, charts=True):
     best = min(t.values(), key=lambda x: x["iter_ms"])
     results["ik_iter_ms"] = round(best["iter_ms"], 4)
     results["ik_batch_200x50_s"] = round(min(x["batch_s"] for x in t.values()), 4)
+    from bench.provenance import record
+    for k in ("ik_iter_ms", "ik_batch_200x50_s"):
+        record(results, k, "fresh", bikes=LIBRARY_SOURCE[0])
     if charts and out_dir:
         os.makedirs(out_dir, exist_ok=True)
         stability_chart(out_dir)

@@ -60,11 +60,18 @@ def main():
     v = pose_vertices(rider, rot, root)[0]
     centre = (0.0, float((v[:, 1].min() + v[:, 1].max()) / 2), 0.0)
     cam = ring_camera(300.0, centre, name="camera0030")
-    os.makedirs(a.work, exist_ok=True)
+    from bench.compare import renders_for
+    from bench.provenance import RENDER_CODE, code_version
+
+    lights = four_suns()
+    # the worker skips a sun_<i>.png that exists: only keep those made for this rider, pose, camera,
+    # suns and code (another rider's renders in the same --work folder were reused before)
+    renders_for(a.work, {"rider": ra.avatar.rider_id, "pose": [70.0, 5.0, 0.0], "camera": [cam.name, list(centre), 300.0],
+                         "suns": [light_json(l) for l in lights], "code": code_version(*RENDER_CODE, "splatting/rider")},
+                prefix="sun_")
     mesh = os.path.join(a.work, "posed.ply")
     export_rider(rider, mesh, vertices=v)
     cj = write_camera(cam, a.work)
-    lights = four_suns()
     jobs = [{"mesh": mesh, "camera": f"{cj}:{cam.name}", "out": os.path.join(a.work, f"sun_{i}.png"),
              "light": light_json(l)} for i, l in enumerate(lights)]
     jp = os.path.join(a.work, "jobs.json")

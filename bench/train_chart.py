@@ -139,8 +139,9 @@ def config_for(spec, threads):
 
 
 def run_fidelity(specs, reference_dir, png, threads=1, out_json=None):
-    """Train every run spec, score it against the clean reference; chart + JSON (resumable: runs
-    already in the JSON with the same spec are not trained again)."""
+    """Train every run spec, score it against the clean reference; chart + JSON (resumable: a run
+    already in the JSON is reused, marked "reused": true, only when its spec, training views, reference
+    folder and content, threads and code version all match: fidelity_key)."""
     from cyclist_formats.atomic import write_json
     from splatting.training.trainer import train_views
     from splatting.training.views import load_views
@@ -152,16 +153,18 @@ def run_fidelity(specs, reference_dir, png, threads=1, out_json=None):
             done = json.load(f).get("runs", [])
     runs = []
     for spec in specs:
-        prev = next((r for r in done if r["spec"] == spec), None)
+        key = fidelity_key(spec, reference_dir, threads)
+        prev = next((r for r in done if r.get("key") == key), None)
         if prev:
-            runs.append(prev)
+            runs.append(dict(prev, reused=True))
+            print(f"train_chart: {spec['label']}: reused (same spec, views, reference, threads and code)", flush=True)
             continue
         cfg = config_for(spec, threads)
         print(f"train_chart: {spec['label']} ...", flush=True)
         load0 = os.getloadavg()[0]
         g, m = train_views(load_views(spec["views"]), cfg)
         box, iou, n = clean_fidelity(g, reference_dir, cfg.antialiased, cfg.eps2d)
-        r = {"spec": spec, "label": spec["label"], "clean_box_psnr": box, "clean_iou": iou, "reference_views": n,
+        r = {"spec": spec, "key": key, "reused": False, "label": spec["label"], "clean_box_psnr": box, "clean_iou": iou, "reference_views": n,
              "psnr_crop": m["psnr_crop"], "gaussians": m["gaussians"], "wall_s": m["wall_s"], "iterations": m["iterations"],
              "stopped": m["stopped"], "load_1min": [round(load0, 2), round(os.getloadavg()[0], 2)]}
         runs.append(r)
@@ -186,7 +189,7 @@ def draw_fidelity(runs, png, title=""):
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.4), sharey=True)
     for i, r in enumerate(runs):
         mk = "os^Dv<>p*h"[i % 10]
-        lab = f"{r['label']}: {r['clean_box_psnr']:.2f} dB, IoU {r['clean_iou']:.3f}"
+        lab = f"{r['label']}: {r['clean_box_psnr']:.2f} dB, IoU {r['clean_iou']:.3f}{' (reused)' if r.get('reused') else ''}"
         line, = a.plot([r["wall_s"]], [r["clean_box_psnr"]], marker=mk, ms=8, ls="", label=lab)
         b.plot([r["gaussians"]], [r["clean_box_psnr"]], marker=mk, ms=8, ls="", color=line.get_color())
     a.set_xlabel("training wall time (s)")
@@ -243,15 +246,36 @@ def bike_fidelity(bike_dir, reference_dir, model=None):
         ps.append(p)
         ious.append(iou)
     os.rmdir(tmpdir)
-    wall = 0.0
     gdir = os.path.join(bike_dir, "gaussians")
-    for js in [part_metrics_path(gdir, name) for name in model.part_names] + [os.path.join(gdir, "posed_train.json")]:
-        if js is not None and os.path.isfile(js):
-            with open(js) as f:
-                wall += float(json.load(f).get("wall_s", 0.0))
-    return {"box_psnr": float(np.mean(ps)), "iou": float(np.mean(ious)), "poses": len(ps), "train_wall_s": wall,
-            "gaussians": len(model), "eps2d": model.eps2d,
+    # every part's training metrics are required (a missing one added 0 s before); the posed fine-tune
+    # is optional (a bike without it has no posed_train.json), but one that ran must say how long
+    walls = [_wall_s(part_metrics_path(gdir, name), f"{bike_dir}: part {name}") for name in model.part_names]
+    posed = os.path.join(gdir, "posed_train.json")
+    if os.path.isfile(posed):
+        walls.append(_wall_s(posed, f"{bike_dir}: posed fine-tune"))
+    return {"box_psnr": float(np.mean(ps)), "iou": float(np.mean(ious)), "poses": len(ps), "train_wall_s": float(sum(walls)),
+            "posed_train": os.path.isfile(posed), "gaussians": len(model), "eps2d": model.eps2d,
             "per_pose": [{"box_psnr": round(float(p), 4), "iou": round(float(i), 5)} for p, i in zip(ps, ious)]}
+
+
+def _wall_s(path, what):
+    """wall_s of a training metrics JSON; a ValueError naming it when the file or the number is missing."""
+    from cyclist_formats.atomic import read_json_or_none
+
+    m = read_json_or_none(path) if path is not None and os.path.isfile(path) else None
+    if not isinstance(m, dict) or not isinstance(m.get("wall_s"), (int, float)):
+        raise ValueError(f"train_chart: {what}: no training wall_s ({path or 'no metrics JSON'})")
+    return float(m["wall_s"])
+
+
+def fidelity_key(spec, reference_dir, threads):
+    """What a fidelity run's numbers depend on: its spec, the training views' and the clean reference's
+    content, the thread count and the training/scoring code."""
+    from bench.provenance import code_version, tree_hash
+
+    return {"spec": spec, "views": tree_hash(spec["views"]), "reference": os.path.abspath(reference_dir),
+            "reference_hash": tree_hash(reference_dir), "threads": threads,
+            "code": code_version("splatting", "cyclist_formats", "bench/train_chart.py", "bench/compare.py")}
 
 
 def draw_bike_fidelity(rows, png, title=""):
