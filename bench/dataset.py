@@ -108,6 +108,8 @@ def run(results, out_dir, count=24, chart=True):
         results["dataset_images_per_hour"] = round(iph, 1)
         results["dataset_bench"] = {"images": count, "workers": 2, "wall_s": round(wall, 2), "gaussians": n_g,
                                     "bikes": desc, "rider": avatar_kind}
+        from bench.provenance import record
+        record(results, "dataset_images_per_hour", "fresh", bikes=desc, rider=avatar_kind)
         if chart:
             sweep = {"size": [], "gaussians": []}
             n = max(4, count // 4)

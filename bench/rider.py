@@ -146,8 +146,13 @@ def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, tim
 
     theta_p, theta_s, yaw, cams = sample_poses(n_poses, seed)
     rot, root = posed_batch(rider, theta_p, theta_s, yaw)
-    gt_dir = os.path.join(out_dir, "rider_gt")
-    os.makedirs(gt_dir, exist_ok=True)
+    from bench.compare import renders_for
+    from bench.provenance import RENDER_CODE, code_version
+
+    # stills reused only for this rider, poses, cameras, samples and code (the roster mesh is posed by splatting/rider)
+    gt_dir = renders_for(os.path.join(out_dir, "rider_gt"), {
+        "rider": rider_id, "theta_p": theta_p.tolist(), "theta_s": theta_s.tolist(), "yaw": yaw.tolist(),
+        "cameras": cams.tolist(), "samples": samples, "code": code_version(*RENDER_CODE, "splatting/rider")})
     if forget_stale_stills(gt_dir):
         print(f"  rider_gt: stills in {gt_dir} were lit before the sun fix: rendering them again", flush=True)
     jobs, cameras, job_file = posed_jobs(rider, rot, root, cams, gt_dir, [{"light_yaw_deg": float(y)} for y in yaw])

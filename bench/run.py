@@ -44,8 +44,9 @@ STAGES = {
     "blender_compare": ("bench.blender_compare", lambda m, r, out: m.run(r, out)),
 }
 
-# stages that prepare inputs for later ones and measure nothing themselves
-PREPARES = {"views"}
+# stages that add no results key by design: views renders the inputs of later stages, train_chart
+# draws a chart (a skip still adds its "not measured" row)
+NO_KEYS = {"views", "train_chart"}
 
 PAPER = {
     "render_view_s_median": "17–20 s per image",
@@ -162,7 +163,7 @@ def main(argv=None):
         added = [k for k in results if k not in before and k not in META]
         for k in added:  # a stage that read a value back records it as reused itself
             record(results, k, results.get("provenance", {}).get(k, {}).get("status", "fresh"), stage=name)
-        if name not in failed and name not in PREPARES and not added and len(results.get("not_measured", {})) == skipped_before:
+        if name not in failed and name not in NO_KEYS and not added and len(results.get("not_measured", {})) == skipped_before:
             not_measured(results, f"stage {name}", "the stage added no key (see its log)")
         timings[name] = time.time() - t
         tmp = os.path.join(args.out, ".results.json.tmp")

@@ -65,6 +65,8 @@ def run(results, bikes_dir="out/bikes", bike=None, part="frame", budgets=BUDGETS
     b, parts = find_bike(bikes_dir, bike)
     if part not in parts:
         print(f"train_chart: skipped, no complete views/{part} under {bikes_dir}", flush=True)
+        from bench.provenance import not_measured
+        not_measured(results, "train_chart (chart only)", f"no complete views/{part} under {bikes_dir}")
         return results
     views = load_views(os.path.join(bikes_dir, b, "views", part))
     runs = []

@@ -63,6 +63,7 @@ def trained_with(ply, cfg):
 
 def run(results, bikes_dir="out/bikes", bike=None, threads=1, max_gaussians=None, time_budget_s=None,
         parts=None):
+    from bench.provenance import not_measured, record
     from splatting.bike.recipes import train_config
     from splatting.training.trainer import default_out, train
 
@@ -70,6 +71,7 @@ def run(results, bikes_dir="out/bikes", bike=None, threads=1, max_gaussians=None
     if not b:
         print(f"train_parts: skipped, no bike under {bikes_dir} has complete views/<part> folders "
               f"(run blender_scripts/render_views.py first)", flush=True)
+        not_measured(results, "train_parts", f"no bike under {bikes_dir} has complete views/<part> folders")
         return results
     rows = results.setdefault("train_parts", [])
     for part in parts or found:
@@ -95,6 +97,13 @@ def run(results, bikes_dir="out/bikes", bike=None, threads=1, max_gaussians=None
         print(f"train_parts: {b}/{part}: held-out PSNR {m['psnr']:.2f} dB, SSIM {m['ssim']:.4f}, "
               f"{m['gaussians']} Gaussians, {m['wall_s']:.0f} s ({m['iterations']} it, {m['stopped']}, "
               f"{m['threads']} threads{', reused' if reused else ''})", flush=True)
+    if rows:
+        n = sum(bool(r["reused"]) for r in rows)
+        # reuse is keyed by the trainer's recipe (PART.json "config"); the views and the code that
+        # trained it are not part of that key, so a reused row says so
+        record(results, "train_parts", "reused" if n == len(rows) else "partly reused" if n else "fresh",
+               bike=os.path.abspath(os.path.join(bikes_dir, b)),
+               **({"reused_rows": f"{n} of {len(rows)}, same recipe (views and code version not checked)"} if n else {}))
     return results
 
 
@@ -103,12 +112,14 @@ def run_posed(results, bikes_dir="out/bikes", bike=None):
     posed Blender renders (splatting/bike/posed_train.py, RECIPE's second step), once:
     a bike already fine-tuned with the same config is reused. Key bike_posed_train = {bike,
     held-out posed views' box PSNR / IoU before and after, wall_s, reused}."""
+    from bench.provenance import not_measured, record
     from splatting.bike.posed_train import done_with, train_bike_posed
     from splatting.bike.recipes import posed_config
 
     b, parts = find_bike(bikes_dir, bike)
     if not b or not all(os.path.isfile(os.path.join(bikes_dir, b, "gaussians", p + ".ply")) for p in parts):
         print(f"bike_posed_train: skipped, no bike under {bikes_dir} with trained parts", flush=True)
+        not_measured(results, "bike_posed_train", f"no bike under {bikes_dir} with trained parts")
         return results
     d = os.path.join(bikes_dir, b)
     cfg = posed_config(RECIPE)
@@ -120,6 +131,8 @@ def run_posed(results, bikes_dir="out/bikes", bike=None):
         m = train_bike_posed(d, cfg, log=lambda s: print(s, flush=True))
     results["bike_posed_train"] = {"bike": b, "recipe": RECIPE, "reused": reused, "wall_s": m["wall_s"],
                                    **{k: m[k] for k in m if k.startswith("held_out_")}}
+    record(results, "bike_posed_train", "reused" if reused else "fresh", bike=os.path.abspath(d),
+           **({"reused": "same posed config (views and code version not checked)"} if reused else {}))
     return results
 
 
