@@ -64,12 +64,36 @@ def test_calib_file_has_kittis_matrices(side_on):
         assert f.read() == "000000\n"
 
 
-def test_3d_boxes_project_onto_the_2d_boxes_and_angles_follow_kitti(side_on):
-    from splatting.dataset.kitti import corners, parse_label_line, project_rect
+def _side_on_labels(side_on):
+    from splatting.dataset.kitti import parse_label_line
     c = read_calib(os.path.join(side_on, "kitti", "training", "calib", "000000.txt"))
-    P2 = c["P2"].reshape(3, 4)
     with open(os.path.join(side_on, "kitti", "training", "label_2", "000000.txt")) as f:
-        objs = [parse_label_line(line) for line in f]
+        return [parse_label_line(line) for line in f], c["P2"].reshape(3, 4)
+
+
+def test_3d_boxes_project_onto_the_2d_boxes_and_angles_follow_kitti(side_on):
+    check_side_on_labels(*_side_on_labels(side_on))
+
+
+@pytest.mark.parametrize("wrong", [
+    ("3D box 1 m off along x", lambda o: dict(o, x=o["x"] + 1.0)),
+    ("heading turned 90 deg (alpha with it)", lambda o: dict(o, rotation_y=o["rotation_y"] + math.pi / 2,
+                                                             alpha=o["alpha"] + math.pi / 2)),
+    ("width and length swapped", lambda o: dict(o, w=o["l"], l=o["w"])),
+    ("box 0.5 m under the road", lambda o: dict(o, y=o["y"] + 0.5)),
+    ("alpha of another convention", lambda o: dict(o, alpha=o["rotation_y"])),
+    ("2D box shifted 20 px", lambda o: dict(o, x1=o["x1"] + 20, x2=o["x2"] + 20)),
+], ids=lambda w: w[0])
+def test_a_wrong_kitti_label_fails_the_check(side_on, wrong):
+    """The label check above is not vacuous: the writer's real labels, each broken one way in memory
+    (the side-on cyclist's line), fail it."""
+    objs, P2 = _side_on_labels(side_on)
+    with pytest.raises(AssertionError):
+        check_side_on_labels([wrong[1](objs[0])] + objs[1:], P2)
+
+
+def check_side_on_labels(objs, P2):
+    from splatting.dataset.kitti import corners, project_rect
     assert [o["type"] for o in objs] == ["Cyclist", "Cyclist"]
     for i, o in enumerate(objs):
         uv = project_rect(P2, corners(o["h"], o["w"], o["l"], [o["x"], o["y"], o["z"]], o["rotation_y"]))
