@@ -45,7 +45,8 @@ def _similarity(src, dst):
     return s, R, md - s * R @ ms
 
 
-def run_case(sp, seed, tmp_path, fmt):
+def run_case(sp, seed, tmp_path, fmt, wheel_claim=1.0):
+    """wheel_claim: a factor on the wheel diameter the annotator tells curation (1: the truth)."""
     rng = np.random.default_rng(seed)
     path = tmp_path / f"{sp['bike_id']}_{seed}.{fmt}"
     truth_c = make_messy(sp, rng, path, fmt)
@@ -57,7 +58,7 @@ def run_case(sp, seed, tmp_path, fmt):
     keys = sorted(k for k in imported if k in truth_c and not k.startswith("tj"))
     sA, RA, tA = _similarity(np.array([imported[k][1] for k in keys]), np.array([truth_c[k][1] for k in keys]))
     truth_area = sum(truth_c[k][0] for k in truth_c)
-    bpy.ops.articcyc.auto_curate(wheel_diameter=sp["wheel_diameter_m"])
+    bpy.ops.articcyc.auto_curate(wheel_diameter=sp["wheel_diameter_m"] * wheel_claim)
     rec = json.loads(bpy.context.scene["articcyc_curation"])
     M = np.array(rec["model_to_canonical"])
     sM = np.cbrt(np.linalg.det(M[:3, :3]))
@@ -111,3 +112,24 @@ def test_accuracy_study(tmp_path, fresh_scene):
     _check(rows)
     with open(tmp_path / "accuracy.json", "w") as f:
         json.dump(rows, f, indent=1)
+
+
+@pytest.mark.parametrize("field,bad", [("rot_err_deg", 2.5), ("scale_err_pct", 1.2), ("kp_err_max_cm", 1.5),
+                                       ("label_area_pct", 97.0), ("problems", ["wheels not found"])])
+def test_a_wrong_curation_fails_the_accuracy_check(field, bad):
+    """The accuracy check is not vacuous: a row as run_case returns it passes, and the same row with
+    one measurement just past its bound (or a problem reported) fails."""
+    good = {"bike": "city_00", "fmt": "glb", "scale_factor": 0.5, "rot_err_deg": 0.01, "scale_err_pct": 0.01,
+            "kp_err_max_cm": 0.2, "kp_worst": "seat", "label_area_pct": 99.5, "problems": []}
+    _check([good])
+    with pytest.raises(AssertionError):
+        _check([good, dict(good, **{field: bad})])
+
+
+def test_a_wrong_wheel_diameter_fails_the_accuracy_study(tmp_path, fresh_scene):
+    """A deliberately broken input through the real pipeline: the annotator's wheel diameter 3 % off
+    scales the whole curation 3 % off, which the study must reject (and the truth must pass)."""
+    sp, s, fmt = _cases(2, 1)[0]
+    _check([run_case(sp, s, tmp_path, fmt)])
+    with pytest.raises(AssertionError):
+        _check([run_case(sp, s, tmp_path, fmt, wheel_claim=1.03)])
