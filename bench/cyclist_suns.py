@@ -149,8 +149,10 @@ def main():
     export_rider(rider, mesh, vertices=pose_vertices(rider, rot.double(), root.double())[0])
     cj = write_camera(cam, a.work)
     lights = four_suns()
-    # Blender's renders in a.work are reused only for this bike, rider, camera and suns
-    renders_for(a.work, {"bike": os.path.abspath(a.bike), "avatar": os.path.abspath(a.avatar), "pose": POSE,
+    # Blender's renders in a.work are reused only for this bike (its files), rider, camera, suns and code
+    from bench.provenance import RENDER_CODE, bike_assets, code_version
+    renders_for(a.work, {**bike_assets(a.bike), "avatar": os.path.abspath(a.avatar), "pose": POSE,
+                         "code": code_version(*RENDER_CODE, "splatting/rider"),
                          "camera": [cam.K.tolist(), cam.R.tolist(), cam.T.tolist()], "samples": SAMPLES,
                          "lights": [light_json(l) for l in lights]})
     jp = os.path.join(a.work, "job.json")

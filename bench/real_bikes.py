@@ -35,7 +35,10 @@ def check_bike(bike_dir, n_poses, seed, samples):
     gt_dir = os.path.join(bike_dir, "gt_check")
     os.makedirs(gt_dir, exist_ok=True)
     job = os.path.join(gt_dir, "poses.json")
-    doc = {"poses": poses.tolist(), "cameras": cams.tolist(), "samples": samples}
+    from bench.provenance import RENDER_CODE, bike_assets, code_version
+    # renders kept only for the same poses, samples, bike files and render code
+    doc = {"poses": poses.tolist(), "cameras": cams.tolist(), "samples": samples, "assets": bike_assets(bike_dir),
+           "code": code_version(*RENDER_CODE)}
     old = None
     if os.path.isfile(job):
         with open(job) as f:
