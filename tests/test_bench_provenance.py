@@ -149,3 +149,58 @@ def test_run_records_fresh_keys_failed_and_silent_stages(tmp_path, monkeypatch):
     report = (tmp_path / "report.md").read_text()
     assert "| `stage bike_gt` | not measured: failed: RuntimeError: worker died |" in report
     assert "| `stage rider` | not measured: the stage added no key (see its log) |" in report
+
+
+def _bike(d, files=("bike.blend", "gaussians/frame.ply", "gaussians/steering.ply", "views/whole/cameras.json")):
+    for f in files:
+        p = os.path.join(d, f)
+        os.makedirs(os.path.dirname(p), exist_ok=True)
+        with open(p, "w") as fh:
+            fh.write("x")
+    return d
+
+
+def test_blender_compare_records_the_bike_and_its_fallback(tmp_path, monkeypatch):
+    """No silent substitution: a bike taken from out/demo/bikes (none under the bench's own bikes/)
+    is recorded with its full path and the fallback, in the key and its provenance."""
+    from bench import blender_compare as bc
+
+    monkeypatch.setattr(bc, "ROOT", str(tmp_path / "repo"))
+    monkeypatch.setattr(bc, "run_compare", lambda *a, **k: ([{"method": bc.GAUSS, "box_psnr": 30.0, "iou": 0.95,
+                                                               "s_2p": 1.0}], []))
+    monkeypatch.setattr(bc, "chart", lambda *a, **k: None)
+    monkeypatch.setattr(bc, "table", lambda rows: [])
+    out = tmp_path / "bench"
+    out.mkdir()
+    res = {}
+    assert bc.run(res, str(out), progress=lambda m: None) is None          # no bike anywhere: not measured
+    assert set(res["not_measured"]) >= {"blender_compare", "bike_fidelity"}
+    demo = _bike(str(tmp_path / "repo" / "out" / "demo" / "bikes" / "city_00"))
+    res = {}
+    bc.run(res, str(out), progress=lambda m: None)
+    assert res["blender_compare"]["bike_dir"] == demo and "demo" in res["blender_compare"]["bike_fallback"]
+    assert res["provenance"]["bike_fidelity"]["fallback"] == res["blender_compare"]["bike_fallback"]
+    own = _bike(str(out / "bikes" / "city_00"))
+    res = {}
+    bc.run(res, str(out), progress=lambda m: None)
+    assert res["blender_compare"]["bike_dir"] == own and res["blender_compare"]["bike_fallback"] is None
+    assert "fallback" not in res["provenance"]["blender_compare"]
+
+
+def test_ik_bench_refuses_an_unreadable_bike(tmp_path):
+    from bench import ik as bench_ik
+    from cyclist_formats.errors import UserError
+
+    good = tmp_path / "city_00"
+    good.mkdir()
+    (good / "meta.json").write_text(json.dumps({"has_crank": True}))
+    kp = {k: [0.0, 0.5, 0.0] for k in ("seat", "crank_axle")}
+    (good / "keypoints.json").write_text(json.dumps({"keypoints": kp}))
+    assert [b for b, _, _ in bench_ik.library_bikes(str(tmp_path))] == ["city_00"]
+    assert bench_ik.LIBRARY_SOURCE[0].startswith("bicycles of")
+    bad = tmp_path / "road_00"
+    bad.mkdir()
+    (bad / "keypoints.json").write_text(json.dumps({"keypoints": kp}))
+    (bad / "meta.json").write_text("{broken")
+    with pytest.raises(UserError, match="road_00"):
+        bench_ik.library_bikes(str(tmp_path))
