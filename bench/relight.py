@@ -67,9 +67,9 @@ def prepare_bike(work, size=SIZE, progress=print):
         # the relight fit as for every other bike (bike_fit_config, keyed: _fit_if_missing), so that a
         # second run finds it current instead of refitting with other settings
         m = train(bike_folder.views_dir(bike, part), ply, cfg)
-        fit = _fit_if_missing(bike, part, progress)
+        fit = _fit_if_missing(bike, part, progress) or {"reused": True}   # None: retrained to the same bytes
         train_stats[part] = {"psnr": m["psnr"], "gaussians": m["gaussians"], "train_s": m["wall_s"],
-                             "relight_fit_s": fit["wall_s"], "albedo_psnr": fit.get("heldout_albedo_psnr"),
+                             "relight_fit_s": fit.get("wall_s"), "albedo_psnr": fit.get("heldout_albedo_psnr"),
                              "gloss_psnr": fit.get("heldout_gloss_psnr"), "normal_err_deg": fit.get("heldout_normal_err_deg")}
         progress(f"  bike_relit: {part} {train_stats[part]}")
     return bike, train_stats
