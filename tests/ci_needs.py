@@ -13,8 +13,8 @@ CI = os.environ.get("CI") == "true"
 def missing(what):
     """Call inside a test whose `what` is absent: skip here, fail under CI."""
     if CI:
-        pytest.fail(f"CI=true but {what} is missing", pytrace=False)
-    pytest.skip(f"{what} not present")
+        pytest.fail(f"CI=true (CI provides it) but missing: {what}", pytrace=False)
+    pytest.skip(f"not present: {what}")
 
 
 def needs(present, what):
