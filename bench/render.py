@@ -148,6 +148,10 @@ def run(results, out_dir):
     results["render_view_s_median"] = statistics.median(data["default_view_s"])
     if data["default_psnr_db"] is not None:
         results["render_psnr_vs_ref_db"] = data["default_psnr_db"]
+    else:
+        from bench.provenance import not_measured
+        not_measured(results, "render_psnr_vs_ref_db", "the default settings (samples, denoise) are not among the "
+                     "sweep's rows compared with the reference")
     chart(data, os.path.join(out_dir, "render_speed_vs_noise.png"))
     return data
 
