@@ -353,3 +353,20 @@ def in_box(points_rect, box):
 def points_in_box(points_velo, T_velo_to_rect, box):
     """Number of scan points inside a KITTI 3D box (label convention, see in_box)."""
     return int(in_box(velo_to_rect(points_velo, T_velo_to_rect), box).sum())
+
+
+def canonical_to_rect(plane, x, z, ry):
+    """(4, 4) rigid transform from a cyclist's canonical frame (X forward, Y up, ground Y = 0,
+    docs/contract.md) to rect: standing on the plane at rect (x, z), heading rotation_y = ry in
+    KITTI's convention (ry = 0 faces rect +x; forward = (cos ry, 0, -sin ry)), its up the plane's
+    normal (a tilted road tilts the cyclist with it: both tyres stay on it)."""
+    p = normalise_plane(plane)
+    up = p[:3]
+    d = np.array([math.cos(ry), 0.0, -math.sin(ry)])
+    f = d - (d @ up) * up
+    f /= np.linalg.norm(f)
+    right = np.cross(f, up)
+    y = -(p[0] * x + p[2] * z + p[3]) / p[1]
+    H = np.eye(4)
+    H[:3, 0], H[:3, 1], H[:3, 2], H[:3, 3] = f, up, right, (x, y, z)
+    return H
