@@ -355,3 +355,49 @@ def test_bad_input_is_one_clear_error():
         lidar.plane_height(np.zeros((1, 3)), (0, -1, 0))
     with pytest.raises(ValueError, match="footprint"):
         lidar.ground_support(np.zeros((5, 4)), T, (0, -1, 0, 1.65), [[0, 1], [1, 1]])
+
+
+def test_stand_in_cyclist_on_a_tilted_road():
+    """A composed cyclist (stand-in bike and mesh rider, as the dataset tests use) stood on a 3 deg
+    slope with canonical_to_rect: tyres on the road, heading as KITTI's rotation_y, its scan
+    points on its Gaussians and inside its 3D box."""
+    from helpers import RIDER, write_test_bike
+    from splatting.bike.pose import transform_gaussians
+    from splatting.cyclist.assets import load_avatar, load_bike
+    from splatting.cyclist.compose import Cyclist
+
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as root:
+        cyc = Cyclist(load_bike(write_test_bike(root), n_per_part=1500), load_avatar(RIDER, root + "/none", n=4000)[0],
+                      ik_iterations=20)
+    fr = cyc.pose(torch.tensor([30.0, 0, 0, 0, 0, 0, 0, 0], dtype=torch.float64))[0]
+    plane, ry = tilted_plane(3.0, 1.65), 0.4
+    H = lidar.canonical_to_rect(plane, 1.0, 11.0, ry)
+    kp = {k: H[:3, :3] @ np.asarray(v, float) + H[:3, 3] for k, v in fr.bike_keypoints.items()}
+    r_wheel = 0.693 / 2
+    for axle in ("front_axle", "rear_axle"):  # both tyres touch the slope
+        assert abs(lidar.plane_height(kp[axle][None], plane)[0] - r_wheel) < 0.01
+    fwd = kp["front_axle"] - kp["rear_axle"]
+    fwd_level = np.array([fwd[0], fwd[2]]) / np.hypot(fwd[0], fwd[2])
+    assert np.allclose(fwd_level, [math.cos(ry), -math.sin(ry)], atol=1e-6)
+    g = transform_gaussians(fr.gaussians, torch.as_tensor(H))
+    s = cast_scan(plane=plane)
+    new, counts, removed = insert_into_scan(s, T, [g], range_noise_m=0.0, rng=0)
+    added = lidar.velo_to_rect(new[len(new) - counts[0]:, :3], T)
+    assert counts[0] > 80 and removed.sum() > 30
+    # every hit within 3 cm of some Gaussian's 2-sigma ball
+    m, sig = g.means.double().numpy(), g.scales.double().numpy().max(1)
+    gap = np.min(np.linalg.norm(added[:, None] - m[None], axis=-1) - 2 * sig[None], axis=1)
+    assert gap.max() < 0.03, gap.max()
+    # and inside the cyclist's 3D box (KITTI convention, from its Gaussians' extent + 5 cm)
+    c, sn = math.cos(ry), math.sin(ry)
+    Ry = np.array([[c, 0, sn], [0, 1, 0], [-sn, 0, c]])  # KITTI's: object axes -> rect, about y only
+    local = m @ Ry
+    lo, hi = local.min(0) - 0.05, local.max(0) + 0.05
+    loc = Ry @ np.array([(lo[0] + hi[0]) / 2, hi[1], (lo[2] + hi[2]) / 2])
+    box = (hi[1] - lo[1], hi[2] - lo[2], hi[0] - lo[0], loc[0], loc[1], loc[2], ry)
+    assert 1.5 < box[2] < 2.2 and box[1] < 1.0  # the length runs along the heading
+    inside = lidar.in_box(added, box)
+    assert inside.mean() > 0.95
+    assert lidar.points_in_box(new, T, box) >= inside.sum()

@@ -362,8 +362,10 @@ def canonical_to_rect(plane, x, z, ry):
     normal (a tilted road tilts the cyclist with it: both tyres stay on it)."""
     p = normalise_plane(plane)
     up = p[:3]
-    d = np.array([math.cos(ry), 0.0, -math.sin(ry)])
-    f = d - (d @ up) * up
+    # forward in the plane, straight above / below KITTI's level heading (cos ry, 0, -sin ry): the
+    # label's rotation_y stays exact on a slope
+    c, s = math.cos(ry), -math.sin(ry)
+    f = np.array([c, -(up[0] * c + up[2] * s) / up[1], s])
     f /= np.linalg.norm(f)
     right = np.cross(f, up)
     y = -(p[0] * x + p[2] * z + p[3]) / p[1]
