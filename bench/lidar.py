@@ -5,7 +5,7 @@
   the road 5-40 m ahead, |x| < 10 m), and the fit's time;
 - depth: the densified LiDAR depth image's error on held-out points (10 % of each scan's points
   hidden, the image built from the rest, |depth - hidden point's depth| at the pixels that
-  only hidden points fall in), with and without densification's coverage;
+  only hidden points fall in), and the same for a plain 13 x 5 min filter as the baseline;
 - beams: the HDL-64E table and azimuth step estimated from the scans (hdl64.estimate_beams);
 - insert: insert_into_scan's time per cyclist on a development scan, with --bike / --avatar (a
   trained bike folder and rider avatar; default: the demo's in out/demo when present).
@@ -79,9 +79,23 @@ def held_out_depth_error(frame, seed=0, share=0.1):
     m = (hidden > 0) & (kept == 0)
     got = dense[m] > 0
     err = np.abs(dense[m][got] - hidden[m][got])
+    # the baseline: a plain min filter over the same reach (+-6 rows, +-2 columns) of the sparse depth
+    base = min_filter_depth(kept)
+    bgot = base[m] > 0
+    berr = np.abs(base[m][bgot] - hidden[m][bgot])
     return {"pixels": int(m.sum()), "coverage": float(got.mean()), "median_m": float(np.median(err)),
             "p90_m": float(np.percentile(err, 90)), "median_rel": float(np.median(err / hidden[m][got])),
-            "densify_s": dt}
+            "densify_s": dt, "minfilter_median_m": float(np.median(berr)),
+            "minfilter_p90_m": float(np.percentile(berr, 90)), "minfilter_coverage": float(bgot.mean())}
+
+
+def min_filter_depth(D, kh=13, kw=5):
+    """The nearest depth within a kh x kw window (a max pool of inverse depth), 0 where none."""
+    import torch
+
+    inv = torch.from_numpy(np.where(D > 0, 1.0 / np.maximum(D, 1e-6), 0.0).astype(np.float32))
+    p = torch.nn.functional.max_pool2d(inv[None, None], (kh, kw), stride=1, padding=(kh // 2, kw // 2))[0, 0].numpy()
+    return np.where(p > 0, 1.0 / np.maximum(p, 1e-12), 0.0).astype(np.float32)
 
 
 def plane_agreement(frame, seed=0):
@@ -197,6 +211,9 @@ def main(argv=None):
         "plane_fit_s_median": med(planes, "fit_s"),
         "depth_heldout_median_m": med(depth, "median_m"), "depth_heldout_p90_m_median": med(depth, "p90_m"),
         "depth_coverage_median": med(depth, "coverage"), "depth_densify_s_median": med(depth, "densify_s"),
+        "depth_minfilter_median_m": med(depth, "minfilter_median_m"),
+        "depth_minfilter_p90_m_median": med(depth, "minfilter_p90_m"),
+        "depth_minfilter_coverage_median": med(depth, "minfilter_coverage"),
         "beams_scans": n, "beams_top_deg": round(float(el[0]), 3), "beams_bottom_deg": round(float(el[-1]), 3),
         "beams_upper_spacing_deg": round(float(-np.diff(el[:32]).mean()), 3),
         "beams_lower_spacing_deg": round(float(-np.diff(el[32:]).mean()), 3),

@@ -102,7 +102,7 @@ def draw_bev(frame, cyc, path, spots=BEV_SPOTS, seed=0):
         axj.set_xlim(-w, w)
         axj.set_ylim(va.mean() - w / 1.6, va.mean() + w / 1.6)
         axj.set_aspect("equal")
-        axj.set_title(f"cyclist {j + 1} from the sensor ({np.linalg.norm(c):.1f} m): azimuth x elevation (deg), shadowed points blue",
+        axj.set_title(f"cyclist {j + 1} ({np.linalg.norm(c):.1f} m) seen from the sensor: azimuth x elevation, deg",
                       fontsize=8, color=COLOURS[j])
         axj.tick_params(labelsize=7)
     with atomic_path(path) as tmp:
