@@ -357,20 +357,32 @@ def test_bad_input_is_one_clear_error():
         lidar.ground_support(np.zeros((5, 4)), T, (0, -1, 0, 1.65), [[0, 1], [1, 1]])
 
 
-def test_stand_in_cyclist_on_a_tilted_road():
-    """A composed cyclist (stand-in bike and mesh rider, as the dataset tests use) stood on a 3 deg
-    slope with canonical_to_rect: tyres on the road, heading as KITTI's rotation_y, its scan
-    points on its Gaussians and inside its 3D box."""
+@pytest.fixture(scope="module")
+def stand_in():
+    """A composed cyclist: stand-in bike and mesh rider, as the dataset tests use."""
+    import tempfile
+
     from helpers import RIDER, write_test_bike
-    from splatting.bike.pose import transform_gaussians
     from splatting.cyclist.assets import load_avatar, load_bike
     from splatting.cyclist.compose import Cyclist
 
-    import tempfile
-
     with tempfile.TemporaryDirectory() as root:
-        cyc = Cyclist(load_bike(write_test_bike(root), n_per_part=1500), load_avatar(RIDER, root + "/none", n=4000)[0],
-                      ik_iterations=20)
+        return Cyclist(load_bike(write_test_bike(root), n_per_part=1500),
+                       load_avatar(RIDER, root + "/none", n=4000)[0], ik_iterations=20)
+
+
+def gaussian_gap(points_rect, g):
+    """Distance of each point to the nearest Gaussian's 2-sigma ball (0 inside one)."""
+    m, sig = g.means.double().numpy(), g.scales.double().numpy().max(1)
+    return np.min(np.linalg.norm(points_rect[:, None] - m[None], axis=-1) - 2 * sig[None], axis=1)
+
+
+def test_stand_in_cyclist_on_a_tilted_road(stand_in):
+    """The cyclist stood on a 3 deg slope with canonical_to_rect: tyres on the road, heading as
+    KITTI's rotation_y, its scan points on its Gaussians and inside its 3D box."""
+    from splatting.bike.pose import transform_gaussians
+
+    cyc = stand_in
     fr = cyc.pose(torch.tensor([30.0, 0, 0, 0, 0, 0, 0, 0], dtype=torch.float64))[0]
     plane, ry = tilted_plane(3.0, 1.65), 0.4
     H = lidar.canonical_to_rect(plane, 1.0, 11.0, ry)
@@ -387,9 +399,9 @@ def test_stand_in_cyclist_on_a_tilted_road():
     added = lidar.velo_to_rect(new[len(new) - counts[0]:, :3], T)
     assert counts[0] > 80 and removed.sum() > 30
     # every hit within 3 cm of some Gaussian's 2-sigma ball
-    m, sig = g.means.double().numpy(), g.scales.double().numpy().max(1)
-    gap = np.min(np.linalg.norm(added[:, None] - m[None], axis=-1) - 2 * sig[None], axis=1)
+    gap = gaussian_gap(added, g)
     assert gap.max() < 0.03, gap.max()
+    m = g.means.double().numpy()
     # and inside the cyclist's 3D box (KITTI convention, from its Gaussians' extent + 5 cm)
     c, sn = math.cos(ry), math.sin(ry)
     Ry = np.array([[c, 0, sn], [0, 1, 0], [-sn, 0, c]])  # KITTI's: object axes -> rect, about y only
@@ -401,3 +413,27 @@ def test_stand_in_cyclist_on_a_tilted_road():
     inside = lidar.in_box(added, box)
     assert inside.mean() > 0.95
     assert lidar.points_in_box(new, T, box) >= inside.sum()
+
+
+@pytest.mark.skipif(not os.path.isdir(os.path.join(DEV, "velodyne")), reason="no development frames")
+def test_insert_into_a_dev_scan(stand_in):
+    """A real scan and calibration: the cyclist on the fitted road 9 m ahead gets points on its
+    Gaussians, shadows only real points behind it, and leaves the rest bit for bit."""
+    from bench.lidar import read_frame
+    from splatting.bike.pose import transform_gaussians
+
+    f = read_frame(DEV, 1)
+    plane = lidar.fit_ground_plane(f["scan"], f["T"], 0)
+    fr = stand_in.pose(torch.tensor([30.0, 0, 0, 0, 0, 0, 0, 0], dtype=torch.float64))[0]
+    g = transform_gaussians(fr.gaussians, torch.as_tensor(lidar.canonical_to_rect(plane, 1.8, 9.0, -math.pi / 2)))
+    new, counts, removed = insert_into_scan(f["scan"], f["T"], [g], rng=0)
+    assert counts[0] > 80 and removed.sum() > 20
+    added = new[len(new) - counts[0]:]
+    assert gaussian_gap(lidar.velo_to_rect(added[:, :3], f["T"]), g).max() < 0.05  # 1.5 cm noise on
+    assert np.array_equal(new[:len(new) - counts[0]], f["scan"][~removed])
+    # the shadowed points lie behind the cyclist, in its direction
+    rr = np.linalg.norm(f["scan"][removed, :3], axis=1)
+    assert rr.min() > np.linalg.norm(added[:, :3], axis=1).min()
+    az = np.degrees(np.arctan2(f["scan"][removed, 1], f["scan"][removed, 0]))
+    az_c = np.degrees(np.arctan2(added[:, 1], added[:, 0]))
+    assert az.min() > az_c.min() - 1 and az.max() < az_c.max() + 1
