@@ -1,6 +1,6 @@
 """LiDAR geometry of a KITTI frame: the road plane from the scan, ground support and obstacles under a
 footprint, whether the sensor sees a spot or a nearer object shadows it, a dense depth image for
-occlusion tests, and the points inside a labelled 3D box.  Pure numpy (torch only for pooling).
+occlusion tests, and the points inside a labelled 3D box.  Pure numpy.
 
 Frames (docs/kitti_lidar.md):
   velo: the Velodyne's own frame, x forward, y left, z up, origin at the sensor;
@@ -13,7 +13,6 @@ height above the road and a x + b y + c z + d is a point's height above it (e.g.
 import math
 
 import numpy as np
-import torch
 
 from splatting.dataset.frames import hdl64
 
