@@ -305,6 +305,26 @@ def test_insert_range_noise_is_seeded():
     assert 0.008 < np.median(res) < 0.02  # 1.5 cm normal noise: median |noise| ~ 1 cm
 
 
+def test_lasers_fire_at_their_own_azimuth_phases():
+    s = cast_scan([])
+    g = box_gaussians(*CYC)
+    step = hdl64.HDL64E.azimuth_step_deg
+
+    def phases(**kw):
+        new, counts, _ = insert_into_scan(s, T, [g], range_noise_m=0.0, rng=1, **kw)
+        a = new[len(new) - counts[0]:]
+        laser = hdl64.HDL64E.beam_index(np.arctan2(a[:, 2], np.hypot(a[:, 0], a[:, 1])))
+        ph = np.degrees(np.arctan2(a[:, 1], a[:, 0])) % step
+        return {int(L_): ph[laser == L_] for L_ in np.unique(laser)}
+
+    one = phases(phase_deg=0.0)
+    assert len(one) > 10 and all(np.minimum(p, step - p).max() < 1e-3 for p in one.values())
+    own = phases()
+    wrap = lambda d: (d + step / 2) % step - step / 2  # noqa: E731
+    assert len(own) > 10 and all(np.abs(wrap(p - p[0])).max() < 1e-3 for p in own.values())  # one per laser
+    assert np.std([p[0] for p in own.values()]) > step / 6  # ... and they differ
+
+
 def test_wall_in_front_hides_the_cyclist():
     wall = ((-2.0, ROAD_Y - 2.5, 7.0), (2.0, ROAD_Y, 7.2))
     s = cast_scan([wall])
