@@ -51,7 +51,8 @@ def prepare_bike(work, size=SIZE, progress=print):
           "--size", str(size), "--samples", str(RENDER_SAMPLES), "--denoise", "NONE", "--threads", "1"], "render_views")
     progress(f"  bike_relit: views at {size} px with passes ({time.time() - t:.0f} s)")
     from cyclist_formats import bike_folder
-    from splatting.training.trainer import TrainConfig, train
+    from splatting.relight.fit import train_relit
+    from splatting.training.trainer import TrainConfig
 
     train_stats = {}
     for part in PARTS:
@@ -64,7 +65,7 @@ def prepare_bike(work, size=SIZE, progress=print):
         cfg = TrainConfig(iterations=ITERATIONS, progress=False, eval_every=100)
         cfg.densify.max_gaussians = MAX_GAUSSIANS
         cfg.densify.stop = ITERATIONS // 2
-        m = train(bike_folder.views_dir(bike, part), ply, cfg, relight=True)
+        m = train_relit(bike_folder.views_dir(bike, part), ply, cfg)
         train_stats[part] = {"psnr": m["psnr"], "gaussians": m["gaussians"], "train_s": m["wall_s"],
                              "relight_fit_s": m["relight"]["wall_s"],
                              "albedo_psnr": m["relight"].get("heldout_albedo_psnr"),

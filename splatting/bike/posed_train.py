@@ -23,7 +23,7 @@ library's posed:<bike> task) it starts from gaussians/<part>_rest.{ply,json} as 
 tasks left them and never writes those.  Parts of the fine-tune's own --sh-degree (a fine-tuned
 bike's, copied without its posed_train.json) are continued from where they are, every SH band
 included (e.g. a few low-rate steps at another --eps2d).  Training poses come
-from seeds 1000, 1001, ... of splatting.library.gt.sample_poses (48 a seed): never the checks' poses
+from seeds 1000, 1001, ... of splatting.bike.pose.sample_poses (48 a seed): never the checks' poses
 (seed 0).
 """
 import dataclasses
@@ -40,6 +40,7 @@ import torch
 from cyclist_formats.atomic import read_json_or_none
 from cyclist_formats.errors import UserError
 from splatting import paths
+from splatting.bike.pose import sample_poses
 from splatting.progress import Progress
 from splatting.raster.sparse import EPS2D
 from splatting.training.trainer import FineTuneRates
@@ -77,8 +78,6 @@ def training_poses(n):
     Drawn in blocks of POSE_BLOCK (seeds POSE_SEED, POSE_SEED + 1, ...), so the first n of any larger
     --poses are these same n: more poses reuse the renders already made (block 0 is what 48 poses
     always were, sample_poses(48, 1000))."""
-    from splatting.library.gt import sample_poses
-
     blocks = [sample_poses(POSE_BLOCK, POSE_SEED + b) for b in range(-(-n // POSE_BLOCK))]
     return np.concatenate([p for p, _ in blocks])[:n], np.concatenate([c for _, c in blocks])[:n]
 
@@ -387,16 +386,6 @@ def model_keypoints_doc(bike_dir):
     from cyclist_formats import bike_folder
 
     return bike_folder.read_json(os.path.join(bike_dir, "keypoints.json"), "keypoints.json")
-
-
-def fine_tuned_eps2d(gdir):
-    """(eps2d, {part: Gaussians}) of gaussians/posed_train.json: the low-pass its fine-tune
-    rendered with (config "eps2d"; 0.3 in records from before --eps2d) and the parts it wrote, or
-    None without a record (BikeModel reads each part's filter with it)."""
-    m = read_json_or_none(os.path.join(gdir, "posed_train.json"))
-    if not isinstance(m, dict) or not isinstance(m.get("config"), dict) or not isinstance(m.get("gaussians"), dict):
-        return None
-    return m["config"].get("eps2d", EPS2D), m["gaussians"]
 
 
 def add_arguments(p):

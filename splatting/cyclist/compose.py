@@ -11,7 +11,7 @@ import numpy as np
 import roma
 import torch
 
-from splatting.bike.pose import check_poses
+from splatting.bike.pose import check_poses, posed_bike_keypoints
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians
 from splatting.rider import ik
@@ -91,7 +91,7 @@ class Cyclist:
         """IK of the rider onto the bike at poses (B, 8) (bike frame; H_g is applied later)."""
         p = check_poses(poses).clone()
         p[:, 2:] = 0.0
-        targets = ik.posed_bike_keypoints(self.bike.keypoints, p)
+        targets = posed_bike_keypoints(self.bike.keypoints, p)
         return ik.solve(self.avatar.rest_joints, targets, init_local_aa=init_local_aa, iterations=self.ik_iterations,
                         saddle_fit=self.saddle_fit, saddle_shared=saddle_shared and self.saddle_fit,
                         pairs=self.pairs)

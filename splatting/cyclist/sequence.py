@@ -49,6 +49,7 @@ def motion_poses(motion_path, rider, bike, n, global_pose):
 def fit_sequence(cyc, poses, motion_aa=None):
     """IK for all frames at once with one seat post.  With a motion: a second solve starts from the
     first one's solution with the motion's rotations on the joints the IK does not move."""
+    from splatting.bike.pose import posed_bike_keypoints
     from splatting.rider import ik
     from splatting.rider.kinematics import JOINT_INDEX
     res = cyc.fit_rider(poses, saddle_shared=True)
@@ -59,7 +60,7 @@ def fit_sequence(cyc, poses, motion_aa=None):
     init[:, keep] = motion_aa[:, keep]
     p = poses.clone()
     p[:, 2:] = 0.0
-    targets = ik.posed_bike_keypoints(cyc.bike.keypoints, p)
+    targets = posed_bike_keypoints(cyc.bike.keypoints, p)
     return ik.solve(cyc.avatar.rest_joints, targets, init_local_aa=init, init_root=res.root_trans,
                     iterations=cyc.ik_iterations, saddle_fit=cyc.saddle_fit, saddle_shared=cyc.saddle_fit,
                     pairs=cyc.pairs)

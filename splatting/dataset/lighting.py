@@ -219,7 +219,7 @@ class RelitSample:
 
     def render(self, parts, slots, n_slots, camera, amodal_slots, amodal_max_px, antialiased=False, eps2d=EPS2D):
         """render_scene's layers with the instances (the first len(self.channels) parts) relit."""
-        from splatting.relight.scene import render_scene_relit
+        from splatting.cyclist.scene_relit import render_scene_relit
         ch = [self.channels[k] for k in range(len(self.channels))]
         return render_scene_relit(parts, ch, slots, n_slots, camera, self.light, self.shadows, amodal_slots,
                                   amodal_max_px, antialiased, eps2d)

@@ -8,12 +8,18 @@ the rider is a trained avatar from --riders-root when one exists, else the mesh 
 """
 import argparse
 import os
+import shutil
 import sys
 import tempfile
 
 import numpy as np
 
 from cyclist_formats.errors import UserError
+from splatting import paths
+
+# without --bike: keypoints + meta of the procedural generator's city bike 0 (spec.sample_spec("city", 0, 0);
+# blend_assets/stand_in_bike/, checked against the generator by tests/test_layers.py) for stand-in Gaussians
+STAND_IN_BIKE = "city_00"
 
 
 def render_sheet(cfg, bike, rider, n=12, cols=4, log=print):
@@ -73,8 +79,8 @@ def main(argv=None):
             if args.bike:
                 root, bike = os.path.dirname(os.path.abspath(args.bike)), os.path.basename(os.path.abspath(args.bike))
             else:
-                from bench.dataset import _write_spec_bike
-                root, bike = scratch, _write_spec_bike(scratch)
+                root, bike = scratch, STAND_IN_BIKE
+                shutil.copytree(os.path.join(paths.BLEND_ASSETS, "stand_in_bike", STAND_IN_BIKE), os.path.join(scratch, bike))
             cfg = resolve_assets(validate({"mode": "street", "camera": {"preset": "nuscenes"}, "seed": args.seed,
                                            "bikes": [bike], "bikes_root": root, "riders": [args.rider],
                                            "riders_root": args.riders_root, "appearance": {"enabled": True,

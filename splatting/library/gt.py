@@ -14,18 +14,10 @@ import sys
 import numpy as np
 
 from cyclist_formats.atomic import atomic_path
+from splatting.bike.pose import sample_poses
 from splatting.training.metrics import box_psnr, mask_iou
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-
-
-def sample_poses(n, seed=0):
-    """n fixed random 8-DoF poses and ring cameras (a seed-only function, as bench/bike_gt.py)."""
-    rng = np.random.default_rng(seed)
-    poses = np.stack([rng.uniform(0, 360, n), rng.uniform(-60, 60, n), rng.uniform(-15, 15, n),
-                      rng.uniform(0, 360, n), rng.uniform(-15, 15, n), rng.uniform(-0.3, 0.3, n),
-                      rng.uniform(-0.1, 0.1, n), rng.uniform(-0.3, 0.3, n)], 1)
-    return poses, rng.integers(0, 36, n)
 
 
 def render_blender(bike_dir, pose, cam_index, out_png, samples=None):

@@ -65,7 +65,7 @@ def relight_features(normals, gloss=None, roughness=None, visibility=None, sky_v
     when given (scenes mixing materials: a bike's 0.4, a rider's 1.0), the sun visibility (1) when
     given (cast shadows), the sky visibility (1) when given (self-occlusion, shadow.sky_visibility).
     The reflectance albedo + gloss is composited through the colour channels (or its own 3
-    features, splatting/relight/scene.py)."""
+    features, splatting/cyclist/scene_relit.py)."""
     luma = None if gloss is None else gloss_luma(gloss)
     return torch.cat(relight_feature_parts(normals, luma, roughness, visibility, sky_visibility), 1).contiguous()
 

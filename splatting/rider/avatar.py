@@ -25,6 +25,7 @@ from splatting.gaussians.sh_rotation import rotate_sh
 from splatting.raster.sparse import EPS2D
 from splatting.rotations import quat_mul, rotmat_to_quat_wxyz  # noqa: F401
 from splatting.rider.kinematics import forward_kinematics
+from splatting.training.record import avatar_trained_eps2d as trained_eps2d
 
 SKINNING_METHOD = "barycentric_nearest_triangle"
 PLY_NAME = "rider.ply"
@@ -230,16 +231,3 @@ class RiderAvatar:
         if not (np.isfinite(w).all() and np.isfinite(j).all()):
             raise UserError(f"{npz}: non-finite values")
         return cls(g, torch.from_numpy(w), torch.from_numpy(j), rider_id, method, trained_eps2d(folder))
-
-
-def trained_eps2d(folder):
-    """The screen-space low-pass (px^2) an avatar's Gaussians were trained with: rider.json's
-    "config" "eps2d" (the trainer's record; rider-posed-train fine-tunes with the same value),
-    0.3 for avatars trained before it was recorded or without metrics."""
-    from cyclist_formats.atomic import read_json_or_none
-    from splatting.bike.model import check_model_eps2d
-
-    m = read_json_or_none(os.path.join(folder, "rider.json"))
-    cfg = m.get("config") if isinstance(m, dict) else None
-    return check_model_eps2d(cfg.get("eps2d", EPS2D) if isinstance(cfg, dict) else EPS2D,
-                             os.path.join(folder, "rider.json"))
