@@ -12,10 +12,20 @@ import shutil
 import sys
 import tempfile
 
+from PIL import Image
 import numpy as np
+import torch
 
+from cyclist_formats.atomic import atomic_path
 from cyclist_formats.errors import UserError
+from cyclist_formats.instances import RIDER_ID
 from splatting import paths
+from splatting.cyclist import appearance
+from splatting.cyclist.render import over
+from splatting.cyclist.scene_render import render_scene, slot_boxes, union
+from splatting.dataset import camera_presets
+from splatting.dataset.config import resolve_assets, validate
+from splatting.dataset.generate import Assets
 
 # without --bike: keypoints + meta of the procedural generator's city bike 0 (spec.sample_spec("city", 0, 0);
 # blend_assets/stand_in_bike/, checked against the generator by tests/test_layers.py) for stand-in Gaussians
@@ -24,13 +34,6 @@ STAND_IN_BIKE = "city_00"
 
 def render_sheet(cfg, bike, rider, n=12, cols=4, log=print):
     """(H, W, 3) uint8 grid of n looks of one cyclist."""
-    import torch
-    from cyclist_formats.instances import RIDER_ID
-    from splatting.cyclist import appearance
-    from splatting.cyclist.render import over
-    from splatting.cyclist.scene_render import render_scene, slot_boxes, union
-    from splatting.dataset import camera_presets
-    from splatting.dataset.generate import Assets
     torch.set_num_threads(1)
     assets = Assets(cfg)
     cyc = assets.cyclist(bike, rider)
@@ -72,8 +75,6 @@ def main(argv=None):
         ap.error("--count must be >= 1")
     if not args.out.lower().endswith(".png"):
         ap.error("--out must be a .png file")
-    from cyclist_formats.atomic import atomic_path
-    from splatting.dataset.config import resolve_assets, validate
     try:
         with tempfile.TemporaryDirectory() as scratch:
             if args.bike:
@@ -89,7 +90,6 @@ def main(argv=None):
     except UserError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    from PIL import Image
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     with atomic_path(args.out) as tmp:
         Image.fromarray(sheet).save(tmp, format="PNG")

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from cyclist_formats.atomic import atomic_path
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, read_ply, write_ply
 from splatting.gaussians.sh_rotation import rotate_sh
@@ -55,7 +56,7 @@ def nearest_surface_point(points, vertices, faces, k=8, chunk=4096):
     Candidate triangles are those around the point's k nearest vertices (exact unless the
     surface is much coarser than k vertex rings); the exact closest point on each candidate comes
     from trimesh. Returns face index (N,) and barycentric (N,3), float64."""
-    import trimesh
+    import trimesh  # lazy: 0.7 s to import (python -X importtime), for the surface binding alone
 
     pts = torch.as_tensor(points, dtype=torch.float64)
     V = torch.as_tensor(vertices, dtype=torch.float64)
@@ -200,7 +201,6 @@ class RiderAvatar:
 
     def save_skinning(self, folder):
         """Only <folder>/skinning.npz (the build writes rider.ply with the trainer)."""
-        from cyclist_formats.atomic import atomic_path
         os.makedirs(folder, exist_ok=True)
         with atomic_path(os.path.join(folder, SKINNING_NAME)) as tmp:
             with open(tmp, "wb") as f:  # a file object: np.savez would append .npz to the temp name
