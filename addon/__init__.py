@@ -11,7 +11,7 @@ Blender uses the system Python (Debian's `blender` neither depends on nor recomm
 python3-numpy), so register() checks once: without numpy the sidebar shows what to install
 and every operator refuses with the same words instead of a ModuleNotFoundError.
 """
-import sys
+from .requirements import _MISSING, missing_numpy_message, requirements_problem  # noqa: F401  (the add-on's API)
 
 bl_info = {
     "name": "3DArticCyclists",
@@ -22,26 +22,6 @@ bl_info = {
     "description": "Curate imported bicycle models: canonical pose, keypoints, parts, rig, 36-view renders",
     "category": "3D View",
 }
-
-
-_MISSING = []  # register() stores the missing-numpy message here, or nothing
-
-
-def missing_numpy_message():
-    """None when numpy imports; else one line naming the package and how to install it."""
-    try:
-        import numpy  # noqa: F401
-    except ImportError as e:  # absent, or built for another Python (a broken system copy)
-        why = "is not installed" if getattr(e, "name", None) == "numpy" else f"fails to import ({e})"
-        return (f"3DArticCyclists needs the Python package numpy, which {why} in this Blender's Python: "
-                f"install it (Debian/Ubuntu: sudo apt install python3-numpy; other Blenders: "
-                f"{sys.executable} -m pip install numpy) and restart Blender")
-    return None
-
-
-def requirements_problem():
-    """The message the panel shows and the operators refuse with, or None (checked at register)."""
-    return _MISSING[0] if _MISSING else None
 
 
 def register():

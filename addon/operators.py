@@ -24,7 +24,7 @@ class _Op:
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
-        from . import requirements_problem
+        from .requirements import requirements_problem
         if requirements_problem():  # no numpy: say what to install, not ModuleNotFoundError
             self.report({"ERROR"}, requirements_problem())
             return {"CANCELLED"}
@@ -318,7 +318,7 @@ def _preview(scene):
 
 
 def preview_update(self, context):
-    from . import requirements_problem
+    from .requirements import requirements_problem
     if requirements_problem():  # the Missing-numpy panel already says why the sliders do nothing
         return
     if math.isfinite(self.articcyc_theta_p_deg) and math.isfinite(self.articcyc_theta_s_deg):

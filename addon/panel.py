@@ -10,7 +10,7 @@ CATEGORY = "ArticCyclists"
 
 
 def _requirements_problem():
-    from . import requirements_problem
+    from .requirements import requirements_problem
     return requirements_problem()
 
 

@@ -18,26 +18,12 @@ import sys
 
 import numpy as np
 
+from splatting.bike.pose import sample_poses  # noqa: F401  (bench modules import it from here too)
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 POSES = 20  # the ground-truth check's random poses (seed 0); bike_relit scores the same ones
-
-
-def sample_poses(n, seed=0):
-    rng = np.random.default_rng(seed)
-    poses = np.stack([
-        rng.uniform(0, 360, n),      # theta_p: full circle
-        rng.uniform(-60, 60, n),     # theta_s
-        rng.uniform(-15, 15, n),     # roll (about X)
-        rng.uniform(0, 360, n),      # yaw (about Y, up)
-        rng.uniform(-15, 15, n),     # pitch (about Z)
-        rng.uniform(-0.3, 0.3, n),   # t_x
-        rng.uniform(-0.1, 0.1, n),   # t_y
-        rng.uniform(-0.3, 0.3, n),   # t_z
-    ], 1)
-    cams = rng.integers(0, 36, n)
-    return poses, cams
 
 
 def blender_worker(bike_dir, poses_json, out_dir, samples):

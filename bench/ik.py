@@ -23,6 +23,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
+from splatting.bike.pose import posed_bike_keypoints  # noqa: E402
 from splatting.rider import ik  # noqa: E402
 from splatting.rider.skeleton_template import template_rest_joints  # noqa: E402
 
@@ -63,7 +64,7 @@ def library_bikes(bikes_dir=None):
 
 
 def _targets(kp, poses):
-    return ik.posed_bike_keypoints(kp, torch.tensor(poses, dtype=torch.float64))
+    return posed_bike_keypoints(kp, torch.tensor(poses, dtype=torch.float64))
 
 
 def _median_s(fn, reps):

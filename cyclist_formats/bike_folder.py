@@ -15,6 +15,7 @@ import os
 import numpy as np
 
 from .atomic import atomic_path, write_json
+from . import text_files
 from .errors import UserError
 
 FILES = ("bike.blend", "keypoints.json", "meta.json")
@@ -33,15 +34,7 @@ MASK_ALPHA = 127  # 8-bit alpha above this (alpha > 0.5) is inside the mask
 def read_json(path, what="JSON file", missing=None):
     """Load a JSON file; every failure is one UserError naming the file (`missing`: the message
     for a file that does not exist)."""
-    try:
-        with open(path) as f:
-            return json.load(f)
-    except FileNotFoundError:
-        raise UserError(missing or f"{path}: missing ({what})") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise UserError(f"{path} is not valid JSON: {e}") from None
-    except OSError as e:
-        raise UserError(f"cannot read {path}: {e.strerror or e} (expected a {what})") from None
+    return text_files.read_json(path, what, missing)
 
 
 def check_bike_dir(bike_dir):

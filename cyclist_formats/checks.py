@@ -9,6 +9,7 @@ it too.
 """
 import math
 import os
+import re
 
 from .errors import UserError
 
@@ -136,6 +137,18 @@ def output_dir(name, path):
     if os.path.isdir(path) and not os.access(path, os.W_OK | os.X_OK):
         raise UserError(f"{flag} {path}: cannot write in it (permission denied)")
     _writable_dir(os.path.dirname(os.path.abspath(path)), flag, path)
+    return path
+
+
+# a name that becomes a file or folder name (a dataset config's name): it cannot leave its folder
+SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
+
+
+def inside(root, path, what):
+    """path, resolved (links and '..' followed), must lie inside root, resolved; returns path."""
+    r, p = os.path.realpath(root), os.path.realpath(path)
+    if os.path.commonpath([r, p]) != r:
+        raise UserError(f"{what} {path} resolves to {p}, outside {r}")
     return path
 
 

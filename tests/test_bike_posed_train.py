@@ -291,7 +291,7 @@ def _held_out_psnr_of_bike_model(d, start, parts, jobs):
 def test_more_poses_keep_the_first_ones():
     """--poses 100 starts with the 48 poses of --poses 48 (their renders are reused), and none of
     them is a ground-truth check pose (seed 0)."""
-    from splatting.library.gt import sample_poses
+    from splatting.bike.pose import sample_poses
 
     p48, c48 = training_poses(48)
     p100, c100 = training_poses(100)

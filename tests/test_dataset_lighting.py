@@ -106,7 +106,7 @@ def _sample(cfg, index):
 
 
 def test_relit_is_deterministic_and_records_the_sun_it_renders(assets, monkeypatch):
-    from splatting.relight import scene
+    from splatting.cyclist import scene_relit as scene
     used = []
     real = scene.shade_composited
     monkeypatch.setattr(scene, "shade_composited", lambda *a, **k: used.append(a[4]) or real(*a, **k))
@@ -134,7 +134,7 @@ def test_relit_is_deterministic_and_records_the_sun_it_renders(assets, monkeypat
 
 def test_relit_bikes_carry_their_sky_visibility(assets, monkeypatch):
     # the bike's self-occlusion rides as the last relight channel (riders: 1), and is shaded
-    from splatting.relight import scene
+    from splatting.cyclist import scene_relit as scene
     seen = []
     real = scene.shade_composited
     monkeypatch.setattr(scene, "shade_composited", lambda *a, **k: seen.append((a, k)) or real(*a, **k))

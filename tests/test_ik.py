@@ -6,6 +6,7 @@ import torch
 
 from addon.core.procedural import layout, spec as bike_spec
 from cyclist_formats.errors import UserError
+from splatting.bike.pose import posed_bike_keypoints
 from splatting.rider import ik
 from splatting.rider.kinematics import JOINT_INDEX, JOINT_NAMES, forward_kinematics
 from splatting.rider.skeleton_template import template_rest_joints
@@ -20,7 +21,7 @@ def bike(style, number=0):
 
 
 def at_poses(kp, poses):
-    return ik.posed_bike_keypoints(kp, torch.tensor(poses, dtype=torch.float64))
+    return posed_bike_keypoints(kp, torch.tensor(poses, dtype=torch.float64))
 
 
 def residuals_from_joints(res, targets, lift=ik.PELVIS_ABOVE_SEAT_M):

@@ -211,7 +211,7 @@ def test_render_gaussians_applies_activations():
 @pytest.fixture
 def tiny_chunks(monkeypatch):
     """Force intersect() through many front-to-back chunks (the early cut-off path)."""
-    import splatting.raster.sparse as R
+    import splatting.raster.torch_composite as R
 
     monkeypatch.setattr(R, "CHUNK_PAIRS", 64)
 

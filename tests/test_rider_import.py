@@ -429,6 +429,7 @@ def test_turned_and_scaled_rig_gives_the_same_rider(source, tmp_path):
 
 def test_imported_rider_is_a_roster_rider_and_rides_a_bike(imported, monkeypatch, source):
     from addon.core.procedural import layout, spec as bike_spec
+    from splatting.bike.pose import posed_bike_keypoints
     from splatting.rider import ik, imported as imported_mod, roster
     from splatting.rider.kinematics import JOINT_INDEX
     monkeypatch.setattr(imported_mod, "IMPORTED_DIR", imported[1])
@@ -444,7 +445,7 @@ def test_imported_rider_is_a_roster_rider_and_rides_a_bike(imported, monkeypatch
     kp = layout.keypoints(bike_spec.sample_spec("kids", 0, 0))  # sized for the 1.50 m source rider
     poses = torch.tensor([[p, s, 0, 0, 0, 0, 0, 0] for p, s in ((0, -10), (90, 0), (180, 10), (270, 20))],
                          dtype=torch.float64)
-    targets = ik.posed_bike_keypoints(kp, poses)
+    targets = posed_bike_keypoints(kp, poses)
     res = ik.solve(rider.joints, targets, saddle_fit=True, saddle_shared=True)
     for joint, target in ik.DEFAULT_PAIRS:  # distances recomputed from the posed joints
         tgt = torch.as_tensor(targets[target], dtype=torch.float64).reshape(-1, 3)

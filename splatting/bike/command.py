@@ -9,10 +9,14 @@ import json
 import os
 import sys
 
+from cyclist_formats import checks
 from cyclist_formats.atomic import write_json
 from cyclist_formats.errors import UserError
 
 from cyclist_formats.pose import FIELDS_HELP  # numpy only: --help does not import torch
+
+# The stage's modules are imported inside the functions below, not at the top: they load torch
+# (~2.5 s, python -X importtime), and `--help` and the argument checks answer before that (0.2-0.5 s).
 
 BATCH_CHUNK = 8  # poses posed at once in --poses mode (bounds memory: ~22 MB per pose at 100k, SH 3)
 
@@ -36,7 +40,6 @@ def keypoints_doc(model, pose, keypoints):
 
 
 def check_args(args):
-    from cyclist_formats import checks
     checks.input_dir("bike", args.bike)
     if args.pose is not None:
         checks.output_file("out", args.out, (".ply",))

@@ -4,6 +4,9 @@ import json
 import math
 import os
 
+from PIL import Image, ImageDraw, ImageFont
+
+from cyclist_formats import checks
 from cyclist_formats.atomic import atomic_path
 from cyclist_formats.errors import UserError
 
@@ -17,8 +20,6 @@ def add_arguments(p):
 
 
 def contact_sheet(bikes_dir, out, view=3, cols=6, tile=256):
-    from PIL import Image, ImageDraw, ImageFont
-
     pattern = os.path.join(bikes_dir, "*", "views", "whole", "rgba", f"camera{view:04d}", "0000.png")
     files = sorted(glob.glob(pattern))
     if not files:
@@ -56,7 +57,6 @@ def _square(bbox, size, pad):
 
 
 def check_args(args):
-    from cyclist_formats import checks
     checks.input_dir("bikes", args.bikes)
     checks.index("view", args.view, 36)
     checks.integer("cols", args.cols, 1, 1000)

@@ -28,6 +28,8 @@ from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, read_ply
 from splatting.gaussians.sh_rotation import BANDS, sh_band_matrices
 from splatting.raster.sparse import EPS2D
+# the training-record rules live in training.record; these names stay importable from here
+from splatting.training.record import check_model_eps2d, part_metrics_path, trained_antialiased, trained_eps2d  # noqa: F401
 
 MAIN_PARTS = ("frame", "steering", "crank")
 SUB_PARTS = ("front_wheel", "rear_wheel", "pedal_left", "pedal_right")
@@ -232,73 +234,6 @@ def present_parts(gdir):
     """The part names (BikeModel's order: MAIN_PARTS then SUB_PARTS) that have a <part>.ply in a
     bike's gaussians/ folder gdir."""
     return [p for p in MAIN_PARTS + SUB_PARTS if os.path.isfile(os.path.join(gdir, p + ".ply"))]
-
-
-def check_model_eps2d(v, source):
-    """A model's recorded eps2d: a finite number > 0 (UserError naming the source otherwise)."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-        raise UserError(f"{source}: eps2d (the splats' low-pass the model was trained with) must be a "
-                        f"finite number > 0, got {v!r}")
-    return float(v)
-
-
-def part_metrics_path(gdir, p):
-    """A part's training metrics: gaussians/<part>.json, else <part>_rest.json (a part fine-tuned by
-    the library's posed stage keeps its training metrics with the rest-trained part); None without."""
-    for js in (os.path.join(gdir, p + ".json"), os.path.join(gdir, p + "_rest.json")):
-        if os.path.isfile(js):
-            return js
-    return None
-
-
-def _part_config(gdir, p):
-    """The "config" of the part's training metrics (part_metrics_path); None without metrics."""
-    js = part_metrics_path(gdir, p)
-    if js is None:
-        return None
-    doc = bike_folder.read_json(js, f"{p}.json")
-    cfg = doc.get("config") if isinstance(doc, dict) else None
-    return cfg if isinstance(cfg, dict) else None
-
-
-def trained_eps2d(gdir, counts, fine_tuned=True):
-    """The screen-space low-pass (px^2) the parts in gdir ({name: Gaussians in its .ply}) were last
-    trained with: with fine_tuned, a part that bike-posed-train wrote (gaussians/posed_train.json
-    records it with this many Gaussians; counted, not dated: a copied folder keeps no file times)
-    has the fine-tune's (splatting.bike.posed_train.fine_tuned_eps2d), any other its <part>.json
-    "config" "eps2d" (trainer.TrainConfig); EPS2D (0.3) where nothing records one (assets made
-    before the filter was recorded were all trained at 0.3).  Parts that disagree are an error, as
-    for the mip filter: a bike is one model, drawn with one filter."""
-    from splatting.bike.posed_train import fine_tuned_eps2d
-
-    posed = fine_tuned_eps2d(gdir) if fine_tuned else None
-    vals = {}
-    for p, n in counts.items():
-        if posed is not None and posed[1].get(p) == n:
-            vals[p] = check_model_eps2d(posed[0], os.path.join(gdir, "posed_train.json"))
-        else:
-            cfg = _part_config(gdir, p)
-            vals[p] = check_model_eps2d((cfg or {}).get("eps2d", EPS2D), os.path.join(gdir, p + ".json"))
-    if len(set(vals.values())) > 1:
-        raise UserError(f"{gdir}: parts trained with different eps2d ({', '.join(f'{p}: {v}' for p, v in vals.items())}); "
-                        "retrain or fine-tune them with one value")
-    return next(iter(vals.values()), EPS2D)
-
-
-def trained_antialiased(gdir, names):
-    """Whether the parts in gdir were trained with antialiased splatting: their <part>.json
-    "config", else <part>_rest.json (a part fine-tuned by the library's posed stage: its training
-    metrics stay with the rest-trained part); a part without metrics, e.g. imported, counts as
-    plain. Parts that disagree are an error: one renderer setting cannot draw both right (a mixed
-    bike lost ~2 dB, docs/training.md)."""
-    flags = {}
-    for p in names:
-        cfg = _part_config(gdir, p)
-        flags[p] = bool(cfg.get("antialiased", False)) if cfg is not None else False
-    if len(set(flags.values())) > 1:
-        raise UserError(f"{gdir}: parts trained with and without antialiasing "
-                        f"({', '.join(f'{p}: {v}' for p, v in flags.items())}); retrain them with one setting")
-    return any(flags.values())
 
 
 def posed_from_tensors(out, b):

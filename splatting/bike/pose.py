@@ -16,9 +16,11 @@ log-scales and opacities are rotation invariant and stay.
 import math
 from dataclasses import replace
 
+import numpy as np
 import torch
 
 from cyclist_formats import pose as formats_pose
+from cyclist_formats.bike_folder import DEFAULT_KEYPOINT_PARTS
 from cyclist_formats.errors import UserError
 from cyclist_formats.pose import N_ANGLES
 from splatting.gaussians.container import Gaussians
@@ -168,3 +170,37 @@ def transform_gaussians(g: Gaussians, H) -> Gaussians:
         quats=g.quats @ quat_left_matrix(q).T,
         sh=rotate_sh(g.sh, R.to(dt)),
     )
+
+
+def sample_poses(n, seed=0):
+    """n random 8-DoF poses (degrees, metres; docs/contract.md) and n ring camera indices (0..35), a
+    function of the seed alone: the ground-truth checks (library gt, bench/bike_gt) score these poses
+    and the posed fine-tune trains on other seeds of it (bike.posed_train.training_poses)."""
+    rng = np.random.default_rng(seed)
+    poses = np.stack([
+        rng.uniform(0, 360, n),      # theta_p: full circle
+        rng.uniform(-60, 60, n),     # theta_s
+        rng.uniform(-15, 15, n),     # roll (about X)
+        rng.uniform(0, 360, n),      # yaw (about Y, up)
+        rng.uniform(-15, 15, n),     # pitch (about Z)
+        rng.uniform(-0.3, 0.3, n),   # t_x
+        rng.uniform(-0.1, 0.1, n),   # t_y
+        rng.uniform(-0.3, 0.3, n),   # t_z
+    ], 1)
+    cams = rng.integers(0, 36, n)
+    return poses, cams
+
+
+def posed_bike_keypoints(keypoints, poses_deg):
+    """Bike keypoints {name: (3,)} (canonical, rest) at B 8-DoF poses (docs/contract.md, degrees and
+    metres) -> {name: (B, 3) float64}: steering keypoints turn with theta_s, pedals with theta_p,
+    then the global transform.  What the IK needs without loading a BikeModel's Gaussians."""
+    kp = {k: torch.as_tensor(v, dtype=torch.float64) for k, v in keypoints.items()}
+    H = pose_transforms(poses_deg, kp["steer_bottom"], kp["steer_top"], kp.get("crank_axle"))
+    part = {k: p for p, ks in DEFAULT_KEYPOINT_PARTS.items() for k in ks}
+    out = {}
+    for k, x in kp.items():
+        local = {"steering": H["steer"], "crank": H["pedal"]}.get(part.get(k))
+        y = transform_points(local, x) if local is not None else x.expand(H["global"].shape[0], 3)
+        out[k] = transform_points(H["global"], y)
+    return out

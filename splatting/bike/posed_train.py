@@ -23,7 +23,7 @@ library's posed:<bike> task) it starts from gaussians/<part>_rest.{ply,json} as 
 tasks left them and never writes those.  Parts of the fine-tune's own --sh-degree (a fine-tuned
 bike's, copied without its posed_train.json) are continued from where they are, every SH band
 included (e.g. a few low-rate steps at another --eps2d).  Training poses come
-from seeds 1000, 1001, ... of splatting.library.gt.sample_poses (48 a seed): never the checks' poses
+from seeds 1000, 1001, ... of splatting.bike.pose.sample_poses (48 a seed): never the checks' poses
 (seed 0).
 """
 import dataclasses
@@ -34,15 +34,26 @@ import sys
 import time
 from dataclasses import dataclass
 
+from PIL import Image
 import numpy as np
 import torch
 
-from cyclist_formats.atomic import read_json_or_none
+from cyclist_formats import bike_folder, checks, ring
+from cyclist_formats.atomic import read_json_or_none, write_json
 from cyclist_formats.errors import UserError
 from splatting import paths
+from splatting.bike.model import BikeModel
+from splatting.bike.pose import check_poses, sample_poses
 from splatting.progress import Progress
-from splatting.raster.sparse import EPS2D
-from splatting.training.trainer import FineTuneRates
+from splatting.raster.camera import from_numpy
+from splatting.raster.sparse import EPS2D, rasterize
+from splatting.training.trainer import FineTuneRates, finite_grads, rgba_loss
+from splatting.gaussians.container import Gaussians, read_ply, write_ply
+from splatting.gaussians.sh_rotation import BANDS, sh_band_matrices
+from splatting.training.metrics import box_psnr, mask_iou
+from splatting.training.strategy import DensifyConfig, DensifyStrategy
+from splatting.training.targets import crop_box, crop_camera, Targets
+from splatting.training.views import load_views
 
 RENDER_SCRIPT = paths.blender_script("render_pose.py")
 POSE_SEED = 1000
@@ -77,8 +88,6 @@ def training_poses(n):
     Drawn in blocks of POSE_BLOCK (seeds POSE_SEED, POSE_SEED + 1, ...), so the first n of any larger
     --poses are these same n: more poses reuse the renders already made (block 0 is what 48 poses
     always were, sample_poses(48, 1000))."""
-    from splatting.library.gt import sample_poses
-
     blocks = [sample_poses(POSE_BLOCK, POSE_SEED + b) for b in range(-(-n // POSE_BLOCK))]
     return np.concatenate([p for p, _ in blocks])[:n], np.concatenate([c for _, c in blocks])[:n]
 
@@ -95,7 +104,6 @@ def render_posed_views(bike_dir, out_dir, cfg: PosedTrainConfig, log=print, thre
     jobs = [{"pose": [float(v) for v in p], "camera": f"{cam_file}:camera{int(c):04d}",
              "out": os.path.abspath(os.path.join(out_dir, f"posed_{k:03d}.png"))} for k, (p, c) in enumerate(zip(poses, cams))]
     settings = {"samples": cfg.samples, "denoise": cfg.denoise}
-    from cyclist_formats.atomic import write_json
 
     meta = os.path.join(out_dir, "poses.json")
     old = read_json_or_none(meta)
@@ -140,11 +148,6 @@ def render_posed_views(bike_dir, out_dir, cfg: PosedTrainConfig, log=print, thre
 
 def _load_posed(jobs, margin):
     """The posed renders as premultiplied RGBA (V, 4, H, W), their cameras and crop boxes."""
-    from PIL import Image
-
-    from cyclist_formats import ring
-    from splatting.raster.camera import from_numpy
-    from splatting.training.targets import crop_box
 
     imgs, cams = [], []
     for j in jobs:
@@ -159,15 +162,6 @@ def _load_posed(jobs, margin):
 
 def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
     """model (BikeModel, parts trained at rest) -> ({part: Gaussians}, metrics)."""
-    from splatting.bike.pose import check_poses
-    from splatting.gaussians.container import Gaussians
-    from splatting.raster.sparse import rasterize
-    from splatting.training.metrics import box_psnr, mask_iou
-    from splatting.training.strategy import DensifyStrategy
-    from splatting.training.targets import Targets, crop_camera
-    from splatting.training.trainer import finite_grads, rgba_loss
-    from splatting.training.views import load_views
-
     if cfg.sh_degree not in (0, 1, 2):
         raise UserError(f"bike-posed-train: sh_degree must be 0, 1 or 2, got {cfg.sh_degree}")
     if model.sh_degree not in (0, cfg.sh_degree):
@@ -201,7 +195,6 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
             dens[name] = DensifyStrategy(_densify_config(cfg), float((m.max(0).values - m.min(0).values).norm()))
     aa = model.antialiased
 
-    from splatting.gaussians.sh_rotation import BANDS, sh_band_matrices
 
     def world(rig):
         """The canonical parameters moved by one pose's per-part rigid transforms (differentiable):
@@ -317,8 +310,6 @@ def _densify_config(cfg: PosedTrainConfig):
     """The trainer's rules, run over the first half of the fine-tune (the second settles what was
     added); no visual-hull pruning (the posed views' silhouettes move with the pose) and no opacity
     reset (the parts are already trained)."""
-    from splatting.training.strategy import DensifyConfig
-
     return DensifyConfig(start=100, stop=max(100, cfg.iterations // 2), every=100, reset_every=0,
                          max_gaussians=cfg.densify_max, hull_prune=False)
 
@@ -350,10 +341,6 @@ def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print, from_res
     from_rest: start from gaussians/<part>_rest.ply (and its .json) as they are, never copying onto
     them (the library's train tasks own those files; a killed run's <part>.ply is only overwritten).
     render_threads: the posed renders' Blender threads (render_posed_views)."""
-    from cyclist_formats.atomic import write_json
-    from splatting.bike.model import BikeModel
-    from splatting.gaussians.container import write_ply
-
     cfg = cfg or PosedTrainConfig()
     torch.set_num_threads(1)
     gdir = os.path.join(bike_dir, "gaussians")
@@ -368,7 +355,6 @@ def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print, from_res
         if not from_rest and (t_meta is None or not os.path.isfile(rest) or os.path.getmtime(ply) > t_meta):
             shutil.copyfile(ply, rest)
         start[p] = rest
-    from splatting.gaussians.container import read_ply
 
     model = BikeModel({p: read_ply(f) for p, f in start.items()}, model_keypoints_doc(bike_dir), model.meta,
                       source=bike_dir, antialiased=model.antialiased, eps2d=model.eps2d)
@@ -384,19 +370,7 @@ def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print, from_res
 
 
 def model_keypoints_doc(bike_dir):
-    from cyclist_formats import bike_folder
-
     return bike_folder.read_json(os.path.join(bike_dir, "keypoints.json"), "keypoints.json")
-
-
-def fine_tuned_eps2d(gdir):
-    """(eps2d, {part: Gaussians}) of gaussians/posed_train.json: the low-pass its fine-tune
-    rendered with (config "eps2d"; 0.3 in records from before --eps2d) and the parts it wrote, or
-    None without a record (BikeModel reads each part's filter with it)."""
-    m = read_json_or_none(os.path.join(gdir, "posed_train.json"))
-    if not isinstance(m, dict) or not isinstance(m.get("config"), dict) or not isinstance(m.get("gaussians"), dict):
-        return None
-    return m["config"].get("eps2d", EPS2D), m["gaussians"]
 
 
 def add_arguments(p):
@@ -430,8 +404,6 @@ def add_arguments(p):
 
 
 def check_args(args):
-    from cyclist_formats import checks
-
     checks.input_dir("bike", args.bike)
     checks.integer("poses", args.poses, HELD_OUT + 1, 10_000)
     checks.count("iterations", args.iterations, hi=10_000_000)

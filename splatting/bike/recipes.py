@@ -25,6 +25,8 @@ FIDELITY = {
 RECIPES = {"default": DEFAULT, "fidelity": FIDELITY}
 
 
+# the configs' modules load torch (~2.5 s, python -X importtime); imported where a config is made, so
+# `library build`'s argument checks, which read RECIPES, stay torch-free
 def train_config(recipe, **runtime):
     """TrainConfig of a recipe (name or dict) plus runtime fields (threads, time_budget_s, ...)."""
     from splatting.training.trainer import TrainConfig

@@ -16,13 +16,16 @@ instance's evaluated colour (SH DC through the 0.5 offset, and every higher band
 All draws come from a Generator seeded with (seed, sample index, instance, a tag), so a sample's
 looks are a function of (config, index) and switching appearance off changes nothing else.
 """
+from dataclasses import replace
 import colorsys
 import math
 
 import numpy as np
 import torch
 
+from cyclist_formats.instances import RIDER_ID
 from splatting.gaussians.sh import C0
+from splatting.rider.body import REGIONS
 
 RECOLOUR = ("top", "bottom", "shoes", "helmet", "paint")
 PAINT_MIN_SAT = 0.2
@@ -124,12 +127,9 @@ def apply_look(g, ids, look, gain, rider_reg=None, rider_colors=None, paint=None
     """Gaussians g of a posed instance (bike parts then rider, ids per Gaussian) in the look:
     rider_reg (N_rider,) regions of its rider Gaussians, rider_colors {region: '#rrggbb'};
     paint (N,) bool and paint_rgb (its reference colour) for the bike."""
-    from dataclasses import replace
 
-    from cyclist_formats.instances import RIDER_ID
     sh = g.sh * 1.0  # one copy, recoloured in place (regions do not overlap)
     if rider_reg is not None:
-        from splatting.rider.body import REGIONS
         is_r = torch.as_tensor(ids).long() == RIDER_ID
         full_reg = torch.full((len(g),), -1, dtype=torch.int64)
         full_reg[is_r] = rider_reg

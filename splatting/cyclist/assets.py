@@ -17,8 +17,11 @@ import torch
 
 from cyclist_formats import bike_folder
 from cyclist_formats.errors import UserError
+from splatting.bike.model import BikeModel
 from splatting.gaussians.container import Gaussians
 from splatting.gaussians.sh import rgb_to_sh0
+from splatting.rider.avatar import PLY_NAME, RiderAvatar, SKINNING_NAME
+from splatting.rider.roster import load_rider
 
 SYNTHETIC_MODES = ("auto", "always", "never")
 
@@ -109,7 +112,6 @@ def has_trained_gaussians(d):
 
 def load_bike(d, synthetic="auto", n_per_part=2000, log=None):
     """BikeModel for folder d: trained Gaussians, or synthetic ones (see module docstring)."""
-    from splatting.bike.model import BikeModel
     if synthetic not in SYNTHETIC_MODES:
         raise UserError(f"synthetic must be one of {SYNTHETIC_MODES}, got {synthetic!r}")
     if synthetic != "always" and has_trained_gaussians(d):
@@ -125,14 +127,12 @@ def load_bike(d, synthetic="auto", n_per_part=2000, log=None):
     if log:
         log(f"bike {meta.get('bike_id')}: no trained Gaussians, using {sum(map(len, parts.values()))} "
             f"synthetic ones on its keypoint skeleton")
-    from splatting.bike.model import BikeModel
     return BikeModel(parts, kdoc, meta, source=d)
 
 
 def mesh_avatar(rider, n=None, seed=0):
     """An untrained RiderAvatar: Gaussians on (a subset of) the rider mesh's vertices, with the
     vertex colours and skinning weights.  Scale ~ the vertex spacing so the skin is closed."""
-    from splatting.rider.avatar import RiderAvatar
     V = len(rider.vertices)
     idx = np.arange(V) if n is None or n >= V else np.sort(np.random.default_rng(seed).choice(V, n, replace=False))
     area = 2.0 * rider.height_m ** 2 * 0.35  # ~1.9 m^2 skin for a 1.8 m adult (Du Bois order)
@@ -143,8 +143,6 @@ def mesh_avatar(rider, n=None, seed=0):
 
 def load_avatar(rider_id, riders_root="data/riders", synthetic="auto", n=None, log=None):
     """(RiderAvatar, rider body) for a roster id: trained avatar folder if present, else mesh_avatar."""
-    from splatting.rider.avatar import PLY_NAME, SKINNING_NAME, RiderAvatar
-    from splatting.rider.roster import load_rider
     rider = load_rider(rider_id)
     folder = os.path.join(riders_root, rider_id)
     trained = all(os.path.isfile(os.path.join(folder, f)) for f in (PLY_NAME, SKINNING_NAME))

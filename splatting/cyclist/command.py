@@ -18,9 +18,12 @@ import os
 
 import torch
 
-from cyclist_formats import bike_folder
+from cyclist_formats import bike_folder, checks
 from cyclist_formats.errors import UserError
 from splatting.cyclist.sequence import fit_sequence, motion_poses, programme_poses, render_sequence
+
+# The stage's modules are imported inside the functions below, not at the top: they load torch
+# (~2.5 s, python -X importtime), and `--help` and the argument checks answer before that (0.2-0.5 s).
 
 def add_arguments(p):
     p.add_argument("--rider", help="roster rider id (`python -m splatting rider --list`)")
@@ -99,7 +102,6 @@ def run_one(args, rider_id, bike, out, log):
 
 def check_args(args):
     """Impossible values (a negative camera distance, an image beyond memory) and unusable paths."""
-    from cyclist_formats import checks
     checks.count("frames", args.frames, hi=1_000_000)
     checks.image_size("size", args.size)
     checks.positive("distance", args.distance, hi=1e4)

@@ -5,19 +5,21 @@ analytic start assumes an upright bike facing +X), then the global transform H_g
 folded into the rider's root rotation and translation, so the rider's LBS lands it on the posed
 bike in the world.  The bike is posed by BikeModel (H_s, H_p, H_g on its part Gaussians).
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import roma
 import torch
 
-from splatting.bike.pose import check_poses
+from splatting.bike.pose import check_poses, posed_bike_keypoints
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians
 from splatting.rider import ik
 from splatting.rider.kinematics import JOINT_NAMES
 from cyclist_formats.instances import IDS
 from cyclist_formats import instances
+from cyclist_formats.pose import POSE_FIELDS
+from splatting.raster.sparse import eps2d_where
 
 PART_IDS = {**instances.PART_IDS, **instances.SUB_PART_IDS}
 
@@ -68,8 +70,6 @@ def frame_eps2d(ids, bike, avatar):
     """rasterize's eps2d for a cyclist frame's Gaussians (ids: CyclistFrame.ids): each model drawn
     with the low-pass it was trained with (BikeModel.eps2d, RiderAvatar.eps2d); one number when
     they agree (the scalar path, the renders of before), else one per Gaussian."""
-    from splatting.raster.sparse import eps2d_where
-
     return eps2d_where(ids != IDS["rider"], bike.eps2d, bike.eps2d if avatar is None else avatar.eps2d)
 
 
@@ -91,7 +91,7 @@ class Cyclist:
         """IK of the rider onto the bike at poses (B, 8) (bike frame; H_g is applied later)."""
         p = check_poses(poses).clone()
         p[:, 2:] = 0.0
-        targets = ik.posed_bike_keypoints(self.bike.keypoints, p)
+        targets = posed_bike_keypoints(self.bike.keypoints, p)
         return ik.solve(self.avatar.rest_joints, targets, init_local_aa=init_local_aa, iterations=self.ik_iterations,
                         saddle_fit=self.saddle_fit, saddle_shared=saddle_shared and self.saddle_fit,
                         pairs=self.pairs)
@@ -141,7 +141,6 @@ class Cyclist:
 
 def take_fit(res, idx):
     """The frames idx (a slice or index list) of an IKResult, as an IKResult."""
-    from dataclasses import replace
     pick = lambda t: None if t is None else t[idx]  # noqa: E731
     return replace(res, local_aa=res.local_aa[idx], root_trans=res.root_trans[idx], joints=res.joints[idx],
                    loss=res.loss[idx], residuals={k: v[idx] for k, v in res.residuals.items()},
@@ -151,7 +150,6 @@ def take_fit(res, idx):
 
 def frame_record(frame, index, extra=None):
     """The docs/contract.md per-frame JSON object."""
-    from cyclist_formats.pose import POSE_FIELDS
     rec = {"frame": int(index), "pose": [float(x) for x in frame.pose], "pose_fields": list(POSE_FIELDS),
            "units": {"angles": "deg", "lengths": "m"}, "coordinate_frame": "world (canonical axes)",
            "bike_keypoints": {k: [float(x) for x in v] for k, v in frame.bike_keypoints.items()}}

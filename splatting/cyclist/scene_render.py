@@ -142,7 +142,7 @@ def render_scene(g, slots, n_slots, camera, amodal_slots=(), amodal_max_px=None,
     label (H, W) int16 (-1 where alpha <= 0.5), amodal {slot: (alpha crop, (u0, v0)) or None}
     (amodal_max_px: see _subset_alpha), boxes [slot box (u0, v0, w, h) or None] (slot_boxes).
     features: optional (N, F) channels composited in the same rasterization (relit datasets:
-    splatting/relight/scene.py); then also "features" (h, w, n_slots + F): the slots' weights and
+    splatting/cyclist/scene_relit.py); then also "features" (h, w, n_slots + F): the slots' weights and
     the features inside "crop" (u0, v0, w, h), the union of the slot boxes (None: nothing seen).
     antialiased: rasterize's mip filter, for all Gaussians (bool) or those of a (N,) bool mask (the
     bikes whose parts were trained with it: BikeModel.antialiased), amodal alphas included.

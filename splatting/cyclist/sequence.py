@@ -7,11 +7,22 @@ import os
 import sys
 import time
 
+from PIL import Image
 import numpy as np
+import roma
 import torch
 
 from cyclist_formats.atomic import atomic_path, write_json
 from cyclist_formats.errors import UserError
+from splatting.bike.model import KEYPOINTS
+from splatting.bike.pose import posed_bike_keypoints
+from splatting.cyclist.compose import frame_eps2d, frame_record, take_fit
+from splatting.cyclist.render import keypoint_visibility, orbit_camera, project_points, render_layers, rgba_image
+from splatting.gaussians.container import write_ply
+from splatting.rider import ik
+from splatting.rider.body import posed_joints
+from splatting.rider.kinematics import JOINT_INDEX, JOINT_NAMES
+from splatting.rider.motion import load_motion, theta_from_pose
 
 MAX_PREVIEW_COLUMNS = 8
 
@@ -32,9 +43,6 @@ def programme_poses(n, rpm, fps, steer_range, global_pose):
 
 def motion_poses(motion_path, rider, bike, n, global_pose):
     """theta_p, theta_s per frame from a motion file (theta_from_pose) + the motion's local rotations."""
-    import roma
-    from splatting.rider.body import posed_joints
-    from splatting.rider.motion import load_motion, theta_from_pose
     m = load_motion(motion_path)
     if len(m) < n:
         raise UserError(f"{motion_path} has {len(m)} frames, --frames asks for {n}")
@@ -49,8 +57,6 @@ def motion_poses(motion_path, rider, bike, n, global_pose):
 def fit_sequence(cyc, poses, motion_aa=None):
     """IK for all frames at once with one seat post.  With a motion: a second solve starts from the
     first one's solution with the motion's rotations on the joints the IK does not move."""
-    from splatting.rider import ik
-    from splatting.rider.kinematics import JOINT_INDEX
     res = cyc.fit_rider(poses, saddle_shared=True)
     if motion_aa is None:
         return res
@@ -59,14 +65,13 @@ def fit_sequence(cyc, poses, motion_aa=None):
     init[:, keep] = motion_aa[:, keep]
     p = poses.clone()
     p[:, 2:] = 0.0
-    targets = ik.posed_bike_keypoints(cyc.bike.keypoints, p)
+    targets = posed_bike_keypoints(cyc.bike.keypoints, p)
     return ik.solve(cyc.avatar.rest_joints, targets, init_local_aa=init, init_root=res.root_trans,
                     iterations=cyc.ik_iterations, saddle_fit=cyc.saddle_fit, saddle_shared=cyc.saddle_fit,
                     pairs=cyc.pairs)
 
 
 def _save_png(path, arr):
-    from PIL import Image
     with atomic_path(path) as tmp:
         Image.fromarray(arr).save(tmp, format="PNG")
 
@@ -85,12 +90,6 @@ def render_sequence(cyc, poses, views, out, size=512, elevation=0.0, distance=12
                     tolerances=(0.08, 0.15), meta=None, log=print, chunk=8):
     """Render a posed sequence into `out` (layout: module docstring); frames already complete are
     skipped.  Returns {"frames", "rendered", "skipped", "wall_s"}."""
-    from splatting.bike.model import KEYPOINTS
-    from splatting.gaussians.container import write_ply
-    from splatting.rider.kinematics import JOINT_NAMES
-    from splatting.cyclist.compose import frame_eps2d, frame_record, take_fit
-    from splatting.cyclist.render import keypoint_visibility, orbit_camera, project_points, render_layers, rgba_image
-
     n = poses.shape[0]
     os.makedirs(out, exist_ok=True)
     # one orbit centre for the whole sequence (docs/contract.md: (x, h, z) of the first frame's box centre)
@@ -143,7 +142,6 @@ def render_sequence(cyc, poses, views, out, size=512, elevation=0.0, distance=12
 def write_previews(out, n, views, thumb=128):
     """preview.png: one row per view, up to 8 frames spread over the sequence, over white;
     preview.gif: the first view, every frame."""
-    from PIL import Image
     cols = sorted(set(np.linspace(0, n - 1, min(n, MAX_PREVIEW_COLUMNS)).round().astype(int).tolist()))
     sheet = Image.new("RGB", (thumb * len(cols), thumb * len(views)), (255, 255, 255))
     for r, az in enumerate(views):

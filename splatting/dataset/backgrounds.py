@@ -14,14 +14,19 @@ the soft contact shadows that keep cyclists from floating over photos and scenes
 - Contact shadows: a few flat, dark Gaussians on the road under each instance, elongated along its
   heading, composited with everything else (slot 0: they never enter an instance's mask).
 """
+from dataclasses import replace
 import functools
 import math
 import os
 
+from PIL import Image
 import numpy as np
 import torch
 
 from cyclist_formats.errors import UserError
+from splatting.bike.pose import transform_gaussians
+from splatting.gaussians.container import Gaussians, read_ply
+from splatting.gaussians.sh import rgb_to_sh0
 
 GENERATED = ("solid", "gradient", "noise")
 IMAGE_EXTS = (".jpg", ".jpeg", ".png")
@@ -83,7 +88,6 @@ def _decoded(path, width, height):
     """The file decoded to RGB, by JPEG draft at 1/2..1/8 scale when that still covers width x
     height (the same pixels every time); cached per process: a folder of a few photos is decoded
     once per worker instead of once per sample.  -> (PIL image, source size)."""
-    from PIL import Image
     with Image.open(path) as im:
         w0, h0 = im.size
         s = max(width / w0, height / h0)
@@ -95,7 +99,6 @@ def photo(files, seed, width, height):
     """(height, width, 3) uint8 (the photo's own bytes: no float round trip for the pixels no
     cyclist covers): one of the files, scaled to cover and cropped (from the seed); also returns
     {"file", "crop"} for the image record."""
-    from PIL import Image
     rng = np.random.default_rng(seed)
     path = files[int(rng.integers(len(files)))]
     fx, fy = float(rng.uniform()), float(rng.uniform())
@@ -124,9 +127,6 @@ def euler_matrix(rotation_deg):
 
 def load_scene(path, transform):
     """The 3DGS scene .ply in the street world (Gaussians)."""
-    from dataclasses import replace
-    from splatting.bike.pose import transform_gaussians
-    from splatting.gaussians.container import read_ply
     g = read_ply(path)
     s = float(transform["scale"])
     H = np.eye(4)
@@ -146,8 +146,6 @@ def contact_shadows(footprints, opacity, n=5, sun=None, heights=None):
     shifted by h / tan(elevation), at most 4 h) -- and its darkness is the sun's share of the
     ground's light, E sin(el) / pi against the sky's L (what a shadow takes away), times opacity.
     An approximation (the silhouette is the footprint's), the same for every background."""
-    from splatting.gaussians.container import Gaussians
-    from splatting.gaussians.sh import rgb_to_sh0
     means, quats, scales, opac = [], [], [], []
     o = min(max(opacity, 1e-4), 0.99)
     shift = np.zeros(2)

@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from cyclist_formats.errors import UserError
+from splatting.raster.camera import from_numpy
 
 RING = "ring"
 PRESETS = {
@@ -126,7 +127,6 @@ def pose(c):
 
 def street_camera(c, name=""):
     """splatting.raster.camera.Camera of a resolved driving-camera spec."""
-    from splatting.raster.camera import from_numpy
     R, T = pose(c)
     return from_numpy(intrinsics(c), R, T, c["width"], c["height"], name)
 

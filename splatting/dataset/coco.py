@@ -8,6 +8,7 @@ beside them in `segmentation_amodal`.  `instance()` is the older single-mask hel
 import json
 import os
 
+from pycocotools import mask as mask_utils
 import numpy as np
 
 from cyclist_formats.atomic import atomic_path
@@ -35,7 +36,6 @@ def categories():
 def instance(mask, category, keypoints=None):
     """Binary mask (H, W) bool, category name, keypoints (n, 3) [x, y, v] or None -> COCO annotation
     without id/image_id, or None when the mask is empty."""
-    from pycocotools import mask as mask_utils
     if not mask.any():
         return None
     rle = mask_utils.encode(np.asfortranarray(mask.astype(np.uint8)))

@@ -7,13 +7,18 @@ Per-sample shards (DIR/shards/%06d.json) are written atomically after the sample
 skips samples whose shard and image exist and merges all shards at the end, so a run killed at
 any moment and rerun gives the same bytes as an uninterrupted one.
 """
-import json
 import os
 import sys
 import time
 
+from cyclist_formats import checks
 from cyclist_formats.atomic import write_json
 from cyclist_formats.errors import UserError
+from cyclist_formats.text_files import read_json
+from splatting.library.ray_address import check_address
+
+# The stage's modules are imported inside the functions below, not at the top: they load torch
+# (~2.5 s, python -X importtime), and `--help` and the argument checks answer before that (0.2-0.5 s).
 
 
 def add_arguments(p):
@@ -25,6 +30,9 @@ def add_arguments(p):
     p.add_argument("--seed", type=int, help="override the config's seed")
     p.add_argument("--image-size", type=int, help="override the config's image_size")
     p.add_argument("--bikes-root", help="override the config's bikes_root")
+    p.add_argument("--bikes", nargs="+", metavar="ID", help="override the config's bikes: these bike ids only")
+    p.add_argument("--riders", nargs="+", metavar="ID", help="override the config's riders: these rider ids only")
+    p.add_argument("--riders-root", help="override the config's riders_root")
     p.add_argument("--format", action="append", choices=("coco", "kitti"),
                    help="label format(s) to write (repeat for both); overrides the config's labels.formats")
     p.add_argument("--camera", help="override the config's camera.preset (street mode)")
@@ -69,8 +77,9 @@ def generate(cfg, out_dir, workers=1, log=print, progress=True, shard=None, engi
     os.makedirs(out_dir, exist_ok=True)
     cpath = os.path.join(out_dir, "config.json")
     if os.path.isfile(cpath):
-        with open(cpath) as f:
-            old = json.load(f)
+        old = read_json(cpath, "dataset config record")
+        if not isinstance(old, dict):
+            raise UserError(f"{cpath} is not a dataset config record; use another --out or delete it")
         if old != cfg:
             diff = sorted(k for k in set(old) | set(cfg) if old.get(k) != cfg.get(k))
             raise UserError(f"{out_dir} holds a dataset made with a different config (fields {', '.join(diff)} "
@@ -115,7 +124,6 @@ def generate(cfg, out_dir, workers=1, log=print, progress=True, shard=None, engi
 
 def check_args(args):
     """Impossible overrides, an empty config file and an unusable --out, before any work."""
-    from cyclist_formats import checks
     if args.config is not None:
         checks.non_empty_file("config", args.config)
     checks.count("count", args.count)
@@ -128,13 +136,13 @@ def check_args(args):
         raise UserError("--shard is the engine-free form (one process per shard); leave out --engine ray")
     if args.address and args.engine != "ray":
         raise UserError("--address goes with --engine ray")
+    check_address(args.address)
 
 
 def run(args):
     from splatting.dataset.config import load_config
     if args.workers < 1:
         raise UserError("--workers must be >= 1")
-    from cyclist_formats import checks
     from splatting.library.use import check_dataset_assets
     shard = parse_shard(args.shard)
     nested = {}
@@ -143,11 +151,14 @@ def run(args):
     if args.camera:
         nested["camera"] = {"preset": args.camera}
     cfg = load_config(args.config, args.preset, {"count": args.count, "seed": args.seed,
-                                                 "image_size": args.image_size, "bikes_root": args.bikes_root},
+                                                 "image_size": args.image_size, "bikes_root": args.bikes_root,
+                                                 "bikes": args.bikes, "riders": args.riders,
+                                                 "riders_root": args.riders_root},
                       nested)
     checks.image_size("config field 'image_size'", cfg["image_size"])
     checks.count("config field 'count'", cfg["count"])
-    out = args.out or os.path.join("out", "datasets", cfg["name"])
+    out = args.out or checks.inside(os.path.join("out", "datasets"), os.path.join("out", "datasets", cfg["name"]),
+                                    "the default output folder")
     checks.output_dir("out", out)
     check_dataset_assets(cfg, allow_low_quality=args.allow_low_quality)  # trained assets only, unless opted out
     log = (lambda *a: None) if args.quiet else (lambda m: print(m, flush=True))

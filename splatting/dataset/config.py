@@ -8,10 +8,9 @@ resolve to the same one.
 import copy
 import os
 
-import yaml
-
-from cyclist_formats import bike_folder
+from cyclist_formats import bike_folder, checks
 from cyclist_formats.errors import UserError
+from cyclist_formats.text_files import read_yaml
 from splatting import paths
 
 PRESET_DIR = str(paths.BLEND_ASSETS / "datasets")
@@ -24,7 +23,9 @@ from splatting.dataset.camera_presets import DEFAULTS as CAMERA_DEFAULTS
 from splatting.cyclist.appearance import RECOLOUR
 from splatting.cyclist.lod import DEFAULT_COMPENSATE as LOD_COMPENSATE, DEFAULT_LEVELS as LOD_LEVELS
 from splatting.dataset.labels import DEFAULT_COMBINED, DEFAULT_NAMES, VEHICLES
-from splatting.dataset import lighting
+from splatting.dataset import camera_presets, lighting
+from splatting.dataset.backgrounds import list_images
+from splatting.rider.roster import all_riders
 
 DEFAULTS = {
     "name": "dataset",
@@ -115,13 +116,7 @@ def _merge(base, over, prefix=""):
 
 
 def load_yaml(path):
-    try:
-        with open(path) as f:
-            data = yaml.safe_load(f)
-    except FileNotFoundError:
-        raise UserError(f"no such config file: {path}")
-    except yaml.YAMLError as e:
-        raise UserError(f"{path} is not valid YAML: {str(e).splitlines()[0]}")
+    data = read_yaml(path, "config file", missing=f"no such config file: {path}")
     return {} if data is None else data
 
 
@@ -150,6 +145,9 @@ def validate(raw):
         raise _err("synthetic_assets", f"expected auto, always or never, got {cfg['synthetic_assets']!r}")
     if not isinstance(cfg["name"], str) or not cfg["name"]:
         raise _err("name", "expected a non-empty string")
+    if not checks.SAFE_NAME.match(cfg["name"]):  # it names the default output folder out/datasets/<name>
+        raise _err("name", f"expected a name of letters, digits, '.', '_' or '-' (starting with a letter or digit, "
+                           f"at most 100), got {cfg['name']!r}")
     for f in ("riders", "bikes"):
         v = cfg[f]
         if not (v == "all" or (isinstance(v, list) and v and all(isinstance(x, str) and x for x in v))):
@@ -180,7 +178,6 @@ def validate(raw):
 
 
 def _validate_street(cfg):
-    from splatting.dataset import camera_presets
     cam = camera_presets.resolve(cfg["camera"])
     if cfg["mode"] == "street" and cam is None:
         raise _err("camera.preset", "street mode needs a driving camera (kitti, nuscenes, waymo, dashcam, custom)")
@@ -280,7 +277,6 @@ def _validate_lod(lod):
 
 def resolve_assets(cfg):
     """Expand 'all' and check that every rider and bike exists (config field named on failure)."""
-    from splatting.rider.roster import all_riders
     cfg = copy.deepcopy(cfg)
     if cfg["mode"] in ("cyclist", "street"):
         known = [r["id"] for r in all_riders()]
@@ -293,7 +289,6 @@ def resolve_assets(cfg):
         cfg["riders"] = []
     b = cfg["backgrounds"]
     if "images" in b["kinds"] and b["image_files"] is None:
-        from splatting.dataset.backgrounds import list_images
         b["image_files"] = [os.path.abspath(f) for f in list_images(b["images_dir"])]
     if "scene" in b["kinds"] and not os.path.isfile(b["scene_ply"]):
         raise _err("backgrounds.scene_ply", f"no such file {b['scene_ply']!r}")

@@ -22,6 +22,7 @@ label_2 fields (KITTI devkit readme): type truncated occluded alpha x1 y1 x2 y2 
 """
 import math
 import os
+import shutil
 
 import numpy as np
 
@@ -116,7 +117,6 @@ def kitti_paths(out_dir, index):
 
 def write_sample(out_dir, index, image_path, objects, calib_dict):
     """Image (hard link to the COCO image where the file system allows, else a copy), label, calib."""
-    import shutil
     p = kitti_paths(out_dir, index)
     for k in ("image", "label", "calib"):
         os.makedirs(os.path.dirname(p[k]), exist_ok=True)

@@ -15,10 +15,12 @@ bicycle or scooter and `motorcyclist` for a motorcycle (`labels.combined` change
 """
 from typing import NamedTuple
 
+from pycocotools import mask as mask_utils
 import numpy as np
 
 from splatting.bike.model import KEYPOINTS as BIKE_KEYPOINTS
 from splatting.dataset.person_keypoints import COCO17, COCO17_FLIP, COCO17_SIGMAS, COCO17_SKELETON
+from splatting.rider.kinematics import JOINT_NAMES, PARENTS
 
 CATEGORY_KEYS = ("bicycle", "rider", "cyclist", "motorcyclist", "motorcycle", "scooter")
 CATEGORY_IDS = {k: i + 1 for i, k in enumerate(CATEGORY_KEYS)}
@@ -45,7 +47,6 @@ BIKE_SIGMAS = {"seat": 0.07, "pedal_left": 0.07, "pedal_right": 0.07, "steer_top
 
 
 def person_schema(kind):
-    from splatting.rider.kinematics import JOINT_NAMES, PARENTS
     if kind == "coco17":
         return {"keypoints": list(COCO17), "skeleton": COCO17_SKELETON, "sigmas": list(COCO17_SIGMAS),
                 "flip_pairs": COCO17_FLIP, "keypoint_format": "coco17"}
@@ -115,7 +116,6 @@ def rle(mask, width=None, height=None):
     """COCO compressed RLE of a (H, W) bool mask or a BoxMask (with the image's width, height) ->
     (pycocotools RLE, JSON-ready dict).  Column-major runs are counted over the box's columns
     only (full height): the columns left and right of them are one zero run each."""
-    from pycocotools import mask as mask_utils
     if not isinstance(mask, BoxMask):
         height, width = mask.shape
         mask = BoxMask(np.asarray(mask, bool), 0, 0)
@@ -163,7 +163,6 @@ def annotation(key, visible, amodal, extent_box, width, height, keypoints=None, 
     """One COCO annotation (without id / image_id) or None when no pixel is visible.
     visible, amodal: (H, W) bool or BoxMask; extent_box: the unclipped projected extent [x0, y0, x1, y1];
     keypoints (n, 3) [x, y, v] or None (the category has none)."""
-    from pycocotools import mask as mask_utils
     if not (visible.crop if isinstance(visible, BoxMask) else visible).any():
         return None
     r, seg = rle(visible, width, height)

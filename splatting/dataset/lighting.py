@@ -19,7 +19,18 @@ import torch
 
 from cyclist_formats import bike_folder
 from cyclist_formats.errors import UserError
-from splatting.raster.sparse import EPS2D
+from splatting.bike.model import present_parts
+from splatting.cyclist.assets import bike_dir, has_trained_gaussians
+from splatting.cyclist.scene_relit import render_scene_relit
+from splatting.dataset.backgrounds import contact_shadows
+from splatting.gaussians.sh import C0
+from splatting.raster.sparse import EPS2D, render_gaussians
+from splatting.relight.avatar import cyclist_static, RelightableAvatar
+from splatting.relight.bike import RelightableBike
+from splatting.relight.render import leading_view_normals, relight_features
+from splatting.relight.shading import Light, SKY_TINT, srgb_decode, sun_direction
+from splatting.relight import shadow  # shadow.X at call time: the maps are swapped in tests
+from splatting.rider.avatar import PLY_NAME, SKINNING_NAME
 
 MODES = ("baked", "relit")
 TAG = 0x5A11  # separates the light's draws from the sample's other streams
@@ -68,9 +79,6 @@ def check_assets(cfg):
     one UserError naming the first asset without them and the command that makes them."""
     if not relit(cfg):
         return
-    from splatting.bike.model import present_parts
-    from splatting.cyclist.assets import bike_dir, has_trained_gaussians
-    from splatting.rider.avatar import PLY_NAME, SKINNING_NAME
     if cfg["synthetic_assets"] == "always":
         raise _err("mode", "relit needs trained assets with relight channels, but synthetic_assets is 'always' "
                            "(stand-ins carry no albedo or normals)")
@@ -98,7 +106,6 @@ def check_assets(cfg):
 
 def draw_light(lc, seed, index):
     """The sun and sky of sample `index`: (Light, its record without the camera frame)."""
-    from splatting.relight.shading import SKY_TINT, Light, sun_direction
     rng = np.random.default_rng([int(seed), int(index), TAG])
     el, az = rng.uniform(*lc["elevation_deg"]), rng.uniform(*lc["azimuth_deg"])
     strength, s = rng.uniform(*lc["strength"]), rng.uniform(*lc["sky"])
@@ -121,14 +128,11 @@ class _Channels:
 
     def bike(self, assets, bike):
         if bike not in self.bikes:
-            from splatting.cyclist.assets import bike_dir
-            from splatting.relight.bike import RelightableBike
             self.bikes[bike] = RelightableBike.of(assets.bikes[bike], bike_dir(bike, assets.cfg["bikes_root"]))
         return self.bikes[bike]
 
     def rider(self, assets, rider):
         if rider not in self.riders:
-            from splatting.relight.avatar import RelightableAvatar
             self.riders[rider] = RelightableAvatar.of(assets.avatars[rider], os.path.join(assets.cfg["riders_root"], rider))
         return self.riders[rider]
 
@@ -137,14 +141,12 @@ class _Channels:
         gloss, roughness and sky visibility, concatenated once rather than per image."""
         key = (bike, rider)
         if key not in self.statics:
-            from splatting.relight.avatar import cyclist_static
             self.statics[key] = cyclist_static(self.bike(assets, bike),
                                                self.rider(assets, rider) if rider is not None else None)
         return self.statics[key]
 
 
 def _srgb_decode(c):
-    from splatting.relight.shading import srgb_decode
     return srgb_decode(c)
 
 
@@ -183,8 +185,6 @@ class RelitSample:
         camera (a bike fitted with view-dependent normals turns them to it).  antialiased, eps2d:
         how g is drawn (rasterize's; the bike's mip filter and each model's low-pass), which its
         shadow map draws it with too."""
-        from splatting.gaussians.sh import C0
-        from splatting.relight.render import leading_view_normals, relight_features
         alb, gl, rough, sky = self.ch.static(self.assets, bike, rider)
         nrm = self.normals[k]
         if self.normal_view.get(k) is not None:  # the bike's Gaussians come first
@@ -197,8 +197,7 @@ class RelitSample:
             alb, gl, rough, sky, nrm = (x.index_select(0, idx) for x in (alb, gl, rough, sky, nrm))
         vis = None
         if self.shadows:
-            from splatting.relight.shadow import sun_visibility
-            vis = sun_visibility(g, self.light, antialiased=antialiased, eps2d=eps2d)
+            vis = shadow.sun_visibility(g, self.light, antialiased=antialiased, eps2d=eps2d)
         self.channels[k] = (alb + gl, relight_features(nrm, gl, rough, vis, sky))
 
     def cast_shadows(self, rgb, L, camera, footprints, heights, opacity):
@@ -207,8 +206,6 @@ class RelitSample:
         background, the contact shadows, a 3DGS scene.  A layer of its own rather than Gaussians in
         the scene's rasterization, so it cannot sort in front of a wheel and move a label: the
         labels stay the baked render's."""
-        from splatting.dataset.backgrounds import contact_shadows
-        from splatting.raster.sparse import render_gaussians
         g = contact_shadows(footprints, opacity, sun=self.light, heights=heights)
         a = render_gaussians(g, camera, sh_degree=0)["alpha"].numpy()
         keep = 1.0 - a * (1.0 - np.clip(L["relit_cover"], 0.0, 1.0))
@@ -219,7 +216,6 @@ class RelitSample:
 
     def render(self, parts, slots, n_slots, camera, amodal_slots, amodal_max_px, antialiased=False, eps2d=EPS2D):
         """render_scene's layers with the instances (the first len(self.channels) parts) relit."""
-        from splatting.relight.scene import render_scene_relit
         ch = [self.channels[k] for k in range(len(self.channels))]
         return render_scene_relit(parts, ch, slots, n_slots, camera, self.light, self.shadows, amodal_slots,
                                   amodal_max_px, antialiased, eps2d)

@@ -8,23 +8,32 @@ the rider is a trained avatar from --riders-root when one exists, else the mesh 
 """
 import argparse
 import os
+import shutil
 import sys
 import tempfile
 
+from PIL import Image
 import numpy as np
+import torch
 
+from cyclist_formats.atomic import atomic_path
 from cyclist_formats.errors import UserError
+from cyclist_formats.instances import RIDER_ID
+from splatting import paths
+from splatting.cyclist import appearance
+from splatting.cyclist.render import over
+from splatting.cyclist.scene_render import render_scene, slot_boxes, union
+from splatting.dataset import camera_presets
+from splatting.dataset.config import resolve_assets, validate
+from splatting.dataset.generate import Assets
+
+# without --bike: keypoints + meta of the procedural generator's city bike 0 (spec.sample_spec("city", 0, 0);
+# blend_assets/stand_in_bike/, checked against the generator by tests/test_layers.py) for stand-in Gaussians
+STAND_IN_BIKE = "city_00"
 
 
 def render_sheet(cfg, bike, rider, n=12, cols=4, log=print):
     """(H, W, 3) uint8 grid of n looks of one cyclist."""
-    import torch
-    from cyclist_formats.instances import RIDER_ID
-    from splatting.cyclist import appearance
-    from splatting.cyclist.render import over
-    from splatting.cyclist.scene_render import render_scene, slot_boxes, union
-    from splatting.dataset import camera_presets
-    from splatting.dataset.generate import Assets
     torch.set_num_threads(1)
     assets = Assets(cfg)
     cyc = assets.cyclist(bike, rider)
@@ -66,15 +75,13 @@ def main(argv=None):
         ap.error("--count must be >= 1")
     if not args.out.lower().endswith(".png"):
         ap.error("--out must be a .png file")
-    from cyclist_formats.atomic import atomic_path
-    from splatting.dataset.config import resolve_assets, validate
     try:
         with tempfile.TemporaryDirectory() as scratch:
             if args.bike:
                 root, bike = os.path.dirname(os.path.abspath(args.bike)), os.path.basename(os.path.abspath(args.bike))
             else:
-                from bench.dataset import _write_spec_bike
-                root, bike = scratch, _write_spec_bike(scratch)
+                root, bike = scratch, STAND_IN_BIKE
+                shutil.copytree(os.path.join(paths.BLEND_ASSETS, "stand_in_bike", STAND_IN_BIKE), os.path.join(scratch, bike))
             cfg = resolve_assets(validate({"mode": "street", "camera": {"preset": "nuscenes"}, "seed": args.seed,
                                            "bikes": [bike], "bikes_root": root, "riders": [args.rider],
                                            "riders_root": args.riders_root, "appearance": {"enabled": True,
@@ -83,7 +90,6 @@ def main(argv=None):
     except UserError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    from PIL import Image
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     with atomic_path(args.out) as tmp:
         Image.fromarray(sheet).save(tmp, format="PNG")

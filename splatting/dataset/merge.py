@@ -9,7 +9,12 @@ the output, so running it twice, or after a single-process run, gives the same b
 import json
 import os
 
+from cyclist_formats import checks
 from cyclist_formats.errors import UserError
+from splatting.dataset.coco import merge
+from splatting.dataset.generate import sample_done
+from splatting.dataset.kitti import write_imagesets
+from splatting.dataset.labels import categories
 
 
 def coco_info(cfg):
@@ -34,14 +39,11 @@ def read_config(out_dir):
 
 
 def missing_samples(out_dir, cfg):
-    from splatting.dataset.generate import sample_done
     return [i for i in range(cfg["count"]) if not sample_done(out_dir, i, cfg)]
 
 
 def merge_dataset(out_dir):
     """Merge every shard of the dataset in out_dir; returns the annotations.json path."""
-    from splatting.dataset.coco import merge
-
     cfg = read_config(out_dir)
     missing = missing_samples(out_dir, cfg)
     if missing:
@@ -49,10 +51,8 @@ def merge_dataset(out_dir):
                         f"(e.g. {', '.join(map(str, missing[:3]))}); finish them with "
                         f"`python -m splatting dataset --config {os.path.join(out_dir, 'config.json')} --out {out_dir}` "
                         f"(or the missing --shard runs), then merge again")
-    from splatting.dataset.labels import categories
     path = merge(out_dir, cfg["count"], coco_info(cfg), categories(cfg["labels"], cfg["keypoints"]["person"]))
     if "kitti" in cfg["labels"]["formats"]:
-        from splatting.dataset.kitti import write_imagesets
         write_imagesets(out_dir, cfg["count"])
     return path
 
@@ -62,7 +62,6 @@ def add_arguments(p):
 
 
 def check_args(args):
-    from cyclist_formats import checks
     checks.input_dir("out", args.out)
 
 

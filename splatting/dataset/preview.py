@@ -2,6 +2,8 @@
 import json
 import os
 
+from PIL import Image, ImageDraw
+from pycocotools import mask as mask_utils
 import numpy as np
 
 from cyclist_formats.atomic import atomic_path
@@ -17,9 +19,6 @@ def _name(c):
 
 
 def coco_preview(coco_dir, out_png, n=4, tile=256):
-    from PIL import Image, ImageDraw
-    from pycocotools import mask as mask_utils
-
     with open(os.path.join(coco_dir, "annotations.json")) as f:
         ann = json.load(f)
     cats = {c["id"]: _name(c) for c in ann["categories"]}
@@ -59,8 +58,6 @@ def coco_preview(coco_dir, out_png, n=4, tile=256):
 def keypoint_figure(coco_dir, out_png, image_id=1, scale=2, names=("person", "bicycle")):
     """One image with the keypoints and skeletons of the given categories drawn and numbered (the
     label reference's picture of the 17 person points and the 11 bike points)."""
-    from PIL import Image, ImageDraw
-
     with open(os.path.join(coco_dir, "annotations.json")) as f:
         ann = json.load(f)
     cats = {c["id"]: c for c in ann["categories"]}
@@ -92,8 +89,6 @@ def relit_preview(baked_dir, relit_dir, out_png, n=4, tile=192, margin=12):
     """The same samples of a baked and a relit set (same config and seed; the light has its own
     random stream, so poses and cameras agree), cropped to the instances: baked on top, relit
     below, each relit tile captioned with its sun (elevation / azimuth, degrees)."""
-    from PIL import Image, ImageDraw
-
     docs = []
     for d in (baked_dir, relit_dir):
         with open(os.path.join(d, "annotations.json")) as f:

@@ -10,11 +10,18 @@ the same files; OUT/library.json lists every asset with its files and hashes, qu
 build time, settings, and whether it clears the quality floor (datasets use only those).
 The bikes themselves come from `make bikes` (blender_scripts/make_bikes.py).
 """
+from dataclasses import asdict, replace
 import os
 import time
 
+from cyclist_formats import checks
+from cyclist_formats.atomic import remove_stale
 from cyclist_formats.errors import UserError
+from splatting.library.ray_address import check_address
 from splatting.library import manifest
+
+# The stage's modules are imported inside the functions below, not at the top: they load torch
+# (~2.5 s, python -X importtime), and `--help` and the argument checks answer before that (0.2-0.5 s).
 
 
 def add_arguments(p):
@@ -61,7 +68,6 @@ def add_arguments(p):
 
 
 def check_args(args):
-    from cyclist_formats import checks
     checks.output_dir("out", args.out)
     checks.image_size("size", args.size, lo=32)
     checks.count("samples", args.samples, hi=1 << 16)
@@ -85,6 +91,7 @@ def check_args(args):
     checks.output_dir("riders_root", args.riders_root)
     if args.address and args.engine != "ray":
         raise UserError("--address goes with --engine ray")
+    check_address(args.address)
 
 
 def select(args):
@@ -132,8 +139,6 @@ def posed_settings(args):
     every other PosedTrainConfig default (rates, rest fraction, denoiser, ...), so that a default
     changed in splatting/bike/posed_train.py is a settings change too, never a silent one.  Resolved
     here, not in add_arguments: the module imports torch, --help should not."""
-    from dataclasses import asdict, replace
-
     from splatting.bike.recipes import posed_config
     d = posed_config(args.recipe)
     cfg = replace(d, poses=args.posed_poses or d.poses, iterations=args.posed_iterations or d.iterations,
@@ -151,7 +156,6 @@ def floors_of(args):
 
 def build(args):
     """Run (or finish) the build; returns (library.json doc, {task: skipped}, wall seconds)."""
-    from cyclist_formats.atomic import remove_stale
     from splatting.library import engine
     from splatting.library.tasks import make_graph
 

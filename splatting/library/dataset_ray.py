@@ -8,13 +8,16 @@ is rerun and skips them too.  One declared CPU and one torch thread per task.
 """
 import json
 
+from splatting.dataset.generate import Assets, sample_done, write_sample
+
+from splatting.library.engine import ensure_ray
+
+import torch
+
 _CACHE = {}  # per worker process: (config json, out dir) -> Assets, reused by later tasks
 
 
 def _render_range(cfg, out_dir, indices):
-    import torch
-
-    from splatting.dataset.generate import Assets, sample_done, write_sample
 
     torch.set_num_threads(1)
     key = (json.dumps(cfg, sort_keys=True), out_dir)
@@ -43,7 +46,6 @@ def chunks(todo, parts):
 
 def generate_ray(cfg, out_dir, todo, address=None, tick=None, tasks_per_cpu=4, retries=3):
     """Render the indices in todo as Ray tasks; tick(done samples) after each finished task."""
-    from splatting.library.engine import ensure_ray
     ray = ensure_ray(address)
     cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
     remote = ray.remote(num_cpus=1, max_retries=retries, retry_exceptions=True)(_render_range)

@@ -9,11 +9,14 @@ ray:   each task is a Ray task declaring its CPUs, its dependencies passed as ob
        driver loses nothing finished; rerunning skips what is recorded.
 Both report one progress line per finished task with the running count (the aggregated bar).
 """
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 import os
 import sys
 import time
 
 from cyclist_formats.errors import UserError
+from splatting.library.ray_address import check_address
+from splatting.library.tasks import execute
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -33,6 +36,7 @@ def ensure_ray(address=None, num_cpus=None):
         raise UserError("--engine ray needs the ray package (pip install -r requirements.txt)") from None
     if ray.is_initialized():
         return ray
+    check_address(address)
     kw = {"runtime_env": ray_runtime_env(), "log_to_driver": False, "include_dashboard": False}
     try:
         if address:
@@ -59,9 +63,6 @@ class Progress:
 
 def run_local(graph, root, settings, workers=1, retries=1, quiet=False):
     """Run graph with `workers` tasks at a time; returns {task id: skipped}."""
-    from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
-
-    from splatting.library.tasks import execute
 
     prog = Progress(len(graph), "library", quiet)
     state, tries = {}, {}
@@ -102,7 +103,6 @@ def run_ray(graph, root, settings, address=None, retries=2, quiet=False):
     """The graph as Ray tasks (dependencies as object refs); returns {task id: skipped}."""
     ray = ensure_ray(address)
 
-    from splatting.library.tasks import execute
 
     @ray.remote(max_retries=retries, retry_exceptions=True)
     def _task(task, root_, settings_, *deps):

@@ -11,21 +11,18 @@ import os
 import subprocess
 import sys
 
+from PIL import Image
 import numpy as np
+import torch
 
 from cyclist_formats.atomic import atomic_path
+from splatting.bike.model import BikeModel
+from splatting.bike.pose import sample_poses
+from splatting.raster.camera import load_cameras
+from splatting.raster.sparse import render_gaussians
 from splatting.training.metrics import box_psnr, mask_iou
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-
-
-def sample_poses(n, seed=0):
-    """n fixed random 8-DoF poses and ring cameras (a seed-only function, as bench/bike_gt.py)."""
-    rng = np.random.default_rng(seed)
-    poses = np.stack([rng.uniform(0, 360, n), rng.uniform(-60, 60, n), rng.uniform(-15, 15, n),
-                      rng.uniform(0, 360, n), rng.uniform(-15, 15, n), rng.uniform(-0.3, 0.3, n),
-                      rng.uniform(-0.1, 0.1, n), rng.uniform(-0.3, 0.3, n)], 1)
-    return poses, rng.integers(0, 36, n)
 
 
 def render_blender(bike_dir, pose, cam_index, out_png, samples=None):
@@ -44,12 +41,6 @@ def render_blender(bike_dir, pose, cam_index, out_png, samples=None):
 
 def ground_truth(bike_dir, out_dir, n_poses=3, samples=None, seed=0):
     """-> (metrics, [files written]).  Renders skipped when their PNG exists (resumable)."""
-    import torch
-    from PIL import Image
-
-    from splatting.bike.model import BikeModel
-    from splatting.raster.camera import load_cameras
-    from splatting.raster.sparse import render_gaussians
 
     torch.set_num_threads(1)
     poses, cams = sample_poses(n_poses, seed)

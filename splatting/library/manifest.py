@@ -18,7 +18,7 @@ import json
 import os
 import time
 
-from cyclist_formats.atomic import read_json_or_none, write_json
+from cyclist_formats.atomic import is_temp_name, read_json_or_none, write_json
 from cyclist_formats.errors import UserError
 
 MANIFEST = "library.json"
@@ -35,7 +35,6 @@ def sha256(path, chunk=1 << 20):
 
 def tree_hash(folder):
     """One hash over every file below folder (relative names + contents), temporaries excluded."""
-    from cyclist_formats.atomic import is_temp_name
     h = hashlib.sha256()
     n = 0
     for d, dirs, files in os.walk(folder):

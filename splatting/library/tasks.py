@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 from cyclist_formats import bike_folder
 from cyclist_formats.errors import UserError
 from splatting.library import manifest
+from splatting.library.gt import ground_truth
+from splatting.rider.avatar import PLY_NAME, SKINNING_NAME
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 PARTS = ("frame", "steering", "crank")
@@ -154,7 +156,6 @@ def run_posed(task, root, s):
 
 
 def run_gt(task, root, s):
-    from splatting.library.gt import ground_truth
     t = time.time()
     out_dir = os.path.join(root, "library", "gt", task.asset)
     m, files = ground_truth(task.bike_dir, out_dir, s["gt_poses"], s.get("samples"), seed=s["gt_seed"])
@@ -170,7 +171,6 @@ def run_avatar(task, root, s):
     t = time.time()
     _run(cmd, f"avatar of {task.asset}")
     wall = time.time() - t
-    from splatting.rider.avatar import PLY_NAME, SKINNING_NAME
     paths = [os.path.join(folder, n) for n in (PLY_NAME, SKINNING_NAME, "rider.json")]
     with open(paths[2]) as f:
         m = json.load(f)

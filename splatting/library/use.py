@@ -9,19 +9,18 @@ OUT/bikes), an asset it marks below the quality floor is refused unless allow_lo
 import os
 
 from cyclist_formats.errors import UserError
+from splatting.cyclist.assets import has_trained_gaussians
+from splatting.dataset.config import resolve_assets
+from splatting.library.manifest import load_manifest
+from splatting.rider.avatar import PLY_NAME, SKINNING_NAME
 
 
 def _manifest_for(bikes_root):
-    from splatting.library.manifest import load_manifest
     return load_manifest(os.path.dirname(os.path.abspath(bikes_root)))
 
 
 def check_dataset_assets(cfg, allow_low_quality=False):
     """Raise UserError naming the first unusable asset of a validated config; returns the resolved config."""
-    from splatting.cyclist.assets import has_trained_gaussians
-    from splatting.dataset.config import resolve_assets
-    from splatting.rider.avatar import PLY_NAME, SKINNING_NAME
-
     cfg = resolve_assets(cfg)
     if cfg["synthetic_assets"] == "always":
         return cfg

@@ -23,6 +23,7 @@ compositing); splatting.raster.reference renders the same image from the formula
 """
 import torch
 
+from splatting.gaussians.sh import rgb_to_sh0
 from splatting.raster.camera import Camera
 from splatting.raster.sparse import EPS2D, rasterize
 
@@ -48,12 +49,13 @@ def viewmat(camera):
 
 
 def rasterization(means, quats, scales, opacities, colors, viewmats, Ks, width, height, *, sh_degree=None,
-                  features=None, backgrounds=None, near=0.01, eps2d=EPS2D, backend=None):
-    """Render N Gaussians into C cameras; see the module docstring for shapes."""
+                  features=None, backgrounds=None, near=0.01, eps2d=EPS2D, antialiased=False, backend=None):
+    """Render N Gaussians into C cameras; see the module docstring for shapes.  eps2d: the low-pass
+    (px^2), a number or one per Gaussian (N,); antialiased: the mip filter (rasterize's), a bool or a
+    (N,) bool mask: models drawn as they were trained (training.record)."""
     cams = _cameras(viewmats, Ks, width, height)
     sh = colors
     if colors.dim() == 2:  # plain RGB: a degree-0 SH whose evaluation gives the colour back
-        from splatting.gaussians.sh import rgb_to_sh0
         sh, sh_degree = rgb_to_sh0(colors)[:, None, :], 0
     if backgrounds is not None:
         backgrounds = torch.as_tensor(backgrounds).to(means)
@@ -63,7 +65,7 @@ def rasterization(means, quats, scales, opacities, colors, viewmats, Ks, width, 
     if backend is not None:
         extra["backend"] = backend
     outs = [rasterize(means, quats, scales, opacities, sh, cam, None if backgrounds is None else backgrounds[i],
-                      sh_degree=sh_degree, near=near, eps2d=eps2d, **extra) for i, cam in enumerate(cams)]
+                      sh_degree=sh_degree, near=near, eps2d=eps2d, antialiased=antialiased, **extra) for i, cam in enumerate(cams)]
     chans = [torch.cat([o["rgb"], o["features"]], -1) if features is not None else o["rgb"] for o in outs]
     meta = {"depths": torch.stack([o["depth"] for o in outs]), "means2d": [o["means2d"] for o in outs],
             "radii": torch.stack([o["radii"] for o in outs]), "backend": outs[0].get("backend", "torch")}

@@ -15,7 +15,7 @@ thread (docs/rasterizer.md).
 import torch
 
 from . import build
-from .sparse import EPS2D, check_eps2d
+from .constants import EPS2D, check_eps2d
 
 _SUFFIX = {torch.float32: "f32", torch.float64: "f64"}
 

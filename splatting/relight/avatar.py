@@ -13,6 +13,7 @@ import torch
 from cyclist_formats import bike_folder
 from splatting.gaussians.container import Gaussians
 from splatting.relight.render import relit_static
+from splatting.relight.shading import ROUGHNESS
 from splatting.rider.avatar import PLY_NAME, RiderAvatar
 
 # the roster riders' material (addon/core/rider_import.py): a fully rough dielectric
@@ -61,8 +62,6 @@ def cyclist_static(rb, ra=None):
     rider's: (albedo (N, 3), gloss (N, 3), roughness (N,), sky visibility (N,)).  The bike keeps
     shading.ROUGHNESS and its own sky visibility (RelightableBike.sky_visibility); a rider has
     RIDER_ROUGHNESS and the whole sky (rider_relit's model)."""
-    from splatting.relight.shading import ROUGHNESS
-
     alb, gl = [rb.albedo], [rb.gloss]
     rough, sky = [torch.full((len(rb.albedo),), ROUGHNESS)], [rb.sky_visibility()]
     if ra is not None:

@@ -8,6 +8,7 @@ import torch
 from cyclist_formats import bike_folder
 from splatting.bike.model import BikeModel
 from splatting.relight.render import relit_static
+from splatting.relight import shadow  # shadow.X at call time: the maps are swapped in tests
 
 
 class RelightableBike:
@@ -76,9 +77,8 @@ class RelightableBike:
         bike hides from itself (on the demo's city bike the rest pose's values scored 28.62 dB at
         bench/relight.py's poses, each pose's own 28.60)."""
         if self._sky is None:
-            from splatting.relight.shadow import sky_visibility
 
             g = self.model.pose(torch.zeros(8, dtype=torch.float64)).gaussians
-            self._sky = sky_visibility(g.map(lambda x: x.contiguous()), self.normals,
+            self._sky = shadow.sky_visibility(g.map(lambda x: x.contiguous()), self.normals,
                                        antialiased=self.model.antialiased, eps2d=self.model.eps2d)  # drawn as trained
         return self._sky

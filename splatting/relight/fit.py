@@ -21,6 +21,7 @@ import torch.nn.functional as F
 
 from cyclist_formats import bike_folder
 from cyclist_formats.errors import UserError
+from splatting.bike.model import present_parts, trained_antialiased as parts_antialiased
 from splatting.gaussians.container import read_ply
 from splatting.progress import Progress
 from splatting.raster.sparse import EPS2D
@@ -29,7 +30,8 @@ from splatting.gaussians.sh import C0
 from splatting.relight.shading import HIGHLIGHT, ROUGHNESS, random_light, srgb_decode, srgb_encode, view_directions
 from splatting.rotations import quat_to_rotmat
 from splatting.training.targets import crop_box, crop_camera, split_views
-from splatting.training.trainer import DEFAULT_HOLDOUT
+from splatting.training.trainer import DEFAULT_HOLDOUT, default_out, train_views, write_trained
+from splatting.training.record import ply_trained_antialiased as trained_antialiased, ply_trained_eps2d
 from splatting.training.views import load_views
 
 
@@ -292,20 +294,9 @@ def fit_relight(g, views, cfg: RelightFitConfig = None, antialiased=False, eps2d
     return feats, metrics
 
 
-def trained_antialiased(ply_path):
-    """Whether the Gaussians at ply_path were trained with the mip filter: their <part>.json's
-    "config" (splatting.bike.model.trained_antialiased's rule; no metrics: plain)."""
-    from splatting.bike.model import trained_antialiased as parts_antialiased
-
-    stem = os.path.splitext(os.path.basename(ply_path))[0]
-    return parts_antialiased(os.path.dirname(ply_path), [stem])
-
-
 def fit_file(views_dir, ply_path=None, cfg: RelightFitConfig = None):
     """Fit and write <ply>.relight.npz beside the Gaussians; returns the metrics.  Gaussians trained
     with the mip filter (their <part>.json says so) are fitted through it."""
-    from splatting.training.trainer import default_out
-
     ply_path = ply_path or default_out(views_dir)
     if not os.path.isfile(ply_path):
         raise UserError(f"{ply_path}: no trained Gaussians (run `python -m splatting train --views {views_dir}` first)")
@@ -314,14 +305,25 @@ def fit_file(views_dir, ply_path=None, cfg: RelightFitConfig = None):
     if missing:
         raise UserError(f"{views_dir}: {len(missing)} views lack the albedo/normal passes (e.g. {missing[0]}); "
                         "render them again with render_views")
-    from splatting.bike.model import trained_eps2d
-
     aa = trained_antialiased(ply_path)
     g = read_ply(ply_path)
-    stem = os.path.splitext(os.path.basename(ply_path))[0]
-    feats, metrics = fit_relight(g, views, cfg, antialiased=aa,
-                                 eps2d=trained_eps2d(os.path.dirname(ply_path), {stem: len(g)}))
+    feats, metrics = fit_relight(g, views, cfg, antialiased=aa, eps2d=ply_trained_eps2d(ply_path, len(g)))
     metrics["path"] = bike_folder.write_relight(ply_path, **{k: v.numpy() for k, v in feats.items()})
+    return metrics
+
+
+def train_relit(views_dir, out_ply, train_cfg):
+    """Train Gaussians on a views folder (splatting.training.trainer) and then fit their relight
+    channels on the same views with the trainer's holdout, seed and filters; writes <out>.relight.npz,
+    <out>.ply and <out>.json; returns the training metrics with the fit's under "relight"."""
+    views = load_views(views_dir)
+    g, metrics = train_views(views, train_cfg)
+    metrics["part"] = os.path.basename(os.path.abspath(views_dir))
+    feats, metrics["relight"] = fit_relight(g, views, RelightFitConfig(holdout=train_cfg.holdout, seed=train_cfg.seed,
+                                                                       progress=train_cfg.progress),
+                                            antialiased=train_cfg.antialiased, eps2d=train_cfg.eps2d)
+    bike_folder.write_relight(out_ply, **{k: v.numpy() for k, v in feats.items()})
+    write_trained(g, out_ply, metrics)
     return metrics
 
 
@@ -329,8 +331,6 @@ def bike_parts(bike_dir):
     """The parts of a trained bike folder to fit: those with gaussians/<part>.ply (BikeModel's parts),
     each needing its views folder with the passes; refuses a bike whose parts disagree on the mip
     filter (BikeModel.load's rule) before any work."""
-    from splatting.bike.model import present_parts, trained_antialiased as parts_antialiased
-
     gdir = os.path.join(bike_dir, "gaussians")
     parts = present_parts(gdir)
     if "frame" not in parts:

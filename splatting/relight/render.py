@@ -6,12 +6,17 @@ backward of the features with the geometry fixed (one projection per view, reuse
 """
 import math
 from typing import NamedTuple, Optional
+import ctypes
 
 import torch
 
+from splatting.gaussians.container import Gaussians
 from splatting.gaussians.sh import rgb_to_sh0
-from splatting.raster.sparse import EPS2D, antialias_opacities, composite, intersect, project
+from splatting.raster import build
+from splatting.raster.cpu_tiles import TileShade
+from splatting.raster.sparse import antialias_opacities, composite, EPS2D, intersect, project, render_gaussians
 from splatting.relight.shading import HIGHLIGHT, ROUGHNESS, Light, _shade_cm, _view_directions_cm
+from splatting.relight import shadow  # shadow.X at call time: the maps are swapped in tests
 
 LUMA = torch.tensor([0.2126, 0.7152, 0.0722])  # Rec. 709 luminance of linear RGB
 
@@ -65,7 +70,7 @@ def relight_features(normals, gloss=None, roughness=None, visibility=None, sky_v
     when given (scenes mixing materials: a bike's 0.4, a rider's 1.0), the sun visibility (1) when
     given (cast shadows), the sky visibility (1) when given (self-occlusion, shadow.sky_visibility).
     The reflectance albedo + gloss is composited through the colour channels (or its own 3
-    features, splatting/relight/scene.py)."""
+    features, splatting/cyclist/scene_relit.py)."""
     luma = None if gloss is None else gloss_luma(gloss)
     return torch.cat(relight_feature_parts(normals, luma, roughness, visibility, sky_visibility), 1).contiguous()
 
@@ -144,11 +149,8 @@ _C = None
 def _shade_c(box, R, feats, alpha, out, camera, light, gloss, rough_channel, shadows, roughness, highlight,
              in_place=False, sky_channel=False):
     """csrc/shade.cpp's rl_shade_f32 on the rasterizer's pixel-major views (no gathers, no copies)."""
-    import ctypes
-
     global _C
     if _C is None:
-        from splatting.raster import build
         _C = build.load().rl_shade_f32
         i64, p = ctypes.c_int64, ctypes.c_void_p
         _C.argtypes, _C.restype = [i64, i64, i64, i64, i64, p, i64, p, i64, p, p, p, ctypes.c_int32], None
@@ -212,11 +214,8 @@ _VN = None
 
 
 def _view_normals_c(normals, normal_view, means, c):
-    import ctypes
-
     global _VN
     if _VN is None:
-        from splatting.raster import build
         _VN = build.load().rl_view_normals_f32
         _VN.argtypes, _VN.restype = [ctypes.c_int64] + [ctypes.c_void_p] * 5, None
     normals, normal_view, means, c = (x.contiguous() for x in (normals, normal_view, means, c))
@@ -253,9 +252,6 @@ def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness
     view_normals(normals, normal_view, g.means, camera); None: normals as they are.
     eps2d: rasterize's low-pass, a number or (N,), as g was trained (BikeModel.eps2d), view and
     shadow map alike."""
-    from splatting.gaussians.container import Gaussians
-    from splatting.raster.sparse import render_gaussians
-
     # Channel budget (each composited channel costs the tiled compositor ~3-5 % of a render): the
     # reflectance albedo + gloss rides in the colour channels (degree-0 SH whose colour is it), the
     # normal and the gloss's luminance are the features (relight_features), handed over as parts
@@ -267,8 +263,7 @@ def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness
         normals = view_normals(normals, normal_view, g.means, camera)
     vis = None
     if shadows:
-        from splatting.relight.shadow import sun_visibility
-        vis = sun_visibility(g, light, antialiased=shadow_antialiased, eps2d=eps2d)
+        vis = shadow.sun_visibility(g, light, antialiased=shadow_antialiased, eps2d=eps2d)
     gr = Gaussians(g.means, g.quats, g.log_scales, g.opacity_logits, static.sh)
     parts = relight_feature_parts(normals, static.gloss_luma, visibility=vis, sky_visibility=sky_visibility)
     gloss_on, sky_on = static.gloss_luma is not None, sky_visibility is not None
@@ -278,7 +273,6 @@ def render_relit(g, albedo, normals, camera, light: Light, gloss=None, roughness
         raise ValueError("render_relit: fused shading needs float32 CPU Gaussians, a scalar roughness and "
                          "reflectance=False")
     if can_fuse and fused is not False:
-        from splatting.raster.cpu_tiles import TileShade
 
         spec = TileShade(shade_params(camera, light, roughness, highlight),
                          shade_flags(gloss_on, False, shadows, sky_on), features=normal)

@@ -13,7 +13,8 @@ import math
 import torch
 
 from splatting.raster.camera import Camera
-from splatting.raster.sparse import EPS2D
+from splatting.raster.sparse import EPS2D, render_gaussians
+from splatting.relight.shading import Light
 
 SIZE = 256        # shadow map pixels (square)
 BIAS_PX = 2.0     # lit if no deeper than the first surface + this many map pixels
@@ -48,8 +49,6 @@ def sun_visibility(g, light, size=SIZE, bias_px=BIAS_PX, antialiased=False, eps2
     (BikeModel.antialiased): drawn without it, their sub-pixel spokes and cables would grow to
     0.3 px^2 blobs at full opacity and cast more shadow than they have.  eps2d: rasterize's, as g
     was trained (a number or (N,))."""
-    from splatting.raster.sparse import render_gaussians
-
     cam, px_m = sun_camera(g.means, light, size)
     r = render_gaussians(g, cam, sh_degree=0, antialiased=antialiased, eps2d=eps2d)
     # the first surface: the expected depth of the map pixel (rasterizer's depth / alpha) where it
@@ -108,8 +107,6 @@ def sky_visibility(g, normals, directions=SKY_DIRECTIONS, size=SKY_SIZE, bias_px
     the sphere, each weighted by max(0, n.d).  normals (N, 3) unit, the frame of g's means.  For a
     uniform sky it depends on the object's shape only, not on where the object is turned, so a
     bike computes it once (RelightableBike.sky_visibility).  antialiased, eps2d: as sun_visibility's."""
-    from splatting.relight.shading import Light
-
     n = normals.float()
     num, den = torch.zeros(len(g)), torch.zeros(len(g))
     for d in sphere_directions(directions):

@@ -19,12 +19,14 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from cyclist_formats.atomic import atomic_path
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, read_ply, write_ply
 from splatting.gaussians.sh_rotation import rotate_sh
 from splatting.raster.sparse import EPS2D
 from splatting.rotations import quat_mul, rotmat_to_quat_wxyz  # noqa: F401
 from splatting.rider.kinematics import forward_kinematics
+from splatting.training.record import avatar_trained_eps2d as trained_eps2d
 
 SKINNING_METHOD = "barycentric_nearest_triangle"
 PLY_NAME = "rider.ply"
@@ -54,7 +56,7 @@ def nearest_surface_point(points, vertices, faces, k=8, chunk=4096):
     Candidate triangles are those around the point's k nearest vertices (exact unless the
     surface is much coarser than k vertex rings); the exact closest point on each candidate comes
     from trimesh. Returns face index (N,) and barycentric (N,3), float64."""
-    import trimesh
+    import trimesh  # lazy: 0.7 s to import (python -X importtime), for the surface binding alone
 
     pts = torch.as_tensor(points, dtype=torch.float64)
     V = torch.as_tensor(vertices, dtype=torch.float64)
@@ -199,7 +201,6 @@ class RiderAvatar:
 
     def save_skinning(self, folder):
         """Only <folder>/skinning.npz (the build writes rider.ply with the trainer)."""
-        from cyclist_formats.atomic import atomic_path
         os.makedirs(folder, exist_ok=True)
         with atomic_path(os.path.join(folder, SKINNING_NAME)) as tmp:
             with open(tmp, "wb") as f:  # a file object: np.savez would append .npz to the temp name
@@ -230,16 +231,3 @@ class RiderAvatar:
         if not (np.isfinite(w).all() and np.isfinite(j).all()):
             raise UserError(f"{npz}: non-finite values")
         return cls(g, torch.from_numpy(w), torch.from_numpy(j), rider_id, method, trained_eps2d(folder))
-
-
-def trained_eps2d(folder):
-    """The screen-space low-pass (px^2) an avatar's Gaussians were trained with: rider.json's
-    "config" "eps2d" (the trainer's record; rider-posed-train fine-tunes with the same value),
-    0.3 for avatars trained before it was recorded or without metrics."""
-    from cyclist_formats.atomic import read_json_or_none
-    from splatting.bike.model import check_model_eps2d
-
-    m = read_json_or_none(os.path.join(folder, "rider.json"))
-    cfg = m.get("config") if isinstance(m, dict) else None
-    return check_model_eps2d(cfg.get("eps2d", EPS2D) if isinstance(cfg, dict) else EPS2D,
-                             os.path.join(folder, "rider.json"))

@@ -6,13 +6,22 @@ Steps, each skipped when its output exists (so a killed run resumes):
   3. rider.ply       Gaussians trained on those views (splatting.training.trainer; rider.json = metrics)
   4. skinning.npz    per-Gaussian LBS weights from the body model (avatar.RiderAvatar)
 """
+import json
 import os
 import subprocess
 import sys
 import time
 
+from cyclist_formats import checks
+import torch
+
 from cyclist_formats.errors import UserError
 from splatting import paths
+from splatting.gaussians.container import read_ply
+from splatting.rider.avatar import PLY_NAME, RiderAvatar, SKINNING_NAME
+from splatting.rider.body import export_rider
+from splatting.rider.roster import load_rider
+from splatting.training.trainer import train, TrainConfig
 
 RENDER_SCRIPT = paths.blender_script("render_rider.py")
 N_VIEWS = 36
@@ -37,15 +46,7 @@ def render_views(mesh, views_dir, samples=None, python=None, log=print):
 def build_avatar(rider_id, out_dir, iterations=None, time_budget_s=None, max_gaussians=None, samples=None,
                  threads=1, log=print):
     """Run the four steps; returns {"avatar": out_dir, "steps": {step: seconds or "skipped"}, "train": metrics}."""
-    import json
 
-    import torch
-
-    from splatting.gaussians.container import read_ply
-    from splatting.training.trainer import TrainConfig, train
-    from splatting.rider.avatar import PLY_NAME, SKINNING_NAME, RiderAvatar
-    from splatting.rider.body import export_rider
-    from splatting.rider.roster import load_rider
 
     rider = load_rider(rider_id)  # UserError for an unknown id, before any work
     os.makedirs(out_dir, exist_ok=True)
@@ -103,7 +104,6 @@ def add_arguments(p):
 
 
 def check_args(args):
-    from cyclist_formats import checks
     checks.count("iterations", args.iterations)
     checks.positive("time_budget_s", args.time_budget_s)
     checks.gaussians("max_gaussians", args.max_gaussians)

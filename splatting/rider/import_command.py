@@ -9,8 +9,13 @@ import os
 import subprocess
 import sys
 
+from cyclist_formats import checks
 from cyclist_formats.errors import UserError
+from cyclist_formats.rider_file import check_rider_id
 from splatting import paths
+
+# The stage's modules are imported inside the functions below, not at the top: they load torch
+# (~2.5 s, python -X importtime), and `--help` and the argument checks answer before that (0.2-0.5 s).
 
 SCRIPT = paths.blender_script("import_rider.py")
 MODEL_EXTENSIONS = (".glb", ".gltf", ".fbx", ".blend")
@@ -31,11 +36,9 @@ def add_arguments(p):
 
 
 def check_args(args):
-    from cyclist_formats import checks
     checks.input_file("model", args.model)
     if not args.model.lower().endswith(MODEL_EXTENSIONS):
         raise UserError(f"--model must be one of {', '.join(MODEL_EXTENSIONS)}, got {args.model}")
-    from cyclist_formats.rider_file import check_rider_id
     check_rider_id(args.id)
     checks.number("height_m", args.height_m, 0.5, 2.6)
     checks.output_file("out", args.out, (".npz",))

@@ -19,6 +19,7 @@ import torch
 from cyclist_formats import rider_file
 from cyclist_formats.errors import UserError
 from splatting import paths
+from splatting.rider.body import Rider
 
 IMPORTED_DIR = paths.DATA / "imported_riders"
 
@@ -48,8 +49,6 @@ def imported_entries(folder=None):
 
 def load_imported_rider(path, rider_id=None, spec=None):
     """Rider from a rider file (UserError if missing or malformed)."""
-    from splatting.rider.body import Rider
-
     a, meta = rider_file.read_rider_file(path)
     f32 = lambda x: torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32))  # noqa: E731
     v = a["vertices"]

@@ -12,6 +12,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import roma
 import torch
 
 from cyclist_formats.errors import UserError
@@ -173,7 +174,6 @@ def _rz(a):
 
 def _swing(a, b):
     """Batched smallest rotation turning unit vectors a onto b: (B,3),(B,3) -> (B,3,3)."""
-    import roma
     axis = torch.linalg.cross(a, b)
     s = axis.norm(dim=-1, keepdim=True)
     ang = torch.atan2(s, (a * b).sum(-1, keepdim=True))
@@ -237,7 +237,6 @@ def pedal_pose(rider_joints, theta_p, theta_s, fit=BikeFit()):
     drop = math.radians(fit.reach_drop_deg)
     bar = sh_mid + fit.reach * A * torch.tensor([math.cos(drop), -math.sin(drop), 0.0],
                                                 dtype=torch.float64)
-    import roma
     axis = torch.from_numpy(fit.steer_axis)
     R_s = roma.rotvec_to_rotmat(theta_s[:, None] * axis)  # (B,3,3)
     half = torch.tensor([0.0, 0.0, fit.bar_half_width_m], dtype=torch.float64)

@@ -27,10 +27,22 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from cyclist_formats import bike_folder
+from cyclist_formats.atomic import atomic_path
 from cyclist_formats.errors import UserError
 from splatting import paths
+from splatting.gaussians.container import write_ply
 from splatting.progress import Progress
-from splatting.training.trainer import FineTuneRates
+from splatting.raster.camera import ring_camera
+from splatting.raster.sparse import rasterize
+from splatting.rider.avatar import PLY_NAME, RiderAvatar
+from splatting.rider.body import export_rider, pose_vertices
+from splatting.rider.motion import pedal_pose
+from splatting.rider.roster import load_rider
+from splatting.training.metrics import psnr
+from splatting.training.targets import crop_camera, Targets
+from splatting.training.trainer import _params_from, FineTuneRates, finite_grads, gaussians_of, rgba_loss
+from splatting.training.views import load_views
 
 RENDER_SCRIPT = paths.blender_script("render_rider.py")
 
@@ -54,10 +66,6 @@ def training_poses(n):
 def render_posed_views(rider, out_dir, cfg: PosedTrainConfig, log=print):
     """Per pose k: out_dir/pose_k/ a SHERF views folder (cameras.json, rgba/) of the posed mesh,
     plus pose.json (local rotations, root).  Resumable (done views are skipped by render_rider)."""
-    from splatting.raster.camera import ring_camera
-    from splatting.rider.body import export_rider, pose_vertices
-    from splatting.rider.motion import pedal_pose
-
     thetas = training_poses(cfg.poses)
     rot, root, _ = pedal_pose(rider.joints, torch.tensor(np.radians(thetas)), torch.zeros(len(thetas), dtype=torch.float64))
     root = root + torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64)
@@ -100,9 +108,6 @@ def render_posed_views(rider, out_dir, cfg: PosedTrainConfig, log=print):
 
 
 def _posed_set(folder, scale, margin):
-    from splatting.training.targets import Targets
-    from splatting.training.views import load_views
-
     with open(os.path.join(folder, "pose.json")) as f:
         p = json.load(f)
     t = Targets(load_views(folder), margin)
@@ -112,12 +117,6 @@ def _posed_set(folder, scale, margin):
 
 def fine_tune(avatar, rest_views_dir, posed_folders, cfg: PosedTrainConfig):
     """avatar (RiderAvatar, trained at rest) -> (Gaussians fine-tuned through the skinning, metrics)."""
-    from splatting.raster.sparse import rasterize
-    from splatting.training.metrics import psnr
-    from splatting.training.targets import Targets, crop_camera
-    from splatting.training.trainer import _params_from, finite_grads, gaussians_of, rgba_loss
-    from splatting.training.views import load_views
-
     t0 = time.time()
     gen = torch.Generator().manual_seed(cfg.seed)
     torch.manual_seed(cfg.seed)
@@ -184,10 +183,6 @@ def fine_tune(avatar, rest_views_dir, posed_folders, cfg: PosedTrainConfig):
 
 
 def train_avatar_posed(avatar_dir, cfg: PosedTrainConfig = None, log=print):
-    from splatting.gaussians.container import write_ply
-    from splatting.rider.avatar import PLY_NAME, RiderAvatar
-    from splatting.rider.roster import load_rider
-
     cfg = cfg or PosedTrainConfig()
     torch.set_num_threads(1)
     av = RiderAvatar.load(avatar_dir)
@@ -199,11 +194,9 @@ def train_avatar_posed(avatar_dir, cfg: PosedTrainConfig = None, log=print):
     if not os.path.isfile(rest_copy):
         shutil.copyfile(ply, rest_copy)
     write_ply(g, ply)  # same Gaussians, same order: skinning.npz stays valid
-    from cyclist_formats import bike_folder
     stale = bike_folder.relight_path(ply)  # fitted to the old Gaussians: refit (relight-fit) after this
     if os.path.isfile(stale):
         os.remove(stale)
-    from cyclist_formats.atomic import atomic_path
     with atomic_path(os.path.join(avatar_dir, "posed_train.json")) as tmp:
         with open(tmp, "w") as f:
             json.dump(metrics, f, indent=1)

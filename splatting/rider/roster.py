@@ -3,10 +3,12 @@ import functools
 import re
 from pathlib import Path
 
-import yaml
-
 from cyclist_formats.errors import UserError
+from cyclist_formats.text_files import read_yaml
 from splatting import paths
+from splatting.rider.body import build_rider
+from splatting.rider import smpl_body
+from splatting.rider.imported import imported_entries, rider_from_spec
 
 ROSTER_PATH = paths.BLEND_ASSETS / "riders.yaml"
 PHENOTYPE_KEYS = ("gender", "age", "muscle", "weight", "height", "proportions")
@@ -17,12 +19,7 @@ _HEX = re.compile(r"^#[0-9a-fA-F]{6}$")
 def load_roster(path=ROSTER_PATH):
     """List of rider dicts, validated (UserError on a bad file)."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise UserError(f"rider roster not found: {path}") from None
-    except yaml.YAMLError as e:
-        raise UserError(f"bad YAML in {path}: {str(e).splitlines()[0]}") from None
+    data = read_yaml(path, "rider roster", missing=f"rider roster not found: {path}", invalid="bad YAML in {path}: {error}")
     riders = (data or {}).get("riders") if isinstance(data, dict) else None
     if not isinstance(riders, list) or not riders:
         raise UserError(f"{path}: expected a top-level 'riders:' list")
@@ -59,7 +56,6 @@ def load_roster(path=ROSTER_PATH):
 def all_riders(path=ROSTER_PATH, imported_dir=None):
     """The roster file's riders, then the imported ones (data/imported_riders/, `rider import`);
     an imported id that the file already has is an error rather than a silent shadow."""
-    from splatting.rider.imported import imported_entries
     riders = load_roster(path)
     ids = {r["id"] for r in riders}
     for e in imported_entries(imported_dir):
@@ -97,10 +93,7 @@ def load_rider(rider_id):
     user's rigged human imported by `rider import` (splatting.rider.imported).  Cached per process."""
     spec = get_spec(rider_id)
     if spec.get("body") == "imported":
-        from splatting.rider.imported import rider_from_spec
         return rider_from_spec(spec)
     if spec.get("body", "anny") == "smpl":
-        from splatting.rider.smpl_body import rider_from_spec
-        return rider_from_spec(spec)
-    from splatting.rider.body import build_rider
+        return smpl_body.rider_from_spec(spec)
     return build_rider(spec)

@@ -7,6 +7,7 @@ source of truth.  The training itself is splatting.training.trainer.train.
 import argparse
 import dataclasses
 
+from cyclist_formats import checks
 from cyclist_formats.errors import UserError
 
 from splatting.training.strategy import DensifyConfig
@@ -59,7 +60,6 @@ def add_arguments(p):
 def config_from_args(args):
     """The TrainConfig of the command line; impossible numbers are refused here, one line each
     (cyclist_formats.checks), for the command and for library callers alike."""
-    from cyclist_formats import checks
     checks.count("iterations", args.iterations)
     checks.positive("time_budget_s", args.time_budget_s)
     checks.gaussians("max_gaussians", args.densify_max_gaussians)
@@ -84,7 +84,6 @@ def config_from_args(args):
 
 def check_args(args):
     """Impossible values and unusable paths, refused before any work."""
-    from cyclist_formats import checks
     config_from_args(args)
     checks.views_folder(args.views)
     checks.output_file("out", args.out if args.out else default_out(args.views), (".ply",))

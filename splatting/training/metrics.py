@@ -2,6 +2,7 @@
 numpy images in [0, 1]), SSIM (pytorch-msssim), mask IoU."""
 import math
 
+from pytorch_msssim import ssim as _ssim
 import numpy as np
 
 
@@ -21,8 +22,6 @@ def psnr(a, b, mask=None, peak=1.0):
 
 def ssim(a, b):
     """SSIM of two (H, W, C) torch images in [0, 1] (differentiable)."""
-    from pytorch_msssim import ssim as _ssim
-
     return _ssim(a.permute(2, 0, 1)[None], b.permute(2, 0, 1)[None], data_range=1.0, size_average=True)
 
 

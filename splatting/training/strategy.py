@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import torch
 
+from cyclist_formats.errors import UserError
 from splatting.rotations import quat_to_rotmat
 
 
@@ -231,6 +232,5 @@ STRATEGIES = {"default": DensifyStrategy, "fixed": FixedStrategy}
 
 def make_strategy(name, cfg: DensifyConfig, extent, hull=None) -> Strategy:
     if name not in STRATEGIES:
-        from cyclist_formats.errors import UserError
         raise UserError(f"unknown densification strategy '{name}' (choose from {', '.join(STRATEGIES)})")
     return STRATEGIES[name](cfg, extent, hull)

@@ -279,24 +279,19 @@ def default_out(views_dir):
     return os.path.join(os.path.dirname(parent), "gaussians", part + ".ply")
 
 
-def train(views_dir, out_ply=None, config: TrainConfig = None, relight=False):
+def train(views_dir, out_ply=None, config: TrainConfig = None):
     """Load a views folder, train, write <out>.ply and <out>.json atomically. Returns the metrics.
-
-    relight=True also fits per-Gaussian albedo and normal to the views' albedo/normal passes
-    (splatting/relight/fit.py) and writes <out>.relight.npz; off, nothing changes."""
+    (Relight channels are fitted after training by their own stage: splatting.relight.fit.)"""
     cfg = config or TrainConfig()
     out_ply = out_ply or default_out(views_dir)
     views = load_views(views_dir)
     g, metrics = train_views(views, cfg)
     metrics["part"] = os.path.basename(os.path.abspath(views_dir))
-    if relight:
-        from cyclist_formats.bike_folder import write_relight
-        from splatting.relight.fit import RelightFitConfig, fit_relight
+    write_trained(g, out_ply, metrics)
+    return metrics
 
-        feats, metrics["relight"] = fit_relight(g, views, RelightFitConfig(holdout=cfg.holdout, seed=cfg.seed,
-                                                                           progress=cfg.progress),
-                                                antialiased=cfg.antialiased, eps2d=cfg.eps2d)
-        write_relight(out_ply, **{k: v.numpy() for k, v in feats.items()})
+
+def write_trained(g, out_ply, metrics):
+    """<out>.ply and its training record <out>.json (splatting.training.record reads it)."""
     write_ply(g, out_ply)
     write_json(os.path.splitext(out_ply)[0] + ".json", metrics)
-    return metrics

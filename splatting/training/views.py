@@ -13,13 +13,15 @@ import math
 import os
 from dataclasses import dataclass
 
+from PIL import Image
 import numpy as np
 import torch
 
-from splatting.raster.camera import Camera, load_cameras
+from splatting.raster.camera import Camera, load_cameras, ring
 from cyclist_formats import bike_folder, ply
 from cyclist_formats import ring as formats_ring
 from cyclist_formats.errors import UserError
+from splatting.raster.sparse import render_gaussians
 
 
 
@@ -51,8 +53,6 @@ class Views:
 
 
 def _open_image(path, mode):
-    from PIL import Image
-
     try:
         with Image.open(path) as im:
             im.load()
@@ -230,9 +230,6 @@ def write_views(folder, cameras, images, points=None, orbit_centre=None, point_c
 def render_ring_views(g, size, orbit_centre):
     """The 36 ring views of Gaussians `g` at `size` px as straight-alpha RGBA (V, H, W, 4), with
     their cameras: synthetic training data in the same form load_views returns."""
-    from splatting.raster.camera import ring
-    from splatting.raster.sparse import render_gaussians
-
     cams = [c.scaled(size / 512) for c in ring(orbit_centre=orbit_centre)]
     imgs = []
     with torch.no_grad():

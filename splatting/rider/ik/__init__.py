@@ -23,7 +23,7 @@ level (left and right limbs in one batched matmul); Adam is hand-written on one 
 tensor.  See docs/ik.md for measured numbers.
 
 Files: slots (parameter layout, hinges, default pairs), start (initial pose, saddle fit), chain
-(the reduced forward kinematics), targets (posed bike keypoints, input checks), solver (solve).
+(the reduced forward kinematics), targets (input checks; the bike keypoints it reaches for are splatting.bike.pose.posed_bike_keypoints), solver (solve).
 """
 from splatting.rider.ik.chain import ReducedChain
 from splatting.rider.ik.slots import (DEFAULT_PAIRS, EXACT_START_M, FLAG_THRESHOLD_M, HINGE_FLEX_DIRECTION, HINGE_MAX_RAD,
@@ -31,8 +31,7 @@ from splatting.rider.ik.slots import (DEFAULT_PAIRS, EXACT_START_M, FLAG_THRESHO
                                       hinge_axes, pair_name)
 from splatting.rider.ik.solver import IKResult, solve
 from splatting.rider.ik.start import analytic_init_pose, cycling_init_pose, saddle_offset_for_reach
-from splatting.rider.ik.targets import posed_bike_keypoints
 
 __all__ = ["DEFAULT_PAIRS", "EXACT_START_M", "FLAG_THRESHOLD_M", "HINGE_FLEX_DIRECTION", "HINGE_MAX_RAD", "IK_JOINTS", "IKResult",
            "OBJECTIVES", "PELVIS_ABOVE_SEAT_M", "ReducedChain", "SEAT_RANGE_M", "SLOT_JOINTS", "analytic_init_pose",
-           "cycling_init_pose", "hinge_axes", "pair_name", "posed_bike_keypoints", "saddle_offset_for_reach", "solve"]
+           "cycling_init_pose", "hinge_axes", "pair_name", "saddle_offset_for_reach", "solve"]

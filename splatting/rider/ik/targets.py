@@ -1,5 +1,5 @@
-"""The IK's inputs: bike keypoints posed by the 8-DoF pose, and validation of user-given targets
-and tensors (one UserError line for NaN, wrong shapes, missing targets)."""
+"""The IK's inputs: validation of user-given targets and tensors (one UserError line for NaN, wrong
+shapes, missing targets)."""
 import numpy as np
 import torch
 
@@ -24,25 +24,6 @@ def finite_tensor(x, what, shape_tail, batch=None):
 
 def batch_of(t, tail):
     return t.shape[0] if t.dim() == tail + 1 else 1
-
-
-
-def posed_bike_keypoints(keypoints, poses_deg):
-    """Bike keypoints {name: (3,)} (canonical, rest) at B 8-DoF poses (docs/contract.md, degrees and
-    metres) -> {name: (B, 3) float64}: steering keypoints turn with theta_s, pedals with theta_p,
-    then the global transform.  What the IK needs without loading a BikeModel's Gaussians."""
-    from cyclist_formats.bike_folder import DEFAULT_KEYPOINT_PARTS
-    from splatting.bike.pose import pose_transforms, transform_points
-
-    kp = {k: torch.as_tensor(v, dtype=torch.float64) for k, v in keypoints.items()}
-    H = pose_transforms(poses_deg, kp["steer_bottom"], kp["steer_top"], kp.get("crank_axle"))
-    part = {k: p for p, ks in DEFAULT_KEYPOINT_PARTS.items() for k in ks}
-    out = {}
-    for k, x in kp.items():
-        local = {"steering": H["steer"], "crank": H["pedal"]}.get(part.get(k))
-        y = transform_points(local, x) if local is not None else x.expand(H["global"].shape[0], 3)
-        out[k] = transform_points(H["global"], y)
-    return out
 
 
 # ------------------------------------------------------------------ the solver
