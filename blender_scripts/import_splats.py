@@ -153,18 +153,17 @@ def setup_render(scene, camera, args):
         cy.transparent_max_bounces = 64
     elif args.mode == "gaussian":
         cy.transparent_max_bounces = splat_gaussian.TRANSPARENT_BOUNCES
-        # A 1-pixel box filter integrates each pixel's own area, like the rasterizer's point
-        # sample (+0.3 px^2 dilation); Cycles' default 1.5 px Blackman-Harris widens sub-pixel
-        # Gaussians by about a pixel.
-        cy.pixel_filter_type = "BOX"
-        scene.render.filter_size = 1.0
+        # The rasterizer evaluates each pixel at its centre: a 0.01 px wide filter makes every
+        # sample the centre ray (splat_billboard.POINT_FILTER); Cycles' default 1.5 px
+        # Blackman-Harris widens sub-pixel Gaussians by about a pixel.  Samples then only
+        # average the Russian roulette below
+        cy.pixel_filter_type, cy.filter_width = splat_billboard.POINT_FILTER
         # Russian roulette only after MIN_TRANSPARENT hits: from the first hit it kills paths
         # behind a few faint Gaussians at random (unbiased, but noise where 3DGS blends
         # deterministically); never would walk every ray through all of them (12x slower)
         cy.min_transparent_bounces = splat_gaussian.MIN_TRANSPARENT
     else:  # camera: the pixel-centre ray, through every quad (no Russian roulette)
-        cy.pixel_filter_type = "BOX"
-        scene.render.filter_size = splat_billboard.POINT_FILTER_PX
+        cy.pixel_filter_type, cy.filter_width = splat_billboard.POINT_FILTER
         cy.transparent_max_bounces = cy.min_transparent_bounces = splat_billboard.TRANSPARENT_BOUNCES
     if args.mode != "preview":
         # the Gaussians emit display values: Raw writes the composite as it is (splat_gaussian)
