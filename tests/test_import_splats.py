@@ -414,9 +414,13 @@ def test_bad_inputs_are_user_errors(tmp_path, fresh_scene):
 
 def test_cli_bad_input_one_line_nonzero_nothing_written(tmp_path):
     bad = _bad_files(tmp_path)
-    for args in (["--ply", str(tmp_path / "missing.ply")], ["--ply", str(bad["nan"])]):
-        r = subprocess.run([sys.executable, SCRIPT, *args, "--render", str(tmp_path / "o.png"),
-                            "--save", str(tmp_path / "o.blend")], capture_output=True, text=True, cwd=ROOT)
+    good = str(tmp_path / "good.ply")
+    out = ["--render", str(tmp_path / "o.png"), "--save", str(tmp_path / "o.blend")]
+    for args in (["--ply", str(tmp_path / "missing.ply"), *out], ["--ply", str(bad["nan"]), *out],
+                 ["--ply", good, "--eps2d", "nan", *out], ["--ply", good, "--eps2d", "-0.3", *out],
+                 ["--ply", good, "--antialiased", *out],  # the mip filter is drawn in camera mode only
+                 ["--ply", good, "--mode", "camera"]):  # camera mode without a render or a .blend
+        r = subprocess.run([sys.executable, SCRIPT, *args], capture_output=True, text=True, cwd=ROOT)
         assert r.returncode == 2, r.stderr
         lines = [ln for ln in r.stderr.splitlines() if "import_splats.py: error:" in ln]
         assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
