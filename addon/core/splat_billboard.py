@@ -12,14 +12,15 @@ fixed exactly:
 - Geometry: each Gaussian becomes a flat quad through its centre, parallel to the image plane
   (instance rotation = the camera's axes, x right, y down, z forward).  A camera ray meets the
   quads in the order of their depth along the optical axis, which is the rasterizer's sort key
-  (camera-space z of the centre).  The quad spans +-r pixels around the projected centre, r the
-  rasterizer's own 3-sigma box radius, so Cycles and the rasterizer touch the same pixels.
+  (camera-space z of the centre).  The quad spans the rasterizer's own 3-sigma box around the
+  projected centre, cut to the box of the ellipse where alpha reaches 1/255, so Cycles and the
+  rasterizer draw the same pixels.
 - Opacity (shader): the quad's object coordinates (ox, oy) in [-1, 1]^2 are the pixel offsets
-  from the projected centre over r, exactly (the plane is at constant depth z, where a metre is
-  f / z pixels).  alpha = o exp(-0.5 (a ox^2 + 2 b ox oy + c oy^2)) with (a, b, c) = r^2 times the
+  from the projected centre over the half-widths (ex, ey), exactly (the plane is at constant depth z, where a metre is
+  f / z pixels).  alpha = o exp(-0.5 (a ox^2 + 2 b ox oy + c oy^2)) with (a, b, c) from the
   rasterizer's conic: the projected covariance with the perspective Jacobian (at the
   FOV-clamped point), plus eps2d px^2, and o times the mip filter's compensation where the
-  model was trained antialiased.  Below 1/255 it is 0 and it is capped at 0.99, as 3DGS does.
+  model was trained antialiased, with (a, b, c) scaled by (ex^2, ex ey, ey^2).  Below 1/255 it is 0 and it is capped at 0.99, as 3DGS does.
 - Colour: the SH evaluated at the direction camera -> centre (as eval_sh), max(0, .), the sRGB
   display value, emitted as is under the Raw view transform (splat_gaussian.DISPLAY_VIEW_TRANSFORM)
   so that Cycles blends display values as the rasterizer does.
@@ -45,7 +46,7 @@ NEAR = 0.01  # the rasterizer's near cut, metres
 POINT_FILTER = ("GAUSSIAN", 0.01)
 # a quad per Gaussian along a ray; trained bikes stack a few hundred where a ray crosses a tyre
 # lengthwise, and with Russian roulette off every one is walked
-TRANSPARENT_BOUNCES = 4096
+TRANSPARENT_BOUNCES = 1024  # also Cycles' largest (its RNA clamps higher values)
 
 
 def sh_basis(d, degree):
@@ -68,7 +69,8 @@ def billboard_points(data, K, R, T, width, height, eps2d=EPS2D, antialiased=Fals
     """Structured 3DGS array + an OpenCV camera (canonical frame; x_cam = R X + T) -> per-quad arrays.
 
     co (N, 3) Blender frame; rot (N, 3) XYZ Euler of C R^T (the camera's axes); scale (N, 3) =
-    (r z / fx, r z / fy, 1); conic (N, 3) = r^2 (A, B, C); opacity (N,); rgb (N, 3) display
+    (ex z / fx, ey z / fy, 1) with (ex, ey) the quad's half-widths in pixels; conic (N, 3) =
+    (A ex^2, B ex ey, C ey^2); opacity (N,); rgb (N, 3) display
     colour; keep (N_file,) the Gaussians drawn (in front of the near plane, projected covariance
     positive definite, box on the image, peak alpha >= 1/255).  The arithmetic follows
     splatting/raster/sparse.py project() and antialias_opacities().
@@ -106,7 +108,14 @@ def billboard_points(data, K, R, T, width, height, eps2d=EPS2D, antialiased=Fals
         op = op * np.sqrt(np.clip(((a - eps2d) * (c - eps2d) - b * b) / det_s, 0.0, None))
     mid = 0.5 * (a + c)
     r = np.ceil(3.0 * np.sqrt(mid + np.sqrt(np.maximum(mid * mid - det, 0.1))))
-    on_image = (mx + r > 0.5) & (mx - r < width - 0.5) & (my + r > 0.5) & (my - r < height - 0.5)
+    # the quad's half-widths: the rasterizer's 3-sigma box, cut to the box of the ellipse where
+    # alpha reaches 1/255 (o exp(-q/2) >= 1/255 <=> q <= 2 tau; its half-widths are
+    # sqrt(2 tau a), sqrt(2 tau c)).  Outside it alpha is 0 anyway, and faint Gaussians get small
+    # quads: fewer transparent hits per ray (Cycles walks at most 1024)
+    tau = np.log(np.maximum(255.0 * op, 1.0))
+    ex = np.minimum(r, np.sqrt(2.0 * tau * a) + 0.5)
+    ey = np.minimum(r, np.sqrt(2.0 * tau * c) + 0.5)
+    on_image = (mx + ex > 0.5) & (mx - ex < width - 0.5) & (my + ey > 0.5) & (my - ey < height - 0.5)
     keep = valid & on_image & (op >= ALPHA_MIN)
 
     deg = min(sh_degree_of(names), max_degree)
@@ -120,9 +129,10 @@ def billboard_points(data, K, R, T, width, height, eps2d=EPS2D, antialiased=Fals
 
     Rb = frames.C @ R.T  # quad axes: camera x (right), y (down), z (forward), in Blender's frame
     rot = matrix_to_euler_xyz(Rb[None])[0]
-    scale = np.stack([r * zs / fx, r * zs / fy, np.ones_like(r)], 1)
+    scale = np.stack([ex * zs / fx, ey * zs / fy, np.ones_like(r)], 1)
+    conic = conic * np.stack([ex * ex, ex * ey, ey * ey], 1)  # in the quad's units (Δu/ex, Δv/ey)
     return {"co": frames.to_blender(mu)[keep], "rot": np.tile(rot, (int(keep.sum()), 1)),
-            "scale": scale[keep], "conic": (conic * (r * r)[:, None])[keep], "opacity": op[keep],
+            "scale": scale[keep], "conic": conic[keep], "opacity": op[keep],
             "rgb": rgb[keep], "keep": keep, "degree": deg}
 
 
