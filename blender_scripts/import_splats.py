@@ -4,7 +4,9 @@
     python blender_scripts/import_splats.py --ply FILE.ply --render out.png [--mode gaussian|preview]
 
 --mode gaussian (default): oriented ellipsoids with a Gaussian falloff and view-dependent SH
-colour; --mode preview: one sphere per Gaussian (fast, DC colour only).
+colour, for any camera; --mode camera: camera-facing quads that draw what our rasterizer draws,
+for the render camera only (docs/import_splats.md); --mode preview: one sphere per Gaussian
+(fast, DC colour only).
 
 --ply also takes a folder or a glob of per-frame .ply files: they import as frames 1..N and
 --render writes FILE_00001.png ... (or only --frame N, to FILE).  The camera is ring view 3 of
@@ -35,10 +37,16 @@ def main(argv):
     p.add_argument("--size", type=int, default=512, help="image size for the ring camera (default 512)")
     p.add_argument("--samples", type=int, default=None)
     p.add_argument("--denoise", choices=["NONE", "FAST", "BALANCED", "HIGH"], default=None)
-    p.add_argument("--mode", choices=["gaussian", "preview"], default="gaussian",
-                   help="gaussian: ellipsoids, Gaussian falloff, SH colour (default); preview: spheres")
+    p.add_argument("--mode", choices=["gaussian", "camera", "preview"], default="gaussian",
+                   help="gaussian: ellipsoids, Gaussian falloff, SH colour, any camera (default); camera: "
+                        "camera-facing quads that draw what our rasterizer draws, for the render camera only; "
+                        "preview: spheres")
     p.add_argument("--sh-degree", type=int, choices=[0, 1, 2, 3], default=3,
-                   help="gaussian mode: highest SH degree evaluated (default 3, or the file's)")
+                   help="gaussian and camera modes: highest SH degree evaluated (default 3, or the file's)")
+    p.add_argument("--eps2d", type=float, default=0.3,
+                   help="the screen-space low-pass (px^2) the Gaussians were trained with (default 0.3)")
+    p.add_argument("--antialiased", action="store_true",
+                   help="camera mode: the Gaussians were trained with the mip filter (opacity compensation)")
     p.add_argument("--shading", choices=["emission", "lit"], default="emission",
                    help="preview mode: emission = the Gaussians' own (baked) colour; lit = Principled BSDF under the studio lights")
     p.add_argument("--radius-scale", type=float, default=None,
@@ -67,19 +75,27 @@ def main(argv):
     rs = RADIUS_SCALE if args.radius_scale is None else args.radius_scale
     if not rs > 0 or rs == float("inf"):
         raise UserError(f"--radius-scale must be a positive number, got {args.radius_scale}")
-    if args.mode == "gaussian" and (args.shading != "emission" or args.radius_scale is not None):
+    if args.mode != "preview" and (args.shading != "emission" or args.radius_scale is not None):
         raise UserError("--shading and --radius-scale go with --mode preview")
+    if not 0 < args.eps2d < 1e3:  # also refuses NaN
+        raise UserError(f"--eps2d must be a positive number of px^2, got {args.eps2d}")
+    if args.antialiased and args.mode != "camera":
+        raise UserError("--antialiased goes with --mode camera")
+    if args.mode == "camera" and not args.render and not args.save:
+        raise UserError("--mode camera builds the Gaussians for one camera: give --render or --save")
 
     import bpy
 
     from addon.core.scene import reset_scene
 
+    camera = render_camera(args, paths) if args.render or args.save else None
     scene = reset_scene()  # the binary's startup file would add a cube, a lamp and a camera
     objs = splat_import.import_splats(paths, shading=args.shading, radius_scale=rs, mode=args.mode,
-                                      sh_degree=args.sh_degree)
+                                      sh_degree=args.sh_degree, camera=camera, eps2d=args.eps2d,
+                                      antialiased=args.antialiased)
     print(f"import_splats: {len(paths)} file(s), {sum(len(o.data.vertices) for o in objs)} points")
-    if args.render or args.save:
-        setup_render(scene, objs, args)
+    if camera is not None:
+        setup_render(scene, camera, args)
     if args.save:
         from cyclist_formats.atomic import atomic_path
 
@@ -92,51 +108,68 @@ def main(argv):
     return 0
 
 
-def setup_render(scene, objs, args):
-    from dataclasses import replace
-
-    from addon.core import render
-    from cyclist_formats import ring
+def render_camera(args, paths):
+    """(K, R, T, width, height) of the render: --camera, or ring view --view around the centre of
+    the Gaussians' bounding box at --size with the ring's field of view."""
     from addon.core.render_pose import load_camera
-    from addon.core.splat_import import points_bbox
+    from addon.core.splat_import import data_bbox
+    from cyclist_formats import ring
 
     if args.camera:
         K, R, T = load_camera(args.camera, ".")
-        size, focal = int(round(2 * K[0, 2])), float(K[0, 0])
-    else:
-        lo, hi = points_bbox(objs)
-        size = args.size
-        focal = ring.FOCAL * size / ring.SIZE  # a smaller image keeps the ring's field of view
-        R, T, _ = ring.view(args.view, (lo + hi) / 2)
+        size = int(round(2 * K[0, 2]))
+        return K, R, T, size, size
+    lo, hi = data_bbox(paths)
+    focal = ring.FOCAL * args.size / ring.SIZE  # a smaller image keeps the ring's field of view
+    R, T, _ = ring.view(args.view, (lo + hi) / 2)
+    return ring.intrinsics(args.size, focal), R, T, args.size, args.size
+
+
+def setup_render(scene, camera, args):
+    from dataclasses import replace
+
+    from addon.core import render
+    from addon.core import splat_billboard, splat_gaussian
+
+    K, R, T, size, _ = camera
     s = replace(render.RenderSettings(), size=size)
     if args.samples:
         s = replace(s, samples=args.samples)
+    elif args.mode == "camera":
+        s = replace(s, samples=1)  # deterministic: every sample is the same pixel-centre ray
     if args.denoise:
         s = replace(s, denoise=args.denoise)
+    elif args.mode == "camera":
+        s = replace(s, denoise="NONE")
     try:
         render.configure_cycles(scene, s)
     except TypeError:  # Debian's Blender 3.4 is built without OpenImageDenoise
         print("import_splats: no OpenImageDenoise in this Blender, rendering without denoising")
         render.configure_cycles(scene, replace(s, denoise="NONE"))
-    # Each translucent splat costs one transparent bounce (back faces are skipped in the
-    # material); configure_cycles' 2 would turn a stack of splats opaque black.
-    from addon.core.splat_gaussian import TRANSPARENT_BOUNCES
-
-    scene.cycles.transparent_max_bounces = TRANSPARENT_BOUNCES if args.mode == "gaussian" else 64
-    if args.mode == "gaussian":
-        # A 1-pixel box filter integrates each pixel's own area, like the rasterizer's point
-        # sample (+0.3 px^2 dilation); Cycles' default 1.5 px Blackman-Harris widens sub-pixel
-        # Gaussians by about a pixel.
-        scene.cycles.pixel_filter_type = "BOX"
-        scene.render.filter_size = 1.0
+    cy = scene.cycles
+    if args.mode == "preview":
+        # Each translucent sphere costs one transparent bounce (back faces are skipped in the
+        # material); configure_cycles' 2 would turn a stack of splats opaque black.
+        cy.transparent_max_bounces = 64
+    elif args.mode == "gaussian":
+        cy.transparent_max_bounces = splat_gaussian.TRANSPARENT_BOUNCES
+        # The rasterizer evaluates each pixel at its centre: a 0.01 px wide filter makes every
+        # sample the centre ray (splat_billboard.POINT_FILTER); Cycles' default 1.5 px
+        # Blackman-Harris widens sub-pixel Gaussians by about a pixel.  Samples then only
+        # average the Russian roulette below
+        cy.pixel_filter_type, cy.filter_width = splat_billboard.POINT_FILTER
         # Russian roulette only after MIN_TRANSPARENT hits: from the first hit it kills paths
         # behind a few faint Gaussians at random (unbiased, but noise where 3DGS blends
         # deterministically); never would walk every ray through all of them (12x slower)
-        from addon.core.splat_gaussian import MIN_TRANSPARENT
-
-        scene.cycles.min_transparent_bounces = MIN_TRANSPARENT
+        cy.min_transparent_bounces = splat_gaussian.MIN_TRANSPARENT
+    else:  # camera: the pixel-centre ray, through every quad (no Russian roulette)
+        cy.pixel_filter_type, cy.filter_width = splat_billboard.POINT_FILTER
+        cy.transparent_max_bounces = cy.min_transparent_bounces = splat_billboard.TRANSPARENT_BOUNCES
+    if args.mode != "preview":
+        # the Gaussians emit display values: Raw writes the composite as it is (splat_gaussian)
+        scene.view_settings.view_transform = splat_gaussian.DISPLAY_VIEW_TRANSFORM
     render.setup_lighting(scene)
-    cam = render.ensure_camera(scene, size, focal)
+    cam = render.ensure_camera(scene, size, float(K[0, 0]))
     render.place_camera(cam, R, T)
 
 

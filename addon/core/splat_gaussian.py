@@ -17,14 +17,16 @@ below 1/255 and capped at 0.99 as 3DGS does.  Back faces are transparent, so eac
 once, and Cycles composites the hits front to back along each ray (per-pixel sorted blending).
 
 Colour (shader): colour = max(0, 0.5 + sum_k Y_k(d) sh_k) in the INRIA 3DGS basis and order
-(splatting/sh.py), d the unit direction camera -> shading point in the canonical frame; the
-result is the sRGB display value 3DGS trains against, so it is linearised (IEC 61966-2-1) for
-Blender's Standard view transform and emitted.  SH coefficient k of a point is the instance
+(splatting/gaussians/sh.py), d the unit direction camera -> shading point in the canonical frame;
+the result is the sRGB display value 3DGS trains against.  It is emitted as is, and rendered
+through the Raw view transform, so Cycles composites display values front to back exactly as the
+rasterizer does (see DISPLAY_VIEW_TRANSFORM).  SH coefficient k of a point is the instance
 attribute `sh_k` (RGB as a vector); degrees 0-3 follow the file's f_rest count.
 """
 import numpy as np
 
 from . import frames
+from .splat_nodes import ShaderExpr, enabled_output, link_with_nodes, new_socket
 
 K_SIGMA = 3.0  # largest proxy extent in standard deviations (3DGS's screen-space cut-off is 3 sigma too)
 # The rasterizer adds 0.3 px^2 to every projected covariance (eps2d, 3DGS's low-pass), so the
@@ -38,6 +40,13 @@ ALPHA_MIN, ALPHA_MAX = 1.0 / 255.0, 0.99  # 3DGS's skip threshold and cap
 # face is transparent); trained parts stack a few hundred along a ray through the bike.
 TRANSPARENT_BOUNCES = 1024
 MIN_TRANSPARENT = 32  # Cycles min_transparent_bounces: hits before Russian roulette may stop a ray
+# The rasterizer blends the Gaussians' sRGB display colours (what 3DGS trains against); Cycles
+# blends whatever the emission holds.  Emitting the display value and writing it through the Raw
+# view transform makes Cycles blend in the same space.  Emitting linear colour under Standard
+# (the earlier way) blends in linear light and re-encodes: exact for one Gaussian, but where
+# Gaussians overlap the encoding's concave curve brightens the mix (50 % black over white:
+# 0.735 instead of 0.5), the speckles on dark tyres and tubes of the trained bike.
+DISPLAY_VIEW_TRANSFORM = "Raw"
 ICO_INRADIUS = 0.7946544722917661  # inscribed radius of the unit-circumradius icosahedron
 C0 = 0.28209479177387814
 C1 = 0.4886025119029199
@@ -76,11 +85,20 @@ def sh_degree_of(names):
     return 0
 
 
+def lowpass_for_view(data, R, T, focal, eps2d):
+    """Per-Gaussian 3D low-pass sigma (metres) that draws eps2d px^2 at each Gaussian's depth in
+    the camera (x_cam = R X + T, focal in px): sqrt(eps2d) z / f."""
+    mu = np.stack([data[k].astype(np.float64) for k in ("x", "y", "z")], 1)
+    z = mu @ np.asarray(R, np.float64)[2] + float(np.asarray(T, np.float64)[2])
+    return np.sqrt(eps2d) * np.maximum(z, 1e-3) / float(focal)
+
+
 def gaussian_points(data, max_degree=3, lowpass_m=LOWPASS_M):
     """Structured 3DGS array -> per-point arrays for the Gaussian mode, Blender frame.
 
     co (N, 3); opacity (N,) sigmoid; rot (N, 3) XYZ Euler of C R (R from the wxyz quaternion);
-    scale (N, 3) k * sqrt(exp(log scale)^2 + lowpass_m^2); k (N,) the proxy extent in sigmas,
+    scale (N, 3) k * sqrt(exp(log scale)^2 + lowpass_m^2) (lowpass_m a number or (N_file,),
+    lowpass_for_view); k (N,) the proxy extent in sigmas,
     min(K_SIGMA, the radius where alpha falls to 1/255); Gaussians that never reach 1/255 are
     left out (keep (N_file,) says which); sh (N, K, 3) coefficients with sh[:, 0] = f_dc and
     f_rest read channel-major (f_rest_{c * (K-1) + k - 1}); degree.
@@ -104,7 +122,8 @@ def gaussian_points(data, max_degree=3, lowpass_m=LOWPASS_M):
     keep = op * 255.0 > 1.0
     k = np.sqrt(2.0 * np.log(np.maximum(op * 255.0, 1.0)))  # exp(-k^2/2) op = 1/255
     k = np.minimum(k, K_SIGMA)
-    sig = np.sqrt(np.exp(2 * np.stack([f(f"scale_{i}") for i in range(3)], 1)) + lowpass_m ** 2)
+    lp = np.asarray(lowpass_m, np.float64).reshape(-1, 1)
+    sig = np.sqrt(np.exp(2 * np.stack([f(f"scale_{i}") for i in range(3)], 1)) + lp ** 2)
     return {"co": frames.to_blender(np.stack([f("x"), f("y"), f("z")], 1))[keep],
             "opacity": op[keep], "rot": matrix_to_euler_xyz(Rb)[keep],
             "scale": (k[:, None] * sig)[keep], "k": k[keep],
@@ -114,23 +133,19 @@ def gaussian_points(data, max_degree=3, lowpass_m=LOWPASS_M):
 # ---- bpy side ----------------------------------------------------------------------------
 
 def _named_vector(n, name):
-    from .splat_import import _enabled_output
-
     a = n.new("GeometryNodeInputNamedAttribute")
     a.data_type = "FLOAT_VECTOR"
     a.inputs["Name"].default_value = name
-    return _enabled_output(a, "Attribute")
+    return enabled_output(a, "Attribute")
 
 
 def gaussian_node_group(material, name="splat_gaussians"):
     """Geometry Nodes: vertices -> points -> an icosahedron instance per point (g_rot, g_scale)."""
     import bpy
 
-    from .splat_import import _new_socket
-
     ng = bpy.data.node_groups.new(name, "GeometryNodeTree")
-    _new_socket(ng, "Geometry", "INPUT", "NodeSocketGeometry")
-    _new_socket(ng, "Geometry", "OUTPUT", "NodeSocketGeometry")
+    new_socket(ng, "Geometry", "INPUT", "NodeSocketGeometry")
+    new_socket(ng, "Geometry", "OUTPUT", "NodeSocketGeometry")
     n, link = ng.nodes, ng.links.new
     gin, gout = n.new("NodeGroupInput"), n.new("NodeGroupOutput")
     to_points = n.new("GeometryNodeMeshToPoints")
@@ -152,55 +167,6 @@ def gaussian_node_group(material, name="splat_gaussians"):
         node.location = (220 * i, 0)
     ico.location, set_mat.location = (220, -250), (440, -250)
     return ng
-
-
-class _Nodes:
-    """Tiny expression builder over shader math nodes (scalar and vector)."""
-
-    def __init__(self, nt):
-        self.nt, self.n, self.link = nt, nt.nodes, nt.links.new
-
-    def math(self, op, a, b=None, c=None):
-        node = self.n.new("ShaderNodeMath")
-        node.operation = op
-        for i, v in enumerate((a, b, c)):
-            if v is None:
-                continue
-            if isinstance(v, (int, float)):
-                node.inputs[i].default_value = float(v)
-            else:
-                self.link(v, node.inputs[i])
-        return node.outputs[0]
-
-    def vmath(self, op, a, b=None, scale=None):
-        node = self.n.new("ShaderNodeVectorMath")
-        node.operation = op
-        for i, v in enumerate((a, b)):
-            if v is None:
-                continue
-            if isinstance(v, (tuple, list)):
-                node.inputs[i].default_value = v
-            else:
-                self.link(v, node.inputs[i])
-        if scale is not None:
-            sock = node.inputs["Scale"] if "Scale" in node.inputs else node.inputs[3]
-            if isinstance(scale, (int, float)):
-                sock.default_value = float(scale)
-            else:
-                self.link(scale, sock)
-        return node.outputs["Value"] if op in ("DOT_PRODUCT", "LENGTH", "DISTANCE") else node.outputs["Vector"]
-
-    def mul(self, *xs):
-        out = xs[0]
-        for x in xs[1:]:
-            out = self.math("MULTIPLY", out, x)
-        return out
-
-    def attr(self, name, output="Vector"):
-        a = self.n.new("ShaderNodeAttribute")
-        a.attribute_type = "INSTANCER"  # Geometry Nodes instance attributes
-        a.attribute_name = name
-        return a.outputs[output]
 
 
 def _sh_basis(b, x, y, z, degree):
@@ -225,20 +191,6 @@ def _sh_basis(b, x, y, z, degree):
     return out
 
 
-def _srgb_to_linear(b, v):
-    """Vector (r, g, b) sRGB-encoded -> linear, the exact piecewise curve per channel."""
-    sep = b.n.new("ShaderNodeSeparateXYZ")
-    b.link(v, sep.inputs[0])
-    comb = b.n.new("ShaderNodeCombineXYZ")
-    for i in range(3):
-        c = sep.outputs[i]
-        lo = b.math("DIVIDE", c, 12.92)
-        hi = b.math("POWER", b.math("DIVIDE", b.math("ADD", c, 0.055), 1.055), 2.4)
-        is_lo = b.math("LESS_THAN", c, 0.04045)
-        b.link(b.math("ADD", hi, b.mul(is_lo, b.math("SUBTRACT", lo, hi))), comb.inputs[i])
-    return comb.outputs[0]
-
-
 def gaussian_material(degree, name="splat_gaussian"):
     """Emission material with the Gaussian falloff and SH colour (see the module docstring)."""
     import bpy
@@ -248,7 +200,7 @@ def gaussian_material(degree, name="splat_gaussian"):
         mat.use_nodes = True
     nt = mat.node_tree
     nt.nodes.clear()
-    b = _Nodes(nt)
+    b = ShaderExpr(nt)
     tex = b.n.new("ShaderNodeTexCoord")
     geo = b.n.new("ShaderNodeNewGeometry")
     # Object coordinates and World->Object vectors use the instance's own transform, so both
@@ -272,8 +224,10 @@ def gaussian_material(degree, name="splat_gaussian"):
     for k, Y in enumerate(_sh_basis(b, x, y, z, degree), start=1):
         col = b.vmath("ADD", col, b.vmath("SCALE", b.attr(f"sh_{k}"), scale=Y))
     col = b.vmath("ADD", col, (0.5, 0.5, 0.5))
-    col = b.vmath("MINIMUM", b.vmath("MAXIMUM", col, (0.0, 0.0, 0.0)), (1.0, 1.0, 1.0))  # PNG range
-    col = _srgb_to_linear(b, col)
+    # max(0, .) as the rasterizer's eval_sh; no upper clamp per Gaussian (the rasterizer clamps
+    # only the composited pixel, as the PNG does).  The value stays display-referred: it is
+    # composited as is and written through the Raw view transform (DISPLAY_VIEW_TRANSFORM)
+    col = b.vmath("MAXIMUM", col, (0.0, 0.0, 0.0))
 
     emit = b.n.new("ShaderNodeEmission")
     emit.inputs["Strength"].default_value = 1.0
@@ -315,5 +269,4 @@ def make_gaussian_object(name, pts, material, node_group, collection=None):
     for key, arr in vectors.items():
         a = mesh.attributes.new(key, "FLOAT_VECTOR", "POINT")
         a.data.foreach_set("vector", np.ascontiguousarray(arr, dtype=np.float32).ravel())
-    from .splat_import import link_with_nodes
     return link_with_nodes(name, mesh, node_group, "splat_gaussians", collection)

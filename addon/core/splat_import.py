@@ -21,8 +21,9 @@ import os
 
 import numpy as np
 
-from . import frames
+from . import frames, splat_billboard as sb, splat_gaussian as sg
 from .contract import UserError, ply
+from .splat_nodes import enabled_output, link_with_nodes, new_socket
 
 SH_C0 = 0.28209479177387814  # Y_0^0: 3DGS's colour = 0.5 + C0 * f_dc
 # Area-equivalent 1-sigma radius of the Gaussian's two largest axes, times sqrt(2): an opaque
@@ -90,24 +91,13 @@ def expand_inputs(spec):
 
 # ---- bpy side -----------------------------------------------------------------------------
 
-def _new_socket(ng, name, in_out, socket_type):
-    if hasattr(ng, "interface"):  # Blender >= 4.0
-        return ng.interface.new_socket(name=name, in_out=in_out, socket_type=socket_type)
-    return (ng.inputs if in_out == "INPUT" else ng.outputs).new(socket_type, name)
-
-
-def _enabled_output(node, name):
-    """The live output called `name` (3.x nodes keep one hidden socket per data type)."""
-    return next(s for s in node.outputs if s.name == name and getattr(s, "enabled", True))
-
-
 def splat_node_group(material, name="splat_points"):
     """Geometry Nodes: mesh vertices -> points (radius from the `radius` attribute) -> material."""
     import bpy
 
     ng = bpy.data.node_groups.new(name, "GeometryNodeTree")
-    _new_socket(ng, "Geometry", "INPUT", "NodeSocketGeometry")
-    _new_socket(ng, "Geometry", "OUTPUT", "NodeSocketGeometry")
+    new_socket(ng, "Geometry", "INPUT", "NodeSocketGeometry")
+    new_socket(ng, "Geometry", "OUTPUT", "NodeSocketGeometry")
     n = ng.nodes
     gin, gout = n.new("NodeGroupInput"), n.new("NodeGroupOutput")
     radius = n.new("GeometryNodeInputNamedAttribute")
@@ -119,7 +109,7 @@ def splat_node_group(material, name="splat_points"):
     set_mat.inputs["Material"].default_value = material
     link = ng.links.new
     link(gin.outputs[0], to_points.inputs["Mesh"])
-    link(_enabled_output(radius, "Attribute"), to_points.inputs["Radius"])
+    link(enabled_output(radius, "Attribute"), to_points.inputs["Radius"])
     link(to_points.outputs["Points"], set_mat.inputs["Geometry"])
     link(set_mat.outputs["Geometry"], gout.inputs[0])
     for i, node in enumerate((gin, radius, to_points, set_mat, gout)):
@@ -202,18 +192,6 @@ def make_point_object(name, pts, material, node_group, collection=None):
     return link_with_nodes(name, mesh, node_group, "splat_points", collection)
 
 
-def link_with_nodes(name, mesh, node_group, modifier, collection=None):
-    """A new object for `mesh` in `collection` (default: the scene's) with a Geometry Nodes modifier."""
-    import bpy
-
-    mesh.update()
-    obj = bpy.data.objects.new(name, mesh)
-    (collection or bpy.context.scene.collection).objects.link(obj)
-    mod = obj.modifiers.new(modifier, "NODES")
-    mod.node_group = node_group
-    return obj
-
-
 def _keyframe_visibility(obj, frame, first, last):
     """Visible (render and viewport) on `frame` only within first..last (bool F-curves step)."""
     keys = [(frame, False)] + [(f, True) for f in (frame - 1, frame + 1) if first <= f <= last]
@@ -223,35 +201,53 @@ def _keyframe_visibility(obj, frame, first, last):
         obj.keyframe_insert("hide_viewport", frame=f)
 
 
-MODES = ("gaussian", "preview")
+MODES = ("gaussian", "camera", "preview")
 
 
 def import_splats(paths, shading="emission", radius_scale=RADIUS_SCALE, first_frame=1, mode="gaussian",
-                  sh_degree=3):
+                  sh_degree=3, camera=None, eps2d=sb.EPS2D, antialiased=False):
     """Import .ply files into the current scene; several files become frames first_frame, +1, ...
 
     mode "gaussian" (default): oriented ellipsoids with a Gaussian falloff and SH colour up to
-    `sh_degree` (splat_gaussian.py; emission only).  mode "preview": one sphere per Gaussian
-    (fast; `shading` and `radius_scale` apply here).  Every file is read and validated before
-    anything is created, so bad input leaves the scene untouched.  Returns the list of objects
-    (one per file, in frame order).
+    `sh_degree` (splat_gaussian.py; emission only), seen from any camera.  mode "camera":
+    camera-facing quads that draw exactly what the rasterizer draws, for `camera` only
+    (splat_billboard.py).  mode "preview": one sphere per Gaussian (fast; `shading` and
+    `radius_scale` apply here).  camera: (K, R, T, width, height), OpenCV world-to-camera in the
+    canonical frame; "camera" mode needs it, "gaussian" mode sizes its low-pass for it (eps2d px^2
+    at each Gaussian's depth; without it, the training ring's 12 m and 2084.97 px).  eps2d and
+    antialiased: the low-pass and mip filter the Gaussians were trained with (camera mode draws
+    both; gaussian mode draws eps2d).  Every file is read and validated before anything is
+    created, so bad input leaves the scene untouched.  Returns the list of objects (one per
+    file, in frame order).
     """
     import bpy
 
     if mode not in MODES:
         raise UserError(f"unknown import mode '{mode}' ({' or '.join(MODES)})")
+    if not (isinstance(eps2d, (int, float)) and 0 < eps2d < 1e3):
+        raise UserError(f"eps2d must be a positive number of px^2, got {eps2d}")
     if isinstance(paths, str):
         paths = [paths]
     scene = bpy.context.scene
+    if mode != "preview" and shading != "emission":
+        raise UserError("--shading lit goes with --mode preview (Gaussians carry their own lit colour)")
     if mode == "gaussian":
-        from . import splat_gaussian as sg
-
-        if shading != "emission":
-            raise UserError("--shading lit goes with --mode preview (Gaussians carry their own lit colour)")
-        clouds = [sg.gaussian_points(read_splat_ply(p), sh_degree) for p in paths]
+        datas = [read_splat_ply(p) for p in paths]
+        lowpass = ([sg.LOWPASS_M * (eps2d / sb.EPS2D) ** 0.5] * len(datas) if camera is None else
+                   [sg.lowpass_for_view(d, camera[1], camera[2], camera[0][0, 0], eps2d) for d in datas])
+        clouds = [sg.gaussian_points(d, sh_degree, lp) for d, lp in zip(datas, lowpass)]
         mat = sg.gaussian_material(max(c["degree"] for c in clouds))
         ng = sg.gaussian_node_group(mat)
         make = sg.make_gaussian_object
+    elif mode == "camera":
+        if camera is None:
+            raise UserError("--mode camera draws the Gaussians for one camera: give --camera or --view")
+        K, R, T, w, h = camera
+        clouds = [sb.billboard_points(read_splat_ply(p), K, R, T, w, h, eps2d, antialiased, sh_degree)
+                  for p in paths]
+        mat = sb.billboard_material()
+        ng = sb.billboard_node_group(mat)
+        make = sb.make_billboard_object
     else:
         clouds = [splat_points(read_splat_ply(p), radius_scale) for p in paths]
         mat = splat_material(shading=shading)
@@ -268,6 +264,22 @@ def import_splats(paths, shading="emission", radius_scale=RADIUS_SCALE, first_fr
         scene.frame_start, scene.frame_end = first_frame, last
         scene.frame_set(first_frame)
     return objs
+
+
+def data_bbox(paths):
+    """Canonical-frame (lo, hi) of the files' Gaussian centres that reach 1/255 opacity (the ones
+    every mode draws); read and validated like import_splats."""
+    los, his = [], []
+    for p in paths:
+        d = read_splat_ply(p)
+        mu = np.stack([d[k].astype(np.float64) for k in ("x", "y", "z")], 1)
+        mu = mu[255.0 / (1.0 + np.exp(-d["opacity"].astype(np.float64))) > 1.0]
+        if len(mu):
+            los.append(mu.min(0))
+            his.append(mu.max(0))
+    if not los:
+        raise UserError("the Gaussian files hold no Gaussian of opacity >= 1/255")
+    return np.min(los, 0), np.max(his, 0)
 
 
 def points_bbox(objs):
