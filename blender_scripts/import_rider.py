@@ -53,11 +53,13 @@ def main(argv):
     _numpy_aliases_for_old_gltf_importer()
     reset_scene()
     objects = import_model(args.model)
-    arrays, meta = rider_rig.rider_from_objects(objects, args.id, os.path.basename(args.model), args.height_m)
+    arrays, meta = rider_rig.rider_from_objects(objects, args.id, os.path.basename(args.model), args.height_m,
+                                                model_dir=os.path.dirname(os.path.abspath(args.model)))
     rider_file.write_rider_file(args.out, meta=meta, **arrays)
     print(json.dumps({"rider": args.out, "vertices": len(arrays["vertices"]), "scheme": meta["scheme"],
                       "rest_pose": meta["rest_pose"], "height_m": meta["height_m"],
-                      "textures": len(meta["textures"])}), flush=True)
+                      "textures": len(meta["textures"]), "missing_textures": meta["missing_textures"],
+                      "size": meta["size"], "placed_joints": sorted(meta["placed_joints"])}), flush=True)
     return 0
 
 

@@ -1,7 +1,12 @@
 """Per-vertex colours of an imported rider's meshes (bpy side; step 5 of rider_rig): per material, the
 image texture feeding the Base Color (sampled bilinearly at each corner's UV, averaged per vertex), a
-colour attribute, or the flat base colour.  A texture whose image is missing or unreadable is an error,
-not a silent grey."""
+colour attribute, or the flat base colour.  A texture whose image file is gone is looked for by its file
+name (any of the usual extensions) next to the model and in its texture folders (files move with the
+model, their absolute paths do not); one found nowhere leaves its material the flat base colour, and is
+listed in `missing` (the rider file's meta and a warning line), never a silent grey.  A texture node
+with no image, or a textured material on a mesh without UVs, is an error."""
+import os
+
 import bpy
 import numpy as np
 
@@ -32,8 +37,31 @@ def _upstream(node, seen=None):
     return out
 
 
-def colour_source(mat, what):
-    """('image', image, uv_map or None) | ('attribute', name) | ('flat', sRGB (3,)) for one material."""
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tga", ".tif", ".tiff", ".bmp", ".webp", ".exr")
+TEXTURE_FOLDERS = ("", "textures", "Textures", "texture", "tex", "images", "maps", "..", "../textures")
+
+
+def _find_moved(img, search_dirs):
+    """Reload `img` from a file with its name (or its stem with another extension) in search_dirs."""
+    name = os.path.basename((img.filepath or img.name).replace("\\", "/"))
+    stem = os.path.splitext(name)[0].lower()
+    for d in search_dirs:
+        for sub in TEXTURE_FOLDERS:
+            folder = os.path.normpath(os.path.join(d, sub))
+            if not os.path.isdir(folder):
+                continue
+            for f in sorted(os.listdir(folder)):
+                if os.path.splitext(f)[0].lower() == stem and f.lower().endswith(IMAGE_EXTENSIONS):
+                    img.filepath = os.path.join(folder, f)
+                    if _load(img):
+                        return True
+    return False
+
+
+def colour_source(mat, what, search_dirs=(), missing=None):
+    """('image', image, uv_map or None) | ('attribute', name) | ('flat', sRGB (3,)) for one material.
+    A texture file found nowhere (not at its path, not by name in search_dirs) is appended to `missing`
+    and the material is flat; with missing=None it is an error."""
     if mat is None:
         return ("flat", srgb_from_linear(DEFAULT_LINEAR))
     nt = mat.node_tree if getattr(mat, "node_tree", None) is not None else None
@@ -63,8 +91,12 @@ def colour_source(mat, what):
                 raise UserError(f"{what}: material '{mat.name}' has an image texture node with no image (missing texture)")
             if img.size[0] == 0 or img.size[1] == 0 or not img.has_data and not _load(img):
                 src = bpy.path.abspath(img.filepath) if img.filepath else img.name
-                raise UserError(f"{what}: material '{mat.name}' uses texture '{src}', which is missing or "
-                                f"unreadable (missing texture)")
+                if not _find_moved(img, search_dirs):
+                    if missing is None:
+                        raise UserError(f"{what}: material '{mat.name}' uses texture '{src}', which is missing "
+                                        f"or unreadable (missing texture)")
+                    missing.append(f"material '{mat.name}': {src}")
+                    return ("flat", srgb_from_linear(default))
             uv = None
             vec = n.inputs.get("Vector")
             if vec is not None and vec.links and vec.links[0].from_node.type == "UVMAP":
@@ -107,7 +139,7 @@ def _sample_bilinear(rgb, uv):
             + (1 - fx) * fy * rgb[y1, x0] + fx * fy * rgb[y1, x1])
 
 
-def object_colors(obj, what, images):
+def object_colors(obj, what, images, search_dirs=(), missing=None):
     """Per-vertex sRGB colours, and per loop the texture coordinate and the index into `images` (an
     ordered {name: sRGB array}) of the texture drawn there (-1: none)."""
     me = obj.data
@@ -125,7 +157,7 @@ def object_colors(obj, what, images):
     for mi in np.unique(loop_mat):
         sel = loop_mat == mi
         mat = obj.material_slots[mi].material if mi < len(obj.material_slots) else None
-        src = colour_source(mat, what)
+        src = colour_source(mat, what, search_dirs, missing)
         if src[0] == "image":
             _, img, uv_name = src
             layer = me.uv_layers.get(uv_name) if uv_name else me.uv_layers.active

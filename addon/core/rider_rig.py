@@ -45,6 +45,12 @@ T_POSE_PASSES = (
 )
 UP_TOLERANCE_DEG = 30.0
 MIN_HEIGHT_M, MAX_HEIGHT_M = 0.5, 2.6
+# a size outside MIN..MAX read in another unit when that makes it PLAUSIBLE_M tall (most likely first)
+UNIT_GUESSES = ((0.01, "centimetres"), (0.001, "millimetres"), (0.0254, "inches"), (0.1, "decimetres"),
+                (0.3048, "feet"), (10.0, "decametres"), (100.0, "hectometres"))
+PLAUSIBLE_M = (1.0, 2.2)
+HIP_M = 0.88          # an adult's hip joint height above the soles (1.75 m person)
+MIN_LEG_SHARE = 0.15  # hip joints below 15 % of the height: not a person (a chibi figure is ~25 %)
 
 
 def _joints():
@@ -70,8 +76,15 @@ def _deformed_by(obj, arm):
     return bool(mods) and any(g.name in arm.data.bones for g in obj.vertex_groups)
 
 
+def _skeleton(arm):
+    """The armature's bones for bone_map.map_skeleton: names, parents, rest heads/tails in world space."""
+    A = arm.matrix_world
+    return [{"name": b.name, "parent": b.parent.name if b.parent else None, "deform": bool(b.use_deform),
+             "head": list(A @ b.head_local), "tail": list(A @ b.tail_local)} for b in arm.data.bones]
+
+
 def find_rig(objects, what):
-    """(armature, its skinned meshes, {joint: bone}, scheme) among `objects`; UserError otherwise."""
+    """(armature, its skinned meshes, bone_map.Mapping) among `objects`; UserError otherwise."""
     objects = list(objects)
     meshes = [o for o in objects if o.type == "MESH"]
     arms = [o for o in objects if o.type == "ARMATURE"]
@@ -83,26 +96,78 @@ def find_rig(objects, what):
     first_error, mapped = None, []
     for arm in sorted(arms, key=lambda a: -len(a.data.bones)):
         try:
-            m, scheme = bone_map.map_bones([b.name for b in arm.data.bones], f"{what}: armature '{arm.name}'")
+            m = bone_map.map_skeleton(_skeleton(arm), f"{what}: armature '{arm.name}'")
         except UserError as e:
             first_error = first_error or e
             continue
-        mapped.append((arm, m, scheme))
+        mapped.append((arm, m))
     if not mapped:
         raise first_error
-    arm, m, scheme = mapped[0]
+    arm, m = mapped[0]
     skinned = [o for o in objects if _deformed_by(o, arm)]
     if not skinned:
         raise UserError(f"{what}: unrigged mesh: no mesh is skinned to armature '{arm.name}' "
                         f"(no Armature modifier with bone vertex groups, no bone parent)")
-    return arm, skinned, m, scheme
+    return arm, skinned, m
 
 
 # ---------------------------------------------------------------- 2./3. frame and T-pose
 
-def _posed_heads(arm, bone_of):
+def _posed_heads(arm, bone_of, placed=None):
+    """World positions (24,3) of the joints at the armature's current pose: a mapped bone's head, or a
+    placed joint (placed: {joint: (bone, offset in that bone's rest space)}) riding on its bone."""
     A = arm.matrix_world
-    return np.array([list(A @ arm.pose.bones[bone_of[j]].head) for j in _joints()], np.float64)
+    out = []
+    for j in _joints():
+        if bone_of.get(j):
+            out.append(list(A @ arm.pose.bones[bone_of[j]].head))
+        else:
+            b, off = placed[j]
+            out.append(list(A @ arm.pose.bones[b].matrix @ off))
+    return np.array(out, np.float64)
+
+
+def _placed_offsets(arm, virtual):
+    """{joint: (bone, offset)}: a placed joint's rest position in its bone's rest space."""
+    A = arm.matrix_world
+    return {j: (b, (A @ arm.data.bones[b].matrix_local).inverted() @ Vector([float(x) for x in p]))
+            for j, (b, p) in virtual.items()}
+
+
+def _derive_toes(arm, mapping, skinned, M, heads):
+    """A toe joint for a foot without a toe bone: 3/4 of the way from the ankle to the foot's most forward
+    vertex (the vertices its ankle bone and the bones below it weigh most), else along the foot bone."""
+    J = {n: i for i, n in enumerate(_joints())}
+    out = {}
+    for j, v in mapping.virtual.items():
+        if v[0] != "toe":
+            continue
+        ankle_bone = v[1]
+        side = j.split("_")[0]
+        ankle = heads[J[f"{side}_ankle"]]
+        names = {ankle_bone} | {c.name for c in arm.data.bones[ankle_bone].children_recursive}
+        best = None
+        for obj in skinned:
+            groups = {g.index for g in obj.vertex_groups if g.name in names}
+            if obj.parent_type == "BONE" and obj.parent_bone in names:
+                pts = _evaluated_world_vertices(obj)
+            elif groups:
+                co = _evaluated_world_vertices(obj)
+                sel = [v.index for v in obj.data.vertices
+                       if sum(g.weight for g in v.groups if g.group in groups) > 0.5]
+                pts = co[sel]
+            else:
+                continue
+            if len(pts):
+                f = pts[np.argmax(pts @ M[0])]
+                if best is None or f @ M[0] > best @ M[0]:
+                    best = f
+        if best is None or (best - ankle) @ M[0] <= 0:
+            tail = np.array(list(arm.matrix_world @ arm.data.bones[ankle_bone].tail_local))
+            best = tail if (tail - ankle) @ M[0] > 0 else ankle + M[0] * 0.12 * np.linalg.norm(
+                heads[J[f"{side}_knee"]] - ankle)
+        out[j] = (ankle_bone, ankle + 0.75 * (best - ankle))
+    return out
 
 
 def body_frame(heads):
@@ -149,14 +214,14 @@ def _swing(a, b):
     return np.eye(3) + math.sin(ang) * K + (1 - math.cos(ang)) * K @ K, ang
 
 
-def to_t_pose(arm, bone_of, M):
+def to_t_pose(arm, bone_of, M, placed=None):
     """Pose the armature so the limbs lie on the T-pose directions; returns {joint: swing degrees}."""
     J = {n: i for i, n in enumerate(_joints())}
     A = arm.matrix_world
     A_inv = A.inverted()
     swings = {}
     for targets in T_POSE_PASSES:
-        heads = _posed_heads(arm, bone_of)
+        heads = _posed_heads(arm, bone_of, placed)
         for joint, (child, direction) in targets.items():
             cur = heads[J[child]] - heads[J[joint]]
             cur /= np.linalg.norm(cur)
@@ -178,7 +243,7 @@ def to_t_pose(arm, bone_of, M):
 def _bone_joint_index(arm, bone_of, heads_rest):
     """Bone name -> SMPL joint index: its own joint, its nearest mapped ancestor's, else the nearest joint."""
     J = {n: i for i, n in enumerate(_joints())}
-    of_bone = {b: J[j] for j, b in bone_of.items()}
+    of_bone = {b: J[j] for j, b in bone_of.items() if b}
     out = {}
     for bone in arm.data.bones:
         k = bone
@@ -258,13 +323,14 @@ def _triangles(me):
     return t.reshape(-1, 3), lo.reshape(-1, 3)
 
 
-def rider_from_objects(objects, rider_id, what, height_m=None, restore=True):
+def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, model_dir=None):
     """(arrays for rider_file.write_rider_file, meta) from the scene objects of one rigged human.
 
     height_m rescales the body to that soles-to-crown height; otherwise its size must already be a
     person's (MIN_HEIGHT_M..MAX_HEIGHT_M metres).  The armature's pose is reset to its rest pose for the
     import and put back afterwards when `restore`."""
-    arm, skinned, bone_of, scheme = find_rig(objects, what)
+    arm, skinned, mapping = find_rig(objects, what)
+    bone_of = {j: b for j, b in mapping.bone_of.items() if b}
     saved = {pb.name: pb.matrix_basis.copy() for pb in arm.pose.bones}
     saved_position = arm.data.pose_position
     try:
@@ -272,19 +338,26 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True):
         for pb in arm.pose.bones:
             pb.matrix_basis = Matrix.Identity(4)
         bpy.context.view_layer.update()
-        heads_rest = _posed_heads(arm, bone_of)
+        placed = _placed_offsets(arm, {j: v for j, v in mapping.virtual.items() if v[0] != "toe"})
+        toes = [j for j, v in mapping.virtual.items() if v[0] == "toe"]
+        for j in toes:  # a stand-in until the body frame is known
+            placed[j] = (mapping.virtual[j][1], Vector((0.0, 0.0, 0.0)))
+        heads_rest = _posed_heads(arm, bone_of, placed)
         M = body_frame(heads_rest)
         _check_humanoid(heads_rest, M, what)
+        if toes:
+            placed.update(_placed_offsets(arm, _derive_toes(arm, mapping, skinned, M, heads_rest)))
+            heads_rest = _posed_heads(arm, bone_of, placed)
         bone_joint = _bone_joint_index(arm, bone_of, heads_rest)
         rest_deform = {}
-        swings = to_t_pose(arm, bone_of, M)
+        swings = to_t_pose(arm, bone_of, M, placed)
         A, A_inv = arm.matrix_world, arm.matrix_world.inverted()
-        for j in _joints():  # each mapped bone's world deformation rest -> T-pose (identity for a T-posed rig)
-            pb = arm.pose.bones[bone_of[j]]
+        for j in _joints():  # each joint's bone's world deformation rest -> T-pose (identity for a T-posed rig)
+            pb = arm.pose.bones[bone_of[j] if j in bone_of else placed[j][0]]
             rest_deform[j] = _m2np(A @ pb.matrix @ pb.bone.matrix_local.inverted() @ A_inv).tolist()
-        heads_t = _posed_heads(arm, bone_of)
+        heads_t = _posed_heads(arm, bone_of, placed)
         V, F, W, C, UV, FT, n_filled = [], [], [], [], [], [], 0
-        images, base = {}, 0
+        images, base, missing = {}, 0, []
         for obj in skinned:
             v = _evaluated_world_vertices(obj)
             w = _object_weights(obj, arm, bone_joint)
@@ -293,7 +366,7 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True):
                                 f"{int((w.sum(1) > 0).sum())} of {len(w)} vertices")
             n_filled += _fill_unweighted(w, v)
             tri, tri_loops = _triangles(obj.data)
-            col, loop_uv, loop_tex = object_colors(obj, what, images)
+            col, loop_uv, loop_tex = object_colors(obj, what, images, [model_dir] if model_dir else [], missing)
             V.append(v)
             F.append(tri + base)
             W.append(w)
@@ -314,23 +387,24 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True):
     height = float(Vc[:, 1].max() - Vc[:, 1].min())
     if height <= 0:
         raise UserError(f"{what}: the mesh is flat along the body's up axis")
-    scale = 1.0 if height_m is None else float(height_m) / height
-    if height_m is None and not MIN_HEIGHT_M <= height <= MAX_HEIGHT_M:
-        raise UserError(f"{what}: the body is {height:.3g} m tall in the file's units (expected "
-                        f"{MIN_HEIGHT_M}-{MAX_HEIGHT_M} m): give --height-m to scale it")
+    hip = float((Jc[1, 1] + Jc[2, 1]) / 2 - Vc[:, 1].min())
+    scale, size = plausible_scale(height, hip, height_m, what)
     Vc, Jc = Vc * scale, Jc * scale
     shift = np.array([-Jc[0, 0], -Vc[:, 1].min(), -Jc[0, 2]])
     Vc, Jc = Vc + shift, Jc + shift
     canon = np.eye(4)
     canon[:3, :3], canon[:3, 3] = scale * M, shift
     meta = {
-        "id": rider_id, "source": what, "scheme": scheme, "armature": arm.name,
+        "id": rider_id, "source": what, "scheme": mapping.scheme, "armature": arm.name,
         "objects": [o.name for o in skinned], "bone_map": dict(bone_of),
+        "placed_joints": {j: placed[j][0] for j in _joints() if j not in bone_of},
+        "joint_source": dict(mapping.how),
         "rest_pose": "T" if max(swings.values()) < 10.0 else "A" if all(
             abs(swings[s] - 45) < 40 for s in ("left_shoulder", "right_shoulder")) else "other",
-        "swings_deg": swings, "height_m": round(float(Vc[:, 1].max()), 4), "scale": scale,
+        "swings_deg": swings, "height_m": round(float(Vc[:, 1].max()), 4), "scale": scale, "size": size,
         "canonical_from_world": canon.tolist(), "t_pose_deform_world": rest_deform,
         "unweighted_vertices_filled": int(n_filled), "textures": sorted(images),
+        "missing_textures": missing,
         "blender": bpy.app.version_string,
     }
     arrays = {"vertices": Vc, "faces": F, "joints": Jc, "weights": W, "colors": C}
@@ -338,6 +412,31 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True):
         arrays.update(uv=np.concatenate(UV), face_texture=np.concatenate(FT),
                       textures=[np.round(t * 255).astype(np.uint8) for t in images.values()])
     return arrays, meta
+
+
+def plausible_scale(height, hip, height_m, what):
+    """(scale to metres, what was assumed) for a body `height` tall with its hip joints `hip` above the
+    soles, in Blender's units after the file's own unit settings and object matrices (the importers apply
+    them).  A person's size is kept; a size that is a person's in another unit (cm, mm, inches, feet,
+    dm) is read in it; otherwise (a stylised figure 3 units tall, a tiny armature with no unit) the legs
+    are given an adult's length (hip joints HIP_M above the soles), which the pedals need.  Refused: a
+    body whose legs are not a plausible share of its height (not a person)."""
+    if height_m is not None:
+        return float(height_m) / height, f"--height-m {float(height_m):g} given"
+    share = hip / height
+    if not MIN_LEG_SHARE <= share <= 0.75:
+        raise UserError(f"{what}: its hip joints are at {share:.0%} of its height: not a person's "
+                        f"proportions (expected {MIN_LEG_SHARE:.0%}-75%)")
+    if MIN_HEIGHT_M <= height <= MAX_HEIGHT_M:
+        return 1.0, f"{height:.3g} m as in the file"
+    for factor, unit in UNIT_GUESSES:
+        if PLAUSIBLE_M[0] <= height * factor <= PLAUSIBLE_M[1]:
+            return factor, f"{height:.4g} units in the file read as {unit} ({height * factor:.3g} m)"
+    scale = HIP_M / hip
+    if height * scale > MAX_HEIGHT_M * 0.95:
+        scale = MAX_HEIGHT_M * 0.95 / height
+    return scale, (f"{height:.4g} units in the file, no unit fits a person: legs scaled to an adult's "
+                   f"(hip joints {hip * scale:.2f} m up, {height * scale:.2f} m tall)")
 
 
 def pose_rig(arm, bone_of, meta, world_transforms):
@@ -353,7 +452,8 @@ def pose_rig(arm, bone_of, meta, world_transforms):
     for pb in arm.pose.bones:
         pb.matrix_basis = Matrix.Identity(4)
     bpy.context.view_layer.update()
-    order = sorted(range(len(_joints())), key=lambda j: depth(bone_of[_joints()[j]]))
+    order = sorted((j for j in range(len(_joints())) if bone_of.get(_joints()[j])),
+                   key=lambda j: depth(bone_of[_joints()[j]]))
     for j in order:
         name = _joints()[j]
         D = np.asarray(meta["t_pose_deform_world"][name], float)

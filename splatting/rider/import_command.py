@@ -81,4 +81,9 @@ def run(args):
     print(f"{res['rider']}: rider {args.id} imported ({res.get('vertices', '?')} vertices, "
           f"{res.get('scheme', '?')} rig, {res.get('rest_pose', '?')}-pose rest, {res.get('height_m', '?')} m, "
           f"{res.get('textures', 0)} texture(s)){where}")
+    print(f"  size: {res.get('size', '?')}")
+    if res.get("placed_joints"):
+        print(f"  joints placed from their neighbours (no bone): {', '.join(res['placed_joints'])}")
+    for m in res.get("missing_textures") or []:
+        print(f"warning: texture not found, flat base colour used: {m}", file=sys.stderr)
     return 0
