@@ -43,7 +43,8 @@ def main(argv):
         raise UserError(f"--model must be one of {', '.join(MODEL_EXTENSIONS)}, got {args.model}")
     checks.number("height_m", args.height_m, 0.5, 2.6)
     checks.output_file("out", args.out, (".npz",))
-    from addon.core.contract import rider_file
+    from addon.core.contract import gltf_extensions, rider_file
+    gltf_extensions.check_readable(args.model)
     rider_file.check_rider_id(args.id)
 
     from addon.core import rider_rig

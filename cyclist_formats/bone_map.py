@@ -242,8 +242,10 @@ def _by_names(tree, usable):
     for side in ("left", "right"):
         g = lambda p: pick.get((p, side))  # noqa: E731
         s = {}
-        s["thigh"] = g("thigh") or g("hip") or (g("leg") if not g("shin") else None)
-        s["shin"] = g("shin") or (g("leg") if s["thigh"] != g("leg") else None)
+        if g("thigh") or g("hip"):  # Mixamo: UpLeg + Leg
+            s["thigh"], s["shin"] = g("thigh") or g("hip"), g("shin") or g("leg")
+        else:  # "Left leg" + "Left shin"
+            s["thigh"], s["shin"] = g("leg"), g("shin")
         if g("ankle"):
             s["ankle"], s["toe"] = g("ankle"), g("toe") or g("foot")
         else:
@@ -277,7 +279,7 @@ def _seg_len(tree, b):
     return max([tree.length(b)] + [float(np.linalg.norm(tree.head[c] - tree.head[b])) for c in kids])
 
 
-def _by_topology(tree, usable):
+def _by_topology(tree, usable, body_z=None):
     """The same structure as _by_names, found from the tree's shape; None when it has no person's shape."""
     use = set(usable)
     leaves = [n for n in use if not any(c in use for c in tree.descendants(n))]
@@ -287,12 +289,18 @@ def _by_topology(tree, usable):
     height = float(pts[:, 2].max() - pts[:, 2].min())
     if height <= 0:
         return None
-    centre_x = float(np.median([tree.head[n][0] for n in use]))
+    # the side-to-side axis: the widest horizontal direction of the skeleton (arms out or down, feet apart)
+    heads = np.array([tree.head[n] for n in use])
+    centre = np.median(heads, axis=0)
+    xy = heads[:, :2] - centre[:2]
+    _, _, vt = np.linalg.svd(xy, full_matrices=False)
+    lateral = np.array([vt[0, 0], vt[0, 1], 0.0])
+    x_of = lambda p: float((np.asarray(p) - centre) @ lateral)  # noqa: E731
     low = lambda n: min(tree.head[n][2], tree.tail[n][2])  # noqa: E731
     leaves_low = sorted(leaves, key=low)
     feet = None
     for a, b in itertools.combinations(leaves_low[:6], 2):
-        if (tree.head[a][0] - centre_x) * (tree.head[b][0] - centre_x) < 0 and tree.lca(a, b) is not None:
+        if x_of(tree.head[a]) * x_of(tree.head[b]) < 0 and tree.lca(a, b) is not None:
             feet = (a, b)
             break
     if feet is None:
@@ -314,11 +322,10 @@ def _by_topology(tree, usable):
     spine_path = tree.path(pelvis, top) or []
     # arms: the two usable leaves above the pelvis reaching furthest sideways, on opposite sides
     up_leaves = [n for n in upper if n in leaves]
-    wide = sorted(up_leaves, key=lambda n: -abs(max(tree.head[n][0], tree.tail[n][0], key=lambda x: abs(x - centre_x))
-                                                - centre_x))
+    wide = sorted(up_leaves, key=lambda n: -max(abs(x_of(tree.head[n])), abs(x_of(tree.tail[n]))))
     hands = None
     for a, b in itertools.combinations(wide[:8], 2):
-        if (tree.tail[a][0] - centre_x) * (tree.tail[b][0] - centre_x) < 0:
+        if x_of(tree.tail[a]) * x_of(tree.tail[b]) < 0:
             hands = (a, b)
             break
     if hands is None:
@@ -376,8 +383,9 @@ def _by_topology(tree, usable):
     out.update(sides)
     above = [b for b in spine_path if tree.depth(b) > tree.depth(branch)]
     out["spine"] = [b for b in spine_path if b not in above]
-    soles = float(pts[:, 2].min())
-    cands = [b for b in [branch] + above if tree.head[b][2] - soles <= 0.95 * height]
+    soles, crown = body_z if body_z is not None else (float(pts[:, 2].min()), float(pts[:, 2].max()))
+    # the head joint sits at the skull's base: at least 8 % of the body's height below its crown
+    cands = [b for b in [branch] + above if tree.head[b][2] <= crown - 0.08 * (crown - soles)]
     head = max(cands, key=lambda b: tree.head[b][2]) if cands else None
     if head is None or head == branch:
         return None
@@ -533,9 +541,10 @@ def usable_bones(bones):
     return out
 
 
-def map_skeleton(bones, what="armature"):
+def map_skeleton(bones, what="armature", body_z=None):
     """bones: [{"name", "parent", "head" (3,), "tail" (3,), "deform"}] in world coordinates with +Z up
-    (Blender's importers) -> Mapping.  UserError (one line) when neither the names nor the shape make
+    (Blender's importers) -> Mapping.  body_z: (lowest, highest) Z of the skinned mesh, when known (the
+    shape fallback finds the head below the crown with it).  UserError (one line) when neither the names nor the shape make
     a humanoid."""
     tree = _Tree(bones)
     usable = usable_bones(bones)
@@ -549,7 +558,7 @@ def map_skeleton(bones, what="armature"):
     fam = max(fams, key=fams.get) if fams else "generic"
     res, missing = _assemble(tree, names, f"names:{fam}", what, usable)
     if res is None:
-        topo = _by_topology(tree, usable)
+        topo = _by_topology(tree, usable, body_z)
         if topo is not None:
             # names that were found still win over the shape for their joints
             for side in ("left", "right"):
@@ -566,8 +575,8 @@ def map_skeleton(bones, what="armature"):
         sample = ", ".join(sorted(b["name"] for b in bones)[:8]) or "none"
         if len(missing) > 8:
             raise UserError(f"{what}: not a humanoid rig of a known naming scheme (Mixamo, Rigify, Unreal/MPFB, "
-                            f"Biped, VRoid, CC, Blender .L/.R) nor of a person's shape: {found} of 24 SMPL joints "
-                            f"found; its bones include {sample}")
+                            f"Biped, VRoid, CC, Blender .L/.R) nor of a person's shape (two legs, two arms, a "
+                            f"head): {found} of 24 SMPL joints found by name; its bones include {sample}")
         raise UserError(f"{what}: humanoid rig without bones for SMPL joints {', '.join(missing)} "
                         f"(its bones include {sample})")
     bone_of, virtual, how = res

@@ -95,8 +95,11 @@ def find_rig(objects, what):
                         f"then import it")
     first_error, mapped = None, []
     for arm in sorted(arms, key=lambda a: -len(a.data.bones)):
+        skinned = [o for o in objects if _deformed_by(o, arm)]
+        z = [(o.matrix_world @ Vector(c)).z for o in skinned for c in o.bound_box]
         try:
-            m = bone_map.map_skeleton(_skeleton(arm), f"{what}: armature '{arm.name}'")
+            m = bone_map.map_skeleton(_skeleton(arm), f"{what}: armature '{arm.name}'",
+                                      (min(z), max(z)) if z else None)
         except UserError as e:
             first_error = first_error or e
             continue
@@ -463,7 +466,7 @@ def pose_rig(arm, bone_of, meta, world_transforms):
         bpy.context.view_layer.update()
 
 
-def save_rider(objects, rider_id, folder, what, height_m=None, overwrite=False):
+def save_rider(objects, rider_id, folder, what, height_m=None, overwrite=False, model_dir=None):
     """The add-on's "Save as rider": rider_from_objects, written to <folder>/<rider_id>/rider.npz (where
     `python -m splatting` finds imported riders when folder is the project's data/imported_riders).
     Returns (path, meta)."""
@@ -476,6 +479,6 @@ def save_rider(objects, rider_id, folder, what, height_m=None, overwrite=False):
     path = os.path.join(folder, rider_id, rider_file.FILE_NAME)
     if os.path.exists(path) and not overwrite:
         raise UserError(f"{path} exists: rider {rider_id!r} was imported before (tick Overwrite to replace it)")
-    arrays, meta = rider_from_objects(objects, rider_id, what, height_m)
+    arrays, meta = rider_from_objects(objects, rider_id, what, height_m, model_dir=model_dir)
     rider_file.write_rider_file(path, meta=meta, **arrays)
     return path, meta

@@ -39,6 +39,8 @@ def check_args(args):
     check_rider_id(args.id)
     checks.number("height_m", args.height_m, 0.5, 2.6)
     checks.output_file("out", args.out, (".npz",))
+    from cyclist_formats.gltf_extensions import check_readable
+    check_readable(args.model)
     if args.blender is not None:
         checks.input_file("blender", args.blender)
 
