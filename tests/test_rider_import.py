@@ -514,9 +514,9 @@ def test_turned_and_scaled_rig_gives_the_same_rider(source, tmp_path):
     arm.matrix_world = Matrix.Rotation(math.radians(90), 4, "Z") @ Matrix.Diagonal((2, 2, 2, 1)) @ Matrix.Translation((3, 1, 0))
     bpy.context.view_layer.update()
     a, meta = rider_rig.rider_from_objects(bpy.context.scene.objects, "giant", "scene")
-    hips = (a["joints"][1, 1] + a["joints"][2, 1]) / 2
-    assert "no unit fits a person" in meta["size"] and abs(hips - rider_rig.HIP_M) < 1e-4
-    assert abs(meta["scale"] - rider_rig.HIP_M / (2 * source.joints[1, 1].item())) < 1e-3  # 2x the source
+    leg = lambda J: np.linalg.norm(np.asarray(J[1]) - np.asarray(J[7]))  # noqa: E731  (left hip -> ankle)
+    assert "no unit fits a person" in meta["size"] and abs(leg(a["joints"]) - rider_rig.LEG_M) < 1e-4
+    assert abs(meta["scale"] - rider_rig.LEG_M / (2 * leg(source.joints.numpy()))) < 1e-4  # 2x the source
     a, meta = rider_rig.rider_from_objects(bpy.context.scene.objects, "giant", "scene", height_m=source.height_m)
     check_same_body(a, meta, source, exact_weights=True)
     npz = rider_file.write_rider_file(tmp_path / "rider.npz", meta=meta, **a)
@@ -768,6 +768,18 @@ def family_models(tmp_path_factory, source):
     arm.parent, arm.scale = root, (0.01, 0.01, 0.01)
     export(d / "scaled.glb")
     out["scaled"] = d / "scaled.glb"
+    reset_scene()  # bound in the T-pose, saved standing idle: the nodes' pose has the arms down
+    arm, _ = build_rigged_human(source, "mixamo")
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        pb = arm.pose.bones[MIXAMO[f"{side}_shoulder"]]
+        pb.rotation_mode = "XYZ"
+        head = arm.matrix_world @ pb.head
+        R = Matrix.Translation(head) @ Matrix.Rotation(math.radians(sign * -70), 4, "X") @ Matrix.Translation(-head)
+        pb.matrix = R @ pb.matrix
+        bpy.context.view_layer.update()
+    bpy.ops.export_scene.gltf(filepath=str(d / "idle_over_t.glb"), export_format="GLB",
+                              export_rest_position_armature=False)
+    out["idle_over_t"] = d / "idle_over_t.glb"
     reset_scene()  # Draco-compressed meshes
     build_rigged_human(source, "mixamo")
     bpy.ops.export_scene.gltf(filepath=str(d / "draco.glb"), export_format="GLB",
@@ -842,6 +854,22 @@ def test_units_object_scales_and_draco_give_the_same_rider(family_models, source
     assert np.abs(a["joints"] - source.joints.numpy()).max() < 1e-4
     d, _ = nearest(a["vertices"], source.vertices.double().numpy())
     assert d.max() < (1e-3 if name == "draco" else 1e-4), d.max()
+
+
+def test_idle_pose_over_a_t_bind_pose_imports_the_bind_pose(family_models, source):
+    """Saved with the arms 70 deg down (the nodes' pose) but bound in the T-pose (the inverse bind
+    matrices): the rider is the bind pose, the source rider itself, not an A-pose turned back."""
+    import json
+    import struct
+    data = open(family_models["idle_over_t"], "rb").read()
+    g = json.loads(data[20:20 + struct.unpack_from("<I", data, 12)[0]])
+    node = next(n for n in g["nodes"] if n.get("name") == MIXAMO["left_shoulder"])
+    assert abs(node.get("rotation", [0, 0, 0, 1])[3]) < 0.95  # the file's pose really is not the bind pose
+    a, meta = import_here(family_models["idle_over_t"])
+    assert meta["rest_pose"] == "T" and max(meta["swings_deg"].values()) < 0.01
+    assert np.abs(a["joints"] - source.joints.numpy()).max() < 2e-5
+    d, _ = nearest(a["vertices"], source.vertices.double().numpy())
+    assert d.max() < 2e-5
 
 
 def test_missing_texture_is_flat_and_said(models, tmp_path):

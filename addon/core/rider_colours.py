@@ -96,7 +96,8 @@ def colour_source(mat, what, search_dirs=(), missing=None):
                         raise UserError(f"{what}: material '{mat.name}' uses texture '{src}', which is missing "
                                         f"or unreadable (missing texture)")
                     missing.append(f"material '{mat.name}': {src}")
-                    return ("flat", srgb_from_linear(default))
+                    # a socket a texture fed is often left black: then the viewport colour
+                    return ("flat", srgb_from_linear(default if max(default) > 0.02 else mat.diffuse_color[:3]))
             uv = None
             vec = n.inputs.get("Vector")
             if vec is not None and vec.links and vec.links[0].from_node.type == "UVMAP":
@@ -106,6 +107,23 @@ def colour_source(mat, what, search_dirs=(), missing=None):
             name = getattr(n, "layer_name", None) or getattr(n, "attribute_name", None)
             return ("attribute", name)
     return ("flat", srgb_from_linear(default))
+
+
+def alpha_image(mat):
+    """The image whose alpha feeds the material's shader Alpha (glTF/FBX cut-outs: MakeHuman's hidden
+    helper geometry, hair cards), or None when the material is opaque."""
+    nt = getattr(mat, "node_tree", None) if mat is not None else None
+    if nt is None:
+        return None
+    for n in nt.nodes:
+        a = n.inputs.get("Alpha") if n.type.startswith("BSDF") else None
+        if a is None or not a.links:
+            continue
+        src = a.links[0].from_node
+        for m in [src] + _upstream(src):
+            if m.type == "TEX_IMAGE" and m.image is not None and m.image.has_data and m.image.channels == 4:
+                return m.image
+    return None
 
 
 def _load(img):
@@ -140,8 +158,9 @@ def _sample_bilinear(rgb, uv):
 
 
 def object_colors(obj, what, images, search_dirs=(), missing=None):
-    """Per-vertex sRGB colours, and per loop the texture coordinate and the index into `images` (an
-    ordered {name: sRGB array}) of the texture drawn there (-1: none)."""
+    """Per-vertex sRGB colours, and per loop the texture coordinate, the index into `images` (an
+    ordered {name: sRGB array}) of the texture drawn there (-1: none) and the texture's alpha where an
+    image's alpha feeds the shader's Alpha (1 elsewhere)."""
     me = obj.data
     nv, nl = len(me.vertices), len(me.loops)
     loop_vert = np.empty(nl, np.int64)
@@ -154,6 +173,7 @@ def object_colors(obj, what, images, search_dirs=(), missing=None):
     loop_rgb = np.empty((nl, 3))
     loop_uv = np.zeros((nl, 2))
     loop_tex = np.full(nl, -1, np.int64)
+    loop_alpha = np.ones(nl)
     for mi in np.unique(loop_mat):
         sel = loop_mat == mi
         mat = obj.material_slots[mi].material if mi < len(obj.material_slots) else None
@@ -170,6 +190,13 @@ def object_colors(obj, what, images, search_dirs=(), missing=None):
             loop_rgb[sel] = _sample_bilinear(images[img.name], uv.reshape(-1, 2)[sel])
             loop_uv[sel] = uv.reshape(-1, 2)[sel]
             loop_tex[sel] = list(images).index(img.name)
+            a_img = alpha_image(mat)
+            if a_img is not None:
+                w, h = a_img.size
+                px = np.empty(w * h * 4, np.float32)
+                a_img.pixels.foreach_get(px)
+                alpha = np.repeat(px.reshape(h, w, 4)[..., 3:].astype(np.float64), 3, -1)
+                loop_alpha[sel] = _sample_bilinear(alpha, uv.reshape(-1, 2)[sel])[:, 0]
         elif src[0] == "attribute":
             loop_rgb[sel] = _attribute_colors(me, src[1], loop_vert)[sel]
         else:
@@ -180,7 +207,7 @@ def object_colors(obj, what, images, search_dirs=(), missing=None):
     np.add.at(cnt, loop_vert, 1)
     out[cnt == 0] = srgb_from_linear(DEFAULT_LINEAR)
     cnt[cnt == 0] = 1
-    return out / cnt[:, None], loop_uv, loop_tex
+    return out / cnt[:, None], loop_uv, loop_tex, loop_alpha
 
 
 def _attribute_colors(me, name, loop_vert):

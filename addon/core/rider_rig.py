@@ -49,8 +49,10 @@ MIN_HEIGHT_M, MAX_HEIGHT_M = 0.5, 2.6
 UNIT_GUESSES = ((0.01, "centimetres"), (0.001, "millimetres"), (0.0254, "inches"), (0.1, "decimetres"),
                 (0.3048, "feet"), (10.0, "decametres"), (100.0, "hectometres"))
 PLAUSIBLE_M = (1.0, 2.2)
-HIP_M = 0.88          # an adult's hip joint height above the soles (1.75 m person)
-MIN_LEG_SHARE = 0.15  # hip joints below 15 % of the height: not a person (a chibi figure is ~25 %)
+PELVIS_LOW, PELVIS_ABOVE_HIPS = 0.015, 0.008  # of the ankle-to-head height (SMPL: pelvis 1 cm above hips)
+CUTOUT_ALPHA = 0.5     # faces whose texture alpha averages below this are invisible: dropped
+LEG_M = 0.82          # an adult's leg, hip joint to ankle (a 1.75 m person)
+MIN_LEG_SHARE = 0.15  # legs under 15 % of the height: not a person (a chibi figure's are ~25 %)
 
 
 def _joints():
@@ -122,11 +124,11 @@ def _posed_heads(arm, bone_of, placed=None):
     A = arm.matrix_world
     out = []
     for j in _joints():
-        if bone_of.get(j):
-            out.append(list(A @ arm.pose.bones[bone_of[j]].head))
-        else:
+        if placed and j in placed:
             b, off = placed[j]
             out.append(list(A @ arm.pose.bones[b].matrix @ off))
+        else:
+            out.append(list(A @ arm.pose.bones[bone_of[j]].head))
     return np.array(out, np.float64)
 
 
@@ -135,6 +137,21 @@ def _placed_offsets(arm, virtual):
     A = arm.matrix_world
     return {j: (b, (A @ arm.data.bones[b].matrix_local).inverted() @ Vector([float(x) for x in p]))
             for j, (b, p) in virtual.items()}
+
+
+def _lift_pelvis(heads, M, pelvis_bone):
+    """{"pelvis": (its bone, position)} when the pelvis bone's head sits more than PELVIS_LOW of the body
+    below the hip joints (game rigs root the hips at the crotch): SMPL's pelvis joint is just above
+    the hips (by PELVIS_ABOVE_HIPS of the body), and the IK seats that joint above the saddle.  The
+    joint still drives its bone and its weights; only the point it turns about moves."""
+    J = {n: i for i, n in enumerate(_joints())}
+    up = M[1]
+    mid = (heads[J["left_hip"]] + heads[J["right_hip"]]) / 2
+    body = float((heads[J["head"]] - (heads[J["left_ankle"]] + heads[J["right_ankle"]]) / 2) @ up)
+    below = float((mid - heads[J["pelvis"]]) @ up)
+    if body <= 0 or below <= PELVIS_LOW * body:
+        return {}
+    return {"pelvis": (pelvis_bone, heads[J["pelvis"]] + up * (below + PELVIS_ABOVE_HIPS * body))}
 
 
 def _derive_toes(arm, mapping, skinned, M, heads):
@@ -350,7 +367,9 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, mod
         _check_humanoid(heads_rest, M, what)
         if toes:
             placed.update(_placed_offsets(arm, _derive_toes(arm, mapping, skinned, M, heads_rest)))
-            heads_rest = _posed_heads(arm, bone_of, placed)
+        lifted = _lift_pelvis(heads_rest, M, bone_of["pelvis"])
+        placed.update(_placed_offsets(arm, lifted))
+        heads_rest = _posed_heads(arm, bone_of, placed)
         bone_joint = _bone_joint_index(arm, bone_of, heads_rest)
         rest_deform = {}
         swings = to_t_pose(arm, bone_of, M, placed)
@@ -360,7 +379,7 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, mod
             rest_deform[j] = _m2np(A @ pb.matrix @ pb.bone.matrix_local.inverted() @ A_inv).tolist()
         heads_t = _posed_heads(arm, bone_of, placed)
         V, F, W, C, UV, FT, n_filled = [], [], [], [], [], [], 0
-        images, base, missing = {}, 0, []
+        images, base, missing, keep_parts = {}, 0, [], []
         for obj in skinned:
             v = _evaluated_world_vertices(obj)
             w = _object_weights(obj, arm, bone_joint)
@@ -369,7 +388,9 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, mod
                                 f"{int((w.sum(1) > 0).sum())} of {len(w)} vertices")
             n_filled += _fill_unweighted(w, v)
             tri, tri_loops = _triangles(obj.data)
-            col, loop_uv, loop_tex = object_colors(obj, what, images, [model_dir] if model_dir else [], missing)
+            col, loop_uv, loop_tex, loop_alpha = object_colors(obj, what, images, [model_dir] if model_dir else [],
+                                                               missing)
+            keep_parts.append(loop_alpha[tri_loops].mean(1) >= CUTOUT_ALPHA)
             V.append(v)
             F.append(tri + base)
             W.append(w)
@@ -384,14 +405,25 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, mod
             arm.data.pose_position = saved_position
             bpy.context.view_layer.update()
     V, F, W, C = np.concatenate(V), np.concatenate(F), np.concatenate(W), np.concatenate(C)
+    UV, FT, keep = np.concatenate(UV), np.concatenate(FT), np.concatenate(keep_parts)
+    n_cut = int((~keep).sum())
+    if n_cut:  # invisible faces (texture alpha ~0: hidden helper geometry) are not part of the person
+        if n_cut == len(keep):
+            raise UserError(f"{what}: every face is transparent (texture alpha below {CUTOUT_ALPHA})")
+        F, UV, FT = F[keep], UV[keep], FT[keep]
+        used = np.unique(F)
+        new_index = np.full(len(V), -1, np.int64)
+        new_index[used] = np.arange(len(used))
+        V, W, C, F = V[used], W[used], C[used], new_index[F]
     W /= W.sum(1, keepdims=True)
     # world -> canonical: rotate by M, scale, soles on Y = 0, pelvis on the Y axis
     Vc, Jc = V @ M.T, heads_t @ M.T
     height = float(Vc[:, 1].max() - Vc[:, 1].min())
     if height <= 0:
         raise UserError(f"{what}: the mesh is flat along the body's up axis")
-    hip = float((Jc[1, 1] + Jc[2, 1]) / 2 - Vc[:, 1].min())
-    scale, size = plausible_scale(height, hip, height_m, what)
+    J = {n: i for i, n in enumerate(_joints())}
+    leg = float(np.mean([np.linalg.norm(Jc[J[f"{s}_hip"]] - Jc[J[f"{s}_ankle"]]) for s in ("left", "right")]))
+    scale, size = plausible_scale(height, leg, height_m, what)
     Vc, Jc = Vc * scale, Jc * scale
     shift = np.array([-Jc[0, 0], -Vc[:, 1].min(), -Jc[0, 2]])
     Vc, Jc = Vc + shift, Jc + shift
@@ -401,45 +433,46 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, mod
         "id": rider_id, "source": what, "scheme": mapping.scheme, "armature": arm.name,
         "objects": [o.name for o in skinned], "bone_map": dict(bone_of),
         "placed_joints": {j: placed[j][0] for j in _joints() if j not in bone_of},
+        "moved_joints": sorted(j for j in placed if j in bone_of),
         "joint_source": dict(mapping.how),
         "rest_pose": "T" if max(swings.values()) < 10.0 else "A" if all(
             abs(swings[s] - 45) < 40 for s in ("left_shoulder", "right_shoulder")) else "other",
         "swings_deg": swings, "height_m": round(float(Vc[:, 1].max()), 4), "scale": scale, "size": size,
         "canonical_from_world": canon.tolist(), "t_pose_deform_world": rest_deform,
         "unweighted_vertices_filled": int(n_filled), "textures": sorted(images),
-        "missing_textures": missing,
+        "missing_textures": missing, "transparent_faces_dropped": n_cut,
         "blender": bpy.app.version_string,
     }
     arrays = {"vertices": Vc, "faces": F, "joints": Jc, "weights": W, "colors": C}
     if images:  # the texture layer: the training renders draw the textures themselves, not vertex colours
-        arrays.update(uv=np.concatenate(UV), face_texture=np.concatenate(FT),
+        arrays.update(uv=UV, face_texture=FT,
                       textures=[np.round(t * 255).astype(np.uint8) for t in images.values()])
     return arrays, meta
 
 
-def plausible_scale(height, hip, height_m, what):
-    """(scale to metres, what was assumed) for a body `height` tall with its hip joints `hip` above the
-    soles, in Blender's units after the file's own unit settings and object matrices (the importers apply
-    them).  A person's size is kept; a size that is a person's in another unit (cm, mm, inches, feet,
-    dm) is read in it; otherwise (a stylised figure 3 units tall, a tiny armature with no unit) the legs
-    are given an adult's length (hip joints HIP_M above the soles), which the pedals need.  Refused: a
-    body whose legs are not a plausible share of its height (not a person)."""
+def plausible_scale(height, leg, height_m, what):
+    """(scale to metres, what was assumed) for a body `height` tall with legs (hip joint to ankle, in the
+    T-pose) `leg` long, in Blender's units after the file's own unit settings and object matrices (the
+    importers apply them).  A person's size is kept; a size that is a person's in another unit (cm, mm,
+    inches, dm, feet) is read in it; otherwise (a stylised figure 3 units tall, a tiny armature with no
+    unit) the legs are given an adult's length (LEG_M), which is what reaching the pedals needs.
+    Refused: legs that are not a plausible share of the height (not a person)."""
     if height_m is not None:
         return float(height_m) / height, f"--height-m {float(height_m):g} given"
-    share = hip / height
+    share = leg / height
     if not MIN_LEG_SHARE <= share <= 0.75:
-        raise UserError(f"{what}: its hip joints are at {share:.0%} of its height: not a person's "
+        raise UserError(f"{what}: its legs (hip to ankle) are {share:.0%} of its height: not a person's "
                         f"proportions (expected {MIN_LEG_SHARE:.0%}-75%)")
     if MIN_HEIGHT_M <= height <= MAX_HEIGHT_M:
         return 1.0, f"{height:.3g} m as in the file"
     for factor, unit in UNIT_GUESSES:
         if PLAUSIBLE_M[0] <= height * factor <= PLAUSIBLE_M[1]:
             return factor, f"{height:.4g} units in the file read as {unit} ({height * factor:.3g} m)"
-    scale = HIP_M / hip
+    scale = LEG_M / leg
     if height * scale > MAX_HEIGHT_M * 0.95:
         scale = MAX_HEIGHT_M * 0.95 / height
     return scale, (f"{height:.4g} units in the file, no unit fits a person: legs scaled to an adult's "
-                   f"(hip joints {hip * scale:.2f} m up, {height * scale:.2f} m tall)")
+                   f"({leg * scale:.2f} m hip to ankle, {height * scale:.2f} m tall)")
 
 
 def pose_rig(arm, bone_of, meta, world_transforms):
