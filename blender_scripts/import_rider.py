@@ -9,15 +9,17 @@ carried over.  Unrigged meshes, non-humanoid rigs and missing textures end in on
 and nothing written.  Prints one JSON line {"rider": OUT, ...} on success.
 """
 import argparse
+import contextlib
 import json
 import os
 import sys
+import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from addon.core.script import UserError, run_main  # noqa: E402
 
-MODEL_EXTENSIONS = (".glb", ".gltf", ".fbx", ".blend")
+MODEL_EXTENSIONS = (".glb", ".gltf", ".vrm", ".fbx", ".blend")  # .vrm: a VRoid/VRM avatar, a .glb
 
 
 def _numpy_aliases_for_old_gltf_importer():
@@ -27,6 +29,18 @@ def _numpy_aliases_for_old_gltf_importer():
     import numpy as np
     if bpy.app.version < (3, 6, 0) and "bool" not in np.__dict__:
         np.bool = bool
+
+
+@contextlib.contextmanager
+def _as_importable(path):
+    """A .vrm (VRoid, VRM avatars) is a binary glTF under another name: imported through a .glb link."""
+    if not path.lower().endswith(".vrm"):
+        yield path
+        return
+    with tempfile.TemporaryDirectory() as d:
+        link = os.path.join(d, os.path.splitext(os.path.basename(path))[0] + ".glb")
+        os.symlink(os.path.abspath(path), link)
+        yield link
 
 
 def main(argv):
@@ -53,7 +67,8 @@ def main(argv):
 
     _numpy_aliases_for_old_gltf_importer()
     reset_scene()
-    objects = import_model(args.model)
+    with _as_importable(args.model) as model:
+        objects = import_model(model)
     arrays, meta = rider_rig.rider_from_objects(objects, args.id, os.path.basename(args.model), args.height_m,
                                                 model_dir=os.path.dirname(os.path.abspath(args.model)))
     rider_file.write_rider_file(args.out, meta=meta, **arrays)

@@ -523,7 +523,7 @@ def _assemble(tree, parts, how_found, what, usable):
             else:
                 p = 0.5 * (s3 + neck_p)
                 p = p + 0.15 * (tree.head[s["upperarm"]] - p)
-                virtual[f"{side}_collar"] = (par if par is not None else bone_of["spine3"], p)
+                virtual[f"{side}_collar"] = (par or bone_of["spine3"] or virtual["spine3"][0], p)
                 how[f"{side}_collar"] = "interpolated"
     return (bone_of, virtual, how), []
 
@@ -556,7 +556,11 @@ def map_skeleton(bones, what="armature", body_z=None):
             fams[f] = fams.get(f, 0) + 1
     fams.pop("generic", None)
     fam = max(fams, key=fams.get) if fams else "generic"
-    res, missing = _assemble(tree, names, f"names:{fam}", what, usable)
+    names_error = None
+    try:
+        res, missing = _assemble(tree, names, f"names:{fam}", what, usable)
+    except UserError as e:  # names that contradict the hierarchy: the shape may still make sense of it
+        res, missing, names_error = None, [], e
     if res is None:
         topo = _by_topology(tree, usable, body_z)
         if topo is not None:
@@ -570,6 +574,8 @@ def map_skeleton(bones, what="armature", body_z=None):
             except UserError:
                 res, missing2 = None, missing
             fam = "topology"
+    if res is None and names_error is not None:
+        raise names_error
     if res is None:
         found = 24 - len(missing)
         sample = ", ".join(sorted(b["name"] for b in bones)[:8]) or "none"

@@ -44,7 +44,7 @@ def gltf_json(path):
 def unreadable_extensions(path):
     """[(extension, advice)] for the extensions `path` requires (or uses without fallback) that
     Blender's importer does not read; [] for other model formats."""
-    if not str(path).lower().endswith((".glb", ".gltf")) or not os.path.isfile(path):
+    if not str(path).lower().endswith((".glb", ".gltf", ".vrm")) or not os.path.isfile(path):
         return []
     g = gltf_json(path)
     if not isinstance(g, dict):

@@ -151,7 +151,7 @@ def write_texture(path):
     return img
 
 
-def build_rigged_human(rider, scheme, texture=None, a_pose_deg=0.0, drop=()):
+def build_rigged_human(rider, scheme, texture=None, a_pose_deg=0.0, drop=(), pelvis_drop=0.0):
     """The rider as a skinned mesh + armature in the current (empty) scene; returns (armature, mesh).
     scheme: a FAMILIES key.  drop: joints that get no bone (as in rigs with fewer spine bones, no neck,
     no collars): their weights go to the parent joint's bone and their children hang from it."""
@@ -205,6 +205,8 @@ def build_rigged_human(rider, scheme, texture=None, a_pose_deg=0.0, drop=()):
         p = eb[names[parent]]
         b.head, b.tail = p.head.copy(), p.head + (p.tail - p.head) * 0.5
         b.parent = p
+    if pelvis_drop:  # a game rig's hips bone rooted at the crotch, below the hip joints
+        eb[names["pelvis"]].head.z -= pelvis_drop
     bpy.ops.object.mode_set(mode="OBJECT")
     W = rider.weights.double().numpy().copy()
     groups = {}
@@ -768,6 +770,23 @@ def family_models(tmp_path_factory, source):
     arm.parent, arm.scale = root, (0.01, 0.01, 0.01)
     export(d / "scaled.glb")
     out["scaled"] = d / "scaled.glb"
+    reset_scene()  # a cut-out: the texture's alpha (0 on its right half) feeds the shader's Alpha
+    img = bpy.data.images.new("cutout", TEX, TEX, alpha=True)
+    x, y = np.meshgrid(np.arange(TEX) / (TEX - 1), np.arange(TEX) / (TEX - 1))
+    img.pixels.foreach_set(np.stack([x, y, np.full_like(x, 0.25), (x <= 0.5).astype(float)], -1)
+                           .astype(np.float32).ravel())
+    img.filepath_raw, img.file_format = str(d / "cutout.png"), "PNG"
+    img.save()
+    _, body = build_rigged_human(source, "mixamo", img)
+    nt = body.data.materials[0].node_tree
+    nt.links.new(next(n for n in nt.nodes if n.type == "TEX_IMAGE").outputs["Alpha"],
+                 next(n for n in nt.nodes if n.type == "BSDF_PRINCIPLED").inputs["Alpha"])
+    export(d / "cutout.glb")
+    out["cutout"] = d / "cutout.glb"
+    reset_scene()  # the pelvis bone's head 8 cm below the hip joints
+    build_rigged_human(source, "mixamo", pelvis_drop=0.08)
+    export(d / "low_pelvis.glb")
+    out["low_pelvis"] = d / "low_pelvis.glb"
     reset_scene()  # bound in the T-pose, saved standing idle: the nodes' pose has the arms down
     arm, _ = build_rigged_human(source, "mixamo")
     for side, sign in (("left", 1.0), ("right", -1.0)):
@@ -825,17 +844,23 @@ def test_kaykit_placed_joints_sit_between_their_neighbours(family_models, source
                                      "right_collar": "chest"}
 
 
-@pytest.mark.parametrize("name,theta_p,theta_s", [("two_bone_spine", 120.0, 10.0), ("helmet", 300.0, -15.0)])
+@pytest.mark.parametrize("name,theta_p,theta_s", [("two_bone_spine", 120.0, 10.0), ("helmet", 300.0, -15.0),
+                                                   ("low_pelvis", 40.0, 0.0)])
 def test_placed_spine_and_rigid_attachment_skin_as_blender_does(family_models, source, tmp_path, name, theta_p,
                                                                   theta_s):
-    """A two-bone spine (spine2 placed on the chain) and a helmet parented to the head bone: LBS of the
-    imported rider equals Blender posing the rig, helmet included."""
+    """A two-bone spine (spine2 placed on the chain), a helmet parented to the head bone and a pelvis bone
+    rooted 8 cm below the hips (its joint moved up): LBS of the imported rider equals Blender posing the
+    rig, helmet included."""
     npz = write_here(family_models[name], tmp_path)
     a, meta = rider_file.read_rider_file(npz)
     if name == "two_bone_spine":
         assert meta["joint_source"]["spine2"] == "interpolated" and meta["placed_joints"] == {"spine2": "mixamorig:Spine"}
         s1, s2, s3 = (a["joints"][JOINT_NAMES.index(k)] for k in ("spine1", "spine2", "spine3"))
         assert s1[1] < s2[1] < s3[1]
+    elif name == "low_pelvis":  # the joint back just above the hips, where SMPL (and the IK's seat) has it
+        assert meta["moved_joints"] == ["pelvis"] and meta["bone_map"]["pelvis"] == MIXAMO["pelvis"]
+        assert np.abs(a["joints"][0] - source.joints.numpy()[0]).max() < 2e-3
+        assert np.abs(a["joints"][1:] - source.joints.numpy()[1:]).max() < 2e-5
     else:
         n = len(source.vertices)
         assert len(a["vertices"]) - n in (8, 24) and "helmet" in meta["objects"]  # glTF splits flat-shaded corners
@@ -872,6 +897,21 @@ def test_idle_pose_over_a_t_bind_pose_imports_the_bind_pose(family_models, sourc
     assert d.max() < 2e-5
 
 
+def test_faces_a_texture_alpha_hides_are_dropped(family_models, source):
+    """Alpha 0 on the texture's right half (u > 0.5, the body's right side in the test's planar map):
+    those faces are not part of the rider, the rest is kept whole."""
+    a, meta = import_here(family_models["cutout"])
+    n = len(source.faces)
+    assert 0.2 * n < meta["transparent_faces_dropped"] < 0.8 * n
+    assert len(a["faces"]) == n - meta["transparent_faces_dropped"]
+    V = source.vertices.double().numpy()
+    lo, hi = V[:, 2].min(), V[:, 2].max()
+    u = lambda v: 0.1 + 0.8 * (v[:, 2] - lo) / (hi - lo)  # noqa: E731  (expected_uv's u)
+    assert u(a["vertices"]).max() < 0.55
+    d, _ = nearest(V[u(V) < 0.45], a["vertices"])
+    assert (d < 2e-5).mean() > 0.99  # the opaque side is all there
+
+
 def test_missing_texture_is_flat_and_said(models, tmp_path):
     """A texture whose file is gone: imported with the material's base colour, a warning line and the
     file's meta naming it (not a silent grey, not a refusal)."""
@@ -882,3 +922,15 @@ def test_missing_texture_is_flat_and_said(models, tmp_path):
     a, meta = rider_file.read_rider_file(out)
     assert len(meta["missing_textures"]) == 1 and "skin.png" in meta["missing_textures"][0]
     assert meta["textures"] == [] and np.ptp(a["colors"], axis=0).max() < 1e-6  # one flat colour
+
+
+def test_vrm_file_is_read_as_the_glb_it_is(family_models, source, tmp_path):
+    """A VRoid avatar's .vrm (a binary glTF under another name) imports through the command."""
+    import shutil
+    vrm = tmp_path / "avatar.vrm"
+    shutil.copy(family_models["vroid"], vrm)
+    out = tmp_path / "vrm" / "rider.npz"
+    r = cli("rider", "import", "--model", vrm, "--id", "vrm", "--out", out)
+    assert r.returncode == 0, r.stderr[-1500:]
+    a, meta = rider_file.read_rider_file(out)
+    assert meta["scheme"] == "vroid" and np.abs(a["joints"] - source.joints.numpy()).max() < 2e-5

@@ -13,7 +13,7 @@ from cyclist_formats.errors import UserError
 from splatting import paths
 
 SCRIPT = paths.blender_script("import_rider.py")
-MODEL_EXTENSIONS = (".glb", ".gltf", ".fbx", ".blend")
+MODEL_EXTENSIONS = (".glb", ".gltf", ".vrm", ".fbx", ".blend")  # .vrm: a VRoid/VRM avatar, a .glb
 
 
 def add_arguments(p):
