@@ -96,8 +96,9 @@ def colour_source(mat, what, search_dirs=(), missing=None):
                         raise UserError(f"{what}: material '{mat.name}' uses texture '{src}', which is missing "
                                         f"or unreadable (missing texture)")
                     missing.append(f"material '{mat.name}': {src}")
-                    # a socket a texture fed is often left black: then the viewport colour
-                    return ("flat", srgb_from_linear(default if max(default) > 0.02 else mat.diffuse_color[:3]))
+                    # a socket a texture fed is often left black: then the viewport colour, else neutral grey
+                    flat = next((c for c in (default, mat.diffuse_color[:3]) if max(c) > 0.02), DEFAULT_LINEAR)
+                    return ("flat", srgb_from_linear(flat))
             uv = None
             vec = n.inputs.get("Vector")
             if vec is not None and vec.links and vec.links[0].from_node.type == "UVMAP":
