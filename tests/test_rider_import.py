@@ -934,3 +934,60 @@ def test_vrm_file_is_read_as_the_glb_it_is(family_models, source, tmp_path):
     assert r.returncode == 0, r.stderr[-1500:]
     a, meta = rider_file.read_rider_file(out)
     assert meta["scheme"] == "vroid" and np.abs(a["joints"] - source.joints.numpy()).max() < 2e-5
+
+
+def test_helper_geometry_pieces_are_found_by_their_texel_density(source):
+    """MakeHuman's helper shells (a separate piece whose UVs sit in a tiny corner of the texture) are
+    dropped; a palette-textured body (every face a few texels) keeps everything."""
+    from addon.core.rider_helpers import helper_faces
+    V = source.vertices.double().numpy()
+    F = source.faces.numpy()
+    W = source.weights.double().numpy()
+    uv = expected_uv(V)
+    # a skirt: a ring of quads around the hips, its own vertices, UVs within a 0.002 square
+    ang = np.linspace(0, 2 * np.pi, 17)[:-1]
+    ring = [np.stack([0.2 * np.cos(ang), np.full_like(ang, y), 0.2 * np.sin(ang)], 1) for y in (0.5, 0.8)]
+    Vs = np.concatenate(ring)
+    k = np.arange(16)
+    Fs = np.concatenate([np.stack([k, (k + 1) % 16, 16 + k], 1), np.stack([(k + 1) % 16, 16 + (k + 1) % 16, 16 + k], 1)])
+    uvs = 0.95 + 0.002 * np.random.default_rng(0).random((len(Vs), 2))
+    Ws = np.zeros((len(Vs), 24))
+    Ws[:, 0] = 1.0
+    Va, Fa, Wa = np.concatenate([V, Vs]), np.concatenate([F, Fs + len(V)]), np.concatenate([W, Ws])
+    UVa = np.concatenate([uv, uvs])[Fa]
+    FT = np.zeros(len(Fa), np.int64)
+    drop = helper_faces(Va, Fa, UVa, FT, Wa)
+    assert drop[len(F):].all() and not drop[:len(F)].any()
+    palette = np.repeat(np.random.default_rng(1).random((len(Fa), 1, 2)), 3, 1)  # each face one texel
+    assert not helper_faces(Va, Fa, palette, FT, Wa).any()
+    assert not helper_faces(Va, Fa, UVa, np.full(len(Fa), -1), Wa).any()  # untextured: nothing to judge by
+
+
+DEV_RIDERS = next((p for p in (os.path.join(ROOT, "..", "shared", "riders"), os.path.join(ROOT, "..", "..", "shared", "riders"))
+                   if os.path.isdir(p)), os.path.join(ROOT, "..", "shared", "riders"))
+DEV_MODELS = ("mh_woman/human.glb", "mh_man/man.glb", "quaternius_superhero_female/Superhero_Female.glb",
+              "quaternius_ual_rigify/AnimationLibrary_Godot_Standard.gltf",
+              "kenney_large_male_fbx/characterLargeMale.fbx", "rocketbox_male_adult_17_fbx/Male_Adult_17.fbx")
+
+
+@pytest.mark.parametrize("model", DEV_MODELS)
+def test_development_riders_import_and_ride(model):
+    """The six rigged humans of ../shared/riders (skipped where absent) import without options, and the
+    IK seats them on a bike sized for a 1.75 m adult with hands, feet and pelvis within 2.5 cm."""
+    from addon.core.procedural import layout, spec as bike_spec
+    from splatting.rider import ik
+    from splatting.rider.kinematics import JOINT_INDEX
+    path = os.path.join(DEV_RIDERS, model)
+    if not os.path.isfile(path):
+        pytest.skip(f"development rider {model} not here")
+    a, meta = import_here(path)
+    assert 1.5 < meta["height_m"] < 2.1 and a["vertices"][:, 1].min() == 0.0
+    if model.startswith("mh_"):  # MakeHuman's skirt, tights and joint cubes are gone
+        assert meta["helper_faces_dropped"] > 5000
+    J = torch.as_tensor(a["joints"], dtype=torch.float64)
+    kp = layout.keypoints(bike_spec.sample_spec("city", 0, 0))
+    poses = torch.tensor([[p, 0, 0, 0, 0, 0, 0, 0] for p in (0, 90, 180, 270)], dtype=torch.float64)
+    targets = ik.posed_bike_keypoints(kp, poses)
+    res = ik.solve(J, targets, saddle_fit=True, saddle_shared=True)
+    worst = max(float(r.max()) for r in res.residuals.values())
+    assert worst < 0.025, {k: float(v.max()) for k, v in res.residuals.items()}

@@ -34,6 +34,7 @@ from mathutils import Matrix, Vector
 
 from .contract import UserError, bone_map
 from .rider_colours import object_colors
+from .rider_helpers import helper_faces
 
 SWING_MIN_DEG = 1.0
 # segment (joint -> child joint) and its T-pose direction in the canonical frame (left is -Z)
@@ -407,9 +408,12 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, mod
     V, F, W, C = np.concatenate(V), np.concatenate(F), np.concatenate(W), np.concatenate(C)
     UV, FT, keep = np.concatenate(UV), np.concatenate(FT), np.concatenate(keep_parts)
     n_cut = int((~keep).sum())
-    if n_cut:  # invisible faces (texture alpha ~0: hidden helper geometry) are not part of the person
-        if n_cut == len(keep):
-            raise UserError(f"{what}: every face is transparent (texture alpha below {CUTOUT_ALPHA})")
+    if n_cut == len(keep):
+        raise UserError(f"{what}: every face is transparent (texture alpha below {CUTOUT_ALPHA})")
+    helpers = helper_faces(V, F, UV, FT, W / W.sum(1, keepdims=True)) & keep
+    n_helper = int(helpers.sum())
+    keep &= ~helpers
+    if not keep.all():  # invisible faces (alpha cut-outs) and hidden helper geometry are not the person
         F, UV, FT = F[keep], UV[keep], FT[keep]
         used = np.unique(F)
         new_index = np.full(len(V), -1, np.int64)
@@ -440,7 +444,7 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, mod
         "swings_deg": swings, "height_m": round(float(Vc[:, 1].max()), 4), "scale": scale, "size": size,
         "canonical_from_world": canon.tolist(), "t_pose_deform_world": rest_deform,
         "unweighted_vertices_filled": int(n_filled), "textures": sorted(images),
-        "missing_textures": missing, "transparent_faces_dropped": n_cut,
+        "missing_textures": missing, "transparent_faces_dropped": n_cut, "helper_faces_dropped": n_helper,
         "blender": bpy.app.version_string,
     }
     arrays = {"vertices": Vc, "faces": F, "joints": Jc, "weights": W, "colors": C}
