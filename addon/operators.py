@@ -4,6 +4,7 @@ Each operator is a thin wrapper over addon/core/curation/scene_io.py: a UserErro
 ERROR report and CANCELLED (bpy.ops then raises RuntimeError with the message).
 """
 import math
+import os
 
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, StringProperty
@@ -289,7 +290,9 @@ class ARTICCYC_OT_import_rider(_Op, bpy.types.Operator):
             bpy.ops.object.mode_set(mode="OBJECT")
         model = bpy.path.abspath(sc.articcyc_rider_model) if sc.articcyc_rider_model else ""
         if model:
+            from .core.contract import gltf_extensions
             from .core.curation import importers
+            gltf_extensions.check_readable(model)
             objects, what = importers.import_model(model), model
         else:  # the open scene: the selected armature's rig when one is selected, else every object
             sel = [o for o in context.selected_objects if o.type == "ARMATURE"]
@@ -297,7 +300,8 @@ class ARTICCYC_OT_import_rider(_Op, bpy.types.Operator):
             what = bpy.data.filepath or "this scene"
         folder = bpy.path.abspath(sc.articcyc_rider_dir).rstrip("/\\")
         path, meta = rider_rig.save_rider(objects, sc.articcyc_rider_id, folder, what,
-                                          sc.articcyc_rider_height or None, self.overwrite)
+                                          sc.articcyc_rider_height or None, self.overwrite,
+                                          model_dir=os.path.dirname(model) if model else None)
         return (f"rider {meta['id']}: {meta['scheme']} rig, {meta['rest_pose']}-pose rest, {meta['height_m']} m "
                 f"-> {path}")
 

@@ -9,15 +9,17 @@ carried over.  Unrigged meshes, non-humanoid rigs and missing textures end in on
 and nothing written.  Prints one JSON line {"rider": OUT, ...} on success.
 """
 import argparse
+import contextlib
 import json
 import os
 import sys
+import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from addon.core.script import UserError, run_main  # noqa: E402
 
-MODEL_EXTENSIONS = (".glb", ".gltf", ".fbx", ".blend")
+MODEL_EXTENSIONS = (".glb", ".gltf", ".vrm", ".fbx", ".blend")  # .vrm: a VRoid/VRM avatar, a .glb
 
 
 def _numpy_aliases_for_old_gltf_importer():
@@ -27,6 +29,18 @@ def _numpy_aliases_for_old_gltf_importer():
     import numpy as np
     if bpy.app.version < (3, 6, 0) and "bool" not in np.__dict__:
         np.bool = bool
+
+
+@contextlib.contextmanager
+def _as_importable(path):
+    """A .vrm (VRoid, VRM avatars) is a binary glTF under another name: imported through a .glb link."""
+    if not path.lower().endswith(".vrm"):
+        yield path
+        return
+    with tempfile.TemporaryDirectory() as d:
+        link = os.path.join(d, os.path.splitext(os.path.basename(path))[0] + ".glb")
+        os.symlink(os.path.abspath(path), link)
+        yield link
 
 
 def main(argv):
@@ -43,7 +57,8 @@ def main(argv):
         raise UserError(f"--model must be one of {', '.join(MODEL_EXTENSIONS)}, got {args.model}")
     checks.number("height_m", args.height_m, 0.5, 2.6)
     checks.output_file("out", args.out, (".npz",))
-    from addon.core.contract import rider_file
+    from addon.core.contract import gltf_extensions, rider_file
+    gltf_extensions.check_readable(args.model)
     rider_file.check_rider_id(args.id)
 
     from addon.core import rider_rig
@@ -52,12 +67,15 @@ def main(argv):
 
     _numpy_aliases_for_old_gltf_importer()
     reset_scene()
-    objects = import_model(args.model)
-    arrays, meta = rider_rig.rider_from_objects(objects, args.id, os.path.basename(args.model), args.height_m)
+    with _as_importable(args.model) as model:
+        objects = import_model(model)
+    arrays, meta = rider_rig.rider_from_objects(objects, args.id, os.path.basename(args.model), args.height_m,
+                                                model_dir=os.path.dirname(os.path.abspath(args.model)))
     rider_file.write_rider_file(args.out, meta=meta, **arrays)
     print(json.dumps({"rider": args.out, "vertices": len(arrays["vertices"]), "scheme": meta["scheme"],
                       "rest_pose": meta["rest_pose"], "height_m": meta["height_m"],
-                      "textures": len(meta["textures"])}), flush=True)
+                      "textures": len(meta["textures"]), "missing_textures": meta["missing_textures"],
+                      "size": meta["size"], "placed_joints": sorted(meta["placed_joints"])}), flush=True)
     return 0
 
 

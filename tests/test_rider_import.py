@@ -43,11 +43,78 @@ RIGIFY = {
     "head": "DEF-spine.006", "left_shoulder": "DEF-upper_arm.L", "right_shoulder": "DEF-upper_arm.R",
     "left_elbow": "DEF-forearm.L", "right_elbow": "DEF-forearm.R", "left_wrist": "DEF-hand.L",
     "right_wrist": "DEF-hand.R", "left_hand": "DEF-f_middle.01.L", "right_hand": "DEF-f_middle.01.R"}
+
+
+def family(center, limbs, left, right):
+    """{joint: bone name}: centre joints as given, limb joints from templates filled with each side's word."""
+    out = dict(center)
+    for side, word in (("left", left), ("right", right)):
+        out.update({f"{side}_{j}": n.format(s=word) for j, n in limbs.items()})
+    return out
+
+
+LIMB_JOINTS = ("hip", "knee", "ankle", "foot", "collar", "shoulder", "elbow", "wrist", "hand")
+# Naming families of published rigs, written out here (not taken from the code under test).
+FAMILIES = {
+    "mixamo": MIXAMO,
+    "mixamo_bare": {j: n.split(":")[1] for j, n in MIXAMO.items()},
+    "mixamo1": {j: n.replace("mixamorig:", "mixamorig1:") for j, n in MIXAMO.items()},
+    "rigify": RIGIFY,
+    "unreal": family({"pelvis": "pelvis", "spine1": "spine_01", "spine2": "spine_02", "spine3": "spine_03",
+                      "neck": "neck_01", "head": "head"},
+                     dict(zip(LIMB_JOINTS, ("thigh_{s}", "calf_{s}", "foot_{s}", "ball_{s}", "clavicle_{s}",
+                                            "upperarm_{s}", "lowerarm_{s}", "hand_{s}", "middle_01_{s}"))), "l", "r"),
+    "biped": family({"pelvis": "Bip01 Pelvis", "spine1": "Bip01 Spine", "spine2": "Bip01 Spine1",
+                     "spine3": "Bip01 Spine2", "neck": "Bip01 Neck", "head": "Bip01 Head"},
+                    dict(zip(LIMB_JOINTS, ("Bip01 {s} Thigh", "Bip01 {s} Calf", "Bip01 {s} Foot", "Bip01 {s} Toe0",
+                                           "Bip01 {s} Clavicle", "Bip01 {s} UpperArm", "Bip01 {s} Forearm",
+                                           "Bip01 {s} Hand", "Bip01 {s} Finger2"))), "L", "R"),
+    "vroid": family({"pelvis": "J_Bip_C_Hips", "spine1": "J_Bip_C_Spine", "spine2": "J_Bip_C_Chest",
+                     "spine3": "J_Bip_C_UpperChest", "neck": "J_Bip_C_Neck", "head": "J_Bip_C_Head"},
+                    dict(zip(LIMB_JOINTS, ("J_Bip_{s}_UpperLeg", "J_Bip_{s}_LowerLeg", "J_Bip_{s}_Foot",
+                                           "J_Bip_{s}_ToeBase", "J_Bip_{s}_Shoulder", "J_Bip_{s}_UpperArm",
+                                           "J_Bip_{s}_LowerArm", "J_Bip_{s}_Hand", "J_Bip_{s}_Middle1"))), "L", "R"),
+    "character_creator": family(
+        {"pelvis": "CC_Base_Hip", "spine1": "CC_Base_Waist", "spine2": "CC_Base_Spine01", "spine3": "CC_Base_Spine02",
+         "neck": "CC_Base_NeckTwist01", "head": "CC_Base_Head"},
+        dict(zip(LIMB_JOINTS, ("CC_Base_{s}_Thigh", "CC_Base_{s}_Calf", "CC_Base_{s}_Foot", "CC_Base_{s}_ToeBase",
+                               "CC_Base_{s}_Clavicle", "CC_Base_{s}_Upperarm", "CC_Base_{s}_Forearm",
+                               "CC_Base_{s}_Hand", "CC_Base_{s}_Mid1"))), "L", "R"),
+    # Sketchfab's export: spaces kept, every name numbered
+    "sketchfab": {j: f"{n}_{i:02d}" for i, (j, n) in enumerate(family(
+        {"pelvis": "Hips", "spine1": "Spine", "spine2": "Spine1", "spine3": "Chest", "neck": "Neck", "head": "Head"},
+        dict(zip(LIMB_JOINTS, ("{s} leg", "{s} shin", "{s} foot", "{s} toe", "{s} shoulder", "{s} arm",
+                               "{s} forearm", "{s} hand", "{s} middle finger1"))), "Left", "Right").items())},
+    "blender_lr": family({"pelvis": "hips", "spine1": "spine", "spine2": "spine.001", "spine3": "chest",
+                          "neck": "neck", "head": "head"},
+                         dict(zip(LIMB_JOINTS, ("thigh.{s}", "shin.{s}", "foot.{s}", "toe.{s}", "shoulder.{s}",
+                                                "upper_arm.{s}", "forearm.{s}", "hand.{s}", "f_middle.01.{s}"))), "L", "R"),
+    "kaykit": family({"pelvis": "hips", "spine1": "spine", "spine2": "-", "spine3": "chest", "neck": "-",
+                      "head": "head"},
+                     dict(zip(LIMB_JOINTS, ("upperleg.{s}", "lowerleg.{s}", "foot.{s}", "toes.{s}", "-",
+                                            "upperarm.{s}", "lowerarm.{s}", "wrist.{s}", "hand.{s}"))), "l", "r"),
+    "smpl": family({"pelvis": "Pelvis", "spine1": "Spine1", "spine2": "Spine2", "spine3": "Spine3", "neck": "Neck",
+                    "head": "Head"},
+                   dict(zip(LIMB_JOINTS, ("{s}_Hip", "{s}_Knee", "{s}_Ankle", "{s}_Foot", "{s}_Collar",
+                                          "{s}_Shoulder", "{s}_Elbow", "{s}_Wrist", "{s}_Hand"))), "L", "R"),
+    "no_names": {j: f"Bone{(7 * i + 3) % 24:02d}" for i, j in enumerate(JOINT_NAMES)},
+}
 # unmapped bones: (name, parent joint, joint whose weights it takes half of, or None)
 EXTRA = {"mixamo": [("mixamorig:LeftHandThumb1", "left_wrist", "left_wrist"),
                     ("mixamorig:RightHandThumb1", "right_wrist", "right_wrist"),
                     ("mixamorig:HeadTop_End", "head", None)],
-         "rigify": [("DEF-thigh.L.001", "left_hip", "left_hip"), ("DEF-thigh.R.001", "right_hip", "right_hip")]}
+         "rigify": [("DEF-thigh.L.001", "left_hip", "left_hip"), ("DEF-thigh.R.001", "right_hip", "right_hip")],
+         # helpers that must never become joints: leaf, twist, IK / control, socket, hair and end bones
+         "unreal": [("ball_leaf_l", "left_foot", None), ("thigh_twist_01_l", "left_hip", "left_hip"),
+                    ("ik_foot_root", None, None), ("ik_foot_l", None, None)],
+         "biped": [("Bip01 HeadNub", "head", None), ("Bip01 L UpperArmTwist", "left_shoulder", "left_shoulder")],
+         "vroid": [("J_Sec_Hair1_01", "head", "head"), ("J_Adj_L_FaceEye", "head", None)],
+         "character_creator": [("CC_Base_L_UpperarmTwist01", "left_shoulder", "left_shoulder"),
+                               ("CC_Base_NeckTwist02", "neck", "neck")],
+         "sketchfab": [("Head_end_25", "head", None), ("Left thumb1_26", "left_wrist", "left_wrist")],
+         "no_names": [("Bone24", "left_wrist", "left_wrist"), ("Bone25", "head", None)],
+         "kaykit": [("kneeIK.l", None, None), ("control-toe-roll.l", None, None), ("handslot.l", "left_hand", None)],
+         "blender_lr": [("MCH-foot_ik.L", None, None), ("thigh_twist.L", "left_hip", "left_hip")]}
 TEX = 32  # texture: pixel (x, y) = (x / 31, y / 31, 0.25), a ramp bilinear sampling reproduces exactly
 
 
@@ -85,12 +152,20 @@ def write_texture(path):
     return img
 
 
-def build_rigged_human(rider, scheme, texture=None, a_pose_deg=0.0):
-    """The rider as a skinned mesh + armature in the current (empty) scene; returns (armature, mesh)."""
+def build_rigged_human(rider, scheme, texture=None, a_pose_deg=0.0, drop=(), pelvis_drop=0.0):
+    """The rider as a skinned mesh + armature in the current (empty) scene; returns (armature, mesh).
+    scheme: a FAMILIES key.  drop: joints that get no bone (as in rigs with fewer spine bones, no neck,
+    no collars): their weights go to the parent joint's bone and their children hang from it."""
     from mathutils import Matrix, Vector
 
     from addon.core.frames import to_blender
-    names = {"mixamo": MIXAMO, "rigify": RIGIFY}[scheme]
+    names = FAMILIES[scheme]
+    drop = set(drop) | {j for j, n in names.items() if n == "-"}
+
+    def kept(j):  # the joint itself, else its nearest ancestor with a bone
+        while j >= 0 and JOINT_NAMES[j] in drop:
+            j = PARENTS[j]
+        return j
     Vc = rider.vertices.double().numpy()
     V, J = to_blender(Vc), to_blender(rider.joints.double().numpy())
     F = rider.faces.numpy()
@@ -108,27 +183,38 @@ def build_rigged_human(rider, scheme, texture=None, a_pose_deg=0.0):
     eb = arm.data.edit_bones
     first_child = {0: 3, 9: 12}  # pelvis -> spine1, spine3 -> neck (the others have one child or none)
     for j, name in enumerate(JOINT_NAMES):
+        if name in drop:
+            continue
         kids = [c for c, p in enumerate(PARENTS) if p == j]
         if kids:
-            tail = J[first_child.get(j, kids[0])]
+            c = first_child.get(j, kids[0])
+            while JOINT_NAMES[c] in drop:  # the segment runs on to the next joint with a bone
+                c = [k for k, p in enumerate(PARENTS) if p == c][0]
+            tail = J[c]
         else:  # a leaf: along its parent segment
             d = J[j] - J[PARENTS[j]]
             tail = J[j] + 0.05 * d / np.linalg.norm(d)
         b = eb.new(names[name])
         b.head, b.tail = Vector(J[j].tolist()), Vector(tail.tolist())
         if PARENTS[j] >= 0:
-            b.parent = eb[names[JOINT_NAMES[PARENTS[j]]]]
-    for name, parent, _ in EXTRA[scheme]:
-        p = eb[names[parent]]
+            b.parent = eb[names[JOINT_NAMES[kept(PARENTS[j])]]]
+    for name, parent, _ in EXTRA.get(scheme, ()):
         b = eb.new(name)
+        if parent is None:  # an IK / control bone at the root, beside a foot
+            b.head, b.tail = Vector((0.1, 0.3, 0.05)), Vector((0.1, 0.3, 0.25))
+            continue
+        p = eb[names[parent]]
         b.head, b.tail = p.head.copy(), p.head + (p.tail - p.head) * 0.5
         b.parent = p
+    if pelvis_drop:  # a game rig's hips bone rooted at the crotch, below the hip joints
+        eb[names["pelvis"]].head.z -= pelvis_drop
     bpy.ops.object.mode_set(mode="OBJECT")
     W = rider.weights.double().numpy().copy()
     groups = {}
     for j, name in enumerate(JOINT_NAMES):
-        groups[names[name]] = W[:, j].copy()
-    for name, _, share in EXTRA[scheme]:
+        groups.setdefault(names[JOINT_NAMES[kept(j)]], np.zeros(len(W)))
+        groups[names[JOINT_NAMES[kept(j)]]] += W[:, j]
+    for name, _, share in EXTRA.get(scheme, ()):
         if share:  # half of the joint's weight moves to the unmapped child bone
             groups[name] = groups[names[share]] * 0.5
             groups[names[share]] *= 0.5
@@ -249,7 +335,25 @@ def models(tmp_path_factory, source):
     export_chain(d / "chain.glb")
     out["chain.glb"] = d / "chain.glb"
     reset_scene()
+    out["meshopt.glb"] = with_required_extension(out["mixamo.glb"], d / "meshopt.glb", "EXT_meshopt_compression")
     return out
+
+
+def with_required_extension(src, dst, ext):
+    """A copy of a .glb whose JSON says it requires glTF extension `ext` (as a compressed file's does)."""
+    import json
+    import struct
+    data = open(src, "rb").read()
+    n = struct.unpack_from("<I", data, 12)[0]
+    g = json.loads(data[20:20 + n])
+    g["extensionsUsed"] = sorted(set(g.get("extensionsUsed", [])) | {ext})
+    g["extensionsRequired"] = [ext]
+    js = json.dumps(g).encode()
+    js += b" " * (-len(js) % 4)
+    rest = data[20 + n:]
+    out = b"glTF" + struct.pack("<II", 2, 12 + 8 + len(js) + len(rest)) + struct.pack("<II", len(js), 0x4E4F534A) + js + rest
+    open(dst, "wb").write(out)
+    return dst
 
 
 def import_here(path, rider_id="here"):
@@ -335,8 +439,8 @@ def blender_posed(model, meta, world_transforms):
 
 def posed_in_scene(rig, meta, world_transforms):
     from addon.core import rider_rig
-    arm, skinned, bone_of, _ = rig
-    rider_rig.pose_rig(arm, bone_of, meta, world_transforms)
+    arm, skinned, _ = rig
+    rider_rig.pose_rig(arm, meta["bone_map"], meta, world_transforms)
     dg = bpy.context.evaluated_depsgraph_get()
     out = []
     for obj in skinned:
@@ -397,8 +501,9 @@ def test_a_pose_is_turned_into_the_t_pose(models, source, tmp_path):
 
 
 def test_turned_and_scaled_rig_gives_the_same_rider(source, tmp_path):
-    """The rig object turned 90 deg about the vertical (facing another way) and scaled x2 (a 3 m giant):
-    refused without --height-m, the same rider with it, and LBS still equal to Blender's posing."""
+    """The rig object turned 90 deg about the vertical (facing another way) and scaled x2 (a 3 m giant, no
+    unit makes it a person): given an adult's legs without --height-m (and saying so), the same rider
+    with it, and LBS still equal to Blender's posing."""
     from mathutils import Matrix
 
     from addon.core import rider_rig
@@ -411,8 +516,10 @@ def test_turned_and_scaled_rig_gives_the_same_rider(source, tmp_path):
     arm, _ = build_rigged_human(source, "mixamo", write_texture(tmp_path / "ramp.png"))
     arm.matrix_world = Matrix.Rotation(math.radians(90), 4, "Z") @ Matrix.Diagonal((2, 2, 2, 1)) @ Matrix.Translation((3, 1, 0))
     bpy.context.view_layer.update()
-    with pytest.raises(UserError, match="give --height-m"):
-        rider_rig.rider_from_objects(bpy.context.scene.objects, "giant", "scene")
+    a, meta = rider_rig.rider_from_objects(bpy.context.scene.objects, "giant", "scene")
+    leg = lambda J: np.linalg.norm(np.asarray(J[1]) - np.asarray(J[7]))  # noqa: E731  (left hip -> ankle)
+    assert "no unit fits a person" in meta["size"] and abs(leg(a["joints"]) - rider_rig.LEG_M) < 1e-4
+    assert abs(meta["scale"] - rider_rig.LEG_M / (2 * leg(source.joints.numpy()))) < 1e-4  # 2x the source
     a, meta = rider_rig.rider_from_objects(bpy.context.scene.objects, "giant", "scene", height_m=source.height_m)
     check_same_body(a, meta, source, exact_weights=True)
     npz = rider_file.write_rider_file(tmp_path / "rider.npz", meta=meta, **a)
@@ -476,7 +583,7 @@ def test_rider_command_lists_and_exports_the_imported_rider(imported, tmp_path):
 
 @pytest.mark.parametrize("name,words", [("unrigged.glb", "unrigged mesh (no armature)"),
                                         ("chain.glb", "not a humanoid rig"),
-                                        ("missing_texture.fbx", "missing texture")])
+                                        ("meshopt.glb", "EXT_meshopt_compression")])
 def test_refused_models_give_one_line(models, tmp_path, name, words):
     out = tmp_path / "x" / "rider.npz"
     r = cli("rider", "import", "--model", models[name], "--id", "x", "--out", out)
@@ -598,3 +705,291 @@ def test_texture_layer_reaches_the_training_renders(imported, tmp_path):
     body = img[..., 3] > 250
     lum = img[body, :3].mean(1)
     assert body.sum() > 2000 and np.percentile(lum, 10) < 40 and np.percentile(lum, 90) > 120, np.percentile(lum, [10, 50, 90])
+
+
+# ---------------------------------------------------------------- naming families, placed joints, units, attachments
+
+SCHEME_OF = {"mixamo": "mixamo", "mixamo_bare": "mixamo", "mixamo1": "mixamo", "rigify": "rigify",
+             "unreal": "unreal", "biped": "biped", "vroid": "vroid", "character_creator": "character_creator",
+             "sketchfab": "sketchfab", "no_names": "topology"}
+PLACED = {"kaykit": {"spine2", "neck", "left_collar", "right_collar"}}
+
+
+def folded_weights(source, names):
+    """The source weights as a rig without bones for some joints has them: each such joint's weight on
+    the nearest ancestor joint that has a bone."""
+    W = source.weights.double().numpy()
+    out = np.zeros_like(W)
+    for j, name in enumerate(JOINT_NAMES):
+        k = j
+        while names[JOINT_NAMES[k]] == "-":
+            k = PARENTS[k]
+        out[:, k] += W[:, j]
+    return out
+
+
+@pytest.fixture(scope="module")
+def family_models(tmp_path_factory, source):
+    """One .glb per naming family (plus its helper bones), and the rigs of the placed-joint, unit and
+    attachment tests: name -> path."""
+    from mathutils import Matrix
+    from addon.core.scene import reset_scene
+    d = tmp_path_factory.mktemp("families")
+    out = {}
+    for fam in FAMILIES:
+        reset_scene()
+        build_rigged_human(source, fam)
+        export(d / f"{fam}.glb")
+        out[fam] = d / f"{fam}.glb"
+    reset_scene()  # a two-bone spine: no bone for spine2 (Spine1)
+    build_rigged_human(source, "mixamo", drop=("spine2",))
+    export(d / "two_bone_spine.glb")
+    out["two_bone_spine"] = d / "two_bone_spine.glb"
+    reset_scene()  # a helmet parented to the head bone, no weights
+    arm, _ = build_rigged_human(source, "mixamo")
+    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0.0, 0.0, 1.45))
+    helmet = bpy.context.active_object
+    helmet.name = "helmet"
+    mw = helmet.matrix_world.copy()
+    helmet.parent, helmet.parent_type, helmet.parent_bone = arm, "BONE", MIXAMO["head"]
+    helmet.matrix_world = mw
+    export(d / "helmet.glb")
+    out["helmet"] = d / "helmet.glb"
+    reset_scene()  # an FBX in centimetres: the person 150 units tall in a scene of 1 cm units
+    arm, _ = build_rigged_human(source, "mixamo_bare")
+    arm.scale = (100.0, 100.0, 100.0)
+    bpy.context.scene.unit_settings.scale_length = 0.01
+    bpy.ops.export_scene.fbx(filepath=str(d / "centimetres.fbx"), add_leaf_bones=False)
+    out["centimetres"] = d / "centimetres.fbx"
+    reset_scene()  # object scales of 0.01 under a 0.1 root, the data 1000x as large
+    bpy.context.scene.unit_settings.scale_length = 1.0
+    arm, body = build_rigged_human(source, "unreal")
+    arm.data.transform(Matrix.Scale(1000.0, 4))
+    body.data.transform(Matrix.Scale(1000.0, 4))
+    root = bpy.data.objects.new("root", None)
+    bpy.context.scene.collection.objects.link(root)
+    root.scale = (0.1, 0.1, 0.1)
+    arm.parent, arm.scale = root, (0.01, 0.01, 0.01)
+    export(d / "scaled.glb")
+    out["scaled"] = d / "scaled.glb"
+    reset_scene()  # a cut-out: the texture's alpha (0 on its right half) feeds the shader's Alpha
+    img = bpy.data.images.new("cutout", TEX, TEX, alpha=True)
+    x, y = np.meshgrid(np.arange(TEX) / (TEX - 1), np.arange(TEX) / (TEX - 1))
+    img.pixels.foreach_set(np.stack([x, y, np.full_like(x, 0.25), (x <= 0.5).astype(float)], -1)
+                           .astype(np.float32).ravel())
+    img.filepath_raw, img.file_format = str(d / "cutout.png"), "PNG"
+    img.save()
+    _, body = build_rigged_human(source, "mixamo", img)
+    nt = body.data.materials[0].node_tree
+    nt.links.new(next(n for n in nt.nodes if n.type == "TEX_IMAGE").outputs["Alpha"],
+                 next(n for n in nt.nodes if n.type == "BSDF_PRINCIPLED").inputs["Alpha"])
+    export(d / "cutout.glb")
+    out["cutout"] = d / "cutout.glb"
+    reset_scene()  # the pelvis bone's head 8 cm below the hip joints
+    build_rigged_human(source, "mixamo", pelvis_drop=0.08)
+    export(d / "low_pelvis.glb")
+    out["low_pelvis"] = d / "low_pelvis.glb"
+    reset_scene()  # bound in the T-pose, saved standing idle: the nodes' pose has the arms down
+    arm, _ = build_rigged_human(source, "mixamo")
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        pb = arm.pose.bones[MIXAMO[f"{side}_shoulder"]]
+        pb.rotation_mode = "XYZ"
+        head = arm.matrix_world @ pb.head
+        R = Matrix.Translation(head) @ Matrix.Rotation(math.radians(sign * -70), 4, "X") @ Matrix.Translation(-head)
+        pb.matrix = R @ pb.matrix
+        bpy.context.view_layer.update()
+    bpy.ops.export_scene.gltf(filepath=str(d / "idle_over_t.glb"), export_format="GLB",
+                              export_rest_position_armature=False)
+    out["idle_over_t"] = d / "idle_over_t.glb"
+    reset_scene()  # Draco-compressed meshes
+    build_rigged_human(source, "mixamo")
+    bpy.ops.export_scene.gltf(filepath=str(d / "draco.glb"), export_format="GLB",
+                              export_draco_mesh_compression_enable=True)
+    out["draco"] = d / "draco.glb"
+    reset_scene()
+    return out
+
+
+@pytest.mark.parametrize("fam", list(FAMILIES))
+def test_every_naming_family_maps_to_the_smpl_joints(family_models, source, fam):
+    """Each family's bones map to their joints (helpers never), the joints are the source rider's, joints
+    without a bone are placed and say so, and every vertex keeps its dominant joint."""
+    a, meta = import_here(family_models[fam])
+    names = FAMILIES[fam]
+    placed = PLACED.get(fam, set())
+    assert meta["bone_map"] == {j: n for j, n in names.items() if j not in placed}
+    assert set(meta["placed_joints"]) == placed
+    if fam in SCHEME_OF:
+        assert meta["scheme"] == SCHEME_OF[fam]
+    for j in JOINT_NAMES:
+        want = "interpolated" if j in placed else "topology" if fam == "no_names" else "names:"
+        assert meta["joint_source"][j].startswith(want), (j, meta["joint_source"][j])
+    real = [i for i, j in enumerate(JOINT_NAMES) if j not in placed]
+    assert np.abs(a["joints"][real] - source.joints.numpy()[real]).max() < 2e-5
+    d, i = nearest(a["vertices"], source.vertices.double().numpy())
+    assert d.max() < 2e-5
+    W = folded_weights(source, names)[i]
+    assert (a["weights"].argmax(1) == W.argmax(1)).mean() > 0.999
+    assert a["weights"][:, [JOINT_NAMES.index(j) for j in placed]].sum() == 0 if placed else True
+
+
+def test_kaykit_placed_joints_sit_between_their_neighbours(family_models, source):
+    """No neck, no collars, one bone less in the spine: neck between spine3 and head, spine2 between
+    spine1 and spine3, collars between the chest and the shoulders, each riding its bone."""
+    a, meta = import_here(family_models["kaykit"])
+    J = {n: a["joints"][i] for i, n in enumerate(JOINT_NAMES)}
+    assert J["spine1"][1] < J["spine2"][1] < J["spine3"][1] < J["neck"][1] < J["head"][1]
+    for side, sign in (("left", -1), ("right", 1)):
+        c = J[f"{side}_collar"]
+        assert 0 < sign * c[2] < sign * J[f"{side}_shoulder"][2] and J["spine3"][1] < c[1] < J["neck"][1]
+    assert meta["placed_joints"] == {"spine2": "spine", "neck": "chest", "left_collar": "chest",
+                                     "right_collar": "chest"}
+
+
+@pytest.mark.parametrize("name,theta_p,theta_s", [("two_bone_spine", 120.0, 10.0), ("helmet", 300.0, -15.0),
+                                                   ("low_pelvis", 40.0, 0.0)])
+def test_placed_spine_and_rigid_attachment_skin_as_blender_does(family_models, source, tmp_path, name, theta_p,
+                                                                  theta_s):
+    """A two-bone spine (spine2 placed on the chain), a helmet parented to the head bone and a pelvis bone
+    rooted 8 cm below the hips (its joint moved up): LBS of the imported rider equals Blender posing the
+    rig, helmet included."""
+    npz = write_here(family_models[name], tmp_path)
+    a, meta = rider_file.read_rider_file(npz)
+    if name == "two_bone_spine":
+        assert meta["joint_source"]["spine2"] == "interpolated" and meta["placed_joints"] == {"spine2": "mixamorig:Spine"}
+        s1, s2, s3 = (a["joints"][JOINT_NAMES.index(k)] for k in ("spine1", "spine2", "spine3"))
+        assert s1[1] < s2[1] < s3[1]
+    elif name == "low_pelvis":  # the joint back just above the hips, where SMPL (and the IK's seat) has it
+        assert meta["moved_joints"] == ["pelvis"] and meta["bone_map"]["pelvis"] == MIXAMO["pelvis"]
+        assert np.abs(a["joints"][0] - source.joints.numpy()[0]).max() < 2e-3
+        assert np.abs(a["joints"][1:] - source.joints.numpy()[1:]).max() < 2e-5
+    else:
+        n = len(source.vertices)
+        assert len(a["vertices"]) - n in (8, 24) and "helmet" in meta["objects"]  # glTF splits flat-shaded corners
+        assert (a["weights"][n:, JOINT_NAMES.index("head")] == 1).all()
+    err, moved = lbs_and_blender(family_models[name], npz, theta_p, theta_s)
+    assert moved.max() > 0.5
+    assert err.max() < 2e-5, err.max()
+
+
+@pytest.mark.parametrize("name", ["centimetres", "scaled", "draco"])
+def test_units_object_scales_and_draco_give_the_same_rider(family_models, source, name):
+    """A centimetre FBX, 0.01 object scales under a 0.1 root, and Draco-compressed meshes: the same
+    person at the same size (Draco quantises positions: to 1 mm)."""
+    a, meta = import_here(family_models[name])
+    assert meta["size"].endswith("as in the file") and abs(meta["scale"] - 1) < 1e-12
+    assert np.abs(a["joints"] - source.joints.numpy()).max() < 1e-4
+    d, _ = nearest(a["vertices"], source.vertices.double().numpy())
+    assert d.max() < (1e-3 if name == "draco" else 1e-4), d.max()
+
+
+def test_idle_pose_over_a_t_bind_pose_imports_the_bind_pose(family_models, source):
+    """Saved with the arms 70 deg down (the nodes' pose) but bound in the T-pose (the inverse bind
+    matrices): the rider is the bind pose, the source rider itself, not an A-pose turned back."""
+    import json
+    import struct
+    data = open(family_models["idle_over_t"], "rb").read()
+    g = json.loads(data[20:20 + struct.unpack_from("<I", data, 12)[0]])
+    node = next(n for n in g["nodes"] if n.get("name") == MIXAMO["left_shoulder"])
+    assert abs(node.get("rotation", [0, 0, 0, 1])[3]) < 0.95  # the file's pose really is not the bind pose
+    a, meta = import_here(family_models["idle_over_t"])
+    assert meta["rest_pose"] == "T" and max(meta["swings_deg"].values()) < 0.01
+    assert np.abs(a["joints"] - source.joints.numpy()).max() < 2e-5
+    d, _ = nearest(a["vertices"], source.vertices.double().numpy())
+    assert d.max() < 2e-5
+
+
+def test_faces_a_texture_alpha_hides_are_dropped(family_models, source):
+    """Alpha 0 on the texture's right half (u > 0.5, the body's right side in the test's planar map):
+    those faces are not part of the rider, the rest is kept whole."""
+    a, meta = import_here(family_models["cutout"])
+    n = len(source.faces)
+    assert 0.2 * n < meta["transparent_faces_dropped"] < 0.8 * n
+    assert len(a["faces"]) == n - meta["transparent_faces_dropped"]
+    V = source.vertices.double().numpy()
+    lo, hi = V[:, 2].min(), V[:, 2].max()
+    u = lambda v: 0.1 + 0.8 * (v[:, 2] - lo) / (hi - lo)  # noqa: E731  (expected_uv's u)
+    assert u(a["vertices"]).max() < 0.55
+    d, _ = nearest(V[u(V) < 0.45], a["vertices"])
+    assert (d < 2e-5).mean() > 0.99  # the opaque side is all there
+
+
+def test_missing_texture_is_flat_and_said(models, tmp_path):
+    """A texture whose file is gone: imported with the material's base colour, a warning line and the
+    file's meta naming it (not a silent grey, not a refusal)."""
+    out = tmp_path / "x" / "rider.npz"
+    r = cli("rider", "import", "--model", models["missing_texture.fbx"], "--id", "x", "--out", out)
+    assert r.returncode == 0, r.stderr[-1500:]
+    assert "warning: texture not found" in r.stderr and "skin.png" in r.stderr
+    a, meta = rider_file.read_rider_file(out)
+    assert len(meta["missing_textures"]) == 1 and "skin.png" in meta["missing_textures"][0]
+    assert meta["textures"] == [] and np.ptp(a["colors"], axis=0).max() < 1e-6  # one flat colour
+
+
+def test_vrm_file_is_read_as_the_glb_it_is(family_models, source, tmp_path):
+    """A VRoid avatar's .vrm (a binary glTF under another name) imports through the command."""
+    import shutil
+    vrm = tmp_path / "avatar.vrm"
+    shutil.copy(family_models["vroid"], vrm)
+    out = tmp_path / "vrm" / "rider.npz"
+    r = cli("rider", "import", "--model", vrm, "--id", "vrm", "--out", out)
+    assert r.returncode == 0, r.stderr[-1500:]
+    a, meta = rider_file.read_rider_file(out)
+    assert meta["scheme"] == "vroid" and np.abs(a["joints"] - source.joints.numpy()).max() < 2e-5
+
+
+def test_helper_geometry_pieces_are_found_by_their_texel_density(source):
+    """MakeHuman's helper shells (a separate piece whose UVs sit in a tiny corner of the texture) are
+    dropped; a palette-textured body (every face a few texels) keeps everything."""
+    from addon.core.rider_helpers import helper_faces
+    V = source.vertices.double().numpy()
+    F = source.faces.numpy()
+    W = source.weights.double().numpy()
+    uv = expected_uv(V)
+    # a skirt: a ring of quads around the hips, its own vertices, UVs within a 0.002 square
+    ang = np.linspace(0, 2 * np.pi, 17)[:-1]
+    ring = [np.stack([0.2 * np.cos(ang), np.full_like(ang, y), 0.2 * np.sin(ang)], 1) for y in (0.5, 0.8)]
+    Vs = np.concatenate(ring)
+    k = np.arange(16)
+    Fs = np.concatenate([np.stack([k, (k + 1) % 16, 16 + k], 1), np.stack([(k + 1) % 16, 16 + (k + 1) % 16, 16 + k], 1)])
+    uvs = 0.95 + 0.002 * np.random.default_rng(0).random((len(Vs), 2))
+    Ws = np.zeros((len(Vs), 24))
+    Ws[:, 0] = 1.0
+    Va, Fa, Wa = np.concatenate([V, Vs]), np.concatenate([F, Fs + len(V)]), np.concatenate([W, Ws])
+    UVa = np.concatenate([uv, uvs])[Fa]
+    FT = np.zeros(len(Fa), np.int64)
+    drop = helper_faces(Va, Fa, UVa, FT, Wa)
+    assert drop[len(F):].all() and not drop[:len(F)].any()
+    palette = np.repeat(np.random.default_rng(1).random((len(Fa), 1, 2)), 3, 1)  # each face one texel
+    assert not helper_faces(Va, Fa, palette, FT, Wa).any()
+    assert not helper_faces(Va, Fa, UVa, np.full(len(Fa), -1), Wa).any()  # untextured: nothing to judge by
+
+
+DEV_RIDERS = next((p for p in (os.path.join(ROOT, "..", "shared", "riders"), os.path.join(ROOT, "..", "..", "shared", "riders"))
+                   if os.path.isdir(p)), os.path.join(ROOT, "..", "shared", "riders"))
+DEV_MODELS = ("mh_woman/human.glb", "mh_man/man.glb", "quaternius_superhero_female/Superhero_Female.glb",
+              "quaternius_ual_rigify/AnimationLibrary_Godot_Standard.gltf",
+              "kenney_large_male_fbx/characterLargeMale.fbx", "rocketbox_male_adult_17_fbx/Male_Adult_17.fbx")
+
+
+@pytest.mark.parametrize("model", DEV_MODELS)
+def test_development_riders_import_and_ride(model):
+    """The six rigged humans of ../shared/riders (skipped where absent) import without options, and the
+    IK seats them on a bike sized for a 1.75 m adult with hands, feet and pelvis within 2.5 cm."""
+    from addon.core.procedural import layout, spec as bike_spec
+    from splatting.rider import ik
+    from splatting.rider.kinematics import JOINT_INDEX
+    path = os.path.join(DEV_RIDERS, model)
+    if not os.path.isfile(path):
+        pytest.skip(f"development rider {model} not here")
+    a, meta = import_here(path)
+    assert 1.5 < meta["height_m"] < 2.1 and a["vertices"][:, 1].min() == 0.0
+    if model.startswith("mh_"):  # MakeHuman's skirt, tights and joint cubes are gone
+        assert meta["helper_faces_dropped"] > 5000
+    J = torch.as_tensor(a["joints"], dtype=torch.float64)
+    kp = layout.keypoints(bike_spec.sample_spec("city", 0, 0))
+    poses = torch.tensor([[p, 0, 0, 0, 0, 0, 0, 0] for p in (0, 90, 180, 270)], dtype=torch.float64)
+    targets = ik.posed_bike_keypoints(kp, poses)
+    res = ik.solve(J, targets, saddle_fit=True, saddle_shared=True)
+    worst = max(float(r.max()) for r in res.residuals.values())
+    assert worst < 0.025, {k: float(v.max()) for k, v in res.residuals.items()}

@@ -1,7 +1,12 @@
 """Per-vertex colours of an imported rider's meshes (bpy side; step 5 of rider_rig): per material, the
 image texture feeding the Base Color (sampled bilinearly at each corner's UV, averaged per vertex), a
-colour attribute, or the flat base colour.  A texture whose image is missing or unreadable is an error,
-not a silent grey."""
+colour attribute, or the flat base colour.  A texture whose image file is gone is looked for by its file
+name (any of the usual extensions) next to the model and in its texture folders (files move with the
+model, their absolute paths do not); one found nowhere leaves its material the flat base colour, and is
+listed in `missing` (the rider file's meta and a warning line), never a silent grey.  A texture node
+with no image, or a textured material on a mesh without UVs, is an error."""
+import os
+
 import bpy
 import numpy as np
 
@@ -32,8 +37,31 @@ def _upstream(node, seen=None):
     return out
 
 
-def colour_source(mat, what):
-    """('image', image, uv_map or None) | ('attribute', name) | ('flat', sRGB (3,)) for one material."""
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tga", ".tif", ".tiff", ".bmp", ".webp", ".exr")
+TEXTURE_FOLDERS = ("", "textures", "Textures", "texture", "tex", "images", "maps", "..", "../textures")
+
+
+def _find_moved(img, search_dirs):
+    """Reload `img` from a file with its name (or its stem with another extension) in search_dirs."""
+    name = os.path.basename((img.filepath or img.name).replace("\\", "/"))
+    stem = os.path.splitext(name)[0].lower()
+    for d in search_dirs:
+        for sub in TEXTURE_FOLDERS:
+            folder = os.path.normpath(os.path.join(d, sub))
+            if not os.path.isdir(folder):
+                continue
+            for f in sorted(os.listdir(folder)):
+                if os.path.splitext(f)[0].lower() == stem and f.lower().endswith(IMAGE_EXTENSIONS):
+                    img.filepath = os.path.join(folder, f)
+                    if _load(img):
+                        return True
+    return False
+
+
+def colour_source(mat, what, search_dirs=(), missing=None):
+    """('image', image, uv_map or None) | ('attribute', name) | ('flat', sRGB (3,)) for one material.
+    A texture file found nowhere (not at its path, not by name in search_dirs) is appended to `missing`
+    and the material is flat; with missing=None it is an error."""
     if mat is None:
         return ("flat", srgb_from_linear(DEFAULT_LINEAR))
     nt = mat.node_tree if getattr(mat, "node_tree", None) is not None else None
@@ -63,8 +91,14 @@ def colour_source(mat, what):
                 raise UserError(f"{what}: material '{mat.name}' has an image texture node with no image (missing texture)")
             if img.size[0] == 0 or img.size[1] == 0 or not img.has_data and not _load(img):
                 src = bpy.path.abspath(img.filepath) if img.filepath else img.name
-                raise UserError(f"{what}: material '{mat.name}' uses texture '{src}', which is missing or "
-                                f"unreadable (missing texture)")
+                if not _find_moved(img, search_dirs):
+                    if missing is None:
+                        raise UserError(f"{what}: material '{mat.name}' uses texture '{src}', which is missing "
+                                        f"or unreadable (missing texture)")
+                    missing.append(f"material '{mat.name}': {src}")
+                    # a socket a texture fed is often left black: then the viewport colour, else neutral grey
+                    flat = next((c for c in (default, mat.diffuse_color[:3]) if max(c) > 0.02), DEFAULT_LINEAR)
+                    return ("flat", srgb_from_linear(flat))
             uv = None
             vec = n.inputs.get("Vector")
             if vec is not None and vec.links and vec.links[0].from_node.type == "UVMAP":
@@ -74,6 +108,23 @@ def colour_source(mat, what):
             name = getattr(n, "layer_name", None) or getattr(n, "attribute_name", None)
             return ("attribute", name)
     return ("flat", srgb_from_linear(default))
+
+
+def alpha_image(mat):
+    """The image whose alpha feeds the material's shader Alpha (glTF/FBX cut-outs: MakeHuman's hidden
+    helper geometry, hair cards), or None when the material is opaque."""
+    nt = getattr(mat, "node_tree", None) if mat is not None else None
+    if nt is None:
+        return None
+    for n in nt.nodes:
+        a = n.inputs.get("Alpha") if n.type.startswith("BSDF") else None
+        if a is None or not a.links:
+            continue
+        src = a.links[0].from_node
+        for m in [src] + _upstream(src):
+            if m.type == "TEX_IMAGE" and m.image is not None and m.image.has_data and m.image.channels == 4:
+                return m.image
+    return None
 
 
 def _load(img):
@@ -107,9 +158,10 @@ def _sample_bilinear(rgb, uv):
             + (1 - fx) * fy * rgb[y1, x0] + fx * fy * rgb[y1, x1])
 
 
-def object_colors(obj, what, images):
-    """Per-vertex sRGB colours, and per loop the texture coordinate and the index into `images` (an
-    ordered {name: sRGB array}) of the texture drawn there (-1: none)."""
+def object_colors(obj, what, images, search_dirs=(), missing=None):
+    """Per-vertex sRGB colours, and per loop the texture coordinate, the index into `images` (an
+    ordered {name: sRGB array}) of the texture drawn there (-1: none) and the texture's alpha where an
+    image's alpha feeds the shader's Alpha (1 elsewhere)."""
     me = obj.data
     nv, nl = len(me.vertices), len(me.loops)
     loop_vert = np.empty(nl, np.int64)
@@ -122,10 +174,11 @@ def object_colors(obj, what, images):
     loop_rgb = np.empty((nl, 3))
     loop_uv = np.zeros((nl, 2))
     loop_tex = np.full(nl, -1, np.int64)
+    loop_alpha = np.ones(nl)
     for mi in np.unique(loop_mat):
         sel = loop_mat == mi
         mat = obj.material_slots[mi].material if mi < len(obj.material_slots) else None
-        src = colour_source(mat, what)
+        src = colour_source(mat, what, search_dirs, missing)
         if src[0] == "image":
             _, img, uv_name = src
             layer = me.uv_layers.get(uv_name) if uv_name else me.uv_layers.active
@@ -138,6 +191,13 @@ def object_colors(obj, what, images):
             loop_rgb[sel] = _sample_bilinear(images[img.name], uv.reshape(-1, 2)[sel])
             loop_uv[sel] = uv.reshape(-1, 2)[sel]
             loop_tex[sel] = list(images).index(img.name)
+            a_img = alpha_image(mat)
+            if a_img is not None:
+                w, h = a_img.size
+                px = np.empty(w * h * 4, np.float32)
+                a_img.pixels.foreach_get(px)
+                alpha = np.repeat(px.reshape(h, w, 4)[..., 3:].astype(np.float64), 3, -1)
+                loop_alpha[sel] = _sample_bilinear(alpha, uv.reshape(-1, 2)[sel])[:, 0]
         elif src[0] == "attribute":
             loop_rgb[sel] = _attribute_colors(me, src[1], loop_vert)[sel]
         else:
@@ -148,7 +208,7 @@ def object_colors(obj, what, images):
     np.add.at(cnt, loop_vert, 1)
     out[cnt == 0] = srgb_from_linear(DEFAULT_LINEAR)
     cnt[cnt == 0] = 1
-    return out / cnt[:, None], loop_uv, loop_tex
+    return out / cnt[:, None], loop_uv, loop_tex, loop_alpha
 
 
 def _attribute_colors(me, name, loop_vert):

@@ -34,6 +34,7 @@ from mathutils import Matrix, Vector
 
 from .contract import UserError, bone_map
 from .rider_colours import object_colors
+from .rider_helpers import helper_faces
 
 SWING_MIN_DEG = 1.0
 # segment (joint -> child joint) and its T-pose direction in the canonical frame (left is -Z)
@@ -45,6 +46,14 @@ T_POSE_PASSES = (
 )
 UP_TOLERANCE_DEG = 30.0
 MIN_HEIGHT_M, MAX_HEIGHT_M = 0.5, 2.6
+# a size outside MIN..MAX read in another unit when that makes it PLAUSIBLE_M tall (most likely first)
+UNIT_GUESSES = ((0.01, "centimetres"), (0.001, "millimetres"), (0.0254, "inches"), (0.1, "decimetres"),
+                (0.3048, "feet"), (10.0, "decametres"), (100.0, "hectometres"))
+PLAUSIBLE_M = (1.0, 2.2)
+PELVIS_LOW, PELVIS_ABOVE_HIPS = 0.015, 0.008  # of the ankle-to-head height (SMPL: pelvis 1 cm above hips)
+CUTOUT_ALPHA = 0.5     # faces whose texture alpha averages below this are invisible: dropped
+LEG_M = 0.82          # an adult's leg, hip joint to ankle (a 1.75 m person)
+MIN_LEG_SHARE = 0.15  # legs under 15 % of the height: not a person (a chibi figure's are ~25 %)
 
 
 def _joints():
@@ -70,8 +79,15 @@ def _deformed_by(obj, arm):
     return bool(mods) and any(g.name in arm.data.bones for g in obj.vertex_groups)
 
 
+def _skeleton(arm):
+    """The armature's bones for bone_map.map_skeleton: names, parents, rest heads/tails in world space."""
+    A = arm.matrix_world
+    return [{"name": b.name, "parent": b.parent.name if b.parent else None, "deform": bool(b.use_deform),
+             "head": list(A @ b.head_local), "tail": list(A @ b.tail_local)} for b in arm.data.bones]
+
+
 def find_rig(objects, what):
-    """(armature, its skinned meshes, {joint: bone}, scheme) among `objects`; UserError otherwise."""
+    """(armature, its skinned meshes, bone_map.Mapping) among `objects`; UserError otherwise."""
     objects = list(objects)
     meshes = [o for o in objects if o.type == "MESH"]
     arms = [o for o in objects if o.type == "ARMATURE"]
@@ -82,27 +98,97 @@ def find_rig(objects, what):
                         f"then import it")
     first_error, mapped = None, []
     for arm in sorted(arms, key=lambda a: -len(a.data.bones)):
+        skinned = [o for o in objects if _deformed_by(o, arm)]
+        z = [(o.matrix_world @ Vector(c)).z for o in skinned for c in o.bound_box]
         try:
-            m, scheme = bone_map.map_bones([b.name for b in arm.data.bones], f"{what}: armature '{arm.name}'")
+            m = bone_map.map_skeleton(_skeleton(arm), f"{what}: armature '{arm.name}'",
+                                      (min(z), max(z)) if z else None)
         except UserError as e:
             first_error = first_error or e
             continue
-        mapped.append((arm, m, scheme))
+        mapped.append((arm, m))
     if not mapped:
         raise first_error
-    arm, m, scheme = mapped[0]
+    arm, m = mapped[0]
     skinned = [o for o in objects if _deformed_by(o, arm)]
     if not skinned:
         raise UserError(f"{what}: unrigged mesh: no mesh is skinned to armature '{arm.name}' "
                         f"(no Armature modifier with bone vertex groups, no bone parent)")
-    return arm, skinned, m, scheme
+    return arm, skinned, m
 
 
 # ---------------------------------------------------------------- 2./3. frame and T-pose
 
-def _posed_heads(arm, bone_of):
+def _posed_heads(arm, bone_of, placed=None):
+    """World positions (24,3) of the joints at the armature's current pose: a mapped bone's head, or a
+    placed joint (placed: {joint: (bone, offset in that bone's rest space)}) riding on its bone."""
     A = arm.matrix_world
-    return np.array([list(A @ arm.pose.bones[bone_of[j]].head) for j in _joints()], np.float64)
+    out = []
+    for j in _joints():
+        if placed and j in placed:
+            b, off = placed[j]
+            out.append(list(A @ arm.pose.bones[b].matrix @ off))
+        else:
+            out.append(list(A @ arm.pose.bones[bone_of[j]].head))
+    return np.array(out, np.float64)
+
+
+def _placed_offsets(arm, virtual):
+    """{joint: (bone, offset)}: a placed joint's rest position in its bone's rest space."""
+    A = arm.matrix_world
+    return {j: (b, (A @ arm.data.bones[b].matrix_local).inverted() @ Vector([float(x) for x in p]))
+            for j, (b, p) in virtual.items()}
+
+
+def _lift_pelvis(heads, M, pelvis_bone):
+    """{"pelvis": (its bone, position)} when the pelvis bone's head sits more than PELVIS_LOW of the body
+    below the hip joints (game rigs root the hips at the crotch): SMPL's pelvis joint is just above
+    the hips (by PELVIS_ABOVE_HIPS of the body), and the IK seats that joint above the saddle.  The
+    joint still drives its bone and its weights; only the point it turns about moves."""
+    J = {n: i for i, n in enumerate(_joints())}
+    up = M[1]
+    mid = (heads[J["left_hip"]] + heads[J["right_hip"]]) / 2
+    body = float((heads[J["head"]] - (heads[J["left_ankle"]] + heads[J["right_ankle"]]) / 2) @ up)
+    below = float((mid - heads[J["pelvis"]]) @ up)
+    if body <= 0 or below <= PELVIS_LOW * body:
+        return {}
+    return {"pelvis": (pelvis_bone, heads[J["pelvis"]] + up * (below + PELVIS_ABOVE_HIPS * body))}
+
+
+def _derive_toes(arm, mapping, skinned, M, heads):
+    """A toe joint for a foot without a toe bone: 3/4 of the way from the ankle to the foot's most forward
+    vertex (the vertices its ankle bone and the bones below it weigh most), else along the foot bone."""
+    J = {n: i for i, n in enumerate(_joints())}
+    out = {}
+    for j, v in mapping.virtual.items():
+        if v[0] != "toe":
+            continue
+        ankle_bone = v[1]
+        side = j.split("_")[0]
+        ankle = heads[J[f"{side}_ankle"]]
+        names = {ankle_bone} | {c.name for c in arm.data.bones[ankle_bone].children_recursive}
+        best = None
+        for obj in skinned:
+            groups = {g.index for g in obj.vertex_groups if g.name in names}
+            if obj.parent_type == "BONE" and obj.parent_bone in names:
+                pts = _evaluated_world_vertices(obj)
+            elif groups:
+                co = _evaluated_world_vertices(obj)
+                sel = [v.index for v in obj.data.vertices
+                       if sum(g.weight for g in v.groups if g.group in groups) > 0.5]
+                pts = co[sel]
+            else:
+                continue
+            if len(pts):
+                f = pts[np.argmax(pts @ M[0])]
+                if best is None or f @ M[0] > best @ M[0]:
+                    best = f
+        if best is None or (best - ankle) @ M[0] <= 0:
+            tail = np.array(list(arm.matrix_world @ arm.data.bones[ankle_bone].tail_local))
+            best = tail if (tail - ankle) @ M[0] > 0 else ankle + M[0] * 0.12 * np.linalg.norm(
+                heads[J[f"{side}_knee"]] - ankle)
+        out[j] = (ankle_bone, ankle + 0.75 * (best - ankle))
+    return out
 
 
 def body_frame(heads):
@@ -149,14 +235,14 @@ def _swing(a, b):
     return np.eye(3) + math.sin(ang) * K + (1 - math.cos(ang)) * K @ K, ang
 
 
-def to_t_pose(arm, bone_of, M):
+def to_t_pose(arm, bone_of, M, placed=None):
     """Pose the armature so the limbs lie on the T-pose directions; returns {joint: swing degrees}."""
     J = {n: i for i, n in enumerate(_joints())}
     A = arm.matrix_world
     A_inv = A.inverted()
     swings = {}
     for targets in T_POSE_PASSES:
-        heads = _posed_heads(arm, bone_of)
+        heads = _posed_heads(arm, bone_of, placed)
         for joint, (child, direction) in targets.items():
             cur = heads[J[child]] - heads[J[joint]]
             cur /= np.linalg.norm(cur)
@@ -178,7 +264,7 @@ def to_t_pose(arm, bone_of, M):
 def _bone_joint_index(arm, bone_of, heads_rest):
     """Bone name -> SMPL joint index: its own joint, its nearest mapped ancestor's, else the nearest joint."""
     J = {n: i for i, n in enumerate(_joints())}
-    of_bone = {b: J[j] for j, b in bone_of.items()}
+    of_bone = {b: J[j] for j, b in bone_of.items() if b}
     out = {}
     for bone in arm.data.bones:
         k = bone
@@ -258,13 +344,14 @@ def _triangles(me):
     return t.reshape(-1, 3), lo.reshape(-1, 3)
 
 
-def rider_from_objects(objects, rider_id, what, height_m=None, restore=True):
+def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, model_dir=None):
     """(arrays for rider_file.write_rider_file, meta) from the scene objects of one rigged human.
 
     height_m rescales the body to that soles-to-crown height; otherwise its size must already be a
     person's (MIN_HEIGHT_M..MAX_HEIGHT_M metres).  The armature's pose is reset to its rest pose for the
     import and put back afterwards when `restore`."""
-    arm, skinned, bone_of, scheme = find_rig(objects, what)
+    arm, skinned, mapping = find_rig(objects, what)
+    bone_of = {j: b for j, b in mapping.bone_of.items() if b}
     saved = {pb.name: pb.matrix_basis.copy() for pb in arm.pose.bones}
     saved_position = arm.data.pose_position
     try:
@@ -272,19 +359,28 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True):
         for pb in arm.pose.bones:
             pb.matrix_basis = Matrix.Identity(4)
         bpy.context.view_layer.update()
-        heads_rest = _posed_heads(arm, bone_of)
+        placed = _placed_offsets(arm, {j: v for j, v in mapping.virtual.items() if v[0] != "toe"})
+        toes = [j for j, v in mapping.virtual.items() if v[0] == "toe"]
+        for j in toes:  # a stand-in until the body frame is known
+            placed[j] = (mapping.virtual[j][1], Vector((0.0, 0.0, 0.0)))
+        heads_rest = _posed_heads(arm, bone_of, placed)
         M = body_frame(heads_rest)
         _check_humanoid(heads_rest, M, what)
+        if toes:
+            placed.update(_placed_offsets(arm, _derive_toes(arm, mapping, skinned, M, heads_rest)))
+        lifted = _lift_pelvis(heads_rest, M, bone_of["pelvis"])
+        placed.update(_placed_offsets(arm, lifted))
+        heads_rest = _posed_heads(arm, bone_of, placed)
         bone_joint = _bone_joint_index(arm, bone_of, heads_rest)
         rest_deform = {}
-        swings = to_t_pose(arm, bone_of, M)
+        swings = to_t_pose(arm, bone_of, M, placed)
         A, A_inv = arm.matrix_world, arm.matrix_world.inverted()
-        for j in _joints():  # each mapped bone's world deformation rest -> T-pose (identity for a T-posed rig)
-            pb = arm.pose.bones[bone_of[j]]
+        for j in _joints():  # each joint's bone's world deformation rest -> T-pose (identity for a T-posed rig)
+            pb = arm.pose.bones[bone_of[j] if j in bone_of else placed[j][0]]
             rest_deform[j] = _m2np(A @ pb.matrix @ pb.bone.matrix_local.inverted() @ A_inv).tolist()
-        heads_t = _posed_heads(arm, bone_of)
+        heads_t = _posed_heads(arm, bone_of, placed)
         V, F, W, C, UV, FT, n_filled = [], [], [], [], [], [], 0
-        images, base = {}, 0
+        images, base, missing, keep_parts = {}, 0, [], []
         for obj in skinned:
             v = _evaluated_world_vertices(obj)
             w = _object_weights(obj, arm, bone_joint)
@@ -293,7 +389,9 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True):
                                 f"{int((w.sum(1) > 0).sum())} of {len(w)} vertices")
             n_filled += _fill_unweighted(w, v)
             tri, tri_loops = _triangles(obj.data)
-            col, loop_uv, loop_tex = object_colors(obj, what, images)
+            col, loop_uv, loop_tex, loop_alpha = object_colors(obj, what, images, [model_dir] if model_dir else [],
+                                                               missing)
+            keep_parts.append(loop_alpha[tri_loops].mean(1) >= CUTOUT_ALPHA)
             V.append(v)
             F.append(tri + base)
             W.append(w)
@@ -308,36 +406,77 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True):
             arm.data.pose_position = saved_position
             bpy.context.view_layer.update()
     V, F, W, C = np.concatenate(V), np.concatenate(F), np.concatenate(W), np.concatenate(C)
+    UV, FT, keep = np.concatenate(UV), np.concatenate(FT), np.concatenate(keep_parts)
+    n_cut = int((~keep).sum())
+    if n_cut == len(keep):
+        raise UserError(f"{what}: every face is transparent (texture alpha below {CUTOUT_ALPHA})")
+    helpers = helper_faces(V, F, UV, FT, W / W.sum(1, keepdims=True)) & keep
+    n_helper = int(helpers.sum())
+    keep &= ~helpers
+    if not keep.all():  # invisible faces (alpha cut-outs) and hidden helper geometry are not the person
+        F, UV, FT = F[keep], UV[keep], FT[keep]
+        used = np.unique(F)
+        new_index = np.full(len(V), -1, np.int64)
+        new_index[used] = np.arange(len(used))
+        V, W, C, F = V[used], W[used], C[used], new_index[F]
     W /= W.sum(1, keepdims=True)
     # world -> canonical: rotate by M, scale, soles on Y = 0, pelvis on the Y axis
     Vc, Jc = V @ M.T, heads_t @ M.T
     height = float(Vc[:, 1].max() - Vc[:, 1].min())
     if height <= 0:
         raise UserError(f"{what}: the mesh is flat along the body's up axis")
-    scale = 1.0 if height_m is None else float(height_m) / height
-    if height_m is None and not MIN_HEIGHT_M <= height <= MAX_HEIGHT_M:
-        raise UserError(f"{what}: the body is {height:.3g} m tall in the file's units (expected "
-                        f"{MIN_HEIGHT_M}-{MAX_HEIGHT_M} m): give --height-m to scale it")
+    J = {n: i for i, n in enumerate(_joints())}
+    leg = float(np.mean([np.linalg.norm(Jc[J[f"{s}_hip"]] - Jc[J[f"{s}_ankle"]]) for s in ("left", "right")]))
+    scale, size = plausible_scale(height, leg, height_m, what)
     Vc, Jc = Vc * scale, Jc * scale
     shift = np.array([-Jc[0, 0], -Vc[:, 1].min(), -Jc[0, 2]])
     Vc, Jc = Vc + shift, Jc + shift
     canon = np.eye(4)
     canon[:3, :3], canon[:3, 3] = scale * M, shift
     meta = {
-        "id": rider_id, "source": what, "scheme": scheme, "armature": arm.name,
+        "id": rider_id, "source": what, "scheme": mapping.scheme, "armature": arm.name,
         "objects": [o.name for o in skinned], "bone_map": dict(bone_of),
+        "placed_joints": {j: placed[j][0] for j in _joints() if j not in bone_of},
+        "moved_joints": sorted(j for j in placed if j in bone_of),
+        "joint_source": dict(mapping.how),
         "rest_pose": "T" if max(swings.values()) < 10.0 else "A" if all(
             abs(swings[s] - 45) < 40 for s in ("left_shoulder", "right_shoulder")) else "other",
-        "swings_deg": swings, "height_m": round(float(Vc[:, 1].max()), 4), "scale": scale,
+        "swings_deg": swings, "height_m": round(float(Vc[:, 1].max()), 4), "scale": scale, "size": size,
         "canonical_from_world": canon.tolist(), "t_pose_deform_world": rest_deform,
         "unweighted_vertices_filled": int(n_filled), "textures": sorted(images),
+        "missing_textures": missing, "transparent_faces_dropped": n_cut, "helper_faces_dropped": n_helper,
         "blender": bpy.app.version_string,
     }
     arrays = {"vertices": Vc, "faces": F, "joints": Jc, "weights": W, "colors": C}
     if images:  # the texture layer: the training renders draw the textures themselves, not vertex colours
-        arrays.update(uv=np.concatenate(UV), face_texture=np.concatenate(FT),
+        arrays.update(uv=UV, face_texture=FT,
                       textures=[np.round(t * 255).astype(np.uint8) for t in images.values()])
     return arrays, meta
+
+
+def plausible_scale(height, leg, height_m, what):
+    """(scale to metres, what was assumed) for a body `height` tall with legs (hip joint to ankle, in the
+    T-pose) `leg` long, in Blender's units after the file's own unit settings and object matrices (the
+    importers apply them).  A person's size is kept; a size that is a person's in another unit (cm, mm,
+    inches, dm, feet) is read in it; otherwise (a stylised figure 3 units tall, a tiny armature with no
+    unit) the legs are given an adult's length (LEG_M), which is what reaching the pedals needs.
+    Refused: legs that are not a plausible share of the height (not a person)."""
+    if height_m is not None:
+        return float(height_m) / height, f"--height-m {float(height_m):g} given"
+    share = leg / height
+    if not MIN_LEG_SHARE <= share <= 0.75:
+        raise UserError(f"{what}: its legs (hip to ankle) are {share:.0%} of its height: not a person's "
+                        f"proportions (expected {MIN_LEG_SHARE:.0%}-75%)")
+    if MIN_HEIGHT_M <= height <= MAX_HEIGHT_M:
+        return 1.0, f"{height:.3g} m as in the file"
+    for factor, unit in UNIT_GUESSES:
+        if PLAUSIBLE_M[0] <= height * factor <= PLAUSIBLE_M[1]:
+            return factor, f"{height:.4g} units in the file read as {unit} ({height * factor:.3g} m)"
+    scale = LEG_M / leg
+    if height * scale > MAX_HEIGHT_M * 0.95:
+        scale = MAX_HEIGHT_M * 0.95 / height
+    return scale, (f"{height:.4g} units in the file, no unit fits a person: legs scaled to an adult's "
+                   f"({leg * scale:.2f} m hip to ankle, {height * scale:.2f} m tall)")
 
 
 def pose_rig(arm, bone_of, meta, world_transforms):
@@ -353,7 +492,8 @@ def pose_rig(arm, bone_of, meta, world_transforms):
     for pb in arm.pose.bones:
         pb.matrix_basis = Matrix.Identity(4)
     bpy.context.view_layer.update()
-    order = sorted(range(len(_joints())), key=lambda j: depth(bone_of[_joints()[j]]))
+    order = sorted((j for j in range(len(_joints())) if bone_of.get(_joints()[j])),
+                   key=lambda j: depth(bone_of[_joints()[j]]))
     for j in order:
         name = _joints()[j]
         D = np.asarray(meta["t_pose_deform_world"][name], float)
@@ -363,7 +503,7 @@ def pose_rig(arm, bone_of, meta, world_transforms):
         bpy.context.view_layer.update()
 
 
-def save_rider(objects, rider_id, folder, what, height_m=None, overwrite=False):
+def save_rider(objects, rider_id, folder, what, height_m=None, overwrite=False, model_dir=None):
     """The add-on's "Save as rider": rider_from_objects, written to <folder>/<rider_id>/rider.npz (where
     `python -m splatting` finds imported riders when folder is the project's data/imported_riders).
     Returns (path, meta)."""
@@ -376,6 +516,6 @@ def save_rider(objects, rider_id, folder, what, height_m=None, overwrite=False):
     path = os.path.join(folder, rider_id, rider_file.FILE_NAME)
     if os.path.exists(path) and not overwrite:
         raise UserError(f"{path} exists: rider {rider_id!r} was imported before (tick Overwrite to replace it)")
-    arrays, meta = rider_from_objects(objects, rider_id, what, height_m)
+    arrays, meta = rider_from_objects(objects, rider_id, what, height_m, model_dir=model_dir)
     rider_file.write_rider_file(path, meta=meta, **arrays)
     return path, meta

@@ -18,7 +18,7 @@ from splatting import paths
 # (~2.5 s, python -X importtime), and `--help` and the argument checks answer before that (0.2-0.5 s).
 
 SCRIPT = paths.blender_script("import_rider.py")
-MODEL_EXTENSIONS = (".glb", ".gltf", ".fbx", ".blend")
+MODEL_EXTENSIONS = (".glb", ".gltf", ".vrm", ".fbx", ".blend")  # .vrm: a VRoid/VRM avatar, a .glb
 
 
 def add_arguments(p):
@@ -42,6 +42,8 @@ def check_args(args):
     check_rider_id(args.id)
     checks.number("height_m", args.height_m, 0.5, 2.6)
     checks.output_file("out", args.out, (".npz",))
+    from cyclist_formats.gltf_extensions import check_readable
+    check_readable(args.model)
     if args.blender is not None:
         checks.input_file("blender", args.blender)
 
@@ -84,4 +86,9 @@ def run(args):
     print(f"{res['rider']}: rider {args.id} imported ({res.get('vertices', '?')} vertices, "
           f"{res.get('scheme', '?')} rig, {res.get('rest_pose', '?')}-pose rest, {res.get('height_m', '?')} m, "
           f"{res.get('textures', 0)} texture(s)){where}")
+    print(f"  size: {res.get('size', '?')}")
+    if res.get("placed_joints"):
+        print(f"  joints placed from their neighbours (no bone): {', '.join(res['placed_joints'])}")
+    for m in res.get("missing_textures") or []:
+        print(f"warning: texture not found, flat base colour used: {m}", file=sys.stderr)
     return 0
