@@ -1,0 +1,106 @@
+"""Where the inserted cyclists and parked bikes of one frame stand (called from generate.draw).
+
+Pure numpy on the sample's Generator, so a sample is a function of (config, index).  Per instance,
+up to `street.max_tries` draws of
+- a distance: camera-0 depth z uniform in `street.distance_m` (3-60 m by default), and an image
+  column u uniform over the width widened by `street.border_margin` (truncation happens); the
+  spot is the road-plane point at that depth seen in that column (through camera 2);
+- a heading along the road (road.road_axis: the labelled cars' dominant direction, or the config's
+  `street.road_heading_deg`) +- `street.heading_spread_deg`, turned round for `street.oncoming_share`
+  (`street.heading: uniform`: any direction);
+and the draw is kept only when
+- |world X| (lateral offset) is within `street.lateral_m`,
+- its footprint (a 1.9 x 0.8 m rectangle along the heading) overlaps no labelled 3D box's footprint
+  grown by `insert.box_margin_m` (cars, vans, pedestrians, cyclists..., DontCare has no box) and no
+  earlier instance's,
+- the instance's 1.8 m height projects into the image (its top above the bottom border),
+- with the frame's LiDAR: lidar.ground_support counts road points around the footprint (at least
+  `insert.min_ground_points`: the sensor sees the road there, so it is road and not inside a nearer
+  object's LiDAR shadow) and no obstacle points (well above the road inside it).
+An instance with no kept draw is left out and counted in `dropped`.  The bike stands on the world
+plane Y = 0 (the road plane, frames.road) with no pitch (theta_z = 0), so both tyres touch it.
+"""
+import numpy as np
+
+from cyclist_formats.pose import POSE_FIELDS
+from splatting.dataset.frames import source
+from splatting.dataset.frames.road import convex_overlap, footprint, rectangle, road_axis
+from splatting.dataset.street import PLACED, _count
+
+FOOT_L, FOOT_W, HEIGHT = 1.9, 0.8, 1.8  # a cyclist's footprint and height (m) for the checks
+
+
+def spot(road, z, u):
+    """The road-plane point (rect) at camera-0 depth z seen in image column u (camera 2)."""
+    K, t = road.K, road.t
+    x = (u - K[0, 2]) * (z + t[2]) / K[0, 0] - t[0]
+    a, b, c, d = road.plane
+    y = -(a * x + c * z + d) / b
+    return np.array([x, y, z])
+
+
+def support_ok(fr, poly_world, min_ground):
+    """LiDAR check of a footprint: (ok, ground count, obstacle count); ok without a scan."""
+    if fr.scan is None:
+        return True, None, None
+    rect = fr.road.to_rect(np.column_stack([poly_world[:, 0], np.zeros(len(poly_world)), poly_world[:, 1]]))
+    s = source.lidar.ground_support(fr.scan[:, :3], fr.T_velo_to_rect, fr.road.plane, rect[:, [0, 2]])
+    return s["ground"] >= min_ground and s["obstacle"] == 0, int(s["ground"]), int(s["obstacle"])
+
+
+def draw_frame(cfg, rng, index):
+    """-> (instances [{"kind", "bike", "rider", "pose"}], dropped, camera record)."""
+    s, ins = cfg["street"], cfg["insert"]
+    fid = source.frame_id(cfg, index)
+    fr = source.frame(cfg, fid)
+    road = fr.road
+    axis, axis_src = road_axis(fr.labels, road, s["road_heading_deg"])
+    boxes = [footprint(b, road, ins["box_margin_m"]) for b in fr.boxes]
+    n_cyc = _count(rng, s["cyclists"]) if cfg["riders"] else 0
+    n_park = _count(rng, s["parked_bikes"])
+    placed, out, dropped, checks = [], [], 0, []
+    for kind in ["cyclist"] * n_cyc + ["parked"] * n_park:
+        bike = cfg["bikes"][int(rng.integers(len(cfg["bikes"])))]
+        rider = cfg["riders"][int(rng.integers(len(cfg["riders"])))] if kind == "cyclist" else None
+        pose = {k: float(rng.uniform(*cfg["pose"][k])) for k in POSE_FIELDS if k not in PLACED}
+        pose["theta_z_deg"] = 0.0  # no pitch: both tyres on the plane
+        if kind == "parked":
+            pose["theta_s_deg"] = float(rng.uniform(*s["parked_steer_deg"]))
+        got = None
+        for _ in range(int(s["max_tries"])):
+            z = float(rng.uniform(*s["distance_m"]))
+            u = float(rng.uniform(-s["border_margin"], 1.0 + s["border_margin"])) * fr.width
+            if s["heading"] == "uniform":
+                yaw = float(rng.uniform(-180.0, 180.0))
+            else:
+                yaw = axis + float(rng.uniform(-1, 1)) * s["heading_spread_deg"]
+                if rng.uniform() < s["oncoming_share"]:
+                    yaw += 180.0
+            yaw = (yaw + 180.0) % 360.0 - 180.0
+            p = spot(road, z, u)
+            w = road.to_world(p[None])[0]
+            if not s["lateral_m"][0] <= w[0] <= s["lateral_m"][1]:
+                continue
+            top = road.to_rect(np.array([[w[0], HEIGHT, w[2]]]))
+            (_, vt), zt = road.project_rect(top)[0][0], road.project_rect(top)[1][0]
+            if not (zt > 0.5 and vt < fr.height):
+                continue
+            poly = rectangle(w[0], w[2], yaw, FOOT_L, FOOT_W)
+            if any(convex_overlap(poly, b) for b in boxes) or any(convex_overlap(poly, q) for q in placed):
+                continue
+            ok, ground, obstacle = support_ok(fr, poly, ins["min_ground_points"])
+            if not ok:
+                continue
+            got = (float(w[0]), float(w[2]), yaw, ground, obstacle)
+            break
+        if got is None:
+            dropped += 1
+            continue
+        placed.append(rectangle(got[0], got[1], got[2], FOOT_L, FOOT_W))
+        pose.update(theta_y_deg=got[2], t_x_m=got[0], t_y_m=0.0, t_z_m=got[1])
+        out.append({"kind": kind, "bike": bike, "rider": rider, "pose": [pose[k] for k in POSE_FIELDS]})
+        checks.append({"lidar_ground_points": got[3], "lidar_obstacle_points": got[4]})
+    camera = {"preset": "frame", "frame": fid, "plane": [round(x, 6) for x in road.plane],
+              "plane_source": fr.plane_source, "road_heading_deg": round(axis, 3), "road_heading_source": axis_src,
+              "lidar": fr.scan is not None, "placement_checks": checks}
+    return out, dropped, camera

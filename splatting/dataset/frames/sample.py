@@ -1,0 +1,127 @@
+"""What generate.make_sample does differently for a frames-mode sample: the frame's camera and image,
+its depth as an occluder, the look matching, the KITTI rows of the frame itself, the shadows' sun.
+
+One FrameSample per sample, built from the draw (generate.draw -> placement.draw_frame).
+"""
+import math
+
+import numpy as np
+
+from cyclist_formats import kitti_frame
+from splatting.dataset.frames import look, occlusion, source
+from splatting.relight.shading import Light, sun_direction
+
+
+class FrameSample:
+    def __init__(self, cfg, d, index):
+        self.cfg, self.index, self.d = cfg, index, d
+        self.frame = source.frame(cfg, d["camera"]["frame"])
+        self.road = self.frame.road
+        self.ins = cfg["insert"]
+        self._boxes = None
+        self.hidden_px = 0
+
+    def camera(self):
+        return self.road.camera()
+
+    def image(self):
+        return self.frame.image()
+
+    def box3d(self, box):
+        return self.road.box3d(box)
+
+    def sun(self):
+        """The cast shadows' sun (world frame): the config's elevation and azimuth (0 = world +X)."""
+        lk = self.ins["look"]
+        return Light(sun_direction=sun_direction(lk["sun_elevation_deg"], lk["sun_azimuth_deg"]))
+
+    def boxes(self):
+        if self._boxes is None:
+            fr = self.frame
+            self._boxes = occlusion.boxes_depth(self.road, fr.boxes, fr.width, fr.height)
+        return self._boxes
+
+    def depth(self):
+        """The frame's depth (H, W) camera-2 z, 0 unknown: labelled boxes and LiDAR, the nearer."""
+        fr = self.frame
+        D = self.boxes()[0] if self.ins["box_occluders"] else np.zeros((fr.height, fr.width), np.float32)
+        if fr.scan is not None:
+            Dl = source.lidar.lidar_depth_image(fr.scan[:, :3], fr.T_velo_to_rect, fr.calib["P2"], fr.width, fr.height)
+            Dl = np.where(Dl > 0, Dl + self.road.t[2], 0.0).astype(np.float32)  # rect z -> camera-2 z
+            D = occlusion.nearer(D, Dl)
+        return D
+
+    def occlude(self, L):
+        """Hide inserted pixels behind the frame; -> (keypoint alpha, keypoint depth)."""
+        ka, kd, hidden = occlusion.occlude(L, self.depth(), self.ins["occlusion_margin_m"])
+        self.hidden_px = int(hidden.sum())
+        return ka, kd
+
+    def composite(self, L, box, feet_world):
+        """The output image: the frame with the inserted layers, light, blur and noise matched."""
+        fr, lk = self.frame, self.ins["look"]
+        img = self.image()
+        rec = {"hidden_px": self.hidden_px}
+        gain, sigma, noise = np.ones(3), 0.0, 0.0
+        if lk["match"]:
+            gain, road_rgb = look.road_gain(img, self.road_mask(feet_world))
+            est = look.estimate_blur(img)
+            own = None
+            if lk["blur_sigma_px"] == "auto":
+                own = look.render_blur(L, box)
+                sigma = 0.0 if est is None else math.sqrt(max(est ** 2 - (own or 0.0) ** 2, 0.0))
+            else:
+                sigma = float(lk["blur_sigma_px"])
+            noise = look.estimate_noise(img) if lk["noise_sigma"] == "auto" else float(lk["noise_sigma"])
+            rec.update(road_rgb=road_rgb, frame_blur_px=None if est is None else round(est, 4),
+                       render_blur_px=None if own is None else round(own, 4))
+        rec.update(gain=[round(float(x), 4) for x in gain], blur_sigma_px=round(float(sigma), 4),
+                   noise_sigma=round(float(noise), 5))
+        rng = np.random.default_rng([self.cfg["seed"], self.index, 26])
+        out, changed = look.composite(img, L, box, gain, round(float(sigma), 4), round(float(noise), 5), rng)
+        self.changed = changed
+        return out, rec
+
+    def road_mask(self, feet_world):
+        """Road pixels near the inserted instances: their footprints grown by 1.5 m (a square in the
+        world X, Z), projected, below the horizon, outside every labelled box's 2D box."""
+        fr = self.frame
+        m = np.zeros((fr.height, fr.width), bool)
+        for x, z in feet_world:
+            sq = np.array([[x - 1.5, 0, z - 1.5], [x + 1.5, 0, z - 1.5], [x + 1.5, 0, z + 1.5], [x - 1.5, 0, z + 1.5]])
+            uv, zc = self.road.project_rect(self.road.to_rect(sq))
+            if (zc <= 0.5).any():
+                continue
+            u0, v0 = max(int(uv[:, 0].min()), 0), max(int(uv[:, 1].min()), 0)
+            u1, v1 = min(int(uv[:, 0].max()) + 1, fr.width), min(int(uv[:, 1].max()) + 1, fr.height)
+            if u1 > u0 and v1 > v0:
+                m[v0:v1, u0:u1] = True
+        for row, _ in fr.labels:
+            m[max(int(row["y1"]), 0):int(row["y2"]) + 1, max(int(row["x1"]), 0):int(row["x2"]) + 1] = False
+        return m
+
+    def frame_rows(self, L):
+        """The frame's own label_2 lines with raised occlusion -> ([text], [(old, new, share)])."""
+        fr = self.frame
+        per = self.boxes()[1]
+        idx, k = [], 0
+        for row, _ in fr.labels:  # boxes_of keeps the rows with a box, in order
+            if row["type"] == kitti_frame.IGNORED_TYPE or min(row["h"], row["w"], row["l"]) <= 0:
+                idx.append(None)
+            else:
+                idx.append(k)
+                k += 1
+        res = occlusion.raised_occlusion(fr.labels, per, idx, L["label"], L["depth"], fr.width, fr.height)
+        lines = [text if new == old else kitti_frame.with_occluded(text, new) for (_, text), (old, new, _) in zip(fr.labels, res)]
+        return lines, res
+
+    def kitti_extras(self, L):
+        lines, res = self.frame_rows(L)
+        fr = self.frame
+        return {"frame_lines": lines, "frame_id": fr.id, "folder": fr.folder, "plane": self.road.plane,
+                "occlusion_raised": res, "scan": None}
+
+    def record(self):
+        fr = self.frame
+        return {"frame": fr.id, "width": fr.width, "height": fr.height, "plane": list(self.road.plane),
+                "plane_source": fr.plane_source, "lidar": fr.scan is not None}
