@@ -134,3 +134,153 @@ def test_the_development_frames_parse():
     f = frames["000000"]
     assert f["labels"][0][1] == PED and f["plane"][3] == pytest.approx(1.68, abs=0.01)
     assert read_velodyne(f["velodyne"]).shape[1] == 4
+
+
+# ---------------------------------------------------------------- samples on a synthetic frame
+
+from helpers import CITY_KEYPOINTS, RIDER, small_config, write_test_bike  # noqa: E402
+
+
+def frames_config(bikes, frames, **kw):
+    cfg = small_config(bikes, mode="frames", frames=frames, count=4,
+                       street={"cyclists": [2, 3], "parked_bikes": [0, 1], "distance_m": [5, 30], "lateral_m": [-8, 8]},
+                       pose={"theta_s_deg": [-12, 12], "theta_x_deg": [-6, 6]})
+    cfg.pop("image_size")
+    for k, v in kw.items():
+        cfg[k] = dict(cfg.get(k, {}), **v) if isinstance(v, dict) and isinstance(cfg.get(k), dict) else v
+    return cfg
+
+
+@pytest.fixture(scope="module")
+def bikes(tmp_path_factory):
+    root = str(tmp_path_factory.mktemp("bikes"))
+    write_test_bike(root)
+    return root
+
+
+def resolved(cfg):
+    import torch
+    torch.set_num_threads(1)
+    from splatting.dataset.config import resolve_assets, validate
+    return resolve_assets(validate(cfg))
+
+
+def fixed(monkeypatch, instances):
+    """Every sample index i: frame i mod n with these instances [(rider, theta_y, X, Z)] (world)."""
+    from splatting.dataset import generate
+    from splatting.dataset.frames import source
+
+    def draw(cfg, index):
+        fid = source.frame_id(cfg, index)
+        inst = [{"kind": "cyclist" if r else "parked", "bike": "city_t", "rider": r,
+                 "pose": [30.0, 0.0, 0.0, yaw, 0.0, x, 0.0, z]} for r, yaw, x, z in instances]
+        return {"instances": inst, "dropped": 0, "camera": {"preset": "frame", "frame": fid},
+                "background": {"kind": "frame", "frame": fid}}
+    monkeypatch.setattr(generate, "draw", draw)
+
+
+def rim_lowest(kp, pose):
+    """Lowest world points of both posed tyres by the tests' own rotation maths (helpers)."""
+    from helpers import ref_global, rotate_about
+    axis = [a - b for a, b in zip(kp["steer_top"], kp["steer_bottom"])]
+    out = []
+    for name in ("front_axle", "rear_axle"):
+        a = kp[name]
+        r = a[1] - kp["ground"][1]
+        pts = []
+        for k in range(360):
+            p = [a[0] + r * np.cos(np.radians(k)), a[1] + r * np.sin(np.radians(k)), a[2]]
+            if name == "front_axle":
+                p = rotate_about(p, kp["steer_bottom"], axis, np.radians(pose[1]))
+            pts.append(ref_global(p, pose))
+        out.append(min(pts, key=lambda q: q[1]))
+    return out
+
+
+def test_tyres_touch_a_tilted_road_plane_and_never_stand_in_a_labelled_box(bikes, tmp_path):
+    from splatting.dataset.frames.road import Road
+    from splatting.dataset.generate import Assets, make_sample
+    cars = [ks.box_row("Car", 1.5, 1.7, 4.2, x, 1.65, z, ry) for x, z, ry in
+            ((-3.0, 12.0, 1.57), (2.5, 9.0, 1.5), (0.0, 20.0, -1.6), (-1.5, 28.0, 1.6), (3.5, 16.0, 0.1))]
+    root = ks.write_frames(str(tmp_path / "f"), {"000000": cars})
+    # a road tilted by ~2.3 deg about x and 1.7 deg about z: a x + b y + c z + d = 0, normal up
+    n = np.array([0.03, -1.0, 0.04])
+    n /= np.linalg.norm(n)
+    with open(os.path.join(root, "planes", "000000.txt"), "w") as f:
+        f.write("# Plane\nWidth 4\nHeight 1\n" + " ".join(f"{x:.9f}" for x in (*n, 1.65)) + "\n")
+    cfg = resolved(frames_config(bikes, root, count=6, street={"cyclists": [3, 3], "parked_bikes": [1, 1]},
+                                 insert={"box_margin_m": 0.5}))
+    assets = Assets(cfg)
+    road = Road((*n, 1.65), ks.P2(), ks.W, ks.H)
+    placed = 0
+    for i in range(6):
+        _, image, _, extras = make_sample(cfg, i, assets)
+        for rec in image["instances"]:
+            for p in rim_lowest(CITY_KEYPOINTS, rec["pose"]):
+                rect = road.to_rect(np.array([p]))[0]
+                assert abs(rect @ n + 1.65) < 0.03  # height above the file's plane, by its own equation
+            placed += 1
+        for o in extras["kitti"]:  # the inserted box's centre is outside every car's footprint + margin
+            for c in cars:
+                v = [float(x) for x in c.split()[8:15]]
+                h, w, l, x, y, z, ry = v
+                dx, dz = o["x"] - x, o["z"] - z
+                lx, lz = dx * np.cos(ry) - dz * np.sin(ry), dx * np.sin(ry) + dz * np.cos(ry)
+                assert abs(lx) > l / 2 + 0.5 or abs(lz) > w / 2 + 0.5, (o, c)
+    assert placed >= 12
+
+
+def test_a_labelled_car_in_front_hides_the_cyclist_and_it_raises_a_pedestrian_behind(bikes, tmp_path, monkeypatch):
+    from cyclist_formats.kitti_frame import parse_label_line
+    from splatting.dataset.generate import Assets, make_sample
+    from splatting.dataset.labels import CATEGORY_IDS
+    car = ks.box_row("Car", 1.5, 1.8, 4.0, 0.0, 1.65, 5.0, 0.0)
+    ped = ks.box_row("Pedestrian", 1.75, 0.6, 0.8, 0.3, 1.65, 14.0, 1.57)
+    root = ks.write_frames(str(tmp_path / "f"), {"000000": [car], "000001": [ped], "000002": []})
+    fixed(monkeypatch, [(RIDER, -90.0, 0.0, 8.0)])  # riding away from the camera, 8 m ahead
+    cfg = resolved(frames_config(bikes, root, insert={"look": {"match": False}}, backgrounds={"shadow": False}))
+    assets = Assets(cfg)
+    res = {i: make_sample(cfg, i, assets) for i in range(3)}
+
+    def ann(i, key):
+        return next(a for a in res[i][2] if a["category_id"] == CATEGORY_IDS[key])
+    free, hidden = ann(2, "cyclist"), ann(0, "cyclist")
+    assert free["visibility"] > 0.95 and free["occlusion"] == 0
+    assert hidden["visibility"] < 0.6 and hidden["occlusion"] >= 1
+    assert hidden["area"] < 0.6 * free["area"]
+    # the bike is wholly behind the bonnet: no visible pixel, no annotation of its own
+    assert not any(a["category_id"] == CATEGORY_IDS["bicycle"] for a in res[0][2])
+    kr_free, kr_hid = (np.array(ann(i, "rider")["keypoints"]).reshape(-1, 3) for i in (2, 0))
+    assert (kr_hid[:5, 2] == kr_free[:5, 2]).all() and (kr_hid[:5, 2] == 2).any()  # the head shows above the car
+    assert (kr_free[15:, 2] == 2).any() and (kr_hid[15:, 2] == 1).all()  # the ankles do not
+    kit = res[0][3]["kitti"][0]
+    assert kit["occluded"] >= 1
+    # the car's own row is kept; the pedestrian behind the cyclist is now occluded, every other byte kept
+    assert res[0][3]["frame"]["frame_lines"] == [car]
+    lines = res[1][3]["frame"]["frame_lines"]
+    new = parse_label_line(lines[0])
+    assert new["occluded"] >= 1 and lines[0].split()[:2] + lines[0].split()[3:] == ped.split()[:2] + ped.split()[3:]
+    assert res[1][1]["frame"]["occlusion_raised"][0][2] > 0.1
+
+
+def test_the_image_changes_only_where_the_cyclists_are(bikes, tmp_path, monkeypatch):
+    from pycocotools import mask as mu
+    from splatting.dataset.frames.source import read_image
+    from splatting.dataset.generate import Assets, make_sample
+    root = ks.write_frames(str(tmp_path / "f"), {"000000": []})
+    fixed(monkeypatch, [(RIDER, -90.0, 0.0, 8.0), (RIDER, 0.0, 2.5, 14.0)])
+    cfg = resolved(frames_config(bikes, root, backgrounds={"shadow": False},
+                                 insert={"look": {"blur_sigma_px": 0.0, "noise_sigma": 0.01}}))
+    rgb, image, anns, _ = make_sample(cfg, 0, Assets(cfg))
+    frame = read_image(os.path.join(root, "image_2", "000000.png"))
+    diff = (rgb != frame).any(-1)
+    inside = np.zeros(diff.shape, bool)
+    for a in anns:
+        inside |= mu.decode(a["segmentation_amodal"]).astype(bool)
+    # grown by 3 px: the Gaussians' faint tails below the mask threshold (alpha 0.5) still tint the frame
+    grown = inside.copy()
+    for dy in range(-3, 4):
+        for dx in range(-3, 4):
+            grown |= np.roll(np.roll(inside, dy, 0), dx, 1)
+    assert diff.sum() > 100 and not (diff & ~grown).any()
+    assert image["background"]["look"]["noise_sigma"] == 0.01
