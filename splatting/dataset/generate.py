@@ -275,7 +275,7 @@ def make_sample(cfg, index, assets):
 
     parts, slots, boxes, keeps, aa, eps = [], [], [], [], [], []
     lod_cfg = cfg["lod"]
-    looks = []
+    looks, scan_parts = [], []
     for k, (inst, frame, _) in enumerate(frames):
         g = frame.gaussians
         slot = torch.where(frame.ids == RIDER_ID, 2 * k + 2, 2 * k + 1).long()
@@ -301,6 +301,8 @@ def make_sample(cfg, index, assets):
         # and each model with the low-pass it was trained with (bike and rider may differ)
         cyc = assets.cyclists[(inst["bike"], inst["rider"])]
         e = frame_eps2d(frame.ids, cyc.bike, cyc.avatar)
+        if fs is not None:  # the full model, for the LiDAR scan
+            scan_parts.append((frame.gaussians, e, bike_aa if bike_trained_aa else False))
         eps.append((len(g), e if idx is None or not torch.is_tensor(e) else e.index_select(0, idx)))
         if relit is not None:  # its sun's shadow map draws the instance as the view does
             relit.instance(k, inst["bike"], inst["rider"], frame.gaussians, looked, g, idx, cam,
@@ -428,6 +430,11 @@ def make_sample(cfg, index, assets):
     if fs is not None:  # the frame's own label rows (occlusion raised), calib, plane and scan
         extras["frame"] = fs.kitti_extras(L)
         image["frame"] = dict(fs.record(), occlusion_raised=[[o, n, round(sh_, 4)] for o, n, sh_ in extras["frame"]["occlusion_raised"]])
+        counts = fs.insert_scan(scan_parts, extras) if "kitti" in lab["formats"] else None
+        if counts is not None:  # the LiDAR points on each inserted instance
+            image["frame"]["scan"] = fs.scan_record
+            for a in anns:
+                a["lidar_points"] = counts[a["instance"] - 1]
         for rec, (inst, _, _) in zip(image["instances"], frames):
             rec["tyre_heights_m"] = [round(x, 5) for x in contact.tyre_heights(assets.bikes[inst["bike"]].keypoints, inst["pose"])]
     return rgb, image, anns, extras

@@ -3,7 +3,9 @@
 - Light: the mean colour of the frame's road around the inserted instances (the pixels of their
   footprints grown by 1.5 m, below the horizon, outside every labelled box) against ROAD_REF, the
   road's value under the light the assets were trained in (a sunlit asphalt albedo of ~0.35 seen by
-  a camera exposed for it).  exposure = luminance ratio, clamped to [0.35, 2]; white balance =
+  a camera exposed for it).  exposure = luminance ratio, clamped to [0.6, 1.5] (part of a dark road
+  is dark asphalt, not dim light: on the development frames the road's value spans 0.12-0.47 in
+  equal sun); white balance =
   the road's chromaticity, each channel within +-15 % of grey (roads are grey: what differs is the
   light).  The gain multiplies the baked render (assets without relight channels, the default).
 - Blur: the frame's optical blur sigma from its strong vertical edges (estimate_blur: for a Gaussian-
@@ -24,6 +26,7 @@ import numpy as np
 
 ROAD_REF = 0.35
 LUMA = np.array([0.2126, 0.7152, 0.0722])
+EXPOSURE = (0.6, 1.5)  # bounds of the exposure gain: roads differ in albedo too (fresh asphalt to paving)
 
 
 def road_gain(image, road_mask):
@@ -32,7 +35,7 @@ def road_gain(image, road_mask):
         return np.ones(3), None
     c = image[road_mask].astype(np.float64).mean(0) / 255.0
     lum = float(c @ LUMA)
-    exposure = float(np.clip(lum / ROAD_REF, 0.35, 2.0))
+    exposure = float(np.clip(lum / ROAD_REF, *EXPOSURE))
     wb = np.clip(c / max(lum, 1e-6), 0.85, 1.15)
     return exposure * wb, [round(float(x), 4) for x in c]
 

@@ -6,6 +6,9 @@ The frame's depth (camera-2 z per pixel, 0 = unknown) is the nearer of
   each oriented box; where LiDAR is sparse (far, dark or glass surfaces) the boxes still hide;
 - the LiDAR depth image when the frame has a scan (lidar.lidar_depth_image: projected and densified
   as docs/kitti_lidar.md describes), which also holds the unlabelled things: poles, walls, trees.
+  Points within 0.2 m of the road plane are left out first: on a planar road the road itself can
+  hide nothing standing on it, and its densified depth is coarse (at 20 m one image row spans
+  ~0.5 m of road), so it would eat tyres and cast shadows.
 An inserted pixel is hidden where the frame is nearer by more than `insert.occlusion_margin_m` (the
 margin keeps the road under the tyres, at the same depth as the contact, from eating them).
 Keypoints are tested against the nearer of the inserted surface and the frame (so a pedal behind a

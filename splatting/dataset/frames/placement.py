@@ -15,15 +15,16 @@ and the draw is kept only when
   earlier instance's,
 - the instance's 1.8 m height projects into the image (its top above the bottom border),
 - with the frame's LiDAR: lidar.ground_support counts road points around the footprint (at least
-  `insert.min_ground_points`: the sensor sees the road there, so it is road and not inside a nearer
-  object's LiDAR shadow) and no obstacle points (well above the road inside it).
+  `insert.min_ground_points`: the sensor sees road there) and no obstacle points (0.3-2.5 m above the
+  road inside it: a pole, a hedge, a wall), and lidar.visible_ground finds no nearer object above
+  the road in the spot's direction (it is not inside another object's LiDAR shadow).
 An instance with no kept draw is left out and counted in `dropped`.  The bike stands on the world
 plane Y = 0 (the road plane, frames.road) with no pitch (theta_z = 0), so both tyres touch it.
 """
 import numpy as np
 
 from cyclist_formats.pose import POSE_FIELDS
-from splatting.dataset.frames import source
+from splatting.dataset.frames import lidar, source
 from splatting.dataset.frames.road import convex_overlap, footprint, rectangle, road_axis
 from splatting.dataset.street import PLACED, _count
 
@@ -39,13 +40,18 @@ def spot(road, z, u):
     return np.array([x, y, z])
 
 
-def support_ok(fr, poly_world, min_ground):
-    """LiDAR check of a footprint: (ok, ground count, obstacle count); ok without a scan."""
+def support_ok(fr, poly_world, centre_rect, min_ground):
+    """LiDAR check of a footprint: (ok, ground count, obstacle count); ok without a scan.  The spot
+    must also be in the sensor's view (lidar.visible_ground: no nearer object above the road in its
+    direction), so nothing is placed inside another object's LiDAR shadow."""
     if fr.scan is None:
         return True, None, None
     rect = fr.road.to_rect(np.column_stack([poly_world[:, 0], np.zeros(len(poly_world)), poly_world[:, 1]]))
-    s = source.lidar.ground_support(fr.scan[:, :3], fr.T_velo_to_rect, fr.road.plane, rect[:, [0, 2]])
-    return s["ground"] >= min_ground and s["obstacle"] == 0, int(s["ground"]), int(s["obstacle"])
+    s = lidar.ground_support(fr.scan[:, :3], fr.T_velo_to_rect, fr.road.plane, rect[:, [0, 2]])
+    ok = s["ground"] >= min_ground and s["obstacle"] == 0
+    if ok:
+        ok = bool(lidar.visible_ground(fr.scan[:, :3], fr.T_velo_to_rect, fr.road.plane, centre_rect[None])[0])
+    return ok, int(s["ground"]), int(s["obstacle"])
 
 
 def draw_frame(cfg, rng, index):
@@ -88,7 +94,7 @@ def draw_frame(cfg, rng, index):
             poly = rectangle(w[0], w[2], yaw, FOOT_L, FOOT_W)
             if any(convex_overlap(poly, b) for b in boxes) or any(convex_overlap(poly, q) for q in placed):
                 continue
-            ok, ground, obstacle = support_ok(fr, poly, ins["min_ground_points"])
+            ok, ground, obstacle = support_ok(fr, poly, p, ins["min_ground_points"])
             if not ok:
                 continue
             got = (float(w[0]), float(w[2]), yaw, ground, obstacle)

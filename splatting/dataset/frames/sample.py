@@ -6,10 +6,16 @@ One FrameSample per sample, built from the draw (generate.draw -> placement.draw
 import math
 
 import numpy as np
+import torch
 
 from cyclist_formats import kitti_frame
-from splatting.dataset.frames import look, occlusion, source
+from splatting.bike.pose import transform_gaussians
+from splatting.dataset.frames import lidar, look, occlusion, source
+from splatting.dataset.frames.scan_insert import insert_into_scan
 from splatting.relight.shading import Light, sun_direction
+
+
+GROUND_M = 0.2  # scan points this close to the road plane are road (lidar.ground_support's tolerance is 0.15)
 
 
 class FrameSample:
@@ -45,8 +51,10 @@ class FrameSample:
         """The frame's depth (H, W) camera-2 z, 0 unknown: labelled boxes and LiDAR, the nearer."""
         fr = self.frame
         D = self.boxes()[0] if self.ins["box_occluders"] else np.zeros((fr.height, fr.width), np.float32)
-        if fr.scan is not None:
-            Dl = source.lidar.lidar_depth_image(fr.scan[:, :3], fr.T_velo_to_rect, fr.calib["P2"], fr.width, fr.height)
+        if fr.scan is not None:  # the road's own points never hide what stands on it: left out
+            pts = fr.scan[:, :3]
+            above = lidar.plane_height(lidar.velo_to_rect(pts, fr.T_velo_to_rect), self.road.plane) > GROUND_M
+            Dl = lidar.lidar_depth_image(pts[above], fr.T_velo_to_rect, fr.calib["P2"], fr.width, fr.height)
             Dl = np.where(Dl > 0, Dl + self.road.t[2], 0.0).astype(np.float32)  # rect z -> camera-2 z
             D = occlusion.nearer(D, Dl)
         return D
@@ -120,6 +128,24 @@ class FrameSample:
         fr = self.frame
         return {"frame_lines": lines, "frame_id": fr.id, "folder": fr.folder, "plane": self.road.plane,
                 "occlusion_raised": res, "scan": None}
+
+    def insert_scan(self, posed, extras):
+        """The frame's scan with the inserted instances ray-cast into it (lidar.insert_into_scan);
+        posed: [(world Gaussians, eps2d, antialiased)] of the full models.  Sets extras["frame"]["scan"]
+        and returns the points on each instance (None without a scan)."""
+        fr = self.frame
+        if fr.scan is None or not posed:
+            return None
+        H = np.eye(4)
+        H[:3, :3], H[:3, 3] = self.road.M, self.road.origin  # world -> rect
+        Ht = torch.from_numpy(H)
+        gs = [transform_gaussians(g, Ht) for g, _, _ in posed]
+        rng = np.random.default_rng([self.cfg["seed"], self.index, 64])
+        new, counts, removed = insert_into_scan(fr.scan, fr.T_velo_to_rect, gs, eps2d=[e for _, e, _ in posed],
+                                                antialiased=[a for _, _, a in posed], rng=rng)
+        extras["frame"]["scan"] = new
+        self.scan_record = {"points_in": int(len(fr.scan)), "points_out": int(len(new)), "removed": int(removed.sum())}
+        return counts
 
     def record(self):
         fr = self.frame

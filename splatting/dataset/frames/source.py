@@ -12,12 +12,8 @@ import numpy as np
 from cyclist_formats import kitti_frame
 from cyclist_formats.errors import UserError
 from splatting import paths
+from splatting.dataset.frames import lidar
 from splatting.dataset.frames.road import Road, boxes_of
-
-try:  # the LiDAR half (splatting/dataset/frames/lidar.py) is optional: frames without it use boxes only
-    from splatting.dataset.frames import lidar
-except ImportError:  # pragma: no cover - only before the module exists
-    lidar = None
 
 _FOLDERS = {}
 
@@ -77,7 +73,7 @@ class Frame:
         self.boxes = boxes_of(self.labels)
         self.width, self.height = image_size(rec["image"])
         self.T_velo_to_rect = kitti_frame.velo_to_rect(self.calib)
-        use_lidar = cfg["insert"]["lidar"] and rec["velodyne"] is not None and lidar is not None
+        use_lidar = cfg["insert"]["lidar"] and rec["velodyne"] is not None
         self.scan = kitti_frame.read_velodyne(rec["velodyne"]) if use_lidar else None
         plane, self.plane_source = rec["plane"], "planes"
         if plane is None and self.scan is not None:
