@@ -95,3 +95,23 @@ def write_frames(root, frames, with_planes=True, with_velodyne=False):
                     boxes.append(tuple(float(x) for x in p[8:15]))
             scan(boxes, k).tofile(os.path.join(root, "velodyne", fid + ".bin"))
     return str(root)
+
+
+def scan_with_wall(z_wall, wall_h, seed=0):
+    """A scan of the road (0.25 m grid, 2-40 m, |x| < 10 m) with an unlabelled wall wall_h high
+    across it at depth z_wall, as the sensor sees it: no road points in the wall's shadow (the
+    sensor stands 1.73 m above the road, 0.27 m behind camera 0)."""
+    rng = np.random.default_rng(seed)
+    sy, sz = -0.08, -0.27  # the sensor in rect (Tr_velo_to_cam's translation)
+    h_s = CAM_H - sy
+    end = sz + (z_wall - sz) * h_s / (h_s - wall_h)  # where the ray over the wall's top meets the road
+    xs, zs = np.meshgrid(np.arange(-10, 10, 0.25), np.arange(2, 40, 0.25))
+    xs, zs = xs.ravel(), zs.ravel()
+    seen = (zs < z_wall) | (zs > end)
+    road = np.column_stack([xs[seen], np.full(seen.sum(), CAM_H), zs[seen]])
+    wall = np.column_stack([rng.uniform(-10, 10, 4000), CAM_H - rng.uniform(0, wall_h, 4000), np.full(4000, z_wall)])
+    rect = np.concatenate([road, wall])
+    T = np.eye(4)
+    T[:3] = TR_VELO
+    velo = (np.linalg.inv(T) @ np.column_stack([rect, np.ones(len(rect))]).T).T[:, :3]
+    return np.column_stack([velo, np.full(len(velo), 0.3)]).astype(np.float32), end

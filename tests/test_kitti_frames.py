@@ -284,3 +284,97 @@ def test_the_image_changes_only_where_the_cyclists_are(bikes, tmp_path, monkeypa
             grown |= np.roll(np.roll(inside, dy, 0), dx, 1)
     assert diff.sum() > 100 and not (diff & ~grown).any()
     assert image["background"]["look"]["noise_sigma"] == 0.01
+
+
+def test_never_placed_in_an_unlabelled_walls_lidar_shadow(bikes, tmp_path):
+    from splatting.dataset.generate import Assets, draw
+    root = ks.write_frames(str(tmp_path / "f"), {"000000": []}, with_velodyne=True)
+    scan, end = ks.scan_with_wall(12.0, 1.0)
+    scan.tofile(os.path.join(root, "velodyne", "000000.bin"))
+    assert 28 < end < 30
+    zs = {}
+    for use in (True, False):
+        cfg = resolved(frames_config(bikes, root, street={"cyclists": [3, 3], "parked_bikes": [0, 0],
+                                                          "distance_m": [5, 40], "lateral_m": [-6, 6]},
+                                     insert={"lidar": use}))
+        zs[use] = [float(i["pose"][7]) for k in range(10) for i in draw(cfg, k)["instances"]]
+    # world Z is rect z here (level road below camera 0)
+    assert len(zs[True]) >= 20 and not any(12.0 - 1.0 < z < end - 0.5 for z in zs[True]), zs[True]
+    assert sum(z < 11 for z in zs[True]) >= 20  # (beyond `end` the sensor's beams graze the wall: kept clear too)
+    # without the scan nothing knows the wall is there: the same draws land behind it
+    assert sum(12.5 < z < end - 0.5 for z in zs[False]) >= 5
+
+
+def test_dataset_command_kitti_layout_and_resume_byte_identical(bikes, tmp_path):
+    from cyclist_formats.kitti_frame import parse_labels, read_velodyne
+    from splatting.dataset.command import generate
+    from splatting.dataset.config import validate
+    car = ks.box_row("Car", 1.5, 1.7, 4.2, -3.0, 1.65, 12.0, 1.57)
+    ped = ks.box_row("Pedestrian", 1.75, 0.6, 0.8, 2.0, 1.65, 15.0, 1.57, occluded=1)
+    root = ks.write_frames(str(tmp_path / "f"), {"000000": [car, ped], "000001": [car]}, with_velodyne=True)
+    cfg = validate(frames_config(bikes, root, count=3, labels={"formats": ["coco", "kitti"]},
+                                 street={"cyclists": [1, 2], "parked_bikes": [0, 1], "distance_m": [5, 25]}))
+    a, b = str(tmp_path / "a"), str(tmp_path / "b")
+    generate(cfg, a, log=lambda m: None, progress=False)
+    generate(cfg, b, log=lambda m: None, progress=False)
+    os.remove(os.path.join(b, "shards", "000001.json"))
+    os.remove(os.path.join(b, "kitti", "training", "velodyne", "000002.bin"))
+    os.remove(os.path.join(b, "kitti", "training", "label_2", "000002.txt"))
+    os.remove(os.path.join(b, "annotations.json"))
+    r = generate(cfg, b, log=lambda m: None, progress=False)
+    assert r["generated"] == 2
+    kt = os.path.join("kitti", "training")
+    for rel in ("annotations.json", "images/000001.png", f"{kt}/label_2/000002.txt", f"{kt}/velodyne/000002.bin",
+                f"{kt}/velodyne/000001.bin", f"{kt}/image_2/000001.png", "kitti/ImageSets/train.txt"):
+        with open(os.path.join(a, rel), "rb") as fa, open(os.path.join(b, rel), "rb") as fb:
+            assert fa.read() == fb.read(), rel
+    # KITTI layout: calib and planes copied byte for byte, the frame's rows first, then the inserted ones
+    for i, fid in ((0, "000000"), (1, "000001"), (2, "000000")):
+        for sub in ("calib", "planes"):
+            with open(os.path.join(a, kt, sub, f"{i:06d}.txt"), "rb") as f, open(os.path.join(root, sub, fid + ".txt"), "rb") as g:
+                assert f.read() == g.read()
+        rows = [r for r, _ in parse_labels(os.path.join(a, kt, "label_2", f"{i:06d}.txt"))]
+        own = 2 if fid == "000000" else 1
+        assert rows[0]["type"] == "Car" and all(r["type"] in ("Cyclist", "Misc") for r in rows[own:]) and len(rows) > own
+        if own == 2:
+            assert rows[1]["occluded"] >= 1  # kept or raised, never lowered
+        scan = read_velodyne(os.path.join(a, kt, "velodyne", f"{i:06d}.bin"))
+        src = read_velodyne(os.path.join(root, "velodyne", fid + ".bin"))
+        assert scan.shape[1] == 4 and not np.array_equal(scan, src)
+    import json
+    with open(os.path.join(a, "annotations.json")) as f:
+        doc = json.load(f)
+    assert [im["frame"]["frame"] for im in doc["images"]] == ["000000", "000001", "000000"]
+    assert all("lidar_points" in an for an in doc["annotations"])
+    assert sum(an["lidar_points"] for an in doc["annotations"]) > 0
+
+
+def test_command_refuses_bad_frames_in_one_line(bikes, tmp_path):
+    import subprocess
+    import sys
+    import yaml
+    root = ks.write_frames(str(tmp_path / "f"), {"000000": [PED]})
+    cfgp = str(tmp_path / "c.yaml")
+    with open(cfgp, "w") as f:
+        yaml.safe_dump(frames_config(bikes, root), f)
+    env = dict(os.environ, PYTHONPATH=ROOT)
+
+    def run(*extra):
+        out = str(tmp_path / "out")
+        p = subprocess.run([sys.executable, "-m", "splatting", "dataset", "--config", cfgp, "--out", out, *extra],
+                           capture_output=True, text=True, env=env, cwd=ROOT, timeout=300)
+        return p.returncode, p.stderr.strip().splitlines(), os.path.exists(out)
+    rc, err, made = run("--frames", str(tmp_path / "nowhere"))
+    assert rc != 0 and len(err) == 1 and "nowhere" in err[0] and not made
+    with open(os.path.join(root, "label_2", "000000.txt"), "w") as f:
+        f.write(" ".join(PED.split()[:14]) + "\n")
+    rc, err, made = run()
+    assert rc != 0 and len(err) == 1 and "label_2/000000.txt:1" in err[0] and "got 14" in err[0] and not made
+    with open(os.path.join(root, "label_2", "000000.txt"), "w") as f:
+        f.write(PED + "\n")
+    with open(os.path.join(root, "velodyne_bad.bin"), "wb") as f:
+        f.write(b"\0" * 20)
+    os.makedirs(os.path.join(root, "velodyne"))
+    os.replace(os.path.join(root, "velodyne_bad.bin"), os.path.join(root, "velodyne", "000000.bin"))
+    rc, err, made = run()
+    assert rc != 0 and len(err) == 1 and "20 bytes is not a whole number of points" in err[0] and not made
