@@ -340,7 +340,7 @@ def make_sample(cfg, index, assets):
     bg_rec = dict(d["background"])
     kp_alpha, kp_depth = L["alpha"], L["depth"]
     if fs is not None:  # the frame's real objects hide what is behind them; then its look
-        kp_alpha, kp_depth = fs.occlude(L)
+        kp_alpha, kp_depth = fs.occlude(L, union(L.get("boxes", [])))
         rgb, bg_rec["look"] = fs.composite(L, union(L.get("boxes", [])), [(i["pose"][5], i["pose"][7]) for i, _, _ in frames])
     elif bg_kind == "images":
         bg, rec = photo(b["image_files"], d["background"]["seed"], W, H)

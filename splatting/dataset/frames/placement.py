@@ -47,10 +47,15 @@ def support_ok(fr, poly_world, centre_rect, min_ground):
     if fr.scan is None:
         return True, None, None
     rect = fr.road.to_rect(np.column_stack([poly_world[:, 0], np.zeros(len(poly_world)), poly_world[:, 1]]))
-    s = lidar.ground_support(fr.scan[:, :3], fr.T_velo_to_rect, fr.road.plane, rect[:, [0, 2]])
+    # only the points near the footprint can count (ground_support's margin is 0.5 m): the same counts
+    lo, hi = rect[:, [0, 2]].min(0) - 1.0, rect[:, [0, 2]].max(0) + 1.0
+    xz = fr.scan_rect[:, [0, 2]]
+    near = ((xz >= lo) & (xz <= hi)).all(1)
+    s = lidar.ground_support(fr.scan[near, :3], fr.T_velo_to_rect, fr.road.plane, rect[:, [0, 2]])
     ok = s["ground"] >= min_ground and s["obstacle"] == 0
-    if ok:
-        ok = bool(lidar.visible_ground(fr.scan[:, :3], fr.T_velo_to_rect, fr.road.plane, centre_rect[None])[0])
+    if ok:  # only points above the road can block the view (visible_ground's own rule, min_height_m 0.3)
+        high = fr.scan[fr.scan_height > 0.3, :3]
+        ok = bool(lidar.visible_ground(high, fr.T_velo_to_rect, fr.road.plane, centre_rect[None])[0])
     return ok, int(s["ground"]), int(s["obstacle"])
 
 

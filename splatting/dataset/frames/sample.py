@@ -47,21 +47,28 @@ class FrameSample:
             self._boxes = occlusion.boxes_depth(self.road, fr.boxes, fr.width, fr.height)
         return self._boxes
 
-    def depth(self):
-        """The frame's depth (H, W) camera-2 z, 0 unknown: labelled boxes and LiDAR, the nearer."""
+    def depth(self, box=None):
+        """The frame's depth (H, W) camera-2 z, 0 unknown: labelled boxes and LiDAR, the nearer.  The
+        LiDAR's only inside box (u0, v0, w, h) grown by 16 px when given (where cyclists were drawn):
+        the image is densified there alone, through P2 shifted to the crop."""
         fr = self.frame
-        D = self.boxes()[0] if self.ins["box_occluders"] else np.zeros((fr.height, fr.width), np.float32)
-        if fr.scan is not None:  # the road's own points never hide what stands on it: left out
-            pts = fr.scan[:, :3]
-            above = lidar.plane_height(lidar.velo_to_rect(pts, fr.T_velo_to_rect), self.road.plane) > GROUND_M
-            Dl = lidar.lidar_depth_image(pts[above], fr.T_velo_to_rect, fr.calib["P2"], fr.width, fr.height)
+        D = self.boxes()[0].copy() if self.ins["box_occluders"] else np.zeros((fr.height, fr.width), np.float32)
+        if fr.scan is not None and box is not None:  # the road's own points never hide what stands on it: left out
+            pad = 16
+            u0, v0 = max(box[0] - pad, 0), max(box[1] - pad, 0)
+            u1, v1 = min(box[0] + box[2] + pad, fr.width), min(box[1] + box[3] + pad, fr.height)
+            P = fr.calib["P2"].copy()
+            P[0] -= u0 * P[2]
+            P[1] -= v0 * P[2]
+            pts = fr.scan[fr.scan_height > GROUND_M, :3]
+            Dl = lidar.lidar_depth_image(pts, fr.T_velo_to_rect, P, u1 - u0, v1 - v0)
             Dl = np.where(Dl > 0, Dl + self.road.t[2], 0.0).astype(np.float32)  # rect z -> camera-2 z
-            D = occlusion.nearer(D, Dl)
+            D[v0:v1, u0:u1] = occlusion.nearer(D[v0:v1, u0:u1], Dl)
         return D
 
-    def occlude(self, L):
+    def occlude(self, L, box):
         """Hide inserted pixels behind the frame; -> (keypoint alpha, keypoint depth)."""
-        ka, kd, hidden = occlusion.occlude(L, self.depth(), self.ins["occlusion_margin_m"])
+        ka, kd, hidden = occlusion.occlude(L, self.depth(box), self.ins["occlusion_margin_m"])
         self.hidden_px = int(hidden.sum())
         return ka, kd
 
@@ -73,14 +80,14 @@ class FrameSample:
         gain, sigma, noise = np.ones(3), 0.0, 0.0
         if lk["match"]:
             gain, road_rgb = look.road_gain(img, self.road_mask(feet_world))
-            est = look.estimate_blur(img)
+            est = self.frame.stat("blur", look.estimate_blur)
             own = None
             if lk["blur_sigma_px"] == "auto":
                 own = look.render_blur(L, box)
                 sigma = 0.0 if est is None else math.sqrt(max(est ** 2 - (own or 0.0) ** 2, 0.0))
             else:
                 sigma = float(lk["blur_sigma_px"])
-            noise = look.estimate_noise(img) if lk["noise_sigma"] == "auto" else float(lk["noise_sigma"])
+            noise = self.frame.stat("noise", look.estimate_noise) if lk["noise_sigma"] == "auto" else float(lk["noise_sigma"])
             rec.update(road_rgb=road_rgb, frame_blur_px=None if est is None else round(est, 4),
                        render_blur_px=None if own is None else round(own, 4))
         rec.update(gain=[round(float(x), 4) for x in gain], blur_sigma_px=round(float(sigma), 4),

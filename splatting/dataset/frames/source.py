@@ -32,6 +32,16 @@ def locate(folder):
     raise UserError(f"config field 'frames': no such folder {folder!r}")
 
 
+def development_frames():
+    """The shared development frames (the repository's sibling shared/realism/kitti_dev, or a
+    worktree's grand-parent's), or None."""
+    for c in (os.path.join(str(paths.ROOT), "..", "shared", "realism", "kitti_dev"),
+              os.path.join(str(paths.ROOT), "..", "..", "shared", "realism", "kitti_dev")):
+        if os.path.isdir(os.path.join(c, "image_2")):
+            return os.path.abspath(c)
+    return None
+
+
 def open_folder(folder):
     """{id: record} of kitti_frame.check_folder, once per process and folder."""
     folder = os.path.abspath(folder)
@@ -85,7 +95,16 @@ class Frame:
         if plane is None:
             plane, self.plane_source = (0.0, -1.0, 0.0, float(cfg["insert"]["camera_height_m"])), "camera_height"
         self.road = Road(plane, self.calib["P2"], self.width, self.height)
-        self._image = None
+        self._image, self._stats = None, {}
+        if self.scan is not None:  # once per frame: the scan in rect and its points above the road
+            self.scan_rect = lidar.velo_to_rect(self.scan[:, :3], self.T_velo_to_rect)
+            self.scan_height = lidar.plane_height(self.scan_rect, self.road.plane)
+
+    def stat(self, name, fn):
+        """fn(image), once per frame (the blur and noise estimates)."""
+        if name not in self._stats:
+            self._stats[name] = fn(self.image())
+        return self._stats[name]
 
     def image(self):
         if self._image is None:
