@@ -11,6 +11,10 @@ Keys:
   largest |height above the plane| of the KITTI box's bottom centre (the lowest posed Gaussian:
   independent of the rim maths), and the number of inserted 3D box footprints overlapping a
   labelled box's footprint (goal 0).
+- `frames_look`: the image gradient energy (mean squared luminance gradient over the box's luminance
+  variance: sharpness free of contrast) and noise sigma (Immerkaer, grey levels) inside the inserted,
+  unoccluded, untruncated cyclists' 2D boxes against the frames' own unoccluded pedestrians and
+  cyclists, medians (and their box heights).
 - `frames_label_stats`: the inserted Cyclist rows against SOURCES.md's KITTI figures: 2D box
   height median and 5th-95th percentiles (px), distance z median and 5th-95th (m), occluded and
   truncated shares.
@@ -105,6 +109,47 @@ def geometry(out, frames):
     return geo, stats
 
 
+def _box_look(img, r):
+    """(normalised gradient energy, noise sigma in grey levels) of a uint8 image inside a label's 2D box."""
+    from splatting.dataset.frames.look import LUMA, estimate_noise
+    x1, y1, x2, y2 = int(r["x1"]), int(r["y1"]), int(r["x2"]) + 1, int(r["y2"]) + 1
+    crop = img[y1:y2, x1:x2]
+    g = crop.astype(np.float64) @ LUMA
+    gx, gy = np.diff(g, axis=1)[:-1], np.diff(g, axis=0)[:, :-1]
+    energy = float(((gx ** 2 + gy ** 2).mean()) / max(g.var(), 1e-9))  # contrast-free: sharpness, not brightness
+    return energy, estimate_noise(crop) * 255.0
+
+
+def look_stats(out, frames, min_px=30):
+    """Gradient energy and noise inside the inserted cyclists' boxes against the frames' own unoccluded
+    pedestrians and cyclists (boxes at least min_px tall), medians."""
+    from cyclist_formats.kitti_frame import check_folder, parse_labels
+    from splatting.dataset.frames.source import read_image
+    with open(os.path.join(out, "annotations.json")) as f:
+        doc = json.load(f)
+    src = check_folder(frames)
+    ins, real, hins, hreal = [], [], [], []
+    for im in doc["images"]:
+        i = im["id"] - 1
+        img = read_image(os.path.join(out, "images", im["file_name"]))
+        rows = [r for r, _ in parse_labels(os.path.join(out, "kitti", "training", "label_2", f"{i:06d}.txt"))]
+        for r in rows[len(im["frame"]["occlusion_raised"]):]:
+            if r["type"] == "Cyclist" and r["occluded"] == 0 and r["truncated"] < 0.05 and r["y2"] - r["y1"] >= min_px:
+                ins.append(_box_look(img, r))
+                hins.append(r["y2"] - r["y1"])
+    for fid, fr in src.items():
+        img = read_image(fr["image"])
+        for r, _ in fr["labels"]:
+            if r["type"] in ("Pedestrian", "Cyclist") and r["occluded"] == 0 and r["y2"] - r["y1"] >= min_px:
+                real.append(_box_look(img, r))
+                hreal.append(r["y2"] - r["y1"])
+    med = lambda v, k: round(float(np.median([x[k] for x in v])), 4) if v else None  # noqa: E731
+    return {"inserted": {"n": len(ins), "height_px_median": round(float(np.median(hins)), 1) if hins else None,
+                         "grad_energy_median": med(ins, 0), "noise_grey_median": med(ins, 1)},
+            "real_people": {"n": len(real), "height_px_median": round(float(np.median(hreal)), 1) if hreal else None,
+                            "grad_energy_median": med(real, 0), "noise_grey_median": med(real, 1)}}
+
+
 def measure(cfg, scratch, tag):
     from splatting.dataset.command import generate
     from splatting.dataset.config import validate
@@ -135,6 +180,7 @@ def run(results, out_dir=None, frames=None, count=10, keep=None, demo=None):
         geo["load"] = f"{os.getloadavg()[0]:.1f} (1-min load average at the end, {os.cpu_count()} cores)"
         results["frames_geometry"] = geo
         results["frames_label_stats"] = stats
+        results["frames_look"] = look_stats(out, frames)
         if keep:
             shutil.copytree(out, keep, dirs_exist_ok=True)
     finally:

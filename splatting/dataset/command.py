@@ -150,6 +150,8 @@ def run(args):
                                                  "image_size": args.image_size, "bikes_root": args.bikes_root,
                                                  "frames": args.frames},
                       nested)
+    if args.frames is not None and cfg["mode"] != "frames":
+        raise UserError(f"--frames goes with mode: frames (e.g. --preset kitti-insert); this config's mode is {cfg['mode']}")
     checks.image_size("config field 'image_size'", cfg["image_size"])
     checks.count("config field 'count'", cfg["count"])
     out = args.out or os.path.join("out", "datasets", cfg["name"])
