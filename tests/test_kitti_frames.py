@@ -378,3 +378,31 @@ def test_command_refuses_bad_frames_in_one_line(bikes, tmp_path):
     os.replace(os.path.join(root, "velodyne_bad.bin"), os.path.join(root, "velodyne", "000000.bin"))
     rc, err, made = run()
     assert rc != 0 and len(err) == 1 and "20 bytes is not a whole number of points" in err[0] and not made
+
+
+def test_behind_a_labelled_car_only_when_labelled_occluded(bikes, tmp_path):
+    """Spots in a labelled car's LiDAR shadow are allowed (insert.behind_cars_share) and then the
+    inserted cyclist's row says occluded; the road in the shadow has no scan points."""
+    from splatting.dataset.generate import Assets, make_sample
+    car = ks.box_row("Car", 1.5, 1.8, 4.2, 0.0, 1.65, 10.0, 0.0)  # crossing: x -2.1..2.1, z 9.1..10.9
+    root = ks.write_frames(str(tmp_path / "f"), {"000000": [car]}, with_velodyne=True)
+    scan = ks.scan([(1.5, 1.8, 4.2, 0.0, 1.65, 10.0, 0.0)])
+    T = np.eye(4)
+    T[:3] = ks.TR_VELO
+    rect = (T @ np.column_stack([scan[:, :3], np.ones(len(scan))]).T).T[:, :3]
+    road = np.abs(rect[:, 1] - ks.CAM_H) < 0.01
+    shadow = road & (rect[:, 2] > 9.1) & (np.abs(rect[:, 0]) / (rect[:, 2] + 0.27) < 2.1 / 9.37)
+    scan[~shadow].tofile(os.path.join(root, "velodyne", "000000.bin"))
+    cfg = resolved(frames_config(bikes, root, count=4, labels={"formats": ["coco", "kitti"]},
+                                 street={"cyclists": [2, 2], "parked_bikes": [0, 0], "distance_m": [5, 30]},
+                                 insert={"behind_cars_share": 1.0}))
+    assets = Assets(cfg)
+    in_shadow = 0
+    for i in range(4):
+        _, image, _, extras = make_sample(cfg, i, assets)
+        for rec, row in zip(image["instances"], extras["kitti"]):
+            x, z = -rec["pose"][5], rec["pose"][7]  # world X is rect -x on this level road
+            if z > 10.9 and abs(x) / (z + 0.27) < 2.1 / 9.37:
+                in_shadow += 1
+                assert row["occluded"] >= 1, (rec["pose"], row)
+    assert in_shadow >= 3

@@ -32,6 +32,7 @@ INSERT_DEFAULTS = {
     "min_ground_points": 3,       # LiDAR road points around a footprint for it to count as seen road
     "camera_height_m": 1.65,      # the level road below camera 0 when a frame has neither planes nor LiDAR
     "occlusion_margin_m": 0.3,    # the frame hides an inserted pixel only when nearer by more than this
+    "behind_cars_share": 0.0,     # share of instances sought just beyond a labelled car (partly hidden by it)
     "box_occluders": True,        # the labelled 3D boxes, drawn solid, hide what is behind them
     "look": {"match": True, "blur_sigma_px": "auto", "noise_sigma": "auto", "sun_elevation_deg": 45.0,
              "sun_azimuth_deg": 120.0, "cast_shadow": True},
@@ -266,7 +267,8 @@ def _validate_insert(cfg):
     for f in ("lidar", "box_occluders"):
         if not isinstance(ins[f], bool):
             raise _err(f"insert.{f}", f"expected true or false, got {ins[f]!r}")
-    for f, lo, hi in (("box_margin_m", 0, 10), ("camera_height_m", 0.2, 10), ("occlusion_margin_m", 0, 5)):
+    for f, lo, hi in (("box_margin_m", 0, 10), ("camera_height_m", 0.2, 10), ("occlusion_margin_m", 0, 5),
+                      ("behind_cars_share", 0, 1)):
         if not (_num(ins[f]) and lo <= ins[f] <= hi):
             raise _err(f"insert.{f}", f"expected a number within [{lo}, {hi}], got {ins[f]!r}")
     if not (isinstance(ins["min_ground_points"], int) and not isinstance(ins["min_ground_points"], bool)

@@ -114,6 +114,29 @@ def rectangle(x, z, theta_y_deg, length, width):
                      c - f * length / 2 - s * width / 2, c - f * length / 2 + s * width / 2])
 
 
+def segment_hits_box(a, b, box, grow=0.0):
+    """True when the rect segment a -> b passes through a labelled box (type, h, w, l, loc, ry) grown
+    by `grow` metres (slab test in the box's frame)."""
+    _, h, w, l, loc, ry = box
+    co, si = math.cos(ry), math.sin(ry)
+    Ry = np.array([[co, 0, si], [0, 1, 0], [-si, 0, co]])
+    c = np.asarray(loc, float) + [0.0, -h / 2, 0.0]
+    o = Ry.T @ (np.asarray(a, float) - c)
+    d = Ry.T @ (np.asarray(b, float) - np.asarray(a, float))
+    half = np.array([l / 2, h / 2, w / 2]) + grow
+    t0, t1 = 0.0, 1.0
+    for k in range(3):
+        if abs(d[k]) < 1e-12:
+            if abs(o[k]) > half[k]:
+                return False
+            continue
+        ta, tb = sorted(((-half[k] - o[k]) / d[k], (half[k] - o[k]) / d[k]))
+        t0, t1 = max(t0, ta), min(t1, tb)
+        if t0 > t1:
+            return False
+    return True
+
+
 def convex_overlap(a, b):
     """True when two convex polygons (n, 2) overlap (separating axis test; touching = apart)."""
     for poly in (a, b):
