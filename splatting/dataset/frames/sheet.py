@@ -1,5 +1,5 @@
 """A contact sheet of an augmented KITTI set: per sample, the image with the inserted cyclists' visible
-masks tinted and their 2D boxes (green; the frame's own labelled boxes thin grey, orange where the
+masks outlined and their 2D boxes (green; the frame's own labelled boxes thin grey, orange where the
 insertion raised their `occluded`), and the LiDAR bird's-eye view (when the set has velodyne/): the
 scan's real points grey, the inserted ones red, the inserted 3D boxes' footprints green.
 
@@ -59,7 +59,12 @@ def sheet(dataset, out_png, samples=None):
         for a in doc["annotations"]:
             if a["image_id"] == im["id"] and a["category_id"] == cyc:
                 m = mu.decode(a["segmentation"]).astype(bool)
-                rgb[m] = (0.65 * rgb[m] + 0.35 * np.array(GREEN)).astype(np.uint8)
+                inner = m.copy()  # the mask's outline (a 1-px erosion removed), so the cyclist itself shows
+                inner[1:] &= m[:-1]
+                inner[:-1] &= m[1:]
+                inner[:, 1:] &= m[:, :-1]
+                inner[:, :-1] &= m[:, 1:]
+                rgb[m & ~inner] = GREEN
         tile = Image.fromarray(rgb)
         d = ImageDraw.Draw(tile)
         rows = [r for r, _ in parse_labels(os.path.join(kt, "label_2", f"{i:06d}.txt"))]
