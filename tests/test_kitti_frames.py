@@ -305,7 +305,7 @@ def test_never_placed_in_an_unlabelled_walls_lidar_shadow(bikes, tmp_path):
     assert sum(12.5 < z < end - 0.5 for z in zs[False]) >= 5
 
 
-def test_dataset_command_kitti_layout_and_resume_byte_identical(bikes, tmp_path):
+def test_dataset_command_kitti_layout_resume_and_shards_byte_identical(bikes, tmp_path):
     from cyclist_formats.kitti_frame import parse_labels, read_velodyne
     from splatting.dataset.command import generate
     from splatting.dataset.config import validate
@@ -328,6 +328,15 @@ def test_dataset_command_kitti_layout_and_resume_byte_identical(bikes, tmp_path)
                 f"{kt}/velodyne/000001.bin", f"{kt}/image_2/000001.png", "kitti/ImageSets/train.txt"):
         with open(os.path.join(a, rel), "rb") as fa, open(os.path.join(b, rel), "rb") as fb:
             assert fa.read() == fb.read(), rel
+    # shards (a Slurm array's tasks) then a merge: the same bytes
+    from splatting.dataset.merge import merge_dataset
+    c = str(tmp_path / "c")
+    for k in (0, 1):
+        generate(cfg, c, log=lambda m: None, progress=False, shard=(k, 2))
+    merge_dataset(c)
+    for rel in ("annotations.json", "images/000002.png", f"{kt}/velodyne/000001.bin", f"{kt}/label_2/000000.txt"):
+        with open(os.path.join(a, rel), "rb") as fa, open(os.path.join(c, rel), "rb") as fc:
+            assert fa.read() == fc.read(), rel
     # KITTI layout: calib and planes copied byte for byte, the frame's rows first, then the inserted ones
     for i, fid in ((0, "000000"), (1, "000001"), (2, "000000")):
         for sub in ("calib", "planes"):
