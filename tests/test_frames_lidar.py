@@ -305,6 +305,26 @@ def test_insert_range_noise_is_seeded():
     assert 0.008 < np.median(res) < 0.02  # 1.5 cm normal noise: median |noise| ~ 1 cm
 
 
+def test_lasers_fire_at_their_own_azimuth_phases():
+    s = cast_scan([])
+    g = box_gaussians(*CYC)
+    step = hdl64.HDL64E.azimuth_step_deg
+
+    def phases(**kw):
+        new, counts, _ = insert_into_scan(s, T, [g], range_noise_m=0.0, rng=1, **kw)
+        a = new[len(new) - counts[0]:]
+        laser = hdl64.HDL64E.beam_index(np.arctan2(a[:, 2], np.hypot(a[:, 0], a[:, 1])))
+        ph = np.degrees(np.arctan2(a[:, 1], a[:, 0])) % step
+        return {int(L_): ph[laser == L_] for L_ in np.unique(laser)}
+
+    one = phases(phase_deg=0.0)
+    assert len(one) > 10 and all(np.minimum(p, step - p).max() < 1e-3 for p in one.values())
+    own = phases()
+    wrap = lambda d: (d + step / 2) % step - step / 2  # noqa: E731
+    assert len(own) > 10 and all(np.abs(wrap(p - p[0])).max() < 1e-3 for p in own.values())  # one per laser
+    assert np.std([p[0] for p in own.values()]) > step / 6  # ... and they differ
+
+
 def test_wall_in_front_hides_the_cyclist():
     wall = ((-2.0, ROAD_Y - 2.5, 7.0), (2.0, ROAD_Y, 7.2))
     s = cast_scan([wall])
@@ -355,3 +375,85 @@ def test_bad_input_is_one_clear_error():
         lidar.plane_height(np.zeros((1, 3)), (0, -1, 0))
     with pytest.raises(ValueError, match="footprint"):
         lidar.ground_support(np.zeros((5, 4)), T, (0, -1, 0, 1.65), [[0, 1], [1, 1]])
+
+
+@pytest.fixture(scope="module")
+def stand_in():
+    """A composed cyclist: stand-in bike and mesh rider, as the dataset tests use."""
+    import tempfile
+
+    from helpers import RIDER, write_test_bike
+    from splatting.cyclist.assets import load_avatar, load_bike
+    from splatting.cyclist.compose import Cyclist
+
+    with tempfile.TemporaryDirectory() as root:
+        return Cyclist(load_bike(write_test_bike(root), n_per_part=1500),
+                       load_avatar(RIDER, root + "/none", n=4000)[0], ik_iterations=20)
+
+
+def gaussian_gap(points_rect, g):
+    """Distance of each point to the nearest Gaussian's 2-sigma ball (0 inside one)."""
+    m, sig = g.means.double().numpy(), g.scales.double().numpy().max(1)
+    return np.min(np.linalg.norm(points_rect[:, None] - m[None], axis=-1) - 2 * sig[None], axis=1)
+
+
+def test_stand_in_cyclist_on_a_tilted_road(stand_in):
+    """The cyclist stood on a 3 deg slope with canonical_to_rect: tyres on the road, heading as
+    KITTI's rotation_y, its scan points on its Gaussians and inside its 3D box."""
+    from splatting.bike.pose import transform_gaussians
+
+    cyc = stand_in
+    fr = cyc.pose(torch.tensor([30.0, 0, 0, 0, 0, 0, 0, 0], dtype=torch.float64))[0]
+    plane, ry = tilted_plane(3.0, 1.65), 0.4
+    H = lidar.canonical_to_rect(plane, 1.0, 11.0, ry)
+    kp = {k: H[:3, :3] @ np.asarray(v, float) + H[:3, 3] for k, v in fr.bike_keypoints.items()}
+    r_wheel = 0.693 / 2
+    for axle in ("front_axle", "rear_axle"):  # both tyres touch the slope
+        assert abs(lidar.plane_height(kp[axle][None], plane)[0] - r_wheel) < 0.01
+    fwd = kp["front_axle"] - kp["rear_axle"]
+    fwd_level = np.array([fwd[0], fwd[2]]) / np.hypot(fwd[0], fwd[2])
+    assert np.allclose(fwd_level, [math.cos(ry), -math.sin(ry)], atol=1e-6)
+    g = transform_gaussians(fr.gaussians, torch.as_tensor(H))
+    s = cast_scan(plane=plane)
+    new, counts, removed = insert_into_scan(s, T, [g], range_noise_m=0.0, rng=0)
+    added = lidar.velo_to_rect(new[len(new) - counts[0]:, :3], T)
+    assert counts[0] > 80 and removed.sum() > 30
+    # every hit within 3 cm of some Gaussian's 2-sigma ball
+    gap = gaussian_gap(added, g)
+    assert gap.max() < 0.03, gap.max()
+    m = g.means.double().numpy()
+    # and inside the cyclist's 3D box (KITTI convention, from its Gaussians' extent + 5 cm)
+    c, sn = math.cos(ry), math.sin(ry)
+    Ry = np.array([[c, 0, sn], [0, 1, 0], [-sn, 0, c]])  # KITTI's: object axes -> rect, about y only
+    local = m @ Ry
+    lo, hi = local.min(0) - 0.05, local.max(0) + 0.05
+    loc = Ry @ np.array([(lo[0] + hi[0]) / 2, hi[1], (lo[2] + hi[2]) / 2])
+    box = (hi[1] - lo[1], hi[2] - lo[2], hi[0] - lo[0], loc[0], loc[1], loc[2], ry)
+    assert 1.5 < box[2] < 2.2 and box[1] < 1.0  # the length runs along the heading
+    inside = lidar.in_box(added, box)
+    assert inside.mean() > 0.95
+    assert lidar.points_in_box(new, T, box) >= inside.sum()
+
+
+@pytest.mark.skipif(not os.path.isdir(os.path.join(DEV, "velodyne")), reason="no development frames")
+def test_insert_into_a_dev_scan(stand_in):
+    """A real scan and calibration: the cyclist on the fitted road 9 m ahead gets points on its
+    Gaussians, shadows only real points behind it, and leaves the rest bit for bit."""
+    from bench.lidar import read_frame
+    from splatting.bike.pose import transform_gaussians
+
+    f = read_frame(DEV, 1)
+    plane = lidar.fit_ground_plane(f["scan"], f["T"], 0)
+    fr = stand_in.pose(torch.tensor([30.0, 0, 0, 0, 0, 0, 0, 0], dtype=torch.float64))[0]
+    g = transform_gaussians(fr.gaussians, torch.as_tensor(lidar.canonical_to_rect(plane, 1.8, 9.0, -math.pi / 2)))
+    new, counts, removed = insert_into_scan(f["scan"], f["T"], [g], rng=0)
+    assert counts[0] > 80 and removed.sum() > 20
+    added = new[len(new) - counts[0]:]
+    assert gaussian_gap(lidar.velo_to_rect(added[:, :3], f["T"]), g).max() < 0.05  # 1.5 cm noise on
+    assert np.array_equal(new[:len(new) - counts[0]], f["scan"][~removed])
+    # the shadowed points lie behind the cyclist, in its direction
+    rr = np.linalg.norm(f["scan"][removed, :3], axis=1)
+    assert rr.min() > np.linalg.norm(added[:, :3], axis=1).min()
+    az = np.degrees(np.arctan2(f["scan"][removed, 1], f["scan"][removed, 0]))
+    az_c = np.degrees(np.arctan2(added[:, 1], added[:, 0]))
+    assert az.min() > az_c.min() - 1 and az.max() < az_c.max() + 1

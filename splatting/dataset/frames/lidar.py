@@ -1,6 +1,6 @@
 """LiDAR geometry of a KITTI frame: the road plane from the scan, ground support and obstacles under a
 footprint, whether the sensor sees a spot or a nearer object shadows it, a dense depth image for
-occlusion tests, and the points inside a labelled 3D box.  Pure numpy (torch only for pooling).
+occlusion tests, and the points inside a labelled 3D box.  Pure numpy.
 
 Frames (docs/kitti_lidar.md):
   velo: the Velodyne's own frame, x forward, y left, z up, origin at the sensor;
@@ -13,7 +13,6 @@ height above the road and a x + b y + c z + d is a point's height above it (e.g.
 import math
 
 import numpy as np
-import torch
 
 from splatting.dataset.frames import hdl64
 
@@ -258,8 +257,8 @@ def sparse_depth(rows, cols, depth, width, height):
 
 def _nearest_along(D, axis, max_gap):
     """For every pixel: depth and distance (pixels) of the nearest valid pixel before and after it
-    along axis (itself counts), within max_gap; 0 / inf where none."""
-    H, W = D.shape
+    along axis (itself counts), within max_gap (a number, or an array broadcasting against D:
+    one reach per row); 0 / inf where none."""
     n = D.shape[axis]
     idx = np.arange(n).reshape((-1, 1) if axis == 0 else (1, -1))
     valid = D > 0
@@ -311,17 +310,15 @@ def densify_depth(D, fy, cy, beams=None, max_col_gap_px=3, rel_tol=0.1, min_row_
     """Densify a sparse depth image (0 = none): first along each row (the azimuth step leaves
     gaps of about 2 px at KITTI's focal length), then along each column with a bound that grows
     with the beam model's row spacing at that row (row_gap_px: ~4 px for the upper block,
-    ~6 px for the lower).  Each pass interpolates between two samples of one surface and takes
-    the nearer sample across a depth edge (_fill_axis).  Outside the beams' rows (above the
+    ~6 px for the lower).  Each pass interpolates between two samples of one surface and, across
+    a depth edge, takes the sample nearer in pixels (_fill_axis): the edge stays halfway between
+    the samples instead of the foreground growing by the whole reach as under a min filter
+    (bench/lidar.py measures both).  Outside the beams' rows (above the
     top beam, below the image's last beam row) nothing is invented: 0 stays unknown."""
     H, W = D.shape
     D1 = _fill_axis(D.astype(np.float64), 1, int(max_col_gap_px), rel_tol)
-    gaps = np.maximum(row_gap_px(H, fy, cy, beams), min_row_gap_px)
-    out = np.zeros_like(D1)
-    for g in np.unique(np.ceil(gaps).astype(int)):  # one pass per gap size, used at its rows
-        rows = np.ceil(gaps).astype(int) == g
-        out[rows] = _fill_axis(D1.astype(np.float64), 0, int(g), rel_tol)[rows]
-    return out
+    gaps = np.ceil(np.maximum(row_gap_px(H, fy, cy, beams), min_row_gap_px))
+    return _fill_axis(D1.astype(np.float64), 0, gaps[:, None], rel_tol)  # each row its own reach
 
 
 def lidar_depth_image(points_velo, T_velo_to_rect, P2, width, height, beams=None, **kw):
@@ -353,3 +350,22 @@ def in_box(points_rect, box):
 def points_in_box(points_velo, T_velo_to_rect, box):
     """Number of scan points inside a KITTI 3D box (label convention, see in_box)."""
     return int(in_box(velo_to_rect(points_velo, T_velo_to_rect), box).sum())
+
+
+def canonical_to_rect(plane, x, z, ry):
+    """(4, 4) rigid transform from a cyclist's canonical frame (X forward, Y up, ground Y = 0,
+    docs/contract.md) to rect: standing on the plane at rect (x, z), heading rotation_y = ry in
+    KITTI's convention (ry = 0 faces rect +x; forward = (cos ry, 0, -sin ry)), its up the plane's
+    normal (a tilted road tilts the cyclist with it: both tyres stay on it)."""
+    p = normalise_plane(plane)
+    up = p[:3]
+    # forward in the plane, straight above / below KITTI's level heading (cos ry, 0, -sin ry): the
+    # label's rotation_y stays exact on a slope
+    c, s = math.cos(ry), -math.sin(ry)
+    f = np.array([c, -(up[0] * c + up[2] * s) / up[1], s])
+    f /= np.linalg.norm(f)
+    right = np.cross(f, up)
+    y = -(p[0] * x + p[2] * z + p[3]) / p[1]
+    H = np.eye(4)
+    H[:3, 0], H[:3, 1], H[:3, 2], H[:3, 3] = f, up, right, (x, y, z)
+    return H

@@ -4,10 +4,16 @@
 Per cyclist (in the given order, each seeing the scan as the ones before left it):
 1. Its angular box from the sensor: every Gaussian's direction +- its 3-sigma angular radius.
 2. The rays: the beam model's lasers whose elevation falls in the box, at every azimuth firing
-   (multiples of the azimuth step from `phase`) in it.
-3. A pinhole camera at the sensor origin aimed at the box's centre, pixel pitch `pitch_deg`
-   (finer than the beams: 0.03 deg, 5 mm at 10 m), renders the cyclist with the project's
-   rasterizer: alpha and the first surface's depth (camera z) per pixel (surface_depth).
+   in it: multiples of the azimuth step from each laser's own phase.  The phases are drawn
+   uniformly in [0, step) per call (or all phase_deg): in KITTI's scans neighbouring lasers'
+   firings are not aligned in azimuth (each laser has its own rotational correction), and a
+   cyclist sampled on one grid for all lasers would show columns no real object shows.
+3. A pinhole camera at the sensor origin aimed at the box's centre renders the cyclist with the
+   project's rasterizer: alpha and the first surface's depth (camera z) per pixel
+   (surface_depth).  Its pixels are `pitch_m` (5 mm) wide at the cyclist's nearest Gaussian,
+   about the 36-view ring's pixel at 12 m (5.8 mm), so each model's screen-space low-pass
+   (eps2d, px^2) blurs it as in training, and the image is ~400 px whatever the distance; never
+   coarser than max_pitch_deg (0.05 deg), a quarter of the beams' spacing.
 4. Each ray reads its nearest pixel: alpha > 0.5 is a hit at range z / cos(angle to the axis),
    plus Gaussian range noise (range_noise_m, seeded).  The ray's cell (laser, azimuth firing) in
    the current scan: a point there nearer than the hit hides the cyclist on that ray (a wall or a
@@ -33,7 +39,7 @@ from splatting.raster.sparse import EPS2D, rasterize
 
 HIT_ALPHA = 0.5
 REFLECTANCE = (0.14, 0.53)
-MAX_IMAGE_PX = 4096  # a cyclist nearer than ~1.5 m would need more: the pitch coarsens instead
+MAX_IMAGE_PX = 4096  # a cyclist spanning a wide angle (very near): the pitch coarsens instead
 
 
 def _per_cyclist(value, n, who):
@@ -67,13 +73,14 @@ def _angular_box(g, T_rv):
     daz = (az - c + math.pi) % (2 * math.pi) - math.pi
     # the horizontal angular radius grows as 1 / cos(elevation)
     aaz = ang / np.maximum(np.cos(el), 1e-3)
-    return c, float(np.max(np.abs(daz) + aaz)), float(np.min(el - ang)), float(np.max(el + ang))
+    return c, float(np.max(np.abs(daz) + aaz)), float(np.min(el - ang)), float(np.max(el + ang)), float(r.min())
 
 
-def _cells(points, beams, phase):
-    """(laser, azimuth firing, range) of velo points."""
+def _cells(points, beams, phases):
+    """(laser, azimuth firing, range) of velo points; phases (lasers,) rad."""
     az, el, rg = _az_el_range(points)
-    return beams.beam_index(el), beams.azimuth_bin(az, phase), rg
+    L = beams.beam_index(el)
+    return L, beams.azimuth_bin(az, phases[L]), rg
 
 
 @torch.no_grad()
@@ -159,10 +166,12 @@ def _sample(R, K, alpha, depth, dirs_rect):
 
 
 def insert_into_scan(scan, T_velo_to_rect, cyclists, eps2d=EPS2D, antialiased=False, rng=0, beams=None,
-                     pitch_deg=0.03, range_noise_m=0.015, reflectance=REFLECTANCE, phase_deg=0.0):
+                     pitch_m=0.005, max_pitch_deg=0.05, range_noise_m=0.015, reflectance=REFLECTANCE,
+                     phase_deg=None):
     """scan (N, 4) float32 velo (x, y, z, reflectance); cyclists: list of Gaussians posed in the
     rect frame; eps2d / antialiased: rasterize's, one for all or one per cyclist; rng: a numpy
-    Generator or seed (range noise and reflectance).  -> (new_scan (M, 4) float32: the kept real
+    Generator or seed (the lasers' azimuth phases, range noise and reflectance); phase_deg: one
+    azimuth phase for every laser instead of drawn ones.  -> (new_scan (M, 4) float32: the kept real
     points in their order, then the added points cyclist by cyclist; counts [points on each
     cyclist in new_scan]; removed (N,) bool: the real points the cyclists shadow)."""
     scan = np.asarray(scan)
@@ -175,8 +184,13 @@ def insert_into_scan(scan, T_velo_to_rect, cyclists, eps2d=EPS2D, antialiased=Fa
     n = len(cyclists)
     eps = _per_cyclist(eps2d, n, "eps2d")
     aas = _per_cyclist(antialiased, n, "antialiased")
-    phase = math.radians(phase_deg)
+    step = math.radians(beams.azimuth_step_deg)
     lasers = beams.elevations_rad()
+    # drawn first: the same rng gives the same phases, noise and reflectances
+    if phase_deg is None:
+        phases = rng.uniform(0.0, step, len(lasers))
+    else:
+        phases = np.full(len(lasers), math.radians(phase_deg))
     Rv = T[:3, :3]
 
     pts = scan[:, :3].astype(np.float64)          # current points: real, then added
@@ -186,7 +200,8 @@ def insert_into_scan(scan, T_velo_to_rect, cyclists, eps2d=EPS2D, antialiased=Fa
     for j, g in enumerate(cyclists):
         if len(g) == 0:
             continue
-        az_c, az_half, el_lo, el_hi = _angular_box(g, T_rv)
+        az_c, az_half, el_lo, el_hi, r_min = _angular_box(g, T_rv)
+        pitch_deg = min(math.degrees(pitch_m / r_min), max_pitch_deg)
         R, t, K, alpha, depth = render_from_sensor(g, T, az_c, az_half, el_lo, el_hi, pitch_deg, eps[j], aas[j])
 
         # 5. shadowed points (before this cyclist's own points exist)
@@ -198,20 +213,19 @@ def insert_into_scan(scan, T_velo_to_rect, cyclists, eps2d=EPS2D, antialiased=Fa
         shadow = (a > HIT_ALPHA) & (rg > r_c)
         # 4. occluders of the rays: the nearest remaining point per (laser, firing) cell
         keep = idx[~shadow]
-        lz, kz, rz = _cells(pts[keep], beams, phase)
+        lz, kz, rz = _cells(pts[keep], beams, phases)
         nearest = np.full(len(lasers) * beams.n_azimuth, np.inf)
         np.minimum.at(nearest, lz * beams.n_azimuth + kz, rz)
         alive[idx[shadow]] = False
 
         # 2. the rays in the angular box
         sel = np.nonzero((lasers >= el_lo) & (lasers <= el_hi))[0]
-        step = math.radians(beams.azimuth_step_deg)
-        k0 = math.floor((az_c - az_half - phase) / step)
-        k1 = math.ceil((az_c + az_half - phase) / step)
+        k0 = math.floor((az_c - az_half) / step) - 1  # - 1, + 1: any phase in [0, step)
+        k1 = math.ceil((az_c + az_half) / step)
         ks = np.arange(k0, k1 + 1)
         Lg, Kg = np.meshgrid(sel, ks, indexing="ij")
         Lg, Kg = Lg.ravel(), Kg.ravel()
-        az = phase + Kg * step
+        az = phases[Lg] + Kg * step
         dv = hdl64.directions(lasers[Lg], az)
         a, r_hit = _sample(R, K, alpha, depth, dv @ Rv.T)
         hit = np.nonzero((a > HIT_ALPHA) & (r_hit > 0))[0]
