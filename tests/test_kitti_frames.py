@@ -415,3 +415,16 @@ def test_behind_a_labelled_car_only_when_labelled_occluded(bikes, tmp_path):
                 in_shadow += 1
                 assert row["occluded"] >= 1, (rec["pose"], row)
     assert in_shadow >= 3
+
+
+def test_a_frame_with_no_room_keeps_its_bytes(bikes, tmp_path):
+    from splatting.dataset.frames.source import read_image
+    from splatting.dataset.generate import Assets, make_sample
+    wall = ks.box_row("Truck", 3.0, 2.0, 40.0, 0.0, 1.65, 8.5, 0.0)  # 40 m across the road at 7.5-9.5 m
+    root = ks.write_frames(str(tmp_path / "f"), {"000000": [wall]})
+    cfg = resolved(frames_config(bikes, root, street={"cyclists": [1, 1], "parked_bikes": [0, 0], "distance_m": [8, 9],
+                                                      "max_tries": 20}, lod={"enabled": True}))
+    rgb, image, anns, extras = make_sample(cfg, 0, Assets(cfg))
+    assert image["instances"] == [] and image["dropped_placements"] == 1 and anns == []
+    assert np.array_equal(rgb, read_image(os.path.join(root, "image_2", "000000.png")))
+    assert extras["frame"]["frame_lines"] == [wall] and extras["kitti"] == []

@@ -421,7 +421,7 @@ def make_sample(cfg, index, assets):
     if keeps:  # the level each instance was rendered at (share of its Gaussians)
         for rec, keep in zip(image["instances"], keeps):
             rec["lod_keep"] = keep
-    else:
+    elif frames:  # (a frame may get no instance: every placement refused)
         inst, frame, _ = frames[0]
         image.update(bike=inst["bike"], rider=inst["rider"], pose=inst["pose"])
         if frame.ik is not None:
