@@ -313,8 +313,10 @@ def make_sample(cfg, index, assets):
     ground_shadows = bool(b["shadow"] and bg_kind in ("images", "scene", "frame") and frames)  # the contact shadow, and relit the sun's
     if ground_shadows:
         feet = [(inst["pose"][5], inst["pose"][7], inst["pose"][3], bx["l"], bx["w"]) for (inst, _, _), bx in zip(frames, boxes)]
-        if fs is not None and relit is None and cfg["insert"]["look"]["cast_shadow"]:  # baked frames: the config's sun
-            sh = contact_shadows(feet, b["shadow_opacity"], sun=fs.sun(), heights=[bx["h"] for bx in boxes])
+        if fs is not None and cfg["insert"]["look"]["cast_shadow"]:  # frames: the sun's shadow in the render, so
+            # the frame's depth hides it too (baked: the config's sun; relit: the sample's)
+            sun = fs.sun() if relit is None else relit.light
+            sh = contact_shadows(feet, b["shadow_opacity"], sun=sun, heights=[bx["h"] for bx in boxes])
         else:
             sh = contact_shadows(feet, b["shadow_opacity"])
         parts.append(sh)
@@ -351,7 +353,7 @@ def make_sample(cfg, index, assets):
         bg = generated(bg_kind, d["background"]["seed"], W, H)
     if fs is None:
         rgb = over_in_box(L, bg, union(L.get("boxes", [])))
-    if relit is not None and ground_shadows:
+    if relit is not None and ground_shadows and fs is None:
         rgb = relit.cast_shadows(rgb, L, cam, feet, [bx["h"] for bx in boxes], b["shadow_opacity"])
 
     K, R, T = cam.K.double().numpy(), cam.R.double().numpy(), cam.T.double().numpy()
