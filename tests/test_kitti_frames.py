@@ -287,7 +287,7 @@ def test_the_image_changes_only_where_the_cyclists_are(bikes, tmp_path, monkeypa
 
 
 def test_never_placed_in_an_unlabelled_walls_lidar_shadow(bikes, tmp_path):
-    from splatting.dataset.generate import Assets, draw
+    from splatting.dataset.generate import draw
     root = ks.write_frames(str(tmp_path / "f"), {"000000": []}, with_velodyne=True)
     scan, end = ks.scan_with_wall(12.0, 1.0)
     scan.tofile(os.path.join(root, "velodyne", "000000.bin"))
