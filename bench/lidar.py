@@ -11,6 +11,11 @@
   trained bike folder and rider avatar; default: the demo's in out/demo when present).
 
     .venv/bin/python bench/lidar.py [--frames ../shared/realism/kitti_dev] [--bike DIR --avatar DIR]
+        [--image docs/img/kitti_lidar_bev.png]
+
+make bench: run(results, out) adds the summary numbers as lidar_* keys (bench/run.py's stage
+contract); skipped without the development frames, insertion timed only when the demo's bike
+and rider exist in out/demo.
 """
 import argparse
 import json
@@ -176,29 +181,14 @@ def insert_timing(frame, cyc, spots, repeats):
     return rows
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--frames", default=DEV, help="a KITTI object folder with calib, velodyne, planes, image_2")
-    ap.add_argument("--bike", help="a trained bike folder for the insertion timing (default: the demo's)")
-    ap.add_argument("--avatar", help="a rider avatar folder (default: the demo's)")
-    ap.add_argument("--repeats", type=int, default=3, help="insertion timings per cyclist (median)")
-    ap.add_argument("--image", help="also draw the bird's-eye view picture (PNG) of frame --image-frame")
-    ap.add_argument("--image-frame", type=int, default=1, help="index into the frames (default 1: 000001's open road)")
-    a = ap.parse_args(argv)
-    if not os.path.isdir(os.path.join(a.frames, "velodyne")):
-        sys.exit(f"bench/lidar.py: {a.frames} has no velodyne/ folder")
-    bike = a.bike or os.path.join(DEMO, "bikes", "city_00")
-    avatar = a.avatar or os.path.join(DEMO, "riders", "m_adult_average_185")
-    have_cyclist = os.path.isfile(os.path.join(bike, "gaussians", "frame.ply")) and \
-        os.path.isfile(os.path.join(avatar, "rider.ply"))
-    if (a.bike or a.avatar or a.image) and not have_cyclist:
-        sys.exit(f"bench/lidar.py: no trained bike in {bike} or rider avatar in {avatar}")
-    if a.repeats < 1:
-        sys.exit("bench/lidar.py: --repeats must be >= 1")
-    names = sorted(f[:-4] for f in os.listdir(os.path.join(a.frames, "velodyne")) if f.endswith(".bin"))
-    frames = [read_frame(a.frames, int(n)) for n in names]
-    if not frames or not 0 <= a.image_frame < len(frames):
-        sys.exit(f"bench/lidar.py: --image-frame {a.image_frame} is not one of the {len(frames)} frames")
+def frame_names(root):
+    return sorted(f[:-4] for f in os.listdir(os.path.join(root, "velodyne")) if f.endswith(".bin"))
+
+
+def measure(root, bike=None, avatar=None, repeats=3, image=None, image_frame=1):
+    """Everything the module docstring lists, as one dict (insertion only with a bike and avatar)."""
+    names = frame_names(root)
+    frames = [read_frame(root, int(n)) for n in names]
     planes = [dict(frame=f["name"], **plane_agreement(f)) for f in frames]
     depth = [dict(frame=f["name"], **held_out_depth_error(f, seed=k)) for k, f in enumerate(frames)]
     el, step, n = hdl64.estimate_beams([f["scan"] for f in frames])
@@ -218,25 +208,71 @@ def main(argv=None):
         "beams_upper_spacing_deg": round(float(-np.diff(el[:32]).mean()), 3),
         "beams_lower_spacing_deg": round(float(-np.diff(el[32:]).mean()), 3),
         "azimuth_step_deg": round(step, 4),
-        "people_reflectance": people_reflectance(a.frames, names),
+        "people_reflectance": people_reflectance(root, names),
         "per_frame": {"plane": planes, "depth": depth},
     }
-    if have_cyclist:
+    if bike and avatar:
         import torch
 
         torch.set_num_threads(2)
         cyc = demo_cyclist(bike, avatar)
-        rows = insert_timing(frames[min(1, len(frames) - 1)], cyc, INSERT_SPOTS, a.repeats)
+        on = frames[min(1, len(frames) - 1)]
+        rows = insert_timing(on, cyc, INSERT_SPOTS, repeats)
         out.update(insert_s_per_cyclist_median=float(np.median([r["seconds"] for r in rows])),
                    insert_points_median=float(np.median([r["points"] for r in rows])), insert=rows,
-                   insert_frame=frames[min(1, len(frames) - 1)]["name"], insert_bike=bike, insert_avatar=avatar)
-        if a.image:
+                   insert_frame=on["name"], insert_bike=bike, insert_avatar=avatar)
+        if image:
             from bench.lidar_bev import draw_bev
 
-            out["image"] = {"path": a.image, "frame": frames[a.image_frame]["name"],
-                            **draw_bev(frames[a.image_frame], cyc, a.image)}
+            out["image"] = {"path": image, "frame": frames[image_frame]["name"],
+                            **draw_bev(frames[image_frame], cyc, image)}
     else:
-        out["insert"] = f"skipped: no trained bike / avatar at {bike}, {avatar}"
+        out["insert"] = "skipped: no trained bike and rider avatar"
+    return out
+
+
+def have_cyclist(bike, avatar):
+    return os.path.isfile(os.path.join(bike, "gaussians", "frame.ply")) and \
+        os.path.isfile(os.path.join(avatar, "rider.ply"))
+
+
+def run(results, out=None, root=DEV):
+    """make bench's stage (bench/run.py): the summary numbers as lidar_* keys; nothing without the
+    development frames; the insertion timing with the demo's bike and rider when built."""
+    if not os.path.isdir(os.path.join(root, "velodyne")):
+        print(f"bench lidar: no development frames at {root}, skipped")
+        return
+    bike, avatar = os.path.join(DEMO, "bikes", "city_00"), os.path.join(DEMO, "riders", "m_adult_average_185")
+    ok = have_cyclist(bike, avatar)
+    m = measure(root, bike if ok else None, avatar if ok else None)
+    results.update({"lidar_" + k: v for k, v in m.items() if isinstance(v, (int, float))})
+    results["lidar_people_reflectance"] = m["people_reflectance"]
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--frames", default=DEV, help="a KITTI object folder with calib, velodyne, planes, image_2")
+    ap.add_argument("--bike", help="a trained bike folder for the insertion timing (default: the demo's)")
+    ap.add_argument("--avatar", help="a rider avatar folder (default: the demo's)")
+    ap.add_argument("--repeats", type=int, default=3, help="insertion timings per cyclist (median)")
+    ap.add_argument("--image", help="also draw the bird's-eye view picture (PNG) of frame --image-frame")
+    ap.add_argument("--image-frame", type=int, default=1, help="index into the frames (default 1: 000001's open road)")
+    a = ap.parse_args(argv)
+    if not os.path.isdir(os.path.join(a.frames, "velodyne")):
+        sys.exit(f"bench/lidar.py: {a.frames} has no velodyne/ folder")
+    bike = a.bike or os.path.join(DEMO, "bikes", "city_00")
+    avatar = a.avatar or os.path.join(DEMO, "riders", "m_adult_average_185")
+    if (a.bike or a.avatar or a.image) and not have_cyclist(bike, avatar):
+        sys.exit(f"bench/lidar.py: no trained bike in {bike} or rider avatar in {avatar}")
+    if a.repeats < 1:
+        sys.exit("bench/lidar.py: --repeats must be >= 1")
+    if a.image and not os.access(os.path.dirname(os.path.abspath(a.image)), os.W_OK):
+        sys.exit(f"bench/lidar.py: cannot write {a.image} (no such folder or not writable)")
+    names = frame_names(a.frames)
+    if not names or not 0 <= a.image_frame < len(names):
+        sys.exit(f"bench/lidar.py: --image-frame {a.image_frame} is not one of the {len(names)} frames")
+    ok = have_cyclist(bike, avatar)
+    out = measure(a.frames, bike if ok else None, avatar if ok else None, a.repeats, a.image, a.image_frame)
     print(json.dumps(out, indent=1))
 
 

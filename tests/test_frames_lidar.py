@@ -457,3 +457,26 @@ def test_insert_into_a_dev_scan(stand_in):
     az = np.degrees(np.arctan2(f["scan"][removed, 1], f["scan"][removed, 0]))
     az_c = np.degrees(np.arctan2(added[:, 1], added[:, 0]))
     assert az.min() > az_c.min() - 1 and az.max() < az_c.max() + 1
+
+
+@pytest.mark.skipif(not os.path.isdir(os.path.join(DEV, "velodyne")), reason="no development frames")
+def test_dev_frame_parked_car_shadow_and_obstacle():
+    """000008: the road behind a labelled parked car (seen from the sensor) is in its shadow, the
+    open road ahead is seen; the car's footprint holds an obstacle, the road's does not."""
+    from bench.lidar import read_frame
+
+    f = read_frame(DEV, 8)
+    plane = lidar.fit_ground_plane(f["scan"], f["T"], 0)
+    o = lidar.sensor_origin_rect(f["T"])
+    car = np.array([-1.17, 1.65 - 1.57 / 2, 7.86])  # the label's box centre (bottom y 1.65, h 1.57)
+
+    def road(x, z):
+        return [x, -(plane[0] * x + plane[2] * z + plane[3]) / plane[1], z]
+
+    behind = [road(*(o + k * (car - o))[[0, 2]]) for k in (1.2, 1.5, 2.0)]
+    vis = lidar.visible_ground(f["scan"], f["T"], plane, behind + [road(0.3, 11.0)])
+    assert vis.tolist() == [False, False, False, True]
+    foot = lambda x, z: [[x - 0.4, z - 0.9], [x + 0.4, z - 0.9], [x + 0.4, z + 0.9], [x - 0.4, z + 0.9]]  # noqa: E731
+    assert lidar.ground_support(f["scan"], f["T"], plane, foot(-1.17, 7.86))["obstacle"] > 50
+    s = lidar.ground_support(f["scan"], f["T"], plane, foot(0.3, 11.0))
+    assert s["obstacle"] == 0 and s["ground"] > 50

@@ -10,7 +10,7 @@ Per cyclist (in the given order, each seeing the scan as the ones before left it
    cyclist sampled on one grid for all lasers would show columns no real object shows.
 3. A pinhole camera at the sensor origin aimed at the box's centre renders the cyclist with the
    project's rasterizer: alpha and the first surface's depth (camera z) per pixel
-   (surface_depth).  Its pixels are `pitch_m` (5 mm) wide at the cyclist's nearest Gaussian,
+   (SurfaceLayers).  Its pixels are `pitch_m` (5 mm) wide at the cyclist's nearest Gaussian,
    about the 36-view ring's pixel at 12 m (5.8 mm), so each model's screen-space low-pass
    (eps2d, px^2) blurs it as in training, and the image is ~400 px whatever the distance; never
    coarser than max_pitch_deg (0.05 deg), a quarter of the beams' spacing.
@@ -85,8 +85,9 @@ def _cells(points, beams, phases):
 
 @torch.no_grad()
 def render_from_sensor(g, T_velo_to_rect, az_c, az_half, el_lo, el_hi, pitch_deg, eps2d, antialiased):
-    """The cyclist seen from the sensor: (R, T, K, alpha (H, W), depth (H, W)) of a pinhole camera
-    (world = rect) at the sensor origin aimed at the angular box's centre, covering the box."""
+    """The cyclist seen from the sensor: (R, T, K, alpha (H, W), depth_at) of a pinhole camera
+    (world = rect) at the sensor origin aimed at the angular box's centre, covering the box;
+    depth_at(rows, cols) -> the first surface's camera z at those pixels (SurfaceLayers.depth_at)."""
     T = T_velo_to_rect
     Rv, o = T[:3, :3], T[:3, 3]
     el_c = 0.5 * (el_lo + el_hi)
@@ -108,48 +109,66 @@ def render_from_sensor(g, T_velo_to_rect, az_c, az_half, el_lo, el_hi, pitch_deg
     K = np.array([[f, 0, 4 - f * xn.min()], [0, f, 4 - f * yn.min()], [0, 0, 1]])
     cam = Camera(torch.tensor(R, dtype=torch.float32), torch.tensor(t, dtype=torch.float32),
                  torch.tensor(K, dtype=torch.float32), W, H, "lidar")
-    alpha, depth = surface_depth(g, cam, eps2d, antialiased)
-    return R, t, K, alpha, depth
+    layers = SurfaceLayers(g, cam, eps2d, antialiased)
+    return R, t, K, layers.alpha, layers.depth_at
 
 
-@torch.no_grad()
-def surface_depth(g, cam, eps2d=EPS2D, antialiased=False, max_bins=24, min_bin_m=0.05):
-    """(alpha (H, W), depth (H, W) camera z) of the first surface along each pixel's ray: where
-    the accumulated alpha crosses HIT_ALPHA, not the expected depth of all Gaussians.  The
+class SurfaceLayers:
+    """The first surface along each pixel's ray: the depth where the accumulated alpha crosses
+    HIT_ALPHA, not the expected depth of all Gaussians.  The
     rasterizer's expected depth leaks past an opaque surface: every Gaussian's alpha is capped at
     0.99 and a pixel between Gaussian centres keeps 1-2 % transmittance, so the far side of a
     cyclist pulls the depth of its near side back by centimetres (3.6 cm median on a 1.6 m box).
     Here each Gaussian's camera depth falls in one of up to max_bins bins (at least min_bin_m
     wide) and the rasterizer composites, per bin, the weights and weighted depths as feature
     channels; a pixel's depth is the weighted mean depth of the bin where the accumulated weight
-    crosses HIT_ALPHA and its two neighbours (a surface split by a bin edge stays whole)."""
-    means = g.means.float()
-    z = (means @ cam.R.float().T + cam.T.float())[:, 2]
-    front = z > 0.01
-    z0 = float(z[front].min()) if bool(front.any()) else 0.0
-    z1 = float(z[front].max()) if bool(front.any()) else 1.0
-    width = max(min_bin_m, (z1 - z0) / max_bins * (1 + 1e-6))
-    B = max(1, min(max_bins, int(math.floor((z1 - z0) / width)) + 1))
-    b = ((z - z0) / width).clamp(0, B - 1).long()
-    onehot = torch.zeros(len(g), B)
-    onehot[torch.arange(len(g)), b] = 1.0
-    sh0 = torch.zeros(len(g), 1, 3)
-    out = rasterize(means, g.quats.float(), g.scales.float(), g.opacities.float(), sh0, cam, sh_degree=0,
-                    eps2d=eps2d, antialiased=antialiased, features=[onehot, onehot * z[:, None]], depth=False)
-    f = out["features"]
-    w, wz = f[..., :B], f[..., B:]
-    cross = (torch.cumsum(w, -1) >= HIT_ALPHA).float()
-    k = cross.argmax(-1)  # the first bin where the accumulated weight crosses (0 where none does)
-    win = (torch.arange(B).view(1, 1, B) - k[..., None]).abs() <= 1
-    sw, swz = (w * win).sum(-1), (wz * win).sum(-1)
-    a = out["alpha"]
-    depth = torch.where((a > HIT_ALPHA) & (sw > 1e-6), swz / sw.clamp_min(1e-6), torch.zeros_like(a))
-    return a.numpy(), depth.numpy()
+    crosses HIT_ALPHA and its two neighbours (a surface split by a bin edge stays whole).
+    alpha (H, W) numpy; depth_at(rows, cols) evaluates only the pixels asked for (rays and scan
+    points: a few thousand of the image's ~10^5); depth() the whole image."""
+
+    @torch.no_grad()
+    def __init__(self, g, cam, eps2d=EPS2D, antialiased=False, max_bins=24, min_bin_m=0.05):
+        self.w, self.wz, self.alpha = self._render(g, cam, eps2d, antialiased, max_bins, min_bin_m)
+
+    @staticmethod
+    def _render(g, cam, eps2d, antialiased, max_bins, min_bin_m):
+        means = g.means.float()
+        z = (means @ cam.R.float().T + cam.T.float())[:, 2]
+        front = z > 0.01
+        z0 = float(z[front].min()) if bool(front.any()) else 0.0
+        z1 = float(z[front].max()) if bool(front.any()) else 1.0
+        width = max(min_bin_m, (z1 - z0) / max_bins * (1 + 1e-6))
+        B = max(1, min(max_bins, int(math.floor((z1 - z0) / width)) + 1))
+        b = ((z - z0) / width).clamp(0, B - 1).long()
+        onehot = torch.zeros(len(g), B)
+        onehot[torch.arange(len(g)), b] = 1.0
+        sh0 = torch.zeros(len(g), 1, 3)
+        out = rasterize(means, g.quats.float(), g.scales.float(), g.opacities.float(), sh0, cam, sh_degree=0,
+                        eps2d=eps2d, antialiased=antialiased, features=[onehot, onehot * z[:, None]], depth=False)
+        f = out["features"]
+        return f[..., :B], f[..., B:], out["alpha"].numpy()
+
+    @staticmethod
+    def _first(w, wz, a):
+        """w, wz (..., B), a (...) -> the first surface's depth (...), 0 where alpha <= HIT_ALPHA."""
+        B = w.shape[-1]
+        cross = (torch.cumsum(w, -1) >= HIT_ALPHA).float()
+        k = cross.argmax(-1)  # the first bin where the accumulated weight crosses (0 where none does)
+        win = (torch.arange(B) - k[..., None]).abs() <= 1
+        sw, swz = (w * win).sum(-1), (wz * win).sum(-1)
+        return torch.where((a > HIT_ALPHA) & (sw > 1e-6), swz / sw.clamp_min(1e-6), torch.zeros_like(a))
+
+    def depth_at(self, rows, cols):
+        r, c = torch.as_tensor(rows, dtype=torch.long), torch.as_tensor(cols, dtype=torch.long)
+        return self._first(self.w[r, c], self.wz[r, c], torch.from_numpy(self.alpha)[r, c]).numpy()
+
+    def depth(self):
+        return self._first(self.w, self.wz, torch.from_numpy(self.alpha)).numpy()
 
 
-def _sample(R, K, alpha, depth, dirs_rect):
+def _sample(R, K, alpha, depth_at, dirs_rect):
     """Nearest-pixel alpha and range (along the ray) for unit rect directions from the camera
-    centre; alpha 0 outside the image or behind."""
+    centre; alpha 0 outside the image or behind; the range only where alpha > HIT_ALPHA."""
     d = dirs_rect @ R.T
     H, W = alpha.shape
     front = d[:, 2] > 1e-6
@@ -161,7 +180,8 @@ def _sample(R, K, alpha, depth, dirs_rect):
     a = np.zeros(len(d), np.float32)
     rng = np.zeros(len(d))
     a[ok] = alpha[r[ok], c[ok]]
-    rng[ok] = depth[r[ok], c[ok]] / z[ok]  # camera z -> range along the unit ray
+    on = np.nonzero(a > HIT_ALPHA)[0]
+    rng[on] = depth_at(r[on], c[on]) / z[on]  # camera z -> range along the unit ray
     return a, rng
 
 
@@ -202,14 +222,14 @@ def insert_into_scan(scan, T_velo_to_rect, cyclists, eps2d=EPS2D, antialiased=Fa
             continue
         az_c, az_half, el_lo, el_hi, r_min = _angular_box(g, T_rv)
         pitch_deg = min(math.degrees(pitch_m / r_min), max_pitch_deg)
-        R, t, K, alpha, depth = render_from_sensor(g, T, az_c, az_half, el_lo, el_hi, pitch_deg, eps[j], aas[j])
+        R, t, K, alpha, depth_at = render_from_sensor(g, T, az_c, az_half, el_lo, el_hi, pitch_deg, eps[j], aas[j])
 
         # 5. shadowed points (before this cyclist's own points exist)
         idx = np.nonzero(alive)[0]
         p = pts[idx]
         rg = np.linalg.norm(p, axis=1)
         dirs = (p / np.maximum(rg, 1e-9)[:, None]) @ Rv.T
-        a, r_c = _sample(R, K, alpha, depth, dirs)
+        a, r_c = _sample(R, K, alpha, depth_at, dirs)
         shadow = (a > HIT_ALPHA) & (rg > r_c)
         # 4. occluders of the rays: the nearest remaining point per (laser, firing) cell
         keep = idx[~shadow]
@@ -227,7 +247,7 @@ def insert_into_scan(scan, T_velo_to_rect, cyclists, eps2d=EPS2D, antialiased=Fa
         Lg, Kg = Lg.ravel(), Kg.ravel()
         az = phases[Lg] + Kg * step
         dv = hdl64.directions(lasers[Lg], az)
-        a, r_hit = _sample(R, K, alpha, depth, dv @ Rv.T)
+        a, r_hit = _sample(R, K, alpha, depth_at, dv @ Rv.T)
         hit = np.nonzero((a > HIT_ALPHA) & (r_hit > 0))[0]
         kb = np.mod(Kg[hit], beams.n_azimuth)
         free = nearest[Lg[hit] * beams.n_azimuth + kb] > r_hit[hit]
