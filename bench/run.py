@@ -36,6 +36,7 @@ STAGES = {
     "rider": ("bench.rider", lambda m, r, out: m.run(r, out)),
     "dataset": ("bench.dataset", lambda m, r, out: m.run(r, out)),
     "street": ("bench.street", lambda m, r, out: m.run(r, out)),
+    "frames": ("bench.frames", lambda m, r, out: m.run(r, out)),  # cyclists inserted into KITTI frames (issue 26)
     "lod": ("bench.lod", lambda m, r, out: m.run(r, out, chart_png=os.path.join(out, "lod_chart.png"))),
     "bike_relit": ("bench.relight", lambda m, r, out: m.run_bench(r, out)),
     "rider_relit": ("bench.rider_relit", lambda m, r, out: m.run(r, out)),
@@ -70,6 +71,7 @@ TARGETS = {
     "rider_gt": "IoU ≥ 0.9, PSNR ≥ 24 dB (means)",
     "dataset_images_per_hour": "≥ 60000 (issue 14)",
     "street_images_per_hour": "≥ 3000 (nuScenes 1600x900, 1-6 cyclists, photo backgrounds)",
+    "frames_geometry": "tyres_within_3cm_share 1.0, labelled_box_overlaps 0",
     "lod_psnr_drop_db": "≤ 0.5 dB",
     "bike_relit": "box PSNR ≥ 30 dB, IoU ≥ 0.97 (means)",
     "rider_relit": "box PSNR ≥ 30 dB, IoU ≥ 0.97 (means)",

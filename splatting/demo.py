@@ -2,7 +2,8 @@
 
 procedural bikes -> 36-view renders -> part Gaussians -> rider avatar -> relight channels of the
 parts and the avatar -> 24-frame pedalling cyclist from 4 views -> small COCO set -> the same
-first samples relit under their own suns -> street images -> contact sheet -> point-cloud import
+first samples relit under their own suns -> street images -> real KITTI frames with the cyclist
+inserted (when ../shared/realism/kitti_dev is there) -> contact sheet -> point-cloud import
 into Blender with one Cycles render -> OUT/report.md.  Each step is skipped when its output exists, so an
 interrupted demo resumes.  Blender steps run as subprocesses (this package never imports bpy).
 """
@@ -152,6 +153,7 @@ def run(args):
     street = os.path.join(out, "street")
     st.run("street images", [py, "-m", "splatting", "dataset", "--config", scfg_path, "--out", street, "--quiet"])
     coco_preview(street, os.path.join(out, "street_preview.png"), n=3)
+    kitti_frames(st, py, out, args.rider, riders, bike)
     st.run("contact sheet", [py, "-m", "splatting", "contact-sheet", "--bikes", os.path.join(out, "bikes"), "--view", "3",
                              "--out", os.path.join(out, "contact_sheet.png")])
     plys = sorted(glob.glob(os.path.join(cyc, "ply", "*.ply")))
@@ -163,6 +165,28 @@ def run(args):
                                                      "--samples", "8", "--render", os.path.join(out, "cyclist_blender.png")])
     report(out, bike, args, st.times, time.time() - t0)
     print(f"demo: finished; see {os.path.join(out, 'report.md')}")
+
+
+def kitti_frames(st, py, out, rider, riders, bike):
+    """A few real KITTI development frames with the demo's cyclist inserted (docs/kitti_insert.md),
+    when ../shared/realism/kitti_dev is there; says so when it is not."""
+    from splatting.dataset.frames.sheet import sheet
+    from splatting.dataset.frames.source import development_frames
+    dev = development_frames()
+    if dev is None:
+        print("demo: KITTI frames: no development frames (../shared/realism/kitti_dev), step skipped", flush=True)
+        return
+    with open(os.path.join(ROOT, "blend_assets", "datasets", "kitti-insert.yaml")) as f:
+        kcfg = yaml.safe_load(f)
+    kcfg.update({"name": "demo_kitti", "count": 4, "frames": dev, "riders": [rider], "riders_root": riders,
+                 "bikes": [os.path.basename(bike)], "bikes_root": os.path.join(out, "bikes"), "synthetic_assets": "never"})
+    kpath = os.path.join(out, "kitti_insert.yaml")
+    with atomic_path(kpath) as tmp:
+        with open(tmp, "w") as f:
+            yaml.safe_dump(kcfg, f, sort_keys=False)
+    kout = os.path.join(out, "kitti_insert")
+    st.run("KITTI frames with cyclists", [py, "-m", "splatting", "dataset", "--config", kpath, "--out", kout, "--quiet"])
+    sheet(kout, os.path.join(out, "kitti_insert.png"))
 
 
 def report(out, bike, args, times, wall):
@@ -199,11 +223,21 @@ def report(out, bike, args, times, wall):
         lines += ["", "## Street images", "", f"{len(ann['images'])} images "
                   f"({ann['images'][0]['width']}x{ann['images'][0]['height']}), {len(ann['annotations'])} annotations "
                   f"in `street/` (COCO) and `street/kitti/` (KITTI)."]
+    ann = read_json_or_none(os.path.join(out, "kitti_insert", "annotations.json"))
+    if ann:
+        n = sum(len(im["instances"]) for im in ann["images"])
+        lines += ["", "## KITTI frames with cyclists", "", f"{len(ann['images'])} real KITTI development frames with "
+                  f"{n} inserted instances in `kitti_insert/` (COCO) and `kitti_insert/kitti/` (KITTI, with velodyne)."]
+    else:
+        lines += ["", "## KITTI frames with cyclists", "", "Not made: the development frames "
+                  "(../shared/realism/kitti_dev) are not present."]
     lines += ["", "## Pictures", ""]
     for title, pattern in (("Contact sheet", "contact_sheet.png"), ("Cyclist preview", "cyclist/preview.png"),
                            ("COCO samples with their annotations", "coco_preview.png"),
                            ("The same samples baked (top) and relit under their own sun (bottom)", "relit_preview.png"),
                            ("Street images with their annotations", "street_preview.png"),
+                           ("Real KITTI frames with inserted cyclists: visible masks, boxes, LiDAR bird's-eye view",
+                            "kitti_insert.png"),
                            ("Point cloud in Blender (Cycles)", "cyclist_blender.png")):
         for p in sorted(glob.glob(os.path.join(out, pattern)))[:1]:
             lines.append(f"### {title}\n\n![{title}]({rel(p)})\n")

@@ -24,7 +24,7 @@ from splatting.library.ray_address import check_address
 def add_arguments(p):
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--config", help="YAML config (see docs/cyclists_and_datasets.md)")
-    src.add_argument("--preset", help="built-in config from blend_assets/datasets/ (bike-only, cyclist, street)")
+    src.add_argument("--preset", help="built-in config from blend_assets/datasets/ (bike-only, cyclist, street, kitti-insert)")
     p.add_argument("--out", help="output folder (default: out/datasets/<name>)")
     p.add_argument("--count", type=int, help="override the config's count")
     p.add_argument("--seed", type=int, help="override the config's seed")
@@ -36,6 +36,8 @@ def add_arguments(p):
     p.add_argument("--format", action="append", choices=("coco", "kitti"),
                    help="label format(s) to write (repeat for both); overrides the config's labels.formats")
     p.add_argument("--camera", help="override the config's camera.preset (street mode)")
+    p.add_argument("--frames", help="frames mode: the KITTI object folder (image_2, calib, label_2; planes, velodyne) "
+                                    "to insert cyclists into; overrides the config's frames (docs/kitti_insert.md)")
     p.add_argument("--workers", type=int, default=1, help="worker processes, one torch thread each (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     # scale-out (docs/scale_out.md)
@@ -131,6 +133,8 @@ def check_args(args):
     checks.image_size("image_size", args.image_size)
     checks.integer("workers", args.workers, 1, 1024)
     checks.output_dir("out", args.out)
+    if args.frames is not None and not os.path.isdir(args.frames):
+        raise UserError(f"--frames {args.frames}: no such folder")
     parse_shard(args.shard)
     if args.shard and args.engine == "ray":
         raise UserError("--shard is the engine-free form (one process per shard); leave out --engine ray")
@@ -153,8 +157,10 @@ def run(args):
     cfg = load_config(args.config, args.preset, {"count": args.count, "seed": args.seed,
                                                  "image_size": args.image_size, "bikes_root": args.bikes_root,
                                                  "bikes": args.bikes, "riders": args.riders,
-                                                 "riders_root": args.riders_root},
+                                                 "riders_root": args.riders_root, "frames": args.frames},
                       nested)
+    if args.frames is not None and cfg["mode"] != "frames":
+        raise UserError(f"--frames goes with mode: frames (e.g. --preset kitti-insert); this config's mode is {cfg['mode']}")
     checks.image_size("config field 'image_size'", cfg["image_size"])
     checks.count("config field 'count'", cfg["count"])
     out = args.out or checks.inside(os.path.join("out", "datasets"), os.path.join("out", "datasets", cfg["name"]),

@@ -14,7 +14,7 @@ from cyclist_formats.text_files import read_yaml
 from splatting import paths
 
 PRESET_DIR = str(paths.BLEND_ASSETS / "datasets")
-MODES = ("cyclist", "bike-only", "street")
+MODES = ("cyclist", "bike-only", "street", "frames")
 BACKGROUNDS = ("solid", "gradient", "noise", "images", "scene")
 PERSON_KEYPOINTS = ("coco17", "smpl24")
 LABEL_FORMATS = ("coco", "kitti")
@@ -26,6 +26,18 @@ from splatting.dataset.labels import DEFAULT_COMBINED, DEFAULT_NAMES, VEHICLES
 from splatting.dataset import camera_presets, lighting
 from splatting.dataset.backgrounds import list_images
 from splatting.rider.roster import all_riders
+
+INSERT_DEFAULTS = {
+    "lidar": True,                # use velodyne/ when present: plane fallback, road checks, occlusion, scan output
+    "box_margin_m": 0.5,          # kept clear around every labelled 3D box's footprint
+    "min_ground_points": 3,       # LiDAR road points around a footprint for it to count as seen road
+    "camera_height_m": 1.65,      # the level road below camera 0 when a frame has neither planes nor LiDAR
+    "occlusion_margin_m": 0.3,    # the frame hides an inserted pixel only when nearer by more than this
+    "behind_cars_share": 0.0,     # share of instances sought just beyond a labelled car (partly hidden by it)
+    "box_occluders": True,        # the labelled 3D boxes, drawn solid, hide what is behind them
+    "look": {"match": True, "blur_sigma_px": "auto", "noise_sigma": "auto", "sun_elevation_deg": 45.0,
+             "sun_azimuth_deg": 120.0, "cast_shadow": True},
+}
 
 DEFAULTS = {
     "name": "dataset",
@@ -71,6 +83,10 @@ DEFAULTS = {
     # per-image light (splatting/dataset/lighting.py): baked = the trained colour; relit = a sun and
     # sky drawn per image from these ranges, bikes and riders shaded from their relight channels
     "lighting": copy.deepcopy(lighting.DEFAULTS),
+    # frames mode (docs/kitti_insert.md): cyclists inserted into the frames of a KITTI object folder;
+    # counts, distances and headings come from `street`, the rest from `insert`
+    "frames": None,
+    "insert": copy.deepcopy(INSERT_DEFAULTS),
 }
 
 
@@ -238,6 +254,34 @@ def _validate_street(cfg):
     _validate_lod(cfg["lod"])
     _validate_appearance(cfg["appearance"])
     lighting.validate(cfg["lighting"])
+    _validate_insert(cfg)
+
+
+def _validate_insert(cfg):
+    ins = cfg["insert"]
+    if cfg["mode"] == "frames" and not (isinstance(cfg["frames"], str) and cfg["frames"]):
+        raise _err("frames", f"frames mode needs a KITTI object folder (or --frames DIR), got {cfg['frames']!r}")
+    for f in ("lidar", "box_occluders"):
+        if not isinstance(ins[f], bool):
+            raise _err(f"insert.{f}", f"expected true or false, got {ins[f]!r}")
+    for f, lo, hi in (("box_margin_m", 0, 10), ("camera_height_m", 0.2, 10), ("occlusion_margin_m", 0, 5),
+                      ("behind_cars_share", 0, 1)):
+        if not (_num(ins[f]) and lo <= ins[f] <= hi):
+            raise _err(f"insert.{f}", f"expected a number within [{lo}, {hi}], got {ins[f]!r}")
+    if not (isinstance(ins["min_ground_points"], int) and not isinstance(ins["min_ground_points"], bool)
+            and ins["min_ground_points"] >= 0):
+        raise _err("insert.min_ground_points", f"expected an integer >= 0, got {ins['min_ground_points']!r}")
+    lk = ins["look"]
+    for f in ("match", "cast_shadow"):
+        if not isinstance(lk[f], bool):
+            raise _err(f"insert.look.{f}", f"expected true or false, got {lk[f]!r}")
+    for f, lo, hi in (("blur_sigma_px", 0, 5), ("noise_sigma", 0, 0.2)):
+        if lk[f] != "auto" and not (_num(lk[f]) and lo <= lk[f] <= hi):
+            raise _err(f"insert.look.{f}", f"expected auto or a number within [{lo}, {hi}], got {lk[f]!r}")
+    if not (_num(lk["sun_azimuth_deg"]) and -360 <= lk["sun_azimuth_deg"] <= 360):
+        raise _err("insert.look.sun_azimuth_deg", f"expected a number within [-360, 360], got {lk['sun_azimuth_deg']!r}")
+    if not (_num(lk["sun_elevation_deg"]) and 1 <= lk["sun_elevation_deg"] <= 90):
+        raise _err("insert.look.sun_elevation_deg", f"expected a number within [1, 90], got {lk['sun_elevation_deg']!r}")
 
 
 def _validate_appearance(a):
@@ -278,7 +322,11 @@ def _validate_lod(lod):
 def resolve_assets(cfg):
     """Expand 'all' and check that every rider and bike exists (config field named on failure)."""
     cfg = copy.deepcopy(cfg)
-    if cfg["mode"] in ("cyclist", "street"):
+    if cfg["mode"] == "frames":
+        from splatting.dataset.frames.source import locate, open_folder
+        cfg["frames"] = locate(cfg["frames"])
+        open_folder(cfg["frames"])  # every frame's calib, labels, plane and scan size, before any work
+    if cfg["mode"] in ("cyclist", "street", "frames"):
         known = [r["id"] for r in all_riders()]
         riders = known if cfg["riders"] == "all" else cfg["riders"]
         bad = [r for r in riders if r not in known]
@@ -297,7 +345,7 @@ def resolve_assets(cfg):
         if not os.path.isdir(root):
             raise _err("bikes_root", f"no such folder {root!r}")
         bikes = sorted(d for d in os.listdir(root) if os.path.isfile(os.path.join(root, d, "keypoints.json")))
-        if cfg["mode"] in ("cyclist", "street"):  # a rider needs pedals and a seat
+        if cfg["mode"] in ("cyclist", "street", "frames"):  # a rider needs pedals and a seat
             bikes = [b for b in bikes if bike_folder.has_crank(os.path.join(root, b))]
         if not bikes:
             raise _err("bikes", f"'all' found no bike folders with keypoints.json under {root!r}")

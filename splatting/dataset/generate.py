@@ -22,6 +22,9 @@ from splatting.cyclist.scene_render import MASK_ALPHA, render_scene, union
 from splatting.dataset import camera_presets, kitti, lighting, png
 from splatting.dataset.backgrounds import contact_shadows, generated, load_scene, photo
 from splatting.dataset.config import POSE_KEYS
+from splatting.dataset.frames import contact, output as frames_output
+from splatting.dataset.frames.placement import draw_frame
+from splatting.dataset.frames.sample import FrameSample
 from splatting.dataset.labels import BoxMask, annotation, vehicle_class
 from splatting.dataset.person_keypoints import COCO17_TOLERANCE_M, PersonKeypoints, RecordingAvatar
 from splatting.dataset.street import draw_street
@@ -116,6 +119,10 @@ def draw(cfg, index):
         cam = camera_presets.resolve(cfg["camera"])
         instances, dropped = draw_street(cfg, rng, cam)
         camera = {"preset": cam["preset"]}
+    elif cfg["mode"] == "frames":  # a KITTI frame: its own camera and image (splatting/dataset/frames)
+        instances, dropped, camera = draw_frame(cfg, rng, index)
+        return {"instances": instances, "dropped": dropped, "camera": camera,
+                "background": {"kind": "frame", "frame": camera["frame"]}}
     else:
         bike = cfg["bikes"][int(rng.integers(len(cfg["bikes"])))]
         rider = cfg["riders"][int(rng.integers(len(cfg["riders"])))] if cfg["mode"] == "cyclist" else None
@@ -225,6 +232,7 @@ def make_sample(cfg, index, assets):
     extras: {"depth": (H, W) float32, "kitti": [objects], "calib": {...}}."""
     d = draw(cfg, index)
     street = cfg["mode"] == "street"
+    fs = FrameSample(cfg, d, index) if cfg["mode"] == "frames" else None
     relit = lighting.RelitSample(cfg, index, assets) if lighting.relit(cfg) else None  # None: baked colour
     kp_cfg, lab = cfg["keypoints"], cfg["labels"]
     # instances of one (bike, rider) are posed in one batch: the IK's cost is mostly per iteration,
@@ -235,6 +243,9 @@ def make_sample(cfg, index, assets):
     frames = [None] * len(d["instances"])
     for (bike, rider), js in groups.items():
         cyc = assets.cyclist(bike, rider)
+        if fs is not None:  # both tyres on the frame's road plane (frames.contact)
+            for j in js:
+                d["instances"][j]["pose"] = contact.seat(cyc.bike.keypoints, d["instances"][j]["pose"])
         posed = cyc.pose(torch.tensor([d["instances"][j]["pose"] for j in js], dtype=torch.float64))
         people = [None] * len(js)
         if rider is not None:
@@ -251,6 +262,8 @@ def make_sample(cfg, index, assets):
     if street:
         spec = camera_presets.resolve(cfg["camera"])
         cam = camera_presets.street_camera(spec)
+    elif fs is not None:
+        cam = fs.camera()
     else:
         g = frames[0][1].gaussians
         lo, hi = g.means.min(0).values, g.means.max(0).values
@@ -262,7 +275,7 @@ def make_sample(cfg, index, assets):
 
     parts, slots, boxes, keeps, aa, eps = [], [], [], [], [], []
     lod_cfg = cfg["lod"]
-    looks = []
+    looks, scan_parts = [], []
     for k, (inst, frame, _) in enumerate(frames):
         g = frame.gaussians
         slot = torch.where(frame.ids == RIDER_ID, 2 * k + 2, 2 * k + 1).long()
@@ -288,6 +301,8 @@ def make_sample(cfg, index, assets):
         # and each model with the low-pass it was trained with (bike and rider may differ)
         cyc = assets.cyclists[(inst["bike"], inst["rider"])]
         e = frame_eps2d(frame.ids, cyc.bike, cyc.avatar)
+        if fs is not None:  # the full model, for the LiDAR scan
+            scan_parts.append((frame.gaussians, e, bike_aa if bike_trained_aa else False))
         eps.append((len(g), e if idx is None or not torch.is_tensor(e) else e.index_select(0, idx)))
         if relit is not None:  # its sun's shadow map draws the instance as the view does
             relit.instance(k, inst["bike"], inst["rider"], frame.gaussians, looked, g, idx, cam,
@@ -295,10 +310,15 @@ def make_sample(cfg, index, assets):
         parts.append(g)
         slots.append(slot)
     b = cfg["backgrounds"]
-    ground_shadows = bool(b["shadow"] and bg_kind in ("images", "scene") and frames)  # the contact shadow, and relit the sun's
+    ground_shadows = bool(b["shadow"] and bg_kind in ("images", "scene", "frame") and frames)  # the contact shadow, and relit the sun's
     if ground_shadows:
         feet = [(inst["pose"][5], inst["pose"][7], inst["pose"][3], bx["l"], bx["w"]) for (inst, _, _), bx in zip(frames, boxes)]
-        sh = contact_shadows(feet, b["shadow_opacity"])
+        if fs is not None and cfg["insert"]["look"]["cast_shadow"]:  # frames: the sun's shadow in the render, so
+            # the frame's depth hides it too (baked: the config's sun; relit: the sample's)
+            sun = fs.sun() if relit is None else relit.light
+            sh = contact_shadows(feet, b["shadow_opacity"], sun=sun, heights=[bx["h"] for bx in boxes])
+        else:
+            sh = contact_shadows(feet, b["shadow_opacity"])
         parts.append(sh)
         slots.append(torch.zeros(len(sh), dtype=torch.long))
     if bg_kind == "scene":
@@ -320,15 +340,20 @@ def make_sample(cfg, index, assets):
              "depth": np.zeros((H, W), np.float32), "label": np.full((H, W), -1, np.int16), "amodal": {},
              "boxes": []}
     bg_rec = dict(d["background"])
-    if bg_kind == "images":
+    kp_alpha, kp_depth = L["alpha"], L["depth"]
+    if fs is not None:  # the frame's real objects hide what is behind them; then its look
+        kp_alpha, kp_depth = fs.occlude(L, union(L.get("boxes", [])))
+        rgb, bg_rec["look"] = fs.composite(L, union(L.get("boxes", [])), [(i["pose"][5], i["pose"][7]) for i, _, _ in frames])
+    elif bg_kind == "images":
         bg, rec = photo(b["image_files"], d["background"]["seed"], W, H)
         bg_rec.update(rec)
     elif bg_kind == "scene":
         bg = np.zeros((H, W, 3), np.float32)
     else:
         bg = generated(bg_kind, d["background"]["seed"], W, H)
-    rgb = over_in_box(L, bg, union(L.get("boxes", [])))
-    if relit is not None and ground_shadows:
+    if fs is None:
+        rgb = over_in_box(L, bg, union(L.get("boxes", [])))
+    if relit is not None and ground_shadows and fs is None:
         rgb = relit.cast_shadows(rgb, L, cam, feet, [bx["h"] for bx in boxes], b["shadow_opacity"])
 
     K, R, T = cam.K.double().numpy(), cam.R.double().numpy(), cam.T.double().numpy()
@@ -345,7 +370,7 @@ def make_sample(cfg, index, assets):
         means, prep = frame.gaussians.means.numpy(), assets.label_inputs(inst["bike"], inst["rider"], frame)
         ext_b = projected_extent(means[prep["bike"]], cam)
         bx = boxes[k]
-        loc, ry, alpha = kitti.box3d(R, T, bx)
+        loc, ry, alpha = fs.box3d(bx) if fs is not None else kitti.box3d(R, T, bx)
         vclass = vehicle_class(assets.meta(inst["bike"]), lab["vehicle_of"].get(inst["bike"]))
         extra = {"instance": k + 1, "track_id": index * 1000 + k + 1, "parked": inst["rider"] is None,
                  "bike": inst["bike"], "rider": inst["rider"], "vehicle": vclass,
@@ -357,7 +382,7 @@ def make_sample(cfg, index, assets):
         bk = np.array([frame.bike_keypoints.get(n, [np.nan] * 3) for n in BIKE_KEYPOINTS], dtype=np.float64)
         have = np.isfinite(bk).all(1)
         uv, z = project_points(np.nan_to_num(bk), cam)
-        vis = keypoint_visibility(uv, z, L["alpha"], L["depth"], kp_cfg["tolerance_bike_m"] + z * px) * have
+        vis = keypoint_visibility(uv, z, kp_alpha, kp_depth, kp_cfg["tolerance_bike_m"] + z * px) * have
         a_b = annotation(vclass, vis_b, am_b, ext_b, W, H, np.column_stack([uv, vis]), extra)
         inst_anns = [a_b]
         if inst["rider"] is not None:
@@ -365,7 +390,7 @@ def make_sample(cfg, index, assets):
             uvr, zr = project_points(person, cam)
             # COCO-17: per-point depths under the skin; SMPL joints: one tolerance for joint centres
             tol = COCO17_TOLERANCE_M if kp_cfg["person"] == "coco17" else kp_cfg["tolerance_rider_m"]
-            visr = keypoint_visibility(uvr, zr, L["alpha"], L["depth"], np.asarray(tol) + zr * px)
+            visr = keypoint_visibility(uvr, zr, kp_alpha, kp_depth, np.asarray(tol) + zr * px)
             inst_anns.append(annotation("rider", vis_r, am_r, ext_r, W, H, np.column_stack([uvr, visr]), extra))
             ext_c = [min(ext_b[0], ext_r[0]), min(ext_b[1], ext_r[1]), max(ext_b[2], ext_r[2]), max(ext_b[3], ext_r[3])]
             combined = lab["combined"][vclass]
@@ -389,7 +414,7 @@ def make_sample(cfg, index, assets):
              "instances": [{"kind": i["kind"], "bike": i["bike"], "rider": i["rider"], "pose": i["pose"]}
                            for i, _, _ in frames],
              "pose_fields": list(POSE_KEYS), "camera": cam_rec, "background": bg_rec}
-    if street:
+    if street or fs is not None:
         image["dropped_placements"] = d["dropped"]
     if relit is not None:
         image["lighting"] = relit.record(cam)
@@ -398,12 +423,22 @@ def make_sample(cfg, index, assets):
     if keeps:  # the level each instance was rendered at (share of its Gaussians)
         for rec, keep in zip(image["instances"], keeps):
             rec["lod_keep"] = keep
-    else:
+    elif frames:  # (a frame may get no instance: every placement refused)
         inst, frame, _ = frames[0]
         image.update(bike=inst["bike"], rider=inst["rider"], pose=inst["pose"])
         if frame.ik is not None:
             image["ik"] = frame.ik
     extras = {"depth": L["depth"], "kitti": kitti_objs, "calib": kitti.calib(K, R, T)}
+    if fs is not None:  # the frame's own label rows (occlusion raised), calib, plane and scan
+        extras["frame"] = fs.kitti_extras(L)
+        image["frame"] = dict(fs.record(), occlusion_raised=[[o, n, round(sh_, 4)] for o, n, sh_ in extras["frame"]["occlusion_raised"]])
+        counts = fs.insert_scan(scan_parts, extras) if "kitti" in lab["formats"] else None
+        if counts is not None:  # the LiDAR points on each inserted instance
+            image["frame"]["scan"] = fs.scan_record
+            for a in anns:
+                a["lidar_points"] = counts[a["instance"] - 1]
+        for rec, (inst, _, _) in zip(image["instances"], frames):
+            rec["tyre_heights_m"] = [round(x, 5) for x in contact.tyre_heights(assets.bikes[inst["bike"]].keypoints, inst["pose"])]
     return rgb, image, anns, extras
 
 
@@ -421,7 +456,9 @@ def write_sample(cfg, index, out_dir, assets):
         mm = np.clip(np.round(extras["depth"] * 1000.0), 0, 65535).astype(np.uint16)
         with atomic_path(dpath) as tmp:
             png.write(tmp, mm, cfg["png_compress_level"])
-    if "kitti" in cfg["labels"]["formats"]:
+    if "kitti" in cfg["labels"]["formats"] and "frame" in extras:
+        frames_output.write_sample(out_dir, index, img_path, extras["kitti"], extras["frame"])
+    elif "kitti" in cfg["labels"]["formats"]:
         kitti.write_sample(out_dir, index, img_path, extras["kitti"], extras["calib"])
     os.makedirs(os.path.join(out_dir, "shards"), exist_ok=True)
     write_json(os.path.join(out_dir, "shards", f"{index:06d}.json"), {"image": image, "annotations": anns}, indent=None)
@@ -437,4 +474,9 @@ def sample_done(out_dir, index, cfg=None):
 
 
 def config_record(cfg):
-    return json.loads(json.dumps(lighting.record_config(cfg)))
+    """The config stored beside a dataset; the frames fields only in frames mode (so the other modes'
+    config.json stays what it was before they existed, and such sets resume)."""
+    cfg = lighting.record_config(cfg)
+    if cfg.get("mode") != "frames":
+        cfg = {k: v for k, v in cfg.items() if k not in ("frames", "insert")}
+    return json.loads(json.dumps(cfg))

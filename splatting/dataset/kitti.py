@@ -26,11 +26,12 @@ import shutil
 
 import numpy as np
 
+from cyclist_formats import kitti_frame
 from cyclist_formats.atomic import atomic_path
+from cyclist_formats.errors import UserError
+from cyclist_formats.kitti_frame import FIELDS, calib_text, label_line  # noqa: F401  (the format lives there)
 
 KITTI_TYPES = {"cyclist": "Cyclist", "motorcyclist": "Misc", "parked": "Misc"}
-FIELDS = ("type", "truncated", "occluded", "alpha", "x1", "y1", "x2", "y2", "h", "w", "l", "x", "y", "z",
-          "rotation_y")
 
 
 def wrap(a):
@@ -60,10 +61,6 @@ def calib(K, R, T):
             "Tr_imu_to_velo": np.column_stack([np.eye(3), np.zeros(3)])}
 
 
-def calib_text(c):
-    return "".join(f"{k}: " + " ".join(f"{v:.12e}" for v in np.asarray(m).ravel()) + "\n" for k, m in c.items())
-
-
 def box3d(R, T, box):
     """Instance 3D box (world: bottom centre, heading_deg, (h, w, l)) -> KITTI location, rotation_y, alpha."""
     Rr, centre, _ = rect_frame(R, T)
@@ -91,21 +88,13 @@ def project_rect(P, pts):
     return h[:2] / h[2]
 
 
-def label_line(obj):
-    return (f"{obj['type']} {obj['truncated']:.2f} {int(obj['occluded'])} {obj['alpha']:.2f} "
-            f"{obj['x1']:.2f} {obj['y1']:.2f} {obj['x2']:.2f} {obj['y2']:.2f} "
-            f"{obj['h']:.2f} {obj['w']:.2f} {obj['l']:.2f} {obj['x']:.2f} {obj['y']:.2f} {obj['z']:.2f} "
-            f"{obj['rotation_y']:.2f}\n")
-
-
 def parse_label_line(line):
-    """A label_2 line -> {field: value} (KITTI's documented 15 fields; a 16th score is allowed)."""
-    p = line.split()
-    if len(p) not in (15, 16):
-        raise ValueError(f"KITTI label lines have 15 fields (16 with a score), got {len(p)}")
-    out = {"type": p[0], "truncated": float(p[1]), "occluded": int(p[2])}
-    out.update({k: float(v) for k, v in zip(FIELDS[3:], p[3:15])})
-    return out
+    """A label_2 line -> {field: value} (KITTI's documented 15 fields; a 16th score is allowed);
+    ValueError when malformed (cyclist_formats.kitti_frame checks the fields)."""
+    try:
+        return kitti_frame.parse_label_line(line)
+    except UserError as e:
+        raise ValueError(str(e)) from None
 
 
 def kitti_paths(out_dir, index):
