@@ -22,6 +22,7 @@ import numpy as np
 from .contacts import Touch
 
 HIGH = 1.75          # wheel diameters: wholly above this is head or torso
+PERSON_D = 0.6       # metres: the least "wheel diameter" the person's proportions are measured in
 
 
 def _solid_top(q, D):
@@ -43,7 +44,7 @@ class _Pieces:
     """The kept components in the canonical frame: bounding boxes, the surface contacts and the
     bike's landmarks the steps share."""
 
-    def __init__(self, soup, pose, idx, P, D):
+    def __init__(self, soup, pose, idx, P, D, wheel_D=None):
         self.idx, self.D = idx, D
         self.local = {i: j for j, i in enumerate(idx)}
         pts = [P[soup.comps[i].verts] for i in idx]
@@ -51,12 +52,12 @@ class _Pieces:
         self.hi = np.array([q.max(0) for q in pts])
         self.fa, self.ra = pose.apply(pose.front.centre), pose.apply(pose.rear.centre)
         self.touch = Touch(P, soup.TW, {i: soup.comps[i] for i in idx}, max(0.02, 0.025 * D))
-        lo, hi, R = self.lo, self.hi, 0.5 * D
+        lo, hi, R = self.lo, self.hi, 0.5 * (wheel_D or D)
         self.lateral = (lo[:, 2] > 0.04 * D) | (hi[:, 2] < -0.04 * D)
         self.wheel = np.zeros(len(idx), bool)
         for c in (self.fa, self.ra):   # tyres, rims, spokes, hubs: within the wheel disc, near its plane
             far = np.maximum(np.abs(lo[:, :2] - c[:2]), np.abs(hi[:, :2] - c[:2]))
-            self.wheel |= (np.hypot(far[:, 0], far[:, 1]) < 1.1 * R) & (np.maximum(-lo[:, 2], hi[:, 2]) < 0.2 * D)
+            self.wheel |= (np.hypot(far[:, 0], far[:, 1]) < 1.1 * R) & (np.maximum(-lo[:, 2], hi[:, 2]) < 0.4 * R)
         # the steering column: a stem, basket or lamp wholly ahead of where a rider's body can
         # be, and what is fastened to it (a toy bike's thick bar halves)
         self.column = lo[:, 0] > self.fa[0] - 0.4 * D
@@ -82,7 +83,10 @@ class _Pieces:
 def drop_rider(soup, pose):
     """Bool per soup component: the rider's pieces (all False when there is none)."""
     P = soup.transformed_points(pose.M)
-    D = 2 * 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale
+    wheel_D = 2 * 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale
+    # the person's measure: a bicycle's wheel, or 0.6 m on small-wheeled vehicles (a motor
+    # scooter's 0.46 m wheels put a seated person 4 wheel diameters up, a bicycle's rider 3)
+    D = max(wheel_D, PERSON_D)
     out = np.zeros(len(soup.comps), bool)
     idx = [i for i, k in enumerate(pose.keep) if k]
     if not idx:
@@ -90,7 +94,7 @@ def drop_rider(soup, pose):
     hi_all = np.array([P[soup.comps[i].verts][:, 1].max() for i in idx])
     if not (2.1 * D < hi_all.max() < 3.5 * D):
         return out
-    pc = _Pieces(soup, pose, idx, P, D)
+    pc = _Pieces(soup, pose, idx, P, D, wheel_D)
     lo, hi = pc.lo, pc.hi
     # a handlebar may sit that high (a motorcycle's): wide across and thin, unlike a person
     bar_like = (hi[:, 2] - lo[:, 2] > 0.5 * D) & ((hi - lo).min(1) <= 0.1 * D)
@@ -104,6 +108,7 @@ def drop_rider(soup, pose):
         return out
     rider = _body(pc, high)
     rider |= _limbs(pc, rider)
+    rider |= _straddling(pc, rider)
     rider |= _surrounded(pc, rider)
     rider |= _hanging(pc, rider)
     out[np.array(idx)[rider]] = True
@@ -167,6 +172,28 @@ def _limbs(pc, body):
         grown[new] = True
         frontier = [pc.idx[j] for j in new]
     return grown
+
+
+def _straddling(pc, rider):
+    """Step 3b: a rider's lower body as one piece (hips and both legs of a low-poly or skinned
+    person, left on the saddle when the torso went): touching the rider, reaching from below the
+    wheel tops to above 1.5 D, wider than 0.6 D across, its surface mostly beside the bike's
+    plane on both sides (legs astride the frame) and little of it on the plane.  A motorcycle's
+    tank, seat or body is narrower or centred; a handlebar is on the steering column; a rack's
+    panniers stay low.  (It may touch the bar: hands and legs in one skinned piece.)"""
+    lo, hi, D = pc.lo, pc.hi, pc.D
+    near = pc.mask(pc.touch.touching(pc.global_(rider)))
+    cand = near & ~rider & ~pc.wheel & ~pc.column & (hi[:, 1] > 1.5 * D) & (lo[:, 1] < 1.1 * D) \
+        & (hi[:, 2] - lo[:, 2] > 0.6 * D)
+    out = np.zeros(len(pc.idx), bool)
+    for j in np.nonzero(cand)[0]:
+        z = pc.touch.samples[pc.idx[j]][:, 2]
+        if len(z) < 20:
+            continue
+        left, right, central = (z < -0.15 * D).mean(), (z > 0.15 * D).mean(), (np.abs(z) < 0.1 * D).mean()
+        if left >= 0.2 and right >= 0.2 and left + right >= 0.5 and central <= 0.3:
+            out[j] = True
+    return out
 
 
 def _surrounded(pc, rider):
