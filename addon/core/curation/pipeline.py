@@ -6,7 +6,7 @@ import numpy as np
 
 from ..contract import UserError
 from . import keypoints as kpmod
-from . import mesh, scale, silhouette, split, wheels
+from . import keypoint_check, mesh, scale, silhouette, split, wheels
 from .rider_removal import drop_rider
 from .shape_fit import check_two_wheels, choose_keypoints, shape_samples
 from .shape_keypoints import bulky as _bulky
@@ -117,6 +117,18 @@ def _curate(V, T, wheel_diameter, keypoints, hints, wheel_centres, _size):
         h = np.asarray(hints)
         use = (h >= 0) & keep_tri
         labels[use] = h[use]
+    kp_probs, kp_dist = {}, {}
+    if all(k in kp for k in needed) and not problems:
+        # the keypoints on their own parts (keypoint_check.py): only once they validate, a
+        # refused geometry says more than a distance
+        given = {k: kp[k] for k in (keypoints or {})}   # an annotator's points are measured, never moved
+        moved = [k for k in keypoint_check.snap(view.P, soup.TW, labels, kp, has_crank) if k not in given]
+        kp.update(given)
+        if moved:
+            problems = validate(kp, has_crank)
+            notes.append(f"moved onto their part: {', '.join(moved)} (were 3-12 cm off)")
+        kp_probs, kp_dist = keypoint_check.check(view.P, soup.TW, labels, kp, has_crank)
+        problems = problems + kp_probs
     split_args = {"head_radius": info.get("head_tube_radius"), "wheel_radius": pose.front.radius * pose.scale,
                   "head_span": info.get("head_span"), "has_crank": bool(has_crank)}
     record = {
@@ -136,6 +148,7 @@ def _curate(V, T, wheel_diameter, keypoints, hints, wheel_centres, _size):
         "keypoint_source": source,
         "notes": pose.notes + notes,
         "faces_cut": int(cut.sum()),
+        "keypoint_distance_cm": {k: round(v * 100, 2) for k, v in kp_dist.items()},
         "split_args": {k: (v if v is None or isinstance(v, bool) else np.asarray(v, float).tolist())
                        for k, v in split_args.items()},
     }

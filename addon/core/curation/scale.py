@@ -24,6 +24,10 @@ CLASSES = {
     "motor scooter": (0.46, (0.30, 0.62), (0.90, 1.80), (0.70, 1.45), (0.50, 1.05)),
     "kick scooter": (None, (0.06, 0.32), (0.30, 1.20), (0.55, 1.35), None),
 }
+# tyre sizes at which the file's own units are believed: the common adult sizes (a toy or a
+# child's bike modelled "in metres" at 0.59 m is more likely an arbitrary unit)
+FILE_UNITS_TRUSTED = {"bicycle": (0.62, 0.76), "motorcycle": (0.55, 0.74), "motor scooter": (0.35, 0.56),
+                      "kick scooter": (0.08, 0.26)}
 UNITS = ((1.0, "metres"), (0.01, "centimetres"), (0.001, "millimetres"), (0.0254, "inches"))
 
 
@@ -49,7 +53,7 @@ def candidates(res):
     d_model = float(sum(res.record["wheel_radii_model_units"]))   # two radii: one mean diameter
     out = []
     for cls in cls_list:
-        lo, hi = CLASSES[cls][1]
+        lo, hi = FILE_UNITS_TRUSTED[cls]
         for f, unit in UNITS:
             if lo <= d_model * f <= hi:
                 d = round(d_model * f, 4)
