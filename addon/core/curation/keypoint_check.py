@@ -109,6 +109,22 @@ def snap(P, TW, labels, kp, has_crank, tol=TOL):
                 m = np.array([2 * c[0] - g[0], 2 * c[1] - g[1], -g[2]])
             if np.linalg.norm(S - m, axis=1).min() <= tol:
                 new[far[0]] = m
+        if not has_crank and names[0] == "pedal_left":
+            # footrests (no crank): one still off the frame (the finder's lateral extreme was a
+            # side stand or a silencer) goes to the frame's outermost surface beside the other's
+            # height and place, on its own side
+            for n in names:
+                q = new.get(n, np.asarray(kp[n], float))
+                if np.linalg.norm(S - q, axis=1).min() <= tol:
+                    continue
+                side = S[(np.hypot(S[:, 0] - q[0], S[:, 1] - q[1]) < 0.06) & (np.sign(S[:, 2]) == np.sign(q[2]))]
+                if len(side):
+                    new[n] = side[np.argmax(np.abs(side[:, 2]))]
+            if new:
+                for n, v in new.items():
+                    kp[n] = v
+                moved += list(new)
+            continue
         if not new:
             continue
         a, b = (new.get(n, np.asarray(kp[n], float)) for n in names)
@@ -123,6 +139,28 @@ def snap(P, TW, labels, kp, has_crank, tol=TOL):
         kp[names[0]], kp[names[1]] = a, b
         moved += list(new)
     return moved
+
+
+def pedal_pieces(soup, P, labels, kp, keep_tri, tol=TOL, size=0.25):
+    """Pedal bodies modelled as their own pieces go with the crank: each mesh piece (kept, at
+    most `size` metres across) whose surface comes within `tol` of a pedal keypoint.  The
+    region split labels a piece by where it lies, and a pedal at the end of an arm modelled at
+    an angle lies outside the crank's disc.  Changes labels in place; returns how many."""
+    n = 0
+    for name in ("pedal_left", "pedal_right"):
+        q = np.asarray(kp[name], float)
+        for c in soup.comps:
+            pts = P[c.verts]
+            if np.ptp(pts, axis=0).max() > size or not keep_tri[c.tris].all():
+                continue
+            if np.any(pts.min(0) - tol > q) or np.any(pts.max(0) + tol < q):
+                continue
+            T = soup.TW[c.tris]
+            S = part_samples(P, T, np.ones(len(T), bool), spacing=0.005)
+            if len(S) and np.linalg.norm(S - q, axis=1).min() <= tol and (labels[c.tris] != split.CRANK).any():
+                labels[c.tris] = split.CRANK
+                n += 1
+    return n
 
 
 def check(P, TW, labels, kp, has_crank, tol=TOL):

@@ -121,12 +121,14 @@ def _curate(V, T, wheel_diameter, keypoints, hints, wheel_centres, _size):
     if all(k in kp for k in needed) and not problems:
         # the keypoints on their own parts (keypoint_check.py): only once they validate, a
         # refused geometry says more than a distance
+        if has_crank and keypoint_check.pedal_pieces(soup, view.P, labels, kp, keep_tri):
+            notes.append("pedal bodies modelled as their own pieces put on the crank")
         given = {k: kp[k] for k in (keypoints or {})}   # an annotator's points are measured, never moved
         moved = [k for k in keypoint_check.snap(view.P, soup.TW, labels, kp, has_crank) if k not in given]
         kp.update(given)
         if moved:
             problems = validate(kp, has_crank)
-            notes.append(f"moved onto their part: {', '.join(moved)} (were 3-12 cm off)")
+            notes.append(f"moved onto their part: {', '.join(moved)}")
         kp_probs, kp_dist = keypoint_check.check(view.P, soup.TW, labels, kp, has_crank)
         problems = problems + kp_probs
     split_args = {"head_radius": info.get("head_tube_radius"), "wheel_radius": pose.front.radius * pose.scale,
