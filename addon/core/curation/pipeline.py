@@ -42,16 +42,36 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
     groups or object names, used instead of the automatic split where given.
     Raises UserError when no wheels are found.
     """
-    res = _curate(V, T, wheel_diameter, keypoints, hints, wheel_centres, {})
+    res, err = _sized(V, T, wheel_diameter, keypoints, hints, wheel_centres, {})
+    if (err or res.problems) and wheel_centres is None and res.record.get("forward_cue", "").startswith("handlebar"):
+        # front and back from the bar are a guess (a motor scooter's broad rear body is as wide
+        # and high as its bar): the other way round, when that one validates with fewer problems
+        rear = np.linalg.inv(res.M) @ np.r_[res.keypoints["rear_axle"], 1.0]
+        try:
+            res2, err2 = _sized(V, T, wheel_diameter, keypoints, hints, wheel_centres, {"front": rear[:3]})
+        except UserError:
+            res2, err2 = res, "refused"
+        if (0 if err2 is None else 1) + len(res2.problems) < (0 if err is None else 1) + len(res.problems):
+            res, err = res2, err2
+            res.record["forward_cue"] = "the other way validates (bar cue reversed)"
+            res.notes.append("front and back: the bar cue reversed, the other way validates")
+    if err:
+        raise UserError(err)
+    return res
+
+
+def _sized(V, T, wheel_diameter, keypoints, hints, wheel_centres, extra):
+    """(Result, refusal text or None): curated at the given wheel size, or, with None, at the
+    size every cue gives (scale.py; the text says why the cues disagree)."""
+    res = _curate(V, T, wheel_diameter, keypoints, hints, wheel_centres, dict(extra))
     if wheel_diameter is not None:
-        return res
+        return res, None
     # the first pass at a bicycle's 0.7 m wheels shows what the vehicle is; curate again at the
     # size its cues give (every length threshold is relative to the wheels or metric)
     size = scale.choose(res)
     if abs(size["diameter"] / res.wheel_diameter - 1) > 0.02:
-        res = _curate(V, T, None, keypoints, hints, wheel_centres, size)
-    scale.check(res, size)
-    return res
+        res = _curate(V, T, None, keypoints, hints, wheel_centres, {**size, **extra})
+    return res, scale.check(res, size)
 
 
 def _curate(V, T, wheel_diameter, keypoints, hints, wheel_centres, _size):
@@ -69,7 +89,7 @@ def _curate(V, T, wheel_diameter, keypoints, hints, wheel_centres, _size):
     check_not_noisy(soup)
     rings = wheels.find_rings(soup)
     pair = wheels.wheel_pair(rings) if wheel_centres is None else None
-    seeds, wheel_method, front = None, "rings", None
+    seeds, wheel_method, front = None, "rings", _size.get("front")
     if wheel_centres is not None:
         pair, bands = silhouette.rings_from_centres(soup, *wheel_centres)
         comp_pos = {c.index: i for i, c in enumerate(soup.comps)}

@@ -178,7 +178,8 @@ def _straddling(pc, rider):
     """Step 3b: a rider's lower body as one piece (hips and both legs of a low-poly or skinned
     person, left on the saddle when the torso went): touching the rider, reaching from below the
     wheel tops to above 1.5 D, wider than 0.6 D across, its surface mostly beside the bike's
-    plane on both sides (legs astride the frame) and little of it on the plane.  A motorcycle's
+    plane on both sides (legs astride the frame, two apart at knee height) and little of it on
+    the plane.  A motor scooter's leg shield is as wide but runs across the plane.  A motorcycle's
     tank, seat or body is narrower or centred; a handlebar is on the steering column; a rack's
     panniers stay low.  (It may touch the bar: hands and legs in one skinned piece.)"""
     lo, hi, D = pc.lo, pc.hi, pc.D
@@ -187,13 +188,28 @@ def _straddling(pc, rider):
         & (hi[:, 2] - lo[:, 2] > 0.6 * D)
     out = np.zeros(len(pc.idx), bool)
     for j in np.nonzero(cand)[0]:
-        z = pc.touch.samples[pc.idx[j]][:, 2]
+        S = pc.touch.samples[pc.idx[j]]
+        z = S[:, 2]
         if len(z) < 20:
             continue
         left, right, central = (z < -0.15 * D).mean(), (z > 0.15 * D).mean(), (np.abs(z) < 0.1 * D).mean()
-        if left >= 0.2 and right >= 0.2 and left + right >= 0.5 and central <= 0.3:
+        if left >= 0.2 and right >= 0.2 and left + right >= 0.5 and central <= 0.3 and _two_legs(S, D):
             out[j] = True
     return out
+
+
+def _two_legs(S, D):
+    """Between knee and thigh height, horizontal slices of legs astride a frame are two
+    separate groups, left and right, with nothing on the bike's plane between them (the frame
+    is another piece); a leg shield or a body panel runs across the plane at every height."""
+    y0, y1 = S[:, 1].min(), S[:, 1].max()
+    split_ = 0
+    for a in np.linspace(0.1, 0.7, 12):
+        z = S[(S[:, 1] >= y0 + a * (y1 - y0)) & (S[:, 1] < y0 + (a + 0.05) * (y1 - y0)), 2]
+        if len(z) >= 10 and (z < -0.06 * D).any() and (z > 0.06 * D).any() and not (np.abs(z) < 0.06 * D).any():
+            split_ += 1
+    # a foot may hang lower than the other and the hips join them: two slices are enough
+    return split_ >= 2
 
 
 def _surrounded(pc, rider):

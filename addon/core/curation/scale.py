@@ -15,8 +15,6 @@ units long), so the size comes from what the vehicle is:
 """
 import numpy as np
 
-from ..contract import UserError
-
 # class: (typical tyre diameter, tyre range, wheelbase range, bar height range, seat height range), metres
 CLASSES = {
     "bicycle": (0.70, (0.30, 0.80), (0.55, 1.50), (0.50, 1.50), (0.40, 1.25)),
@@ -104,12 +102,14 @@ def measures(res):
 
 
 def check(res, size):
-    """UserError naming the measured figures when the sized vehicle is not its class's size."""
+    """The refusal (one line naming the measured figures) when the sized vehicle is not its
+    class's size, else None; the record keeps the size and its cue."""
     cls = size["class"]
     bad = misfits(res, cls)
     if bad:
-        raise UserError(f"size: the cues disagree: a {cls} with {res.wheel_diameter:.2f} m wheels ({size['cue']}) "
-                        f"gives {', '.join(bad)}; give --wheel-diameter if the wheels are right")
+        return (f"size: the cues disagree: a {cls} with {res.wheel_diameter:.2f} m wheels ({size['cue']}) "
+                f"gives {', '.join(bad)}; give --wheel-diameter if the wheels are right")
     wb, bar, seat = measures(res)
     res.record["size"] = {"class": cls, "cue": size["cue"], "wheelbase_m": wb, "bar_height_m": bar,
                           "seat_height_m": seat}
+    return None
