@@ -129,13 +129,24 @@ def snap(P, TW, labels, kp, has_crank, tol=TOL):
             continue
         a, b = (new.get(n, np.asarray(kp[n], float)) for n in names)
         if names[0] == "handle_left":
+            def mirror(p):
+                return p * [1, 1, -1]
             xy, w = 0.5 * (a[:2] + b[:2]), 0.5 * (b[2] - a[2])
-            a, b = np.array([xy[0], xy[1], -w]), np.array([xy[0], xy[1], w])
+            pairs = [(np.array([xy[0], xy[1], -w]), np.array([xy[0], xy[1], w]))]
         elif "crank_axle" in kp:
             c = np.asarray(kp["crank_axle"], float)
+
+            def mirror(p):
+                return np.array([2 * c[0] - p[0], 2 * c[1] - p[1], -p[2]])
             v = 0.5 * ((b[:2] - c[:2]) - (a[:2] - c[:2]))
-            a = np.array([c[0] - v[0], c[1] - v[1], a[2]])
-            b = np.array([c[0] + v[0], c[1] + v[1], b[2]])
+            pairs = [(np.array([c[0] - v[0], c[1] - v[1], a[2]]), np.array([c[0] + v[0], c[1] + v[1], b[2]]))]
+        else:
+            pairs = []
+        if pairs:
+            # the averaged pair, or either one with its mirror image: whichever lies closest
+            pairs += [(a, mirror(a)), (mirror(b), b)]
+            a, b = min(pairs, key=lambda pq: max(np.linalg.norm(S - pq[0], axis=1).min(),
+                                                 np.linalg.norm(S - pq[1], axis=1).min()))
         kp[names[0]], kp[names[1]] = a, b
         moved += list(new)
     return moved

@@ -20,6 +20,7 @@ diameter D); object names are never looked at.
 import numpy as np
 
 from .contacts import Touch
+from .shape_keypoints import steering_axis
 
 HIGH = 1.75          # wheel diameters: wholly above this is head or torso
 PERSON_D = 0.6       # metres: the least "wheel diameter" the person's proportions are measured in
@@ -61,6 +62,25 @@ class _Pieces:
         # the steering column: a stem, basket or lamp wholly ahead of where a rider's body can
         # be, and what is fastened to it (a toy bike's thick bar halves)
         self.column = lo[:, 0] > self.fa[0] - 0.4 * D
+        # on small wheels (D raised to the person's measure), also ahead of the steering axis'
+        # line less 0.3 D where the shape shows one: a motor scooter's stem leans its bar 30 cm
+        # behind the front axle, where a seated rider's hands are (on a bicycle's or a
+        # motorcycle's wheels the rider's head and arms come as close to that line)
+        axis = None
+        if wheel_D is not None and wheel_D < D:
+            X = np.concatenate([self.touch.samples[i] for i in idx])
+            axis = steering_axis(X, self.fa, R)
+        if axis is not None:
+            sb, st = axis
+            ymid = 0.5 * (lo[:, 1] + hi[:, 1])
+            x_at = sb[0] + (ymid - sb[1]) * (st[0] - sb[0]) / max(st[1] - sb[1], 1e-9)
+            along = (lo[:, 0] > x_at - 0.3 * D) & (ymid > self.fa[1])
+            self.column |= along
+            # the bar itself, up to the stem's top: never a head or torso (a scooter's bar halves
+            # sit 1.3 m up, above 1.75 of a small-wheeled vehicle's D)
+            self.bar_top = along & (hi[:, 1] < st[1] + 0.1 * D)
+        else:
+            self.bar_top = np.zeros(len(idx), bool)
         self.on_column = self.mask(self.touch.touching(self.global_(self.column)))
         # the frame's stays, the fork legs, axle nuts: lateral pieces reaching a wheel's hub
         self.at_hub = np.zeros(len(idx), bool)
@@ -100,7 +120,7 @@ def drop_rider(soup, pose):
     bar_like = (hi[:, 2] - lo[:, 2] > 0.5 * D) & ((hi - lo).min(1) <= 0.1 * D)
     # plates and rods up there (a triple clamp, bar risers, a windscreen) are not a head or torso
     solid = (hi - lo).min(1) >= 0.06 * D
-    high = ((lo[:, 1] > HIGH * D) & ~bar_like & solid) \
+    high = ((lo[:, 1] > HIGH * D) & ~bar_like & solid & ~pc.bar_top) \
         | np.array([h > HIGH * D and lw < HIGH * D and not b and _solid_top(pc.touch.samples[i], D)
                     for i, lw, h, b in zip(idx, lo[:, 1], hi[:, 1], bar_like)])
     # a person shows a head and shoulders above HIGH*D: as wide as 0.2 D and reaching 0.25 D up
@@ -123,7 +143,11 @@ def _body(pc, high):
     thick = (hi - lo).min(1) > 0.1 * D
     side = np.abs(0.5 * (lo[:, 2] + hi[:, 2])) > 0.25 * (hi[:, 2] - lo[:, 2])
     short = (hi[:, 0] - lo[:, 0]) < 0.6 * D
-    ok = (mid > 1.1 * D) & thick & (side | short) & ~pc.column & ~(pc.on_column & ~high)
+    # a handlebar assembly (bar, headset, lamp in one piece) at the top of a stem leaning far
+    # back, behind the column test's line: wider than 0.8 D, centred, in the front half
+    bars = (hi[:, 2] - lo[:, 2] > 0.8 * D) & (np.abs(hi[:, 2] + lo[:, 2]) < 0.2 * (hi[:, 2] - lo[:, 2])) \
+        & (0.5 * (lo[:, 0] + hi[:, 0]) > 0.5 * (pc.fa[0] + pc.ra[0]))
+    ok = (mid > 1.1 * D) & thick & (side | short) & ~pc.column & ~(pc.on_column & ~high) & ~(bars & ~high)
     grow = high.copy()
     gap = 0.08 * D
     frontier = list(np.nonzero(high)[0])
