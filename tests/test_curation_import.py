@@ -128,3 +128,36 @@ def test_partial_curation_resumed_from_placed_wheel_centres(tmp_path, fresh_scen
     assert rec["wheels_from"] == "given"
     assert bpy.ops.articcyc.save_bike(directory=str(tmp_path / "bike")) == {"FINISHED"}
     assert sorted(os.listdir(tmp_path / "bike")) == ["bike.blend", "keypoints.json", "meta.json"]
+
+
+def _curate_cli(model, out):
+    import subprocess
+    import sys
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, PYTHONPATH=root)
+    return subprocess.run([sys.executable, os.path.join(root, "blender_scripts", "curate.py"), "--input", str(model),
+                           "--out", str(out), "--wheel-diameter", str(SP["wheel_diameter_m"])],
+                          capture_output=True, text=True, env=env, timeout=600)
+
+
+def test_fbx_with_lamps_imports_and_a_broken_fbx_is_one_line(tmp_path, fresh_scene):
+    """Blender 5.0's FBX importer stopped on every lamp ('CyclesLightSettings' has no
+    'cast_shadow'); a bike exported with a point lamp and a sun now curates, and an FBX the
+    importer cannot read gives one line on stderr, no Python traceback."""
+    _bike_scene()
+    bpy.ops.object.light_add(type="POINT", location=(2.0, 2.0, 2.0))
+    bpy.ops.object.light_add(type="SUN", location=(0.0, 3.0, 3.0))
+    path = tmp_path / "bike_with_lamps.fbx"
+    bpy.ops.export_scene.fbx(filepath=str(path))
+    assert b"Light" in path.read_bytes()
+    r = _curate_cli(path, tmp_path / "bike")
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr and "cast_shadow" not in r.stderr, r.stderr
+    assert (tmp_path / "bike" / "keypoints.json").is_file()
+    broken = tmp_path / "broken.fbx"
+    broken.write_bytes(path.read_bytes()[:len(path.read_bytes()) // 3])
+    r = _curate_cli(broken, tmp_path / "broken")
+    assert r.returncode == 2, r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("curate.py: error:") and "cannot import" in lines[0], r.stderr
+    assert not (tmp_path / "broken").exists()

@@ -7,8 +7,11 @@ appended: the objects of its main scene (named "Scene", else the first) are link
 alternatives, studio sets, not the bike).  glTF files with Draco-compressed meshes go through the
 same importer (it carries the Draco decoder).
 """
+import contextlib
 import os
 import re
+import sys
+import tempfile
 
 import bpy
 
@@ -52,9 +55,12 @@ def import_model(path):
     else:
         if ext in (".glb", ".gltf"):
             _numpy_bool_alias()
+        if ext == ".fbx":
+            _fbx_light_shadow_property()
         op = _operator(ext)
         try:
-            res = op(filepath=path)
+            with _stderr_kept_on_success():
+                res = op(filepath=path)
         except Exception as e:  # importers raise RuntimeError or their own errors on bad files
             lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
             # the exception's own line in a wrapped traceback says why; else the last line
@@ -82,6 +88,46 @@ def _numpy_bool_alias():
     import numpy as np
     if not hasattr(np, "bool"):
         np.bool = bool
+
+
+def _fbx_light_shadow_property():
+    """Blender 5.0's FBX importer sets `light.cycles.cast_shadow` on every lamp it reads, a
+    property Cycles no longer has: any FBX with a lamp stopped with "'CyclesLightSettings' object
+    has no attribute 'cast_shadow'".  Give Cycles' light settings that (unused) property back so
+    the import runs to the end; the lamps are dropped with the other non-mesh objects anyway.
+    Blender versions whose Cycles still has it are left as they are."""
+    light = bpy.data.lights.new("articcyc_probe", "POINT")
+    try:
+        settings = getattr(light, "cycles", None)
+        if settings is not None and not hasattr(settings, "cast_shadow"):
+            type(settings).cast_shadow = bpy.props.BoolProperty(default=True)
+    finally:
+        bpy.data.lights.remove(light)
+
+
+@contextlib.contextmanager
+def _stderr_kept_on_success():
+    """Blender prints an importer's Python traceback on stderr itself before the operator raises;
+    the user should see one line saying why (import_model's UserError), not the traceback.  So
+    the importer's stderr (file descriptor 2: Blender writes it from C) goes to a temporary file
+    and is passed on only when the import succeeds (its warnings)."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile(mode="w+b") as tmp:
+        os.dup2(tmp.fileno(), 2)
+        ok = False
+        try:
+            yield
+            ok = True
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            if ok:
+                tmp.seek(0)
+                text = tmp.read()
+                if text:
+                    os.write(2, text)
 
 
 def _append_blend(path):

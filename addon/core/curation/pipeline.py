@@ -6,9 +6,10 @@ import numpy as np
 
 from ..contract import UserError
 from . import keypoints as kpmod
-from . import mesh, silhouette, split, wheels
+from . import keypoint_check, mesh, scale, silhouette, split, wheels
 from .rider_removal import drop_rider
 from .shape_fit import check_two_wheels, choose_keypoints, shape_samples
+from .shape_keypoints import bulky as _bulky
 from .pose import canonical_pose
 from .validate import validate
 
@@ -32,12 +33,48 @@ class Result:
 def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, hints=None, wheel_centres=None):
     """V (n, 3) model vertices (world), T (m, 3) triangles.
 
+    wheel_diameter: the tyres' outer diameter in metres, or None: sized from every cue
+    (scale.py: the vehicle class its shape shows, the file's own units, the wheelbase, bar and
+    seat heights), refused with the measured figures when they disagree.
     keypoints: optional {name: canonical xyz} that replace the automatic ones (an annotator's
     JSON); wheel_centres: optional (front, rear) model points an annotator placed, used instead
     of the wheel search; hints: optional per-triangle labels (split.FRAME.. or -1 for none) from vertex
     groups or object names, used instead of the automatic split where given.
     Raises UserError when no wheels are found.
     """
+    res, err = _sized(V, T, wheel_diameter, keypoints, hints, wheel_centres, {})
+    if (err or res.problems) and wheel_centres is None and res.record.get("forward_cue", "").startswith("handlebar"):
+        # front and back from the bar are a guess (a motor scooter's broad rear body is as wide
+        # and high as its bar): the other way round, when that one validates with fewer problems
+        rear = np.linalg.inv(res.M) @ np.r_[res.keypoints["rear_axle"], 1.0]
+        try:
+            res2, err2 = _sized(V, T, wheel_diameter, keypoints, hints, wheel_centres, {"front": rear[:3]})
+        except UserError:
+            res2, err2 = res, "refused"
+        if (0 if err2 is None else 1) + len(res2.problems) < (0 if err is None else 1) + len(res.problems):
+            res, err = res2, err2
+            res.record["forward_cue"] = "the other way validates (bar cue reversed)"
+            res.notes.append("front and back: the bar cue reversed, the other way validates")
+    if err:
+        raise UserError(err)
+    return res
+
+
+def _sized(V, T, wheel_diameter, keypoints, hints, wheel_centres, extra):
+    """(Result, refusal text or None): curated at the given wheel size, or, with None, at the
+    size every cue gives (scale.py; the text says why the cues disagree)."""
+    res = _curate(V, T, wheel_diameter, keypoints, hints, wheel_centres, dict(extra))
+    if wheel_diameter is not None:
+        return res, None
+    # the first pass at a bicycle's 0.7 m wheels shows what the vehicle is; curate again at the
+    # size its cues give (every length threshold is relative to the wheels or metric)
+    size = scale.choose(res)
+    if abs(size["diameter"] / res.wheel_diameter - 1) > 0.02:
+        res = _curate(V, T, None, keypoints, hints, wheel_centres, {**size, **extra})
+    return res, scale.check(res, size)
+
+
+def _curate(V, T, wheel_diameter, keypoints, hints, wheel_centres, _size):
     if wheel_diameter is not None and not (wheel_diameter > 0 and np.isfinite(wheel_diameter)):
         raise UserError(f"--wheel-diameter must be a positive number of metres, got {wheel_diameter}")
     V = np.asarray(V, float)
@@ -52,7 +89,7 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
     check_not_noisy(soup)
     rings = wheels.find_rings(soup)
     pair = wheels.wheel_pair(rings) if wheel_centres is None else None
-    seeds, wheel_method, front = None, "rings", None
+    seeds, wheel_method, front = None, "rings", _size.get("front")
     if wheel_centres is not None:
         pair, bands = silhouette.rings_from_centres(soup, *wheel_centres)
         comp_pos = {c.index: i for i, c in enumerate(soup.comps)}
@@ -60,20 +97,17 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
         wheel_method, front = "given", np.asarray(wheel_centres[0], float)
     elif pair is None:
         # no clean tyre pieces: the wheels are the two circles of the side-view outline
-        pair, _, bands = silhouette.wheel_rings(soup)
+        pair, _, bands = silhouette.wheel_rings(soup, skip=backdrops(soup))
         comp_pos = {c.index: i for i, c in enumerate(soup.comps)}
         seeds = sorted({comp_pos[c] for b in bands for c in soup.comp_of_vert[b] if c in comp_pos})
         wheel_method = "silhouette"
     if seeds is not None and not seeds:  # no vertex on the tyre outline: grow from everything
         seeds = list(range(len(soup.comps)))
     auto_size = wheel_diameter is None
-    pose = canonical_pose(soup, rings, pair, wheel_diameter or DEFAULT_WHEEL_DIAMETER, seeds, front)
-    wheel_diameter = DEFAULT_WHEEL_DIAMETER if auto_size else wheel_diameter
-    if auto_size and auto_wheel_diameter(soup, pose):
-        wheel_diameter = auto_wheel_diameter(soup, pose)
-        pose = canonical_pose(soup, rings, pair, wheel_diameter, seeds, front)
-        pose.notes.append(f"small wheels for the vehicle's height (a kick scooter?): wheel diameter set to "
-                          f"{wheel_diameter:.3f} m so its top is 1 m high")
+    wheel_diameter = _size.get("diameter", DEFAULT_WHEEL_DIAMETER) if auto_size else wheel_diameter
+    pose = canonical_pose(soup, rings, pair, wheel_diameter, seeds, front)
+    if "note" in _size:
+        pose.notes.append(_size["note"])
     keep_tri = soup.tri_mask(pose.keep)
     rider = drop_rider(soup, pose)
     if rider.any():
@@ -103,6 +137,20 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
         h = np.asarray(hints)
         use = (h >= 0) & keep_tri
         labels[use] = h[use]
+    kp_probs, kp_dist = {}, {}
+    if all(k in kp for k in needed) and not problems:
+        # the keypoints on their own parts (keypoint_check.py): only once they validate, a
+        # refused geometry says more than a distance
+        if has_crank and keypoint_check.pedal_pieces(soup, view.P, labels, kp, keep_tri):
+            notes.append("pedal bodies modelled as their own pieces put on the crank")
+        given = {k: kp[k] for k in (keypoints or {})}   # an annotator's points are measured, never moved
+        moved = [k for k in keypoint_check.snap(view.P, soup.TW, labels, kp, has_crank) if k not in given]
+        kp.update(given)
+        if moved:
+            problems = validate(kp, has_crank)
+            notes.append(f"moved onto their part: {', '.join(moved)}")
+        kp_probs, kp_dist = keypoint_check.check(view.P, soup.TW, labels, kp, has_crank)
+        problems = problems + kp_probs
     split_args = {"head_radius": info.get("head_tube_radius"), "wheel_radius": pose.front.radius * pose.scale,
                   "head_span": info.get("head_span"), "has_crank": bool(has_crank)}
     record = {
@@ -115,11 +163,14 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
         "chainring_found": pose.crank is not None,
         "wheels_from": wheel_method,
         "has_crank": bool(has_crank),
+        "height_m": float(X[:, 1].max()) if len(X) else 0.0,
+        "bulky": float(sk_bulky(X, pose)),
         "components": len(soup.comps),
         "components_kept": int(pose.keep.sum()),
         "keypoint_source": source,
         "notes": pose.notes + notes,
         "faces_cut": int(cut.sum()),
+        "keypoint_distance_cm": {k: round(v * 100, 2) for k, v in kp_dist.items()},
         "split_args": {k: (v if v is None or isinstance(v, bool) else np.asarray(v, float).tolist())
                        for k, v in split_args.items()},
     }
@@ -143,12 +194,32 @@ def check_not_noisy(soup):
                         f"{np.median(ang):.0f} deg > {NOISY_MEDIAN_DEG:.0f}; a photogrammetry scan?)")
 
 
-def auto_wheel_diameter(soup, pose):
-    """0.7 m, unless the wheels are tiny for the vehicle (a kick scooter: its top more than four
-    wheel diameters up), then the size that puts its top (the bar) at 1 m."""
-    top = float(soup.transformed_points(pose.M)[soup.vert_mask(pose.keep), 1].max())
-    D = 2 * 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale
-    return round(D / top, 4) if top > 4 * D else None
+def sk_bulky(X, pose):
+    """Share of the side view between the wheels filled by a wide body (a motorcycle's engine
+    and tank, a scooter's deck or covered body; shape_keypoints.bulky)."""
+    fa, ra = pose.apply(pose.front.centre), pose.apply(pose.rear.centre)
+    return _bulky(X, fa, ra, 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale) if len(X) else 0.0
+
+
+def backdrops(soup):
+    """Components that are flat sheets at least as large as everything else together: a ground
+    plane or backdrop the model was published on (found before the wheels, whose size sizes the
+    later ground_like check).  A bike's own plates (a number plate, a fairing) are far smaller
+    than the bike."""
+    out = np.zeros(len(soup.comps), bool)
+    if len(soup.comps) < 2:
+        return out
+    lo = np.array([c.bbox[0] for c in soup.comps])
+    hi = np.array([c.bbox[1] for c in soup.comps])
+    for i, c in enumerate(soup.comps):
+        if not (c.spread[0] > 0 and c.spread[2] < 0.01 * c.spread[0]):
+            continue
+        rest = np.ones(len(soup.comps), bool)
+        rest[i] = False
+        rest_ext = float((hi[rest].max(0) - lo[rest].min(0)).max())
+        if float((c.bbox[1] - c.bbox[0]).max()) >= 0.9 * rest_ext:
+            out[i] = True
+    return out
 
 
 class _Identity:

@@ -20,8 +20,10 @@ diameter D); object names are never looked at.
 import numpy as np
 
 from .contacts import Touch
+from .shape_keypoints import steering_axis
 
 HIGH = 1.75          # wheel diameters: wholly above this is head or torso
+PERSON_D = 0.6       # metres: the least "wheel diameter" the person's proportions are measured in
 
 
 def _solid_top(q, D):
@@ -43,7 +45,7 @@ class _Pieces:
     """The kept components in the canonical frame: bounding boxes, the surface contacts and the
     bike's landmarks the steps share."""
 
-    def __init__(self, soup, pose, idx, P, D):
+    def __init__(self, soup, pose, idx, P, D, wheel_D=None):
         self.idx, self.D = idx, D
         self.local = {i: j for j, i in enumerate(idx)}
         pts = [P[soup.comps[i].verts] for i in idx]
@@ -51,15 +53,34 @@ class _Pieces:
         self.hi = np.array([q.max(0) for q in pts])
         self.fa, self.ra = pose.apply(pose.front.centre), pose.apply(pose.rear.centre)
         self.touch = Touch(P, soup.TW, {i: soup.comps[i] for i in idx}, max(0.02, 0.025 * D))
-        lo, hi, R = self.lo, self.hi, 0.5 * D
+        lo, hi, R = self.lo, self.hi, 0.5 * (wheel_D or D)
         self.lateral = (lo[:, 2] > 0.04 * D) | (hi[:, 2] < -0.04 * D)
         self.wheel = np.zeros(len(idx), bool)
         for c in (self.fa, self.ra):   # tyres, rims, spokes, hubs: within the wheel disc, near its plane
             far = np.maximum(np.abs(lo[:, :2] - c[:2]), np.abs(hi[:, :2] - c[:2]))
-            self.wheel |= (np.hypot(far[:, 0], far[:, 1]) < 1.1 * R) & (np.maximum(-lo[:, 2], hi[:, 2]) < 0.2 * D)
+            self.wheel |= (np.hypot(far[:, 0], far[:, 1]) < 1.1 * R) & (np.maximum(-lo[:, 2], hi[:, 2]) < 0.4 * R)
         # the steering column: a stem, basket or lamp wholly ahead of where a rider's body can
         # be, and what is fastened to it (a toy bike's thick bar halves)
         self.column = lo[:, 0] > self.fa[0] - 0.4 * D
+        # on small wheels (D raised to the person's measure), also ahead of the steering axis'
+        # line less 0.3 D where the shape shows one: a motor scooter's stem leans its bar 30 cm
+        # behind the front axle, where a seated rider's hands are (on a bicycle's or a
+        # motorcycle's wheels the rider's head and arms come as close to that line)
+        axis = None
+        if wheel_D is not None and wheel_D < D:
+            X = np.concatenate([self.touch.samples[i] for i in idx])
+            axis = steering_axis(X, self.fa, R)
+        if axis is not None:
+            sb, st = axis
+            ymid = 0.5 * (lo[:, 1] + hi[:, 1])
+            x_at = sb[0] + (ymid - sb[1]) * (st[0] - sb[0]) / max(st[1] - sb[1], 1e-9)
+            along = (lo[:, 0] > x_at - 0.3 * D) & (ymid > self.fa[1])
+            self.column |= along
+            # the bar itself, up to the stem's top: never a head or torso (a scooter's bar halves
+            # sit 1.3 m up, above 1.75 of a small-wheeled vehicle's D)
+            self.bar_top = along & (hi[:, 1] < st[1] + 0.1 * D)
+        else:
+            self.bar_top = np.zeros(len(idx), bool)
         self.on_column = self.mask(self.touch.touching(self.global_(self.column)))
         # the frame's stays, the fork legs, axle nuts: lateral pieces reaching a wheel's hub
         self.at_hub = np.zeros(len(idx), bool)
@@ -82,7 +103,10 @@ class _Pieces:
 def drop_rider(soup, pose):
     """Bool per soup component: the rider's pieces (all False when there is none)."""
     P = soup.transformed_points(pose.M)
-    D = 2 * 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale
+    wheel_D = 2 * 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale
+    # the person's measure: a bicycle's wheel, or 0.6 m on small-wheeled vehicles (a motor
+    # scooter's 0.46 m wheels put a seated person 4 wheel diameters up, a bicycle's rider 3)
+    D = max(wheel_D, PERSON_D)
     out = np.zeros(len(soup.comps), bool)
     idx = [i for i, k in enumerate(pose.keep) if k]
     if not idx:
@@ -90,13 +114,13 @@ def drop_rider(soup, pose):
     hi_all = np.array([P[soup.comps[i].verts][:, 1].max() for i in idx])
     if not (2.1 * D < hi_all.max() < 3.5 * D):
         return out
-    pc = _Pieces(soup, pose, idx, P, D)
+    pc = _Pieces(soup, pose, idx, P, D, wheel_D)
     lo, hi = pc.lo, pc.hi
     # a handlebar may sit that high (a motorcycle's): wide across and thin, unlike a person
     bar_like = (hi[:, 2] - lo[:, 2] > 0.5 * D) & ((hi - lo).min(1) <= 0.1 * D)
     # plates and rods up there (a triple clamp, bar risers, a windscreen) are not a head or torso
     solid = (hi - lo).min(1) >= 0.06 * D
-    high = ((lo[:, 1] > HIGH * D) & ~bar_like & solid) \
+    high = ((lo[:, 1] > HIGH * D) & ~bar_like & solid & ~pc.bar_top) \
         | np.array([h > HIGH * D and lw < HIGH * D and not b and _solid_top(pc.touch.samples[i], D)
                     for i, lw, h, b in zip(idx, lo[:, 1], hi[:, 1], bar_like)])
     # a person shows a head and shoulders above HIGH*D: as wide as 0.2 D and reaching 0.25 D up
@@ -104,6 +128,7 @@ def drop_rider(soup, pose):
         return out
     rider = _body(pc, high)
     rider |= _limbs(pc, rider)
+    rider |= _straddling(pc, rider)
     rider |= _surrounded(pc, rider)
     rider |= _hanging(pc, rider)
     out[np.array(idx)[rider]] = True
@@ -118,7 +143,11 @@ def _body(pc, high):
     thick = (hi - lo).min(1) > 0.1 * D
     side = np.abs(0.5 * (lo[:, 2] + hi[:, 2])) > 0.25 * (hi[:, 2] - lo[:, 2])
     short = (hi[:, 0] - lo[:, 0]) < 0.6 * D
-    ok = (mid > 1.1 * D) & thick & (side | short) & ~pc.column & ~(pc.on_column & ~high)
+    # a handlebar assembly (bar, headset, lamp in one piece) at the top of a stem leaning far
+    # back, behind the column test's line: wider than 0.8 D, centred, in the front half
+    bars = (hi[:, 2] - lo[:, 2] > 0.8 * D) & (np.abs(hi[:, 2] + lo[:, 2]) < 0.2 * (hi[:, 2] - lo[:, 2])) \
+        & (0.5 * (lo[:, 0] + hi[:, 0]) > 0.5 * (pc.fa[0] + pc.ra[0]))
+    ok = (mid > 1.1 * D) & thick & (side | short) & ~pc.column & ~(pc.on_column & ~high) & ~(bars & ~high)
     grow = high.copy()
     gap = 0.08 * D
     frontier = list(np.nonzero(high)[0])
@@ -167,6 +196,44 @@ def _limbs(pc, body):
         grown[new] = True
         frontier = [pc.idx[j] for j in new]
     return grown
+
+
+def _straddling(pc, rider):
+    """Step 3b: a rider's lower body as one piece (hips and both legs of a low-poly or skinned
+    person, left on the saddle when the torso went): touching the rider, reaching from below the
+    wheel tops to above 1.5 D, wider than 0.6 D across, its surface mostly beside the bike's
+    plane on both sides (legs astride the frame, two apart at knee height) and little of it on
+    the plane.  A motor scooter's leg shield is as wide but runs across the plane.  A motorcycle's
+    tank, seat or body is narrower or centred; a handlebar is on the steering column; a rack's
+    panniers stay low.  (It may touch the bar: hands and legs in one skinned piece.)"""
+    lo, hi, D = pc.lo, pc.hi, pc.D
+    near = pc.mask(pc.touch.touching(pc.global_(rider)))
+    cand = near & ~rider & ~pc.wheel & ~pc.column & (hi[:, 1] > 1.5 * D) & (lo[:, 1] < 1.1 * D) \
+        & (hi[:, 2] - lo[:, 2] > 0.6 * D)
+    out = np.zeros(len(pc.idx), bool)
+    for j in np.nonzero(cand)[0]:
+        S = pc.touch.samples[pc.idx[j]]
+        z = S[:, 2]
+        if len(z) < 20:
+            continue
+        left, right, central = (z < -0.15 * D).mean(), (z > 0.15 * D).mean(), (np.abs(z) < 0.1 * D).mean()
+        if left >= 0.2 and right >= 0.2 and left + right >= 0.5 and central <= 0.3 and _two_legs(S, D):
+            out[j] = True
+    return out
+
+
+def _two_legs(S, D):
+    """Between knee and thigh height, horizontal slices of legs astride a frame are two
+    separate groups, left and right, with nothing on the bike's plane between them (the frame
+    is another piece); a leg shield or a body panel runs across the plane at every height."""
+    y0, y1 = S[:, 1].min(), S[:, 1].max()
+    split_ = 0
+    for a in np.linspace(0.1, 0.7, 12):
+        z = S[(S[:, 1] >= y0 + a * (y1 - y0)) & (S[:, 1] < y0 + (a + 0.05) * (y1 - y0)), 2]
+        if len(z) >= 10 and (z < -0.06 * D).any() and (z > 0.06 * D).any() and not (np.abs(z) < 0.06 * D).any():
+            split_ += 1
+    # a foot may hang lower than the other and the hips join them: two slices are enough
+    return split_ >= 2
 
 
 def _surrounded(pc, rider):

@@ -28,6 +28,9 @@ from .wheels import fit_circle_2d
 IMAGE_PX = 200          # pixels along the longer side of the side view
 MIN_SUPPORT = 0.5       # share of a wheel's circumference that must be (outward-facing) outline
 MIN_PAIR_SUPPORT = 1.2  # and both wheels together (one tyre may be half hidden by a rider's leg)
+GROUND_MIN_SUPPORT = 0.35   # each wheel of a pair standing on a common ground line
+GROUND_PAIR_SUPPORT = 0.9   # and both together
+GROUND_BONUS = 4.0          # a pair standing on the ground ranks above any pair that does not
 
 
 @dataclass
@@ -199,18 +202,88 @@ def side_view(P, TW, normal, px_count=IMAGE_PX):
     return sv
 
 
-def pairs(circles, min_support=MIN_SUPPORT):
-    """(score, a, b) of disjoint circle pairs, best first (any size ratio: checks come later)."""
-    good = [c for c in circles if c.support >= min_support]
+def merge_concentric(circles):
+    """One circle per wheel: candidates around the same centre with similar radii (a tyre seen in
+    two radius bands, its tyre and rim outlines, a mudguard arc over it) become the best-supported
+    of them.  Without this, a clean spoked bicycle showed "4 round outlines" and no pair."""
     out = []
-    for i, a in enumerate(good):
-        for b in good[i + 1:]:
+    for c in sorted(circles, key=lambda c: -c.support * c.radius):
+        if any(np.linalg.norm(c.centre - o.centre) < 0.25 * max(c.radius, o.radius)
+               and min(c.radius, o.radius) > 0.75 * max(c.radius, o.radius) for o in out):
+            continue
+        out.append(c)
+    return out
+
+
+def ground_line(sv, a, b):
+    """The line tangent to both circles from the side that nothing of the vehicle crosses: the
+    ground both wheels stand on.  (unit outward normal n, offset g: the ground is n.x = g), or
+    None when both common tangents cut through the side view (the circles are not the two
+    wheels the vehicle stands on: a basket, a headlight, a chainring, a covered scooter's
+    front)."""
+    if getattr(sv, "image", None) is None:
+        return None
+    d = b.centre - a.centre
+    L = float(np.linalg.norm(d))
+    if L <= 0:
+        return None
+    u = d / L
+    p = np.array([-u[1], u[0]])
+    s = (a.radius - b.radius) / L
+    if abs(s) >= 1:
+        return None
+    c = np.sqrt(1 - s * s)
+    ys, xs = np.nonzero(sv.image)
+    pts = sv.lo + (np.stack([xs, ys], 1) + 0.5) * sv.px
+    R = 0.5 * (a.radius + b.radius)
+    tol = 2.5 * sv.px + 0.03 * R
+    best = None
+    for sg in (1, -1):
+        n = s * u + sg * c * p
+        g = float(n @ a.centre + a.radius)
+        beyond = int(((pts @ n) - g > tol).sum())
+        if beyond <= max(3, 0.003 * len(pts)) and (best is None or beyond < best[2]):
+            best = (n, g, beyond)
+    return None if best is None else best[:2]
+
+
+def on_ground(circ, ground, R):
+    """Whether a circle's bottom reaches the ground line (a wheel, not a lamp or basket)."""
+    n, g = ground
+    return float(n @ circ.centre + circ.radius) >= g - 0.1 * R
+
+
+def pairs(circles, min_support=MIN_SUPPORT, sv=None, grounded_ok=True):
+    """(score, a, b) of disjoint circle pairs, best first (any size ratio: checks come later).
+
+    The wheels are the two circles the vehicle stands on: both tangent to one line that nothing
+    of the side view crosses (the ground), one behind the other along it.  Such a pair ranks
+    above any other and needs less outline (a covered scooter's body hides the top of its small
+    wheels; a rider's legs or mudguards hide parts of a tyre): each >= 35 %, together >= 90 %.
+    A third round outline (a basket, a headlight, a chainring, a mudguard arc, a scooter's front)
+    stands on nothing, so it cannot pair with a wheel.  Without the side view image (or when no
+    pair stands on a common ground: a display base under the wheels) the best-supported pair.
+    grounded_ok False (a view along a thicker axis than the thinnest, where a front or top
+    view's round ends can stand on a line too): only well-supported pairs, as before."""
+    circles = merge_concentric(circles)
+    out = []
+    for i, a in enumerate(circles):
+        for b in circles[i + 1:]:
+            if min(a.support, b.support) < GROUND_MIN_SUPPORT:
+                continue
             d = np.linalg.norm(a.centre - b.centre)
-            if d < 0.95 * (a.radius + b.radius) or a.support + b.support < MIN_PAIR_SUPPORT:
+            if d < 0.95 * (a.radius + b.radius):
                 continue
             ratio = min(a.radius, b.radius) / max(a.radius, b.radius)
             # big, well-supported, and similar: a wheel pair beats a wheel and a headlight
-            out.append(((a.support + b.support) * (a.radius + b.radius) * ratio, a, b))
+            score = (a.support + b.support) * (a.radius + b.radius) * ratio
+            strong = min(a.support, b.support) >= min_support and a.support + b.support >= MIN_PAIR_SUPPORT
+            grounded = grounded_ok and a.support + b.support >= GROUND_PAIR_SUPPORT \
+                and ground_line(sv, a, b) is not None
+            if grounded:
+                out.append((GROUND_BONUS * score, a, b))
+            elif strong:
+                out.append((score, a, b))
     out.sort(key=lambda t: -t[0])
     return out
 
@@ -287,11 +360,12 @@ def find_side_view(P, TW):
     tried = []
     for k in range(3):
         sv = side_view(P, TW, axes[k])
-        pr = pairs(sv.circles)
+        pr = pairs(sv.circles, sv=sv, grounded_ok=k == 0)
         tried.append((pr[0][0] if pr else 0.0, k, sv, pr))
-        # the thinnest axis giving two well-supported similar circles is the lateral one
-        if k == 0 and pr and min(pr[0][1].support, pr[0][2].support) > 0.6 and \
-                min(pr[0][1].radius, pr[0][2].radius) > 0.6 * max(pr[0][1].radius, pr[0][2].radius):
+        # the thinnest axis giving two well-supported similar circles, or two it stands on, is
+        # the lateral one (a top or front view has round ends that can look grounded too)
+        if k == 0 and pr and min(pr[0][1].radius, pr[0][2].radius) > 0.6 * max(pr[0][1].radius, pr[0][2].radius) \
+                and (min(pr[0][1].support, pr[0][2].support) > 0.6 or ground_line(sv, pr[0][1], pr[0][2]) is not None):
             break
     best = max(tried, key=lambda t: t[0])
     return best[2], best[3], spread
@@ -304,12 +378,22 @@ def _frame(normal):
     return normal, e1, np.cross(normal, e1)
 
 
-def wheel_rings(soup):
+def wheel_rings(soup, skip=None):
     """The two wheels as wheels.Ring (comp = -1) from the side view, refined on the vertices,
-    plus (side view, all circles, band vertex indices per wheel).  UserError naming the failed
-    check for models that are not two-wheelers."""
+    plus (side view, all circles, band vertex indices per wheel).  skip: bool per soup component
+    left out of the search (backdrops).  UserError naming the failed check for models that are
+    not two-wheelers."""
     from .wheels import Ring
     P, TW = soup.P, soup.TW
+    used = None
+    if skip is not None and skip.any() and not skip.all():
+        # the search sees the vehicle only: a ground plane under it would be the thinnest
+        # direction of the whole and fill the side view (a leaning motorcycle on a 12 m sheet)
+        keep_t = ~soup.tri_mask(skip)
+        used = np.unique(TW[keep_t])
+        remap = np.full(len(P), -1)
+        remap[used] = np.arange(len(used))
+        P, TW = P[used], remap[TW[keep_t]]
     sv, pr, spread = find_side_view(P, TW)
     if sv.thickness < 0.03:
         raise UserError(f"not a 3D two-wheeler: the model is flat (thickness {sv.thickness * 100:.1f} % of its "
@@ -324,9 +408,13 @@ def wheel_rings(soup):
         raise UserError(f"wheel sizes very unequal (smaller/larger = {ratio:.2f} < 0.6): a penny-farthing "
                         f"or not a two-wheeler")
     R = 0.5 * (a.radius + b.radius)
-    third = [c for c in sv.circles if c.support >= 0.6 and c is not a and c is not b
+    ground = ground_line(sv, a, b)
+    # a third wheel stands on the same ground (a trailer, an in-line trike); a round basket,
+    # lamp or a covered scooter's front above it is no wheel
+    third = [c for c in merge_concentric(sv.circles) if c.support >= 0.6 and c is not a and c is not b
              and min(c.radius, R) > 0.75 * max(c.radius, R)
-             and all(np.linalg.norm(c.centre - w.centre) > 0.95 * (c.radius + w.radius) for w in (a, b))]
+             and all(np.linalg.norm(c.centre - w.centre) > 0.95 * (c.radius + w.radius) for w in (a, b))
+             and (ground is None or on_ground(c, ground, R))]
     if third:
         raise UserError(f"three wheels in the side view ({len(third) + 2} wheel-sized circles): a tricycle "
                         f"or a vehicle with a trailer, not a two-wheeler")
@@ -376,6 +464,8 @@ def wheel_rings(soup):
     for c3, r, band in zip(cents, radii, bands):
         lat = float(np.median((P[band] - c3) @ normal)) if len(band) else 0.0
         rings.append(Ring(-1, c3 + lat * normal, normal.copy(), float(r), 0.0))
+    if used is not None:
+        bands = [used[b] for b in bands]
     return rings, sv, bands
 
 
