@@ -19,14 +19,15 @@ from cyclist_formats.errors import UserError
 def add_arguments(p):
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--config", help="YAML config (see docs/cyclists_and_datasets.md)")
-    src.add_argument("--preset", help="built-in config from blend_assets/datasets/ (bike-only, cyclist, street, kitti-insert)")
+    src.add_argument("--preset", help="built-in config from blend_assets/datasets/ (bike-only, cyclist, street, street-sequence, kitti-insert)")
     p.add_argument("--out", help="output folder (default: out/datasets/<name>)")
     p.add_argument("--count", type=int, help="override the config's count")
     p.add_argument("--seed", type=int, help="override the config's seed")
     p.add_argument("--image-size", type=int, help="override the config's image_size")
     p.add_argument("--bikes-root", help="override the config's bikes_root")
-    p.add_argument("--format", action="append", choices=("coco", "kitti"),
-                   help="label format(s) to write (repeat for both); overrides the config's labels.formats")
+    p.add_argument("--format", action="append", choices=("coco", "kitti", "mot"),
+                   help="label format(s) to write (repeat for several); overrides the config's labels.formats "
+                        "(sequences: kitti = KITTI tracking, mot = MOTChallenge; docs/sequences.md)")
     p.add_argument("--camera", help="override the config's camera.preset (street mode)")
     p.add_argument("--frames", help="frames mode: the KITTI object folder (image_2, calib, label_2; planes, velodyne) "
                                     "to insert cyclists into; overrides the config's frames (docs/kitti_insert.md)")
@@ -55,7 +56,14 @@ def _init_worker(cfg, out_dir):
 
 def _work(index):
     from splatting.dataset.generate import write_sample
+    if _sequences(_WORKER["cfg"]):  # a frame of a street sequence (splatting/dataset/sequences)
+        from splatting.dataset.sequences.output import write_frame
+        return write_frame(_WORKER["cfg"], index, _WORKER["out"], _WORKER["assets"])
     return write_sample(_WORKER["cfg"], index, _WORKER["out"], _WORKER["assets"])
+
+
+def _sequences(cfg):
+    return bool((cfg.get("sequence") or {}).get("enabled"))
 
 
 def generate(cfg, out_dir, workers=1, log=print, progress=True, shard=None, engine="local", address=None):
@@ -79,11 +87,17 @@ def generate(cfg, out_dir, workers=1, log=print, progress=True, shard=None, engi
                             f"differ); use another --out or delete it")
     else:
         write_json(cpath, cfg)
-    mine = range(cfg["count"]) if shard is None else range(shard[0], cfg["count"], shard[1])
+    total = cfg["count"]
+    if _sequences(cfg):  # the work items are frames: sequence s, frame f is index s * length + f
+        from splatting.dataset.sequences.output import frame_done as sample_done, total as frames_total
+        total = frames_total(cfg)
+        if engine == "ray":
+            raise UserError("sequences run with the local engine (--workers) or --shard")
+    mine = range(total) if shard is None else range(shard[0], total, shard[1])
     todo = [i for i in mine if not sample_done(out_dir, i, cfg)]
     skipped = len(mine) - len(todo)
     if skipped:
-        log(f"dataset: {skipped} of {cfg['count']} samples already done, resuming")
+        log(f"dataset: {skipped} of {total} samples already done, resuming")
     t0, last = time.time(), 0.0
 
     def tick(done):
@@ -93,7 +107,7 @@ def generate(cfg, out_dir, workers=1, log=print, progress=True, shard=None, engi
             last = now
             rate = done / max(now - t0, 1e-9)
             eta = (len(todo) - done) / rate if rate > 0 else float("inf")
-            sys.stderr.write(f"dataset: {skipped + done}/{cfg['count']} samples, {rate:.2f} img/s, eta {eta:.0f} s\n")
+            sys.stderr.write(f"dataset: {skipped + done}/{total} samples, {rate:.2f} img/s, eta {eta:.0f} s\n")
             sys.stderr.flush()
 
     if todo and engine == "ray":

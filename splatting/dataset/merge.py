@@ -35,6 +35,9 @@ def read_config(out_dir):
 
 def missing_samples(out_dir, cfg):
     from splatting.dataset.generate import sample_done
+    if (cfg.get("sequence") or {}).get("enabled"):  # sequences: every frame
+        from splatting.dataset.sequences.output import frame_done, total
+        return [i for i in range(total(cfg)) if not frame_done(out_dir, i, cfg)]
     return [i for i in range(cfg["count"]) if not sample_done(out_dir, i, cfg)]
 
 
@@ -50,6 +53,9 @@ def merge_dataset(out_dir):
                         f"`python -m splatting dataset --config {os.path.join(out_dir, 'config.json')} --out {out_dir}` "
                         f"(or the missing --shard runs), then merge again")
     from splatting.dataset.labels import categories
+    if (cfg.get("sequence") or {}).get("enabled"):
+        from splatting.dataset.sequences.output import assemble
+        return assemble(out_dir, cfg, coco_info(cfg), categories(cfg["labels"], cfg["keypoints"]["person"]))
     path = merge(out_dir, cfg["count"], coco_info(cfg), categories(cfg["labels"], cfg["keypoints"]["person"]))
     if "kitti" in cfg["labels"]["formats"]:
         from splatting.dataset.kitti import write_imagesets
