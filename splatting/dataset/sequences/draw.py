@@ -20,7 +20,8 @@ from splatting.dataset import camera_presets
 from splatting.dataset.sequences import trajectory as tj
 from splatting.dataset.street import road_heading
 
-TAG = 2029  # keeps the sequence draws apart from the single-image draws of the same seed
+TAG = 2029
+MAX_RAMP_ACCEL = 3.5  # m/s^2: the hardest stop or start a short sequence may ask for  # keeps the sequence draws apart from the single-image draws of the same seed
 
 
 @functools.lru_cache(maxsize=64)
@@ -65,14 +66,14 @@ def manoeuvre_plan(rng, manoeuvre, sq, duration, v_lo, v_hi, a_max, x0, psi0_deg
         ln = max(ln, 2.5, math.sqrt(2.0 * abs(off) * v * v / a_max))  # peak v^2 kappa <= a_max
         s0 = v * duration * float(rng.uniform(0.1, 0.3))
         bumps = tj.lane_change(s0, off, ln) + tj.lane_change(s0 + 2 * ln + hold, -off, ln)
-    elif manoeuvre == "stop":
-        decel = float(rng.uniform(1.0, 2.5))
-        speed = {"kind": "stop", "v": v, "t0": duration * float(rng.uniform(0.1, 0.4)),
-                 "ramp": math.pi * v / (2.0 * decel)}  # a raised-cosine ramp's steepest slope is v pi / (2 ramp)
-    elif manoeuvre == "start":
-        acc = float(rng.uniform(0.8, 1.5))
-        speed = {"kind": "start", "v": v, "t0": duration * float(rng.uniform(0.05, 0.3)),
-                 "ramp": math.pi * v / (2.0 * acc)}
+    elif manoeuvre in ("stop", "start"):
+        # a raised-cosine ramp's steepest slope is v pi / (2 ramp); the ramp ends within the
+        # sequence (then the peak braking / acceleration may rise, up to MAX_RAMP_ACCEL)
+        a = float(rng.uniform(1.0, 2.5)) if manoeuvre == "stop" else float(rng.uniform(0.8, 1.5))
+        t0 = duration * float(rng.uniform(0.1, 0.4) if manoeuvre == "stop" else rng.uniform(0.05, 0.3))
+        ramp = min(math.pi * v / (2.0 * a), 0.9 * (duration - t0))
+        v = max(min(v, 2.0 * ramp * MAX_RAMP_ACCEL / math.pi), min(v, v_lo))
+        speed = {"kind": manoeuvre, "v": v, "t0": t0, "ramp": ramp}
     return speed, bumps, v
 
 
