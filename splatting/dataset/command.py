@@ -178,7 +178,9 @@ def run(args):
         print(f"dataset: shard {shard[0]}/{shard[1]} of {out} done ({r['generated']} generated, {r['skipped']} resumed, "
               f"{r['wall_s']:.1f} s); when every shard is done: python -m splatting dataset merge --out {out}")
         return
-    print(f"dataset: {cfg['count']} images in {out} ({r['generated']} generated, {r['skipped']} resumed, "
+    what = (f"{cfg['count']} sequences of {cfg['sequence']['length']} frames" if cfg["sequence"]["enabled"]
+            else f"{cfg['count']} images")
+    print(f"dataset: {what} in {out} ({r['generated']} generated, {r['skipped']} resumed, "
           f"{r['wall_s']:.1f} s); annotations: {r['annotations']}")
 
 
