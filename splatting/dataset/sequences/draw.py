@@ -47,8 +47,10 @@ def manoeuvre_plan(rng, manoeuvre, sq, duration, v_lo, v_hi, a_max, x0, psi0_deg
         radius = max(float(rng.uniform(r_lo, r_hi)), v * v / a_max)
         s0 = v * duration * float(rng.uniform(0.15, 0.4))
         bumps = [tj.turn_bump(s0, math.pi / 2 if manoeuvre == "turn_left" else -math.pi / 2, radius)]
-    elif manoeuvre == "cross":
-        radius = max(float(rng.uniform(r_lo, r_hi)), v * v / a_max)
+    elif manoeuvre == "cross":  # slower and tighter than a turn at a junction: across the road in a few seconds
+        v = float(rng.uniform(v_lo, 0.5 * (v_lo + v_hi)))
+        speed["v"] = v
+        radius = max(r_lo * float(rng.uniform(1.0, 1.5)), v * v / a_max)
         angle = math.radians(float(rng.uniform(60.0, 90.0)))
         # a left turn (+) points the bike to -sin(psi0) in X; the path (X = 0) lies at -sign(x0)
         sign = math.copysign(1.0, math.sin(math.radians(psi0_deg)) * x0)
