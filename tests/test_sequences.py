@@ -41,7 +41,7 @@ def test_bike_geometry_of_the_city_bike():
     dx, dy = kp["steer_bottom"][0] - kp["steer_top"][0], kp["steer_top"][1] - kp["steer_bottom"][1]
     assert g["eps"] == pytest.approx(math.atan2(dx, dy))
     ground_x = kp["steer_bottom"][0] + kp["steer_bottom"][1] * dx / dy  # the axis met at Y = 0
-    assert g["trail"] == pytest.approx(kp["front_axle"][0] - ground_x)
+    assert g["trail"] == pytest.approx(ground_x - kp["front_axle"][0]) and 0.05 < g["trail"] < 0.12  # ~8 cm
 
 
 def test_wheels_roll_without_slip_and_pedals_follow_the_gear():

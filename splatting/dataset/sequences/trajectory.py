@@ -43,11 +43,11 @@ def bike_geometry(keypoints):
     L = float(front[0] - rear[0])
     axis = k["steer_top"] - k["steer_bottom"]
     eps = math.atan2(-axis[0], axis[1])  # raked back: the top lies behind the bottom
-    # trail: where the steering axis meets the ground, behind the front contact point
+    # trail: how far the front contact point (under the axle) lies behind where the steering axis meets the ground
     t = -k["steer_bottom"][1] / axis[1]
     ground_x = k["steer_bottom"][0] + t * axis[0]
     return {"L": L, "b": float(-rear[0]), "r": float(rear[1]), "eps": float(eps),
-            "trail": float(front[0] - ground_x)}
+            "trail": float(ground_x - front[0])}
 
 
 def bumps(s, spec):
