@@ -91,8 +91,6 @@ def generate(cfg, out_dir, workers=1, log=print, progress=True, shard=None, engi
     if _sequences(cfg):  # the work items are frames: sequence s, frame f is index s * length + f
         from splatting.dataset.sequences.output import frame_done as sample_done, total as frames_total
         total = frames_total(cfg)
-        if engine == "ray":
-            raise UserError("sequences run with the local engine (--workers) or --shard")
     mine = range(total) if shard is None else range(shard[0], total, shard[1])
     todo = [i for i in mine if not sample_done(out_dir, i, cfg)]
     skipped = len(mine) - len(todo)
@@ -166,6 +164,8 @@ def run(args):
                       nested)
     if args.frames is not None and cfg["mode"] != "frames":
         raise UserError(f"--frames goes with mode: frames (e.g. --preset kitti-insert); this config's mode is {cfg['mode']}")
+    if cfg["sequence"]["enabled"] and args.engine == "ray":
+        raise UserError("sequences run with the local engine (--workers) or --shard, not --engine ray")
     checks.image_size("config field 'image_size'", cfg["image_size"])
     checks.count("config field 'count'", cfg["count"])
     out = args.out or os.path.join("out", "datasets", cfg["name"])
