@@ -302,3 +302,39 @@ def test_sequence_tracks_formats_and_resume(bikes, tmp_path):
                 "mot/0000/seqinfo.ini", "kitti_tracking/training/label_02/0000.txt",
                 "kitti_tracking/training/calib/0000.txt", "shards/0000/000001.json"):
         assert read(os.path.join(a, rel)) == read(os.path.join(b, rel)), rel
+
+
+def test_preset_and_command_line(tmp_path):
+    import subprocess
+    import sys
+    from helpers import ROOT
+    from splatting.dataset.config import load_config
+    c = load_config(preset="street-sequence")
+    assert c["sequence"]["enabled"] and (c["sequence"]["length"], c["sequence"]["fps"]) == (100, 10)
+    assert c["labels"]["formats"] == ["coco", "kitti", "mot"] and c["camera"]["preset"] == "nuscenes"
+    # MOT on a still set: one line naming the field, non-zero, nothing written
+    out = tmp_path / "o"
+    r = subprocess.run([sys.executable, "-m", "splatting", "dataset", "--preset", "street", "--format", "mot",
+                        "--out", str(out)], cwd=ROOT, capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=ROOT))
+    assert r.returncode != 0 and len(r.stderr.strip().splitlines()) == 1 and "labels.formats" in r.stderr
+    assert not out.exists()
+
+
+def test_sharded_sequence_frames_merge_to_the_same_bytes(bikes, tmp_path):
+    import torch
+    torch.set_num_threads(1)
+    from splatting.dataset.command import generate
+    from splatting.dataset.config import validate
+    from splatting.dataset.merge import merge_dataset
+    cfg = validate(seq_config(bikes, seed=11))
+    a, b = str(tmp_path / "a"), str(tmp_path / "b")
+    generate(cfg, a, log=lambda m: None, progress=False)
+    r0 = generate(cfg, b, log=lambda m: None, progress=False, shard=(0, 2))  # frames 0 and 2
+    assert r0["annotations"] is None and not os.path.exists(os.path.join(b, "annotations.json"))
+    from cyclist_formats.errors import UserError
+    with pytest.raises(UserError, match="1 of 3 samples"):  # frame 1 missing: merge refuses
+        merge_dataset(b)
+    generate(cfg, b, log=lambda m: None, progress=False, shard=(1, 2))
+    merge_dataset(b)
+    for rel in ("annotations.json", "mot/0000/gt/gt.txt", "kitti_tracking/training/label_02/0000.txt"):
+        assert read(os.path.join(a, rel)) == read(os.path.join(b, rel)), rel

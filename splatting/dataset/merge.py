@@ -48,7 +48,8 @@ def merge_dataset(out_dir):
     cfg = read_config(out_dir)
     missing = missing_samples(out_dir, cfg)
     if missing:
-        raise UserError(f"{out_dir}: {len(missing)} of {cfg['count']} samples are not generated yet "
+        n = cfg["count"] * cfg["sequence"]["length"] if (cfg.get("sequence") or {}).get("enabled") else cfg["count"]
+        raise UserError(f"{out_dir}: {len(missing)} of {n} samples are not generated yet "
                         f"(e.g. {', '.join(map(str, missing[:3]))}); finish them with "
                         f"`python -m splatting dataset --config {os.path.join(out_dir, 'config.json')} --out {out_dir}` "
                         f"(or the missing --shard runs), then merge again")
