@@ -338,3 +338,24 @@ def test_sharded_sequence_frames_merge_to_the_same_bytes(bikes, tmp_path):
     merge_dataset(b)
     for rel in ("annotations.json", "mot/0000/gt/gt.txt", "kitti_tracking/training/label_02/0000.txt"):
         assert read(os.path.join(a, rel)) == read(os.path.join(b, rel)), rel
+
+
+def test_ego_camera_moves_along_the_road_or_stands(bikes):
+    from splatting.dataset.config import resolve_assets, validate
+    from splatting.dataset.sequences.draw import draw_sequence, ego_camera
+    for motion in ("moving", "static"):
+        cfg = resolve_assets(validate(street_config(bikes, count=1, sequence={
+            "enabled": True, "length": 11, "fps": 10.0, "ego": {"motion": motion, "speed_mps": [5.0, 6.0]}})))
+        sd = draw_sequence(cfg, 0)
+        centres = []
+        for f in (0, 10):
+            cam = ego_camera(sd, f)
+            R, T = cam.R.double().numpy(), cam.T.double().numpy()
+            centres.append(-R.T @ T)
+        moved = centres[1] - centres[0]
+        if motion == "static":
+            assert np.allclose(moved, 0) and sd["ego_speed"] == 0
+        else:  # 1 s of driving along +Z at the drawn speed, at the preset's height
+            assert 5.0 <= sd["ego_speed"] <= 6.0
+            assert np.allclose(moved, [0, 0, sd["ego_speed"]], atol=1e-5)
+        assert centres[0][1] == pytest.approx(1.65, abs=1e-6)
