@@ -77,7 +77,7 @@ def cpu_per_frame(cfg, n):
             rows.append(time.process_time() - c)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
-    return statistics.median(rows)
+    return statistics.median(rows), len(rows)
 
 
 def plausibility(bikes_root, bikes, n_seq=25):
@@ -159,9 +159,9 @@ def run(results, out_dir, frames=20, bikes_root=None, riders_root=None, plaus_se
         print(f"sequence bench: 1 sequence of {frames} frames 1600x900, 4 cyclists, {len(doc['annotations'])} "
               f"annotations, COCO-video + KITTI tracking + MOT, 2 workers: {wall:.1f} s -> {fph:.0f} frames/hour "
               f"(1-min load average {load[0]} before, {load[1]} after)")
-        cpu = cpu_per_frame(cfg, cpu_frames)
+        cpu, n_cpu = cpu_per_frame(cfg, cpu_frames)
         cpu_fph = 2 * 3600.0 / cpu
-        print(f"sequence bench: {cpu:.2f} CPU s per frame (median of {cpu_frames}) -> {cpu_fph:.0f} frames/hour on 2 unshared cores")
+        print(f"sequence bench: {cpu:.2f} CPU s per frame (median of {n_cpu}) -> {cpu_fph:.0f} frames/hour on 2 unshared cores")
         plaus = plausibility(cfg["bikes_root"], cfg["bikes"], plaus_sequences)
         print(f"sequence bench: plausibility {plaus}")
         results["sequence_frames_per_hour"] = round(fph, 1)
