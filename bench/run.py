@@ -37,6 +37,7 @@ STAGES = {
     "dataset": ("bench.dataset", lambda m, r, out: m.run(r, out)),
     "street": ("bench.street", lambda m, r, out: m.run(r, out)),
     "frames": ("bench.frames", lambda m, r, out: m.run(r, out)),  # cyclists inserted into KITTI frames (issue 26)
+    "sequence": ("bench.sequence", lambda m, r, out: m.run(r, out)),  # street sequences (issue 29)
     "lod": ("bench.lod", lambda m, r, out: m.run(r, out, chart_png=os.path.join(out, "lod_chart.png"))),
     "bike_relit": ("bench.relight", lambda m, r, out: m.run_bench(r, out)),
     "rider_relit": ("bench.rider_relit", lambda m, r, out: m.run(r, out)),
@@ -71,6 +72,7 @@ TARGETS = {
     "rider_gt": "IoU ≥ 0.9, PSNR ≥ 24 dB (means)",
     "dataset_images_per_hour": "≥ 60000 (issue 14)",
     "street_images_per_hour": "≥ 3000 (nuScenes 1600x900, 1-6 cyclists, photo backgrounds)",
+    "sequence_plausibility": "max_lateral_accel_mps2 ≤ bound (3.0), slip and cadence error ≈ 0",
     "frames_geometry": "tyres_within_3cm_share 1.0, labelled_box_overlaps 0",
     "lod_psnr_drop_db": "≤ 0.5 dB",
     "bike_relit": "box PSNR ≥ 30 dB, IoU ≥ 0.97 (means)",

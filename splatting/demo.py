@@ -3,7 +3,7 @@
 procedural bikes -> 36-view renders -> part Gaussians -> rider avatar -> relight channels of the
 parts and the avatar -> 24-frame pedalling cyclist from 4 views -> small COCO set -> the same
 first samples relit under their own suns -> street images -> real KITTI frames with the cyclist
-inserted (when ../shared/realism/kitti_dev is there) -> contact sheet -> point-cloud import
+inserted (when ../shared/realism/kitti_dev is there) -> a street sequence with its tracks -> contact sheet -> point-cloud import
 into Blender with one Cycles render -> OUT/report.md.  Each step is skipped when its output exists, so an
 interrupted demo resumes.  Blender steps run as subprocesses (this package never imports bpy).
 """
@@ -154,6 +154,7 @@ def run(args):
     st.run("street images", [py, "-m", "splatting", "dataset", "--config", scfg_path, "--out", street, "--quiet"])
     coco_preview(street, os.path.join(out, "street_preview.png"), n=3)
     kitti_frames(st, py, out, args.rider, riders, bike)
+    street_sequence(st, py, out, args.rider, riders, bike)
     st.run("contact sheet", [py, "-m", "splatting", "contact-sheet", "--bikes", os.path.join(out, "bikes"), "--view", "3",
                              "--out", os.path.join(out, "contact_sheet.png")])
     plys = sorted(glob.glob(os.path.join(cyc, "ply", "*.ply")))
@@ -187,6 +188,30 @@ def kitti_frames(st, py, out, rider, riders, bike):
     kout = os.path.join(out, "kitti_insert")
     st.run("KITTI frames with cyclists", [py, "-m", "splatting", "dataset", "--config", kpath, "--out", kout, "--quiet"])
     sheet(kout, os.path.join(out, "kitti_insert.png"))
+
+
+def street_sequence(st, py, out, rider, riders, bike):
+    """A short street sequence (docs/sequences.md): cyclists crossing, turning and overtaking in
+    front of a moving camera, in the three tracking formats, and a strip of its frames with tracks."""
+    from splatting.dataset.sequences.strip import main as strip
+    with open(os.path.join(ROOT, "blend_assets", "datasets", "street-sequence.yaml")) as f:
+        qcfg = yaml.safe_load(f)
+    qcfg.update({"name": "demo_sequence", "count": 1, "seed": 4, "riders": [rider], "riders_root": riders,
+                 "bikes": [os.path.basename(bike)], "bikes_root": os.path.join(out, "bikes"), "synthetic_assets": "never"})
+    qcfg["camera"] = dict(qcfg.get("camera", {}), scale=0.5)
+    qcfg["street"] = dict(qcfg["street"], cyclists=[3, 3], parked_bikes=[1, 1], distance_m=[8, 25])
+    qcfg["sequence"] = dict(qcfg["sequence"], length=30, fps=5,
+                            manoeuvres={"straight": 0, "turn_left": 1, "turn_right": 0, "cross": 3, "overtake": 1,
+                                        "stop": 0, "start": 0, "swerve": 0}, ego={"motion": "moving", "speed_mps": [2, 3]})
+    qpath = os.path.join(out, "sequence.yaml")
+    with atomic_path(qpath) as tmp:
+        with open(tmp, "w") as f:
+            yaml.safe_dump(qcfg, f, sort_keys=False)
+    qout = os.path.join(out, "sequence")
+    st.run("street sequence", [py, "-m", "splatting", "dataset", "--config", qpath, "--out", qout, "--quiet"],
+           done=os.path.join(qout, "annotations.json"))
+    if strip(["--dataset", qout, "--out", os.path.join(out, "sequence_strip.png")]) != 0:
+        raise UserError(f"the sequence strip of {qout} failed")
 
 
 def report(out, bike, args, times, wall):
@@ -231,6 +256,12 @@ def report(out, bike, args, times, wall):
     else:
         lines += ["", "## KITTI frames with cyclists", "", "Not made: the development frames "
                   "(../shared/realism/kitti_dev) are not present."]
+    ann = read_json_or_none(os.path.join(out, "sequence", "annotations.json"))
+    if ann:
+        crossing = sum(a["intention"] == "crossing" for a in ann["annotations"] if a["category_id"] == 3)
+        lines += ["", "## Street sequence", "", f"{len(ann['videos'])} sequence of {len(ann['images'])} frames, "
+                  f"{len(ann['tracks'])} tracks ({crossing} cyclist boxes labelled `crossing`) in `sequence/` "
+                  "(COCO-video), `sequence/kitti_tracking/` (KITTI tracking) and `sequence/mot/` (MOTChallenge)."]
     lines += ["", "## Pictures", ""]
     for title, pattern in (("Contact sheet", "contact_sheet.png"), ("Cyclist preview", "cyclist/preview.png"),
                            ("COCO samples with their annotations", "coco_preview.png"),
@@ -238,6 +269,8 @@ def report(out, bike, args, times, wall):
                            ("Street images with their annotations", "street_preview.png"),
                            ("Real KITTI frames with inserted cyclists: visible masks, boxes, LiDAR bird's-eye view",
                             "kitti_insert.png"),
+                           ("A street sequence with its tracks (amodal boxes, ids, manoeuvres, intentions, trails)",
+                            "sequence_strip.png"),
                            ("Point cloud in Blender (Cycles)", "cyclist_blender.png")):
         for p in sorted(glob.glob(os.path.join(out, pattern)))[:1]:
             lines.append(f"### {title}\n\n![{title}]({rel(p)})\n")

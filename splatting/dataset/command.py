@@ -24,7 +24,7 @@ from splatting.library.ray_address import check_address
 def add_arguments(p):
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--config", help="YAML config (see docs/cyclists_and_datasets.md)")
-    src.add_argument("--preset", help="built-in config from blend_assets/datasets/ (bike-only, cyclist, street, kitti-insert)")
+    src.add_argument("--preset", help="built-in config from blend_assets/datasets/ (bike-only, cyclist, street, street-sequence, kitti-insert)")
     p.add_argument("--out", help="output folder (default: out/datasets/<name>)")
     p.add_argument("--count", type=int, help="override the config's count")
     p.add_argument("--seed", type=int, help="override the config's seed")
@@ -33,8 +33,9 @@ def add_arguments(p):
     p.add_argument("--bikes", nargs="+", metavar="ID", help="override the config's bikes: these bike ids only")
     p.add_argument("--riders", nargs="+", metavar="ID", help="override the config's riders: these rider ids only")
     p.add_argument("--riders-root", help="override the config's riders_root")
-    p.add_argument("--format", action="append", choices=("coco", "kitti"),
-                   help="label format(s) to write (repeat for both); overrides the config's labels.formats")
+    p.add_argument("--format", action="append", choices=("coco", "kitti", "mot"),
+                   help="label format(s) to write (repeat for several); overrides the config's labels.formats "
+                        "(sequences: kitti = KITTI tracking, mot = MOTChallenge; docs/sequences.md)")
     p.add_argument("--camera", help="override the config's camera.preset (street mode)")
     p.add_argument("--frames", help="frames mode: the KITTI object folder (image_2, calib, label_2; planes, velodyne) "
                                     "to insert cyclists into; overrides the config's frames (docs/kitti_insert.md)")
@@ -63,7 +64,14 @@ def _init_worker(cfg, out_dir):
 
 def _work(index):
     from splatting.dataset.generate import write_sample
+    if _sequences(_WORKER["cfg"]):  # a frame of a street sequence (splatting/dataset/sequences)
+        from splatting.dataset.sequences.output import write_frame
+        return write_frame(_WORKER["cfg"], index, _WORKER["out"], _WORKER["assets"])
     return write_sample(_WORKER["cfg"], index, _WORKER["out"], _WORKER["assets"])
+
+
+def _sequences(cfg):
+    return bool((cfg.get("sequence") or {}).get("enabled"))
 
 
 def generate(cfg, out_dir, workers=1, log=print, progress=True, shard=None, engine="local", address=None):
@@ -88,11 +96,15 @@ def generate(cfg, out_dir, workers=1, log=print, progress=True, shard=None, engi
                             f"differ); use another --out or delete it")
     else:
         write_json(cpath, cfg)
-    mine = range(cfg["count"]) if shard is None else range(shard[0], cfg["count"], shard[1])
-    todo = [i for i in mine if not sample_done(out_dir, i, cfg)]
+    total, done = cfg["count"], sample_done
+    if _sequences(cfg):  # the work items are frames: sequence s, frame f is index s * length + f
+        from splatting.dataset.sequences.output import frame_done as done, total as frames_total
+        total = frames_total(cfg)
+    mine = range(total) if shard is None else range(shard[0], total, shard[1])
+    todo = [i for i in mine if not done(out_dir, i, cfg)]
     skipped = len(mine) - len(todo)
     if skipped:
-        log(f"dataset: {skipped} of {cfg['count']} samples already done, resuming")
+        log(f"dataset: {skipped} of {total} samples already done, resuming")
     t0, last = time.time(), 0.0
 
     def tick(done):
@@ -102,7 +114,7 @@ def generate(cfg, out_dir, workers=1, log=print, progress=True, shard=None, engi
             last = now
             rate = done / max(now - t0, 1e-9)
             eta = (len(todo) - done) / rate if rate > 0 else float("inf")
-            sys.stderr.write(f"dataset: {skipped + done}/{cfg['count']} samples, {rate:.2f} img/s, eta {eta:.0f} s\n")
+            sys.stderr.write(f"dataset: {skipped + done}/{total} samples, {rate:.2f} img/s, eta {eta:.0f} s\n")
             sys.stderr.flush()
 
     if todo and engine == "ray":
@@ -161,6 +173,8 @@ def run(args):
                       nested)
     if args.frames is not None and cfg["mode"] != "frames":
         raise UserError(f"--frames goes with mode: frames (e.g. --preset kitti-insert); this config's mode is {cfg['mode']}")
+    if cfg["sequence"]["enabled"] and args.engine == "ray":
+        raise UserError("sequences run with the local engine (--workers) or --shard, not --engine ray")
     checks.image_size("config field 'image_size'", cfg["image_size"])
     checks.count("config field 'count'", cfg["count"])
     out = args.out or checks.inside(os.path.join("out", "datasets"), os.path.join("out", "datasets", cfg["name"]),
@@ -174,7 +188,9 @@ def run(args):
         print(f"dataset: shard {shard[0]}/{shard[1]} of {out} done ({r['generated']} generated, {r['skipped']} resumed, "
               f"{r['wall_s']:.1f} s); when every shard is done: python -m splatting dataset merge --out {out}")
         return
-    print(f"dataset: {cfg['count']} images in {out} ({r['generated']} generated, {r['skipped']} resumed, "
+    what = (f"{cfg['count']} sequences of {cfg['sequence']['length']} frames" if cfg["sequence"]["enabled"]
+            else f"{cfg['count']} images")
+    print(f"dataset: {what} in {out} ({r['generated']} generated, {r['skipped']} resumed, "
           f"{r['wall_s']:.1f} s); annotations: {r['annotations']}")
 
 

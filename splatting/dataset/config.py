@@ -17,7 +17,7 @@ PRESET_DIR = str(paths.BLEND_ASSETS / "datasets")
 MODES = ("cyclist", "bike-only", "street", "frames")
 BACKGROUNDS = ("solid", "gradient", "noise", "images", "scene")
 PERSON_KEYPOINTS = ("coco17", "smpl24")
-LABEL_FORMATS = ("coco", "kitti")
+LABEL_FORMATS = ("coco", "kitti", "mot")  # mot: sequences only
 from cyclist_formats.pose import POSE_FIELDS as POSE_KEYS  # config keys are the contract's field names
 from splatting.dataset.camera_presets import DEFAULTS as CAMERA_DEFAULTS
 from splatting.cyclist.appearance import RECOLOUR
@@ -25,6 +25,7 @@ from splatting.cyclist.lod import DEFAULT_COMPENSATE as LOD_COMPENSATE, DEFAULT_
 from splatting.dataset.labels import DEFAULT_COMBINED, DEFAULT_NAMES, VEHICLES
 from splatting.dataset import camera_presets, lighting
 from splatting.dataset.backgrounds import list_images
+from splatting.dataset.sequences.trajectory import MANOEUVRES
 from splatting.rider.roster import all_riders
 
 INSERT_DEFAULTS = {
@@ -37,6 +38,19 @@ INSERT_DEFAULTS = {
     "box_occluders": True,        # the labelled 3D boxes, drawn solid, hide what is behind them
     "look": {"match": True, "blur_sigma_px": "auto", "noise_sigma": "auto", "sun_elevation_deg": 45.0,
              "sun_azimuth_deg": 120.0, "cast_shadow": True},
+}
+
+SEQUENCE_DEFAULTS = {
+    "enabled": False,
+    "length": 100,                # frames per sequence
+    "fps": 10.0,                  # KITTI's rate
+    "manoeuvres": {m: 1.0 for m in MANOEUVRES},  # relative weights (0 = never)
+    "speed_mps": [2.0, 8.0],
+    "turn_radius_m": [6.0, 20.0],  # tightest radius of a turn (raised above v^2 / max_lateral_accel)
+    "max_lateral_accel_mps2": 3.0,
+    "cadence_rpm": [60.0, 90.0],  # cruising cadence; sets each cyclist's gear ratio
+    "lane_half_width_m": 1.5,     # the ego's lane about its path X = 0 (the crossing label)
+    "ego": {"motion": "moving", "speed_mps": [4.0, 10.0]},  # moving | static
 }
 
 DEFAULTS = {
@@ -87,6 +101,8 @@ DEFAULTS = {
     # counts, distances and headings come from `street`, the rest from `insert`
     "frames": None,
     "insert": copy.deepcopy(INSERT_DEFAULTS),
+    # street sequences (docs/sequences.md): `count` counts sequences of `length` frames
+    "sequence": copy.deepcopy(SEQUENCE_DEFAULTS),
 }
 
 
@@ -255,6 +271,38 @@ def _validate_street(cfg):
     _validate_appearance(cfg["appearance"])
     lighting.validate(cfg["lighting"])
     _validate_insert(cfg)
+    _validate_sequence(cfg)
+
+
+def _validate_sequence(cfg):
+    sq = cfg["sequence"]
+    if not isinstance(sq["enabled"], bool):
+        raise _err("sequence.enabled", f"expected true or false, got {sq['enabled']!r}")
+    if not sq["enabled"]:
+        if "mot" in cfg["labels"]["formats"]:
+            raise _err("labels.formats", "mot (MOTChallenge) is a tracking format: it needs sequence.enabled: true")
+        return
+    if cfg["mode"] != "street":
+        raise _err("sequence.enabled", f"sequences are street scenes (mode: street), got mode {cfg['mode']!r}")
+    if cfg["lighting"]["mode"] != "baked":
+        raise _err("lighting.mode", "sequences use the baked light (a relit sun per frame would flicker)")
+    n = sq["length"]
+    if not isinstance(n, int) or isinstance(n, bool) or not 2 <= n <= 100000:
+        raise _err("sequence.length", f"expected an integer within 2..100000, got {n!r}")
+    if not (_num(sq["fps"]) and 0.5 <= sq["fps"] <= 240):
+        raise _err("sequence.fps", f"expected a number within [0.5, 240], got {sq['fps']!r}")
+    w = sq["manoeuvres"]
+    if not all(_num(v) and v >= 0 for v in w.values()) or not sum(w.values()) > 0:
+        raise _err("sequence.manoeuvres", f"expected weights >= 0, not all 0, got {w!r}")
+    _range(cfg, "sequence.speed_mps", 0.5, 15)
+    _range(cfg, "sequence.turn_radius_m", 2, 200)
+    _range(cfg, "sequence.cadence_rpm", 20, 150)
+    _range(cfg, "sequence.ego.speed_mps", 0, 40)
+    for f, lo, hi in (("max_lateral_accel_mps2", 0.5, 9.81), ("lane_half_width_m", 0.5, 10)):
+        if not (_num(sq[f]) and lo <= sq[f] <= hi):
+            raise _err(f"sequence.{f}", f"expected a number within [{lo}, {hi}], got {sq[f]!r}")
+    if sq["ego"]["motion"] not in ("moving", "static"):
+        raise _err("sequence.ego.motion", f"expected moving or static, got {sq['ego']['motion']!r}")
 
 
 def _validate_insert(cfg):

@@ -227,10 +227,12 @@ def over_in_box(layers, background, box):
     return out
 
 
-def make_sample(cfg, index, assets):
+def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
     """Render sample `index` -> (rgb uint8 (H, W, 3), image record, annotations, extras)
-    extras: {"depth": (H, W) float32, "kitti": [objects], "calib": {...}}."""
-    d = draw(cfg, index)
+    extras: {"depth": (H, W) float32, "kitti": [objects], "calib": {...}}.
+    A sequence frame (splatting/dataset/sequences) passes its own draw, the ego camera of the
+    frame and the index its looks are drawn with (the sequence's, so they stay across frames)."""
+    d = draw(cfg, index) if drawn is None else drawn
     street = cfg["mode"] == "street"
     fs = FrameSample(cfg, d, index) if cfg["mode"] == "frames" else None
     relit = lighting.RelitSample(cfg, index, assets) if lighting.relit(cfg) else None  # None: baked colour
@@ -261,7 +263,7 @@ def make_sample(cfg, index, assets):
 
     if street:
         spec = camera_presets.resolve(cfg["camera"])
-        cam = camera_presets.street_camera(spec)
+        cam = camera_presets.street_camera(spec) if camera is None else camera
     elif fs is not None:
         cam = fs.camera()
     else:
@@ -283,7 +285,7 @@ def make_sample(cfg, index, assets):
         boxes.append(extent_box(g, inst["pose"], prep=prep["extent"]))  # labels come from the full model, LOD or not
         idx = None
         if cfg["appearance"]["enabled"]:
-            look, gain = appearance.draw_look(cfg, cfg["seed"], index, k)
+            look, gain = appearance.draw_look(cfg, cfg["seed"], index if look_index is None else look_index, k)
             g = appearance.apply_look(g, frame.ids, look, gain, **assets.look_inputs(inst["bike"], inst["rider"], frame))
             looks.append({"colours": {r: None if c is None else [round(float(x), 4) for x in c] for r, c in look.items()},
                           "gain": [round(float(x), 4) for x in gain]})
@@ -405,7 +407,7 @@ def make_sample(cfg, index, assets):
             kitti_objs.append({"type": ktype, "truncated": main["truncation"], "occluded": main["occlusion"],
                                "alpha": alpha, "x1": x0, "y1": y0, "x2": x1, "y2": y1,
                                "h": bx["h"], "w": bx["w"], "l": bx["l"], "x": loc[0], "y": loc[1], "z": loc[2],
-                               "rotation_y": ry})
+                               "rotation_y": ry, "instance": k + 1})
 
     cam_rec = {"K": K.tolist(), "R": R.tolist(), "T": T.tolist(), **{k: v for k, v in d["camera"].items() if k != "jitter"}}
     if street:
@@ -479,4 +481,6 @@ def config_record(cfg):
     cfg = lighting.record_config(cfg)
     if cfg.get("mode") != "frames":
         cfg = {k: v for k, v in cfg.items() if k not in ("frames", "insert")}
+    if not (cfg.get("sequence") or {}).get("enabled"):  # (config.json of still sets stays as it was)
+        cfg = {k: v for k, v in cfg.items() if k != "sequence"}
     return json.loads(json.dumps(cfg))

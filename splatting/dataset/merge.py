@@ -15,6 +15,7 @@ from splatting.dataset.coco import merge
 from splatting.dataset.generate import sample_done
 from splatting.dataset.kitti import write_imagesets
 from splatting.dataset.labels import categories
+from splatting.dataset.sequences import output as sequence_output
 
 
 def coco_info(cfg):
@@ -39,6 +40,8 @@ def read_config(out_dir):
 
 
 def missing_samples(out_dir, cfg):
+    if (cfg.get("sequence") or {}).get("enabled"):  # sequences: every frame
+        return [i for i in range(sequence_output.total(cfg)) if not sequence_output.frame_done(out_dir, i, cfg)]
     return [i for i in range(cfg["count"]) if not sample_done(out_dir, i, cfg)]
 
 
@@ -47,10 +50,13 @@ def merge_dataset(out_dir):
     cfg = read_config(out_dir)
     missing = missing_samples(out_dir, cfg)
     if missing:
-        raise UserError(f"{out_dir}: {len(missing)} of {cfg['count']} samples are not generated yet "
+        n = cfg["count"] * cfg["sequence"]["length"] if (cfg.get("sequence") or {}).get("enabled") else cfg["count"]
+        raise UserError(f"{out_dir}: {len(missing)} of {n} samples are not generated yet "
                         f"(e.g. {', '.join(map(str, missing[:3]))}); finish them with "
                         f"`python -m splatting dataset --config {os.path.join(out_dir, 'config.json')} --out {out_dir}` "
                         f"(or the missing --shard runs), then merge again")
+    if (cfg.get("sequence") or {}).get("enabled"):
+        return sequence_output.assemble(out_dir, cfg, coco_info(cfg), categories(cfg["labels"], cfg["keypoints"]["person"]))
     path = merge(out_dir, cfg["count"], coco_info(cfg), categories(cfg["labels"], cfg["keypoints"]["person"]))
     if "kitti" in cfg["labels"]["formats"]:
         write_imagesets(out_dir, cfg["count"])

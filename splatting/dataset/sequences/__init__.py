@@ -1,0 +1,1 @@
+"""Street sequences: cyclists moving through a driving scene (docs/sequences.md)."""

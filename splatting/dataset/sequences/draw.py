@@ -1,0 +1,205 @@
+"""The random choices of one street sequence: ego motion, background, and per cyclist its bike,
+rider, manoeuvre, speed, gear and placement; the trajectories that follow from them.
+
+A pure function of (config, sequence index): numpy's Generator seeded with [seed, sequence, TAG]
+draws everything in a fixed order, and the trajectories are deterministic numpy (trajectory.py).
+Every frame of the sequence calls this again (it costs milliseconds), so frames can be rendered
+in any order, by any worker, and resumed.
+
+World as in street mode (docs/street_scenes.md): road plane Y = 0, the road along world +Z; the
+ego camera starts at (0, height, 0) and moves along +Z at the drawn ego speed (or stands).
+"""
+import functools
+import math
+
+import numpy as np
+
+from cyclist_formats.bike_folder import read_keypoints
+from splatting.cyclist.assets import bike_dir
+from splatting.dataset import camera_presets
+from splatting.dataset.sequences import trajectory as tj
+from splatting.dataset.street import road_heading
+
+TAG = 2029
+MAX_RAMP_ACCEL = 3.5  # m/s^2: the hardest stop or start a short sequence may ask for  # keeps the sequence draws apart from the single-image draws of the same seed
+
+
+@functools.lru_cache(maxsize=64)
+def _geometry(bike, root):
+    return tj.bike_geometry(read_keypoints(bike_dir(bike, root)))
+
+
+def geometry(cfg, bike):
+    return _geometry(bike, cfg["bikes_root"])
+
+
+def _count(rng, lohi):
+    return int(rng.integers(int(lohi[0]), int(lohi[1]) + 1))
+
+
+def manoeuvre_plan(rng, manoeuvre, sq, duration, v_lo, v_hi, a_max, x0, psi0_deg):
+    """(speed programme, curvature bumps, cruising speed) of one manoeuvre (docs/sequences.md)."""
+    v = float(rng.uniform(v_lo, v_hi))
+    speed = {"kind": "cruise", "v": v}
+    bumps = []
+    r_lo, r_hi = sq["turn_radius_m"]
+    if manoeuvre in ("turn_left", "turn_right"):
+        radius = max(float(rng.uniform(r_lo, r_hi)), v * v / a_max)
+        s0 = v * duration * float(rng.uniform(0.15, 0.4))
+        bumps = [tj.turn_bump(s0, math.pi / 2 if manoeuvre == "turn_left" else -math.pi / 2, radius)]
+    elif manoeuvre == "cross":  # slower and tighter than a turn at a junction: across the road in a few seconds
+        v = float(rng.uniform(v_lo, 0.5 * (v_lo + v_hi)))
+        speed["v"] = v
+        radius = max(r_lo * float(rng.uniform(1.0, 1.5)), v * v / a_max)
+        angle = math.radians(float(rng.uniform(60.0, 90.0)))
+        # a left turn (+) points the bike to -sin(psi0) in X; the path (X = 0) lies at -sign(x0)
+        sign = math.copysign(1.0, math.sin(math.radians(psi0_deg)) * x0)
+        s0 = v * duration * float(rng.uniform(0.05, 0.25))
+        bumps = [tj.turn_bump(s0, sign * angle, radius)]
+    elif manoeuvre in ("overtake", "swerve"):
+        if manoeuvre == "overtake":
+            v = float(rng.uniform(0.5 * (v_lo + v_hi), v_hi))
+            speed["v"] = v
+            off, ln = float(rng.uniform(1.2, 2.0)), v * float(rng.uniform(1.2, 2.0))
+            hold = v * float(rng.uniform(1.0, 2.0))
+        else:
+            off, ln, hold = float(rng.uniform(0.5, 1.0)), v * float(rng.uniform(0.4, 0.7)), 0.0
+        off *= 1.0 if rng.uniform() < 0.5 else -1.0
+        ln = max(ln, 2.5, math.sqrt(2.0 * abs(off) * v * v / a_max))  # peak v^2 kappa <= a_max
+        s0 = v * duration * float(rng.uniform(0.1, 0.3))
+        bumps = tj.lane_change(s0, off, ln) + tj.lane_change(s0 + 2 * ln + hold, -off, ln)
+    elif manoeuvre in ("stop", "start"):
+        # a raised-cosine ramp's steepest slope is v pi / (2 ramp); the ramp ends within the
+        # sequence (then the peak braking / acceleration may rise, up to MAX_RAMP_ACCEL)
+        a = float(rng.uniform(1.0, 2.5)) if manoeuvre == "stop" else float(rng.uniform(0.8, 1.5))
+        t0 = duration * float(rng.uniform(0.1, 0.4) if manoeuvre == "stop" else rng.uniform(0.05, 0.3))
+        ramp = min(math.pi * v / (2.0 * a), 0.9 * (duration - t0))
+        v = max(min(v, 2.0 * ramp * MAX_RAMP_ACCEL / math.pi), min(v, v_lo))
+        speed = {"kind": manoeuvre, "v": v, "t0": t0, "ramp": ramp}
+    return speed, bumps, v
+
+
+def intention(manoeuvre, traj, crossing):
+    """Per-frame intention labels (docs/sequences.md)."""
+    out = []
+    for i in range(len(traj["t"])):
+        k, v, a = traj["kappa"][i], traj["speed"][i], traj["accel"][i]
+        if crossing[i]:
+            lab = "crossing"
+        elif manoeuvre in ("turn_left", "turn_right") and abs(k) > 1e-3:
+            lab = "turning_left" if k > 0 else "turning_right"
+        elif manoeuvre in ("overtake", "swerve", "cross") and abs(k) > 1e-3:
+            lab = {"overtake": "overtaking", "swerve": "swerving", "cross": "turning_left" if k > 0 else "turning_right"}[manoeuvre]
+        elif v < 0.05:
+            lab = "stopped"
+        elif a < tj.BRAKING:
+            lab = "stopping"
+        elif a > 0.05:
+            lab = "starting"
+        else:
+            lab = "riding"
+        out.append(lab)
+    return out
+
+
+def draw_sequence(cfg, seq):
+    """Sequence `seq` -> {"ego_speed", "camera", "background", "instances": [...], "dropped"}; each
+    instance {kind, bike, rider, manoeuvre, poses (n, 8), traj, crossing, intention, gear_ratio, geometry}."""
+    sq, st = cfg["sequence"], cfg["street"]
+    rng = np.random.default_rng([cfg["seed"], seq, TAG])
+    n, fps = int(sq["length"]), float(sq["fps"])
+    duration = (n - 1) / fps
+    t = np.arange(n) / fps
+    cam = camera_presets.resolve(cfg["camera"])
+    ego = sq["ego"]
+    ego_speed = float(rng.uniform(*ego["speed_mps"])) if ego["motion"] == "moving" else 0.0
+    ego_z = ego_speed * t
+    names = list(sq["manoeuvres"])
+    w = np.array([float(sq["manoeuvres"][m]) for m in names])
+    n_cyc = _count(rng, st["cyclists"]) if cfg["riders"] else 0
+    n_park = _count(rng, st["parked_bikes"])
+    r_fp = float(st["footprint_radius_m"])
+    a_max = float(sq["max_lateral_accel_mps2"])
+    v_lo, v_hi = sq["speed_mps"]
+    mid = n // 2
+    placed, out, dropped = [], [], 0
+    for kind in ["cyclist"] * n_cyc + ["parked"] * n_park:
+        bike = cfg["bikes"][int(rng.integers(len(cfg["bikes"])))]
+        rider = cfg["riders"][int(rng.integers(len(cfg["riders"])))] if kind == "cyclist" else None
+        geom = geometry(cfg, bike)
+        man = names[int(rng.choice(len(names), p=w / w.sum()))] if kind == "cyclist" else "parked"
+        cadence = float(rng.uniform(*sq["cadence_rpm"]))
+        pedal0 = float(rng.uniform(0.0, 360.0))
+        steer = float(rng.uniform(*st["parked_steer_deg"]))
+        got = None
+        for _ in range(int(st["max_tries"])):
+            z_rel = float(rng.uniform(*st["distance_m"]))
+            u = float(rng.uniform(-st["border_margin"], 1.0 + st["border_margin"])) * cam["width"]
+            x = -(u - cam["cx"]) * z_rel / cam["fx"]  # image-right is world -X
+            oncoming = bool(rng.uniform() < st["oncoming_share"])
+            plan_rng = np.random.default_rng([cfg["seed"], seq, TAG, len(placed), int(rng.integers(2 ** 31))])
+            if not st["lateral_m"][0] <= x <= st["lateral_m"][1]:
+                continue
+            if kind == "parked":
+                yaw = road_heading(st["road_heading_deg"]) + float(rng.uniform(-1, 1)) * st["heading_spread_deg"]
+                pose = np.tile([0.0, steer, 0.0, yaw, 0.0, x, 0.0, ego_z[mid] + z_rel], (n, 1))
+                traj = {"t": t, "speed": np.zeros(n), "kappa": np.zeros(n), "accel": np.zeros(n),
+                        "velocity_xz": np.zeros((n, 2)), "origin_xz": pose[:, [5, 7]], "wheel_rad": np.zeros(n),
+                        "crank_rate": np.zeros(n), "wheel_rate": np.zeros(n), "lateral_accel": np.zeros(n)}
+                gear = None
+            else:
+                psi0 = road_heading(st["road_heading_deg"]) + (180.0 if oncoming else 0.0)
+                x0 = x if man == "cross" else 0.0
+                if man == "cross" and abs(x0) < 2.0:  # a crossing starts beside the ego's lane
+                    x0 = math.copysign(float(rng.uniform(2.5, 6.0)), x0 if x0 != 0 else 1.0)
+                speed, bumps, v_cruise = manoeuvre_plan(plan_rng, man, sq, duration, v_lo, v_hi, a_max, x0, psi0)
+                gear = float(np.clip(v_cruise / geom["r"] / (cadence * 2 * math.pi / 60.0), 1.0, 5.0))
+                traj = tj.integrate(n, fps, speed, bumps, geom, (x0, 0.0), psi0, gear, pedal0)
+                xz = traj["origin_xz"]
+                if man == "cross":  # the ego reaches the crossing point z_rel behind the cyclist
+                    past = np.flatnonzero(xz[:, 0] * math.copysign(1.0, x0) <= 0)
+                    anchor = int(past[0]) if len(past) else n - 1
+                    shift = np.array([0.0, ego_z[anchor] + max(z_rel, 8.0) - xz[anchor, 1]])
+                else:
+                    anchor = mid
+                    shift = np.array([x - xz[anchor, 0], ego_z[anchor] + z_rel - xz[anchor, 1]])
+                for key in ("origin_xz", "rear_xz"):
+                    traj[key] = traj[key] + shift
+                pose = tj.poses(traj)
+            track = pose[:, [5, 7]]
+            if all(np.min(np.sum((track - p) ** 2, 1)) >= (2 * r_fp) ** 2 for p in placed):
+                got = (pose, traj, gear)
+                break
+        if got is None:
+            dropped += 1
+            continue
+        pose, traj, gear = got
+        placed.append(pose[:, [5, 7]])
+        if kind == "cyclist":
+            crossing = tj.crossing_frames(traj["origin_xz"][:, 0], traj["theta_y_deg"], sq["lane_half_width_m"])
+            inten = intention(man, traj, crossing)
+        else:
+            crossing, inten = np.zeros(n, bool), ["parked"] * n
+        out.append({"kind": kind, "bike": bike, "rider": rider, "manoeuvre": man, "poses": pose, "traj": traj,
+                    "crossing": crossing, "intention": inten, "gear_ratio": gear, "geometry": geom})
+    kinds = cfg["backgrounds"]["kinds"]
+    bg = {"kind": kinds[int(rng.integers(len(kinds)))], "seed": int(rng.integers(2 ** 31))}
+    return {"ego_speed": ego_speed, "ego_z": ego_z, "camera": {"preset": cam["preset"]}, "spec": cam,
+            "background": bg, "instances": out, "dropped": dropped}
+
+
+def frame_draw(sd, f):
+    """make_sample's draw dict for frame f of a drawn sequence."""
+    inst = [{"kind": i["kind"], "bike": i["bike"], "rider": i["rider"], "pose": [float(x) for x in i["poses"][f]]}
+            for i in sd["instances"]]
+    return {"instances": inst, "dropped": sd["dropped"], "camera": dict(sd["camera"]), "background": dict(sd["background"])}
+
+
+def ego_camera(sd, f):
+    """The driving camera at frame f: the preset's camera moved by the ego's travel along +Z."""
+    from splatting.raster.camera import from_numpy
+    spec = sd["spec"]
+    R, T = camera_presets.pose(spec)
+    T = T - R @ np.array([0.0, 0.0, sd["ego_z"][f]])
+    return from_numpy(camera_presets.intrinsics(spec), R, T, spec["width"], spec["height"])
+

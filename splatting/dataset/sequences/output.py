@@ -1,0 +1,104 @@
+"""Files of a sequence dataset; every per-frame file atomic, every per-sequence file assembled from
+the frames' shards once all are done (so a killed and resumed run gives the same bytes).
+
+DIR/images/SEQ/FFFFFF.png, DIR/shards/SEQ/FFFFFF.json (the frame's image record, annotations and
+tracking rows; written last: it marks the frame done), DIR/annotations.json (COCO-video);
+`kitti`: DIR/kitti_tracking/training/{image_02/SEQ/FFFFFF.png, label_02/SEQ.txt, calib/SEQ.txt};
+`mot`: DIR/mot/SEQ/{img1/%06d.png (1-based), gt/gt.txt, seqinfo.ini}.  SEQ = %04d.
+Images in the kitti and mot trees are hard links to DIR/images (copies where links fail).
+"""
+import json
+import os
+import shutil
+
+from cyclist_formats.atomic import atomic_path, write_json
+from splatting.dataset import png
+from splatting.dataset.kitti import calib_text
+from splatting.dataset.sequences import writers
+from splatting.dataset.sequences.render import make_frame, sequence_of
+
+
+def paths(out_dir, index, cfg):
+    s, f = sequence_of(cfg, index)
+    return (os.path.join(out_dir, "images", f"{s:04d}", f"{f:06d}.png"),
+            os.path.join(out_dir, "shards", f"{s:04d}", f"{f:06d}.json"))
+
+
+def write_frame(cfg, index, out_dir, assets):
+    rgb, image, anns, rows = make_frame(cfg, index, assets)
+    img, shard = paths(out_dir, index, cfg)
+    os.makedirs(os.path.dirname(img), exist_ok=True)
+    with atomic_path(img) as tmp:
+        png.write(tmp, rgb, cfg["png_compress_level"])
+    calib = {k: [float(x) for x in v.ravel()] for k, v in rows["calib"].items()}
+    os.makedirs(os.path.dirname(shard), exist_ok=True)
+    write_json(shard, {"image": image, "annotations": anns, "kitti": rows["kitti"], "mot": rows["mot"],
+                       "calib": calib}, indent=None)
+    return index
+
+
+def frame_done(out_dir, index, cfg):
+    return all(os.path.isfile(p) for p in paths(out_dir, index, cfg))
+
+
+def total(cfg):
+    return int(cfg["count"]) * int(cfg["sequence"]["length"])
+
+
+def _text(path, text):
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with atomic_path(path) as tmp:
+        with open(tmp, "w") as f:
+            f.write(text)
+
+
+def _link(src, dst):
+    os.makedirs(os.path.dirname(dst), exist_ok=True)
+    with atomic_path(dst) as tmp:
+        os.remove(tmp)
+        try:
+            os.link(src, tmp)
+        except OSError:
+            shutil.copyfile(src, tmp)
+
+
+def assemble(out_dir, cfg, info, cats):
+    """Every sequence's text files and the COCO-video annotations.json (atomic); returns its path."""
+    n, fps = int(cfg["sequence"]["length"]), float(cfg["sequence"]["fps"])
+    fm = cfg["labels"]["formats"]
+    images, anns, videos = [], [], []
+    for s in range(int(cfg["count"])):
+        kit, mot = [], []
+        for f in range(n):
+            img, shard = paths(out_dir, s * n + f, cfg)
+            with open(shard) as fh:
+                doc = json.load(fh)
+            im = doc["image"]
+            images.append((im, s + 1, f))
+            for a in doc["annotations"]:
+                anns.append(dict(a, id=len(anns) + 1, image_id=im["id"]))
+            kit.append((f, doc["kitti"]))
+            mot.append((f, doc["mot"]))
+            if "kitti" in fm:
+                _link(img, os.path.join(out_dir, "kitti_tracking", "training", "image_02", f"{s:04d}", f"{f:06d}.png"))
+            if "mot" in fm:
+                _link(img, os.path.join(out_dir, "mot", f"{s:04d}", "img1", f"{f + 1:06d}.png"))
+            if f == 0:
+                calib, W, H = doc["calib"], im["width"], im["height"]
+        videos.append({"id": s + 1, "name": f"{s:04d}", "width": W, "height": H, "length": n, "fps": fps})
+        if "kitti" in fm:
+            base = os.path.join(out_dir, "kitti_tracking", "training")
+            _text(os.path.join(base, "label_02", f"{s:04d}.txt"), writers.kitti_tracking_text(kit))
+            _text(os.path.join(base, "calib", f"{s:04d}.txt"), calib_text(calib))
+        if "mot" in fm:
+            d = os.path.join(out_dir, "mot", f"{s:04d}")
+            _text(os.path.join(d, "gt", "gt.txt"), writers.mot_gt_text(mot))
+            _text(os.path.join(d, "seqinfo.ini"), writers.seqinfo_text(f"{s:04d}", fps, n, W, H))
+    imgs, tracks = writers.coco_video(images, anns, videos)
+    doc = {"info": info, "licenses": [], "videos": videos, "images": imgs, "annotations": anns, "tracks": tracks,
+           "categories": cats}
+    path = os.path.join(out_dir, "annotations.json")
+    with atomic_path(path) as tmp:
+        with open(tmp, "w") as fh:
+            json.dump(doc, fh, separators=(",", ":"))
+    return path
