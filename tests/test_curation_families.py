@@ -154,3 +154,49 @@ def test_keypoints_off_their_part_are_refused_with_the_distance():
     assert len(bad) == 2 and all("cm from the steering surface" in p for p in bad), res.problems
     # the grip centre is 5 cm in from the bar's end: 12 cm further out is ~7 cm beyond it
     assert 5.5 < float(bad[0].split()[1]) < 8.5, bad
+
+
+def _lower_body(b, seat_top, pl, pr):
+    """A rider's hips and both legs as one connected piece (a low-poly or skinned person), astride
+    the top tube, feet on the pedals."""
+    from curation_synth import RIDER, fuse
+    p = Builder()
+    hip = seat_top + [0.0, 0.1, 0.0]
+    p.box(hip, [0.12, 0.09, 0.17], RIDER)
+    for s, ped in ((1, pr), (-1, pl)):
+        knee = np.array([0.12, 0.72, s * 0.14])
+        p.tube(hip + [0, 0, s * 0.11], knee, 0.06, RIDER)
+        p.tube(knee, ped + [0, 0.06, 0.0], 0.05, RIDER)
+    b.add(*fuse(*p.arrays())[:3])
+
+
+@pytest.mark.parametrize("seed,scale", [(61, 1.0), (62, 100.0)])
+def test_a_riders_one_piece_lower_body_goes_with_the_rider(seed, scale):
+    """Torso, head and arms are separate pieces; hips and legs one piece astride the frame (it
+    stayed on the saddle, and the seat keypoint sat on it)."""
+    from curation_synth import RIDER
+    V, T, lab, kp = synth_bike(nseg=24, rider=True)
+    keep = ~((lab == RIDER) & (mesh.Soup(V, T).comp_of_tri >= 0) & (V[T].mean(1)[:, 1] < 1.1))   # drop its thighs
+    b = Builder()
+    b.add(V, T[keep], lab[keep])
+    _lower_body(b, kp["seat"], kp["pedal_left"], kp["pedal_right"])
+    V, T, lab = b.arrays()
+    Vm, q = transform(V, seed, scale, 0.0)
+    res = pipeline.curate_arrays(Vm, T, 0.7)
+    assert res.problems == [], res.problems
+    assert np.all(res.labels[lab == RIDER] == -1), (res.labels[lab == RIDER] != -1).sum()
+    assert np.linalg.norm(res.keypoints["seat"] - kp["seat"]) < 0.03, res.keypoints["seat"]
+
+
+@pytest.mark.parametrize("angle,seed", [(172.0, 71), (188.0, 72)])
+def test_crank_arms_modelled_at_an_angle(angle, seed):
+    """Crank arms 172 or 188 degrees apart (a pedal 2.4 cm off the opposite of the other): the
+    pedals are still an opposite pair about the crank axle, each within 3 cm of its pedal body,
+    and no 'not opposite' refusal."""
+    V, T, lab, kp = synth_bike(nseg=24, crank_angle=angle)
+    res = pipeline.curate_arrays(transform(V, seed, 1.0, 0.0)[0], T, 0.7)
+    assert res.problems == [], res.problems
+    k = res.keypoints
+    assert np.linalg.norm((k["pedal_left"] - k["crank_axle"])[:2] + (k["pedal_right"] - k["crank_axle"])[:2]) < 0.03
+    for n in ("pedal_left", "pedal_right"):
+        assert np.linalg.norm(k[n] - kp[n]) < 0.03, (n, k[n], kp[n])
