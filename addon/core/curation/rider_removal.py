@@ -142,7 +142,10 @@ def _body(pc, high):
     mid = 0.5 * (lo[:, 1] + hi[:, 1])
     thick = (hi - lo).min(1) > 0.1 * D
     side = np.abs(0.5 * (lo[:, 2] + hi[:, 2])) > 0.25 * (hi[:, 2] - lo[:, 2])
-    short = (hi[:, 0] - lo[:, 0]) < 0.7 * D   # hips: 35-45 cm long; a tank or motorcycle seat is longer
+    # short, or a chunky blob up to 0.7 D long (hips: as high and wide as half their length;
+    # a tank, a motorcycle seat or a frame tube is longer for its height or width)
+    ext = hi - lo
+    short = (ext[:, 0] < 0.6 * D) | ((ext[:, 0] < 0.7 * D) & (ext.min(1) >= 0.55 * ext.max(1)))
     # a handlebar assembly (bar, headset, lamp in one piece) at the top of a stem leaning far
     # back, behind the column test's line: wider than 0.8 D, centred, in the front half
     bars = (hi[:, 2] - lo[:, 2] > 0.8 * D) & (np.abs(hi[:, 2] + lo[:, 2]) < 0.2 * (hi[:, 2] - lo[:, 2])) \
