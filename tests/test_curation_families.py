@@ -200,3 +200,20 @@ def test_crank_arms_modelled_at_an_angle(angle, seed):
     assert np.linalg.norm((k["pedal_left"] - k["crank_axle"])[:2] + (k["pedal_right"] - k["crank_axle"])[:2]) < 0.03
     for n in ("pedal_left", "pedal_right"):
         assert np.linalg.norm(k[n] - kp[n]) < 0.03, (n, k[n], kp[n])
+
+
+@pytest.mark.parametrize("kind,scale,cls,diameter", [("motorcycle", 3.3, "motorcycle", 0.64),
+                                                     ("motorcycle", 100.0, "motorcycle", 0.60),
+                                                     ("kick scooter", 7.0, "kick scooter", None)])
+def test_size_by_vehicle_class(kind, scale, cls, diameter):
+    """Without a wheel size: a motorcycle in arbitrary units gets a motorcycle's 0.64 m tyres, in
+    centimetres its own 0.6 m; a kick scooter its top at 1 m (its bar, 0.96 m up, at ~1 m)."""
+    from curation_synth import synth_motorcycle, synth_scooter
+    V, T, lab, kp = synth_motorcycle() if kind == "motorcycle" else synth_scooter()
+    res = pipeline.curate_arrays(transform(V, 81, scale, 0.0)[0], T, None)
+    assert res.record["size"]["class"] == cls, res.record["size"]
+    if diameter is not None:
+        assert res.wheel_diameter == pytest.approx(diameter, abs=0.005)
+    else:
+        top = res.record["height_m"]
+        assert abs(top - 1.0) < 0.02 and abs(res.wheel_diameter - 0.2 / 0.965) < 0.02, (top, res.wheel_diameter)
