@@ -7,7 +7,7 @@ A model that is not a two-wheeler is refused with one line naming the failed che
 whose keypoints or split fail is saved as OUT.partial.blend for the annotator panel to finish.
 
 MODEL: .glb .gltf .obj .fbx .ply .stl .blend.  Removes what is not the bike, finds the wheels, puts
-the bike in the canonical pose at real scale (tyre diameter --wheel-diameter, default 0.7 m),
+the bike in the canonical pose at real scale (tyre diameter --wheel-diameter, else from every size cue),
 estimates and validates the keypoints (or reads them, canonical frame, from FILE.json), splits
 frame / steering / crank, rigs and saves.  Runs the annotator panel's operators, headless.
 """
@@ -27,8 +27,8 @@ def parse(argv):
     p.add_argument("--out", required=True, help="bike folder to write, e.g. OUT/bikes/my_bike")
     p.add_argument("--keypoints", default="auto", help="'auto' (default) or a JSON file of canonical keypoints")
     p.add_argument("--wheel-diameter", default="auto",
-                   help="tyre outer diameter in metres, or 'auto' (default: 0.7 m; a kick scooter's small wheels "
-                        "are sized so its bar is 1 m high)")
+                   help="tyre outer diameter in metres, or 'auto' (default: from the vehicle's class, the file's "
+                        "units, its wheelbase, bar and seat heights; refused with the figures when they disagree)")
     p.add_argument("--allow-problems", action="store_true", help="save even if keypoint validation fails")
     return p.parse_args(argv)
 

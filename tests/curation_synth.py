@@ -70,7 +70,7 @@ class Builder:
 
 
 def synth_bike(nseg=24, tyre_r=0.022, rider=False, chainring=True, third_wheel=None, front_R=0.35,
-               chain_guard=False, front_twin=None, extras=(), wheelbase=1.07):
+               chain_guard=False, front_twin=None, extras=(), wheelbase=1.07, crank_angle=180.0):
     """A city bike from primitives in the canonical frame; (V, T, labels, truth keypoints).
 
     rider: False; True (torso, head, arms to the bar, thighs: separate pieces); "legs" (also
@@ -124,9 +124,12 @@ def synth_bike(nseg=24, tyre_r=0.022, rider=False, chainring=True, third_wheel=N
     b.tube(ca - [0, 0, 0.036], ca + [0, 0, 0.036], 0.02, FRAME)     # bottom bracket shell
     ang = np.radians(30)
     v = 0.17 * np.array([np.cos(ang), np.sin(ang), 0])
-    pr, pl = ca + v + [0, 0, 0.14], ca - v - [0, 0, 0.14]
+    # crank_angle: the arms' angle apart (180 opposite; a model's arms at 170 are not)
+    al = ang + np.radians(crank_angle)
+    vl = 0.17 * np.array([np.cos(al), np.sin(al), 0])
+    pr, pl = ca + v + [0, 0, 0.14], ca + vl - [0, 0, 0.14]
     b.tube(ca + [0, 0, 0.06], ca + v + [0, 0, 0.07], 0.01, CRANK)
-    b.tube(ca - [0, 0, 0.06], ca - v - [0, 0, 0.07], 0.01, CRANK)
+    b.tube(ca - [0, 0, 0.06], ca + vl - [0, 0, 0.07], 0.01, CRANK)
     b.box(pr, [0.045, 0.012, 0.05], CRANK)
     b.box(pl, [0.045, 0.012, 0.05], CRANK)
     if chainring:

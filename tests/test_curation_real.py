@@ -5,7 +5,8 @@ SOURCES.md for authors and licences; skipped where that folder is absent).
   Pedal_Right -> crank; the rest frame) and named pivots: the automatic split is measured per
   part against the names, the keypoints against the pivots.  The truth comes from the file's
   own names, never from the code under test.
-- every shared two-wheeler curates without help through the add-on's operators (slow).
+- every shared two-wheeler curates without help through the add-on's operators (slow): at its
+  class's size, riders removed, each keypoint within 3 cm of its part.
 """
 import json
 import os
@@ -28,7 +29,13 @@ TRUTH_PART = {"FrontWheel": 1, "Handle": 1, "Pedalier": 2, "Pedal_Left": 2, "Ped
 REAL = {"lanejustice_citybike.glb": True, "cvo_bicycle_gltf/scene.gltf": True,
         "facupola_oldgerman_bike.glb": True, "arfun_bicycle.glb": True,
         "jswing_razor_scooter_gltf/scene.gltf": False, "tomkranis_motorcycle_gltf/scene.gltf": False,
-        "vinny_robot_on_bike_obj/bike.obj": True}   # its robot rider is removed, legs and feet too
+        "vinny_robot_on_bike_obj/bike.obj": True,   # its robot rider is removed, legs and feet too
+        "arfun_harley_motorcycle.glb": False, "gow2023_jo_on_bike_rigged.glb": True,
+        "diegor_scooter_rider_gltf/scene.gltf": False}
+# the vehicle class its size comes from (scale.py), and whether a rider is on it
+CLASS = {"jswing_razor_scooter_gltf/scene.gltf": "kick scooter", "tomkranis_motorcycle_gltf/scene.gltf": "motorcycle",
+         "arfun_harley_motorcycle.glb": "motorcycle", "diegor_scooter_rider_gltf/scene.gltf": "motor scooter"}
+RIDER = ("vinny", "gow2023", "diegor")
 
 
 def _scene_arrays():
@@ -94,8 +101,12 @@ def test_real_model_curates_without_help(rel, tmp_path, fresh_scene):
     kp = json.loads((out / "keypoints.json").read_text())
     assert set(kp["keypoints"]) == set(KEYPOINT_NAMES)
     assert meta["has_crank"] == REAL[rel]
-    if rel.startswith("vinny"):
-        assert any("removed a rider" in n for n in meta["curation"]["notes"])
+    rec = meta["curation"]
+    assert any("removed a rider" in n for n in rec["notes"]) == rel.startswith(RIDER)
+    # the size its class gives, the class's heights, every keypoint on its part within 3 cm
+    assert rec["size"]["class"] == CLASS.get(rel, "bicycle"), rec["size"]
+    assert max(rec["keypoint_distance_cm"].values()) < 3.0, rec["keypoint_distance_cm"]
+    assert len(rec["keypoint_distance_cm"]) == 8
     assert set(meta["triangles"]) == ({"frame", "steering", "crank"} if meta["has_crank"] else {"frame", "steering"})
     assert all(n > 0 for n in meta["triangles"].values())
 

@@ -142,7 +142,10 @@ def _body(pc, high):
     mid = 0.5 * (lo[:, 1] + hi[:, 1])
     thick = (hi - lo).min(1) > 0.1 * D
     side = np.abs(0.5 * (lo[:, 2] + hi[:, 2])) > 0.25 * (hi[:, 2] - lo[:, 2])
-    short = (hi[:, 0] - lo[:, 0]) < 0.6 * D
+    # short, or a chunky blob up to 0.7 D long (hips: as high and wide as half their length;
+    # a tank, a motorcycle seat or a frame tube is longer for its height or width)
+    ext = hi - lo
+    short = (ext[:, 0] < 0.6 * D) | ((ext[:, 0] < 0.7 * D) & (ext.min(1) >= 0.55 * ext.max(1)))
     # a handlebar assembly (bar, headset, lamp in one piece) at the top of a stem leaning far
     # back, behind the column test's line: wider than 0.8 D, centred, in the front half
     bars = (hi[:, 2] - lo[:, 2] > 0.8 * D) & (np.abs(hi[:, 2] + lo[:, 2]) < 0.2 * (hi[:, 2] - lo[:, 2])) \
@@ -201,7 +204,7 @@ def _limbs(pc, body):
 def _straddling(pc, rider):
     """Step 3b: a rider's lower body as one piece (hips and both legs of a low-poly or skinned
     person, left on the saddle when the torso went): touching the rider, reaching from below the
-    wheel tops to above 1.5 D, wider than 0.6 D across, its surface mostly beside the bike's
+    wheel tops to above 1.5 D, wider than 0.45 D across, its surface mostly beside the bike's
     plane on both sides (legs astride the frame, two apart at knee height) and little of it on
     the plane.  A motor scooter's leg shield is as wide but runs across the plane.  A motorcycle's
     tank, seat or body is narrower or centred; a handlebar is on the steering column; a rack's
@@ -209,7 +212,7 @@ def _straddling(pc, rider):
     lo, hi, D = pc.lo, pc.hi, pc.D
     near = pc.mask(pc.touch.touching(pc.global_(rider)))
     cand = near & ~rider & ~pc.wheel & ~pc.column & (hi[:, 1] > 1.5 * D) & (lo[:, 1] < 1.1 * D) \
-        & (hi[:, 2] - lo[:, 2] > 0.6 * D)
+        & (hi[:, 2] - lo[:, 2] > 0.45 * D)
     out = np.zeros(len(pc.idx), bool)
     for j in np.nonzero(cand)[0]:
         S = pc.touch.samples[pc.idx[j]]
