@@ -6,7 +6,8 @@ body part and a side:
 
 1. Normalise: drop a namespace (`mixamorig:`, `mixamorig1:`, `Armature|`), split camelCase, separators
    (`_ . - space`) and digits into tokens, drop family prefixes (`mixamorig`, `DEF`, `J_Bip_C`,
-   `CC_Base`, `Bip01`, `Skeleton ... joint`...), read a side token (`L/R/Left/Right`, as prefix or
+   `CC_Base`, `Bip01`, `Skeleton ... joint`, and any unknown leading word such as HumanIK's
+   `Character1_`), read a side token (`L/R/Left/Right`, as prefix or
    suffix: `thigh_l`, `DEF-thigh.L`, `Bip01 L Thigh`, `LeftUpLeg`, `Left arm_07`).  The rest is the
    part key, tried with and without a trailing number (Sketchfab's `_07` renumbering, UE's `spine_01`).
 2. Never a joint: helper, IK, control, pole, target, twist, roll, leaf, end, socket bones (name
@@ -50,7 +51,7 @@ SPINE_FRACTIONS = {"spine1": 0.265, "spine2": 0.44, "spine3": 0.705}
 
 _EXCLUDE = re.compile(r"(ik|fk|ctrl|ctl|control|controller|pole|target|tgt|twist|roll|leaf|end|nub|helper|hlp|"
                       r"aux|socket|slot|prop|weapon|attach|attachment|mch|org|wgt|corrective|dummy|null|"
-                      r"ref|marker|locator|adjust|offset|pv|effector|goal|bend|share|pad|jiggle|physics|"
+                      r"ref|marker|locator|adjust|offset|pv|effector|goal|share|pad|jiggle|physics|"
                       r"dyn|spring|cloth|hair|skirt|cape|tail|ear|eye|jaw|tongue|teeth|lip|brow|cheek|"
                       r"nose|mouth|breast|bust|pec|butt|glute)\d*$")
 _EXCLUDE_SUFFIX = re.compile(r"(ik|ctrl|ctl|twist|roll|end|leaf|slot|socket|target|pole|nub|helper)\d*$")
@@ -63,13 +64,13 @@ _SIDE = {"l": "left", "left": "left", "lft": "left", "r": "right", "right": "rig
 # part key (side removed, tokens joined) -> part; first match wins
 _PARTS = [
     ("pelvis", r"(hips?|pelvis|hipbone|hipsbone|cog)"),
-    ("neck", r"(neck\d*|necktwist0?1|neckbase)"),
+    ("neck", r"(neck\d*|necktwist0?1|neckbase|necklower|neckupper)"),
     ("head", r"(head)"),
-    ("spine", r"(spine\d*|chest\d*|upperchest|abdomen\d*|abdomenupper|abdomenlower|torso|waist|belly|"
+    ("spine", r"(spine\d*|chest\d*|upperchest|chestlower|chestupper|abdomen\d*|abdomenupper|abdomenlower|torso|waist|belly|"
               r"stomach|back|lowerback|upperback|midback|spine(lower|upper|mid|low|up)|ribs|ribcage|thorax)"),
     ("collar", r"(clavicle|collar|collarbone|scapula)"),
     ("shoulder", r"(shoulder)"),
-    ("upperarm", r"(upperarm|uparm|upperarms|humerus|armupper|bicep|arm)"),
+    ("upperarm", r"(upperarm|uparm|upperarms|humerus|armupper|bicep|arm|shldr)"),
     ("forearm", r"(forearm|lowerarm|lowarm|loarm|elbow|armlower|ulna|radius)"),
     ("wrist", r"(wrist)"),
     ("hand", r"(hand|fist|palm)"),
@@ -142,10 +143,13 @@ def classify(name):
         rest.append(t)
     while rest and (rest[0] in _PREFIX_TOKENS or _PREFIX_RE.match(rest[0])) and len(rest) > 1:
         rest = rest[1:]
-    rest = [t for t in rest if t not in ("joint", "jnt", "bone", "bn", "deform")] or rest
-    keys = ["".join(rest)]
-    if len(rest) > 1 and rest[-1].isdigit():
-        keys.append("".join(rest[:-1]))
+    rest = [t for t in rest if t not in ("joint", "jnt", "bone", "bn", "deform", "bend")] or rest
+    keys = []
+    for start in range(len(rest)):  # an unknown leading word (HumanIK's Character1_) is a prefix too
+        tail = rest[start:]
+        keys.append("".join(tail))
+        if len(tail) > 1 and tail[-1].isdigit():
+            keys.append("".join(tail[:-1]))
     for key in keys:
         for part, rx in _PARTS:
             if rx.match(key):
@@ -156,7 +160,7 @@ def classify(name):
 
 
 def _excluded(toks):
-    return any(_EXCLUDE.match(t) or _EXCLUDE_SUFFIX.search(t) for t in toks)
+    return any(t != "bend" and (_EXCLUDE.match(t) or _EXCLUDE_SUFFIX.search(t)) for t in toks)  # Daz's *Bend bones
 
 
 # ---------------------------------------------------------------- the tree

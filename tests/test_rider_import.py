@@ -96,6 +96,11 @@ FAMILIES = {
                     "head": "Head"},
                    dict(zip(LIMB_JOINTS, ("{s}_Hip", "{s}_Knee", "{s}_Ankle", "{s}_Foot", "{s}_Collar",
                                           "{s}_Shoulder", "{s}_Elbow", "{s}_Wrist", "{s}_Hand"))), "L", "R"),
+    "daz_genesis": family({"pelvis": "hip", "spine1": "abdomenLower", "spine2": "abdomenUpper", "spine3": "chestLower",
+                           "neck": "neckLower", "head": "head"},
+                          dict(zip(LIMB_JOINTS, ("{s}ThighBend", "{s}Shin", "{s}Foot", "{s}Toe", "{s}Collar",
+                                                 "{s}ShldrBend", "{s}ForearmBend", "{s}Hand", "{s}Mid1"))), "l", "r"),
+    "humanik": {j: "Character1_" + n.split(":")[1] for j, n in MIXAMO.items()},
     "no_names": {j: f"Bone{(7 * i + 3) % 24:02d}" for i, j in enumerate(JOINT_NAMES)},
 }
 # unmapped bones: (name, parent joint, joint whose weights it takes half of, or None)
@@ -112,6 +117,8 @@ EXTRA = {"mixamo": [("mixamorig:LeftHandThumb1", "left_wrist", "left_wrist"),
                                ("CC_Base_NeckTwist02", "neck", "neck")],
          "sketchfab": [("Head_end_25", "head", None), ("Left thumb1_26", "left_wrist", "left_wrist")],
          "no_names": [("Bone24", "left_wrist", "left_wrist"), ("Bone25", "head", None)],
+         "daz_genesis": [("lThighTwist", "left_hip", "left_hip"), ("rShldrTwist", "right_shoulder", "right_shoulder"),
+                         ("neckUpper", "neck", "neck")],
          "kaykit": [("kneeIK.l", None, None), ("control-toe-roll.l", None, None), ("handslot.l", "left_hand", None)],
          "blender_lr": [("MCH-foot_ik.L", None, None), ("thigh_twist.L", "left_hip", "left_hip")]}
 TEX = 32  # texture: pixel (x, y) = (x / 31, y / 31, 0.25), a ramp bilinear sampling reproduces exactly
