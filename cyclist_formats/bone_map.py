@@ -315,6 +315,14 @@ def _by_topology(tree, usable, body_z=None):
     legs = [tree.path(pelvis, f) for f in feet]
     if any(len(_long_bones(tree, lg, 0.12 * height)) < 2 for lg in legs):
         return None
+    # the thighs may hang from the first spine bone (3ds Max Biped): the pelvis is then its parent,
+    # whose head is nearer the hip joints
+    hips_z = np.mean([tree.head[_long_bones(tree, lg, 0.12 * height)[0]][2] for lg in legs])
+    par = tree.parent[pelvis]
+    if par is not None and par in use and abs(tree.head[par][2] - hips_z) < abs(tree.head[pelvis][2] - hips_z):
+        legs = [tree.path(par, f) for f in feet]
+        legs = [[b for b in lg if b != pelvis] for lg in legs]
+        pelvis = par
     # the head: the highest point reached through a child of the pelvis that is not on a leg
     first_leg = {lg[0] for lg in legs}
     up_roots = [c for c in tree.children[pelvis] if c in use and c not in first_leg] or \
@@ -379,9 +387,14 @@ def _by_topology(tree, usable, body_z=None):
         i_fa = arm.index(fa)
         rest = arm[i_fa + 1:]
         i_ua = arm.index(ua)
+        hand = rest[1] if len(rest) > 1 else None
+        kids = [c for c in tree.children[rest[0]] if c in use] if rest else []
+        if len(kids) >= 3:  # fingers: the middle one, nearest the fingers' mean base
+            mean = np.mean([tree.head[c] for c in kids], axis=0)
+            hand = min(kids, key=lambda c: float(np.linalg.norm(tree.head[c] - mean)))
         s = sides.setdefault(side, {})
         s.update(upperarm=ua, forearm=fa, collar=arm[i_ua - 1] if i_ua > 0 else None,
-                 wrist=rest[0] if rest else None, hand=rest[1] if len(rest) > 1 else None)
+                 wrist=rest[0] if rest else None, hand=hand)
     if set(sides) != {"left", "right"}:
         return None
     out.update(sides)
@@ -474,6 +487,11 @@ def _assemble(tree, parts, how_found, what, usable):
     else:
         above = [b for b in chain if branch is not None and tree.depth(b) > tree.depth(branch)]
         neck = above[0] if above else None
+        if neck is None and len(chain) >= 2 and chain[-1] == branch:
+            # the arms hang from the neck itself (Biped's clavicles): a branch 80 % of the way up is the neck
+            span = tree.head[head] - tree.head[pelvis]
+            if span @ span > 0 and (tree.head[branch] - tree.head[pelvis]) @ span / (span @ span) >= 0.8:
+                neck = branch
     spine = chain[:chain.index(neck)] if neck else list(chain)
     if neck:
         put("neck", neck)

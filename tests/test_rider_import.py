@@ -979,8 +979,9 @@ DEV_MODELS = ("mh_woman/human.glb", "mh_man/man.glb", "quaternius_superhero_fema
 
 @pytest.mark.parametrize("model", DEV_MODELS)
 def test_development_riders_import_and_ride(model):
-    """The six rigged humans of ../shared/riders (skipped where absent) import without options, and the
-    IK seats them on a bike sized for a 1.75 m adult with hands, feet and pelvis within 2.5 cm."""
+    """The six rigged humans of ../shared/riders (skipped where absent) import without options, the same
+    joints come out of their skeletons' shape alone (bones renamed), and the IK seats them on a city
+    bike with hands, feet and pelvis within 2.5 cm."""
     from addon.core.procedural import layout, spec as bike_spec
     from splatting.rider import ik
     from splatting.rider.kinematics import JOINT_INDEX
@@ -991,6 +992,18 @@ def test_development_riders_import_and_ride(model):
     assert 1.5 < meta["height_m"] < 2.1 and a["vertices"][:, 1].min() == 0.0
     if model.startswith("mh_"):  # MakeHuman's skirt, tights and joint cubes are gone
         assert meta["helper_faces_dropped"] > 5000
+    # the same rig with every bone renamed to nothing meaningful: the skeleton's shape finds the same joints
+    from addon.core import rider_rig
+    from addon.core.curation.importers import import_model
+    from addon.core.scene import reset_scene
+    reset_scene()
+    objects = import_model(path)
+    arm = next(o for o in objects if o.type == "ARMATURE")
+    for k, b in enumerate(list(arm.data.bones)):
+        b.name = f"b{k:03d}"  # Blender renames the meshes' vertex groups with it
+    a2, meta2 = rider_rig.rider_from_objects(objects, "anon", "anon")
+    assert set(meta2["joint_source"].values()) <= {"topology", "interpolated", "derived"}
+    assert np.abs(a2["joints"] - a["joints"]).max() < 1e-5
     J = torch.as_tensor(a["joints"], dtype=torch.float64)
     kp = layout.keypoints(bike_spec.sample_spec("city", 0, 0))
     poses = torch.tensor([[p, 0, 0, 0, 0, 0, 0, 0] for p in (0, 90, 180, 270)], dtype=torch.float64)
