@@ -1011,3 +1011,16 @@ def test_development_riders_import_and_ride(model):
     res = ik.solve(J, targets, saddle_fit=True, saddle_shared=True)
     worst = max(float(r.max()) for r in res.residuals.values())
     assert worst < 0.025, {k: float(v.max()) for k, v in res.residuals.items()}
+
+
+@pytest.mark.parametrize("height,leg,scale,words", [
+    (1.70, 0.80, 1.0, "as in the file"), (172.0, 80.0, 0.01, "centimetres"), (1750.0, 820.0, 0.001, "millimetres"),
+    (68.0, 32.0, 0.0254, "inches"), (4.5, 2.05, 0.82 / 2.05, "no unit fits a person"),
+    (0.3, 0.13, 0.82 / 0.13, "no unit fits a person")])
+def test_sizes_are_read_in_a_plausible_unit(height, leg, scale, words):
+    from addon.core import rider_rig
+    s, said = rider_rig.plausible_scale(height, leg, None, "m")
+    assert abs(s - scale) < 1e-12 and words in said
+    assert rider_rig.plausible_scale(height, leg, 1.6, "m")[0] == 1.6 / height  # --height-m wins
+    with pytest.raises(UserError, match="not a person's proportions"):
+        rider_rig.plausible_scale(height, 0.05 * height, None, "m")

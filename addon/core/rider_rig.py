@@ -47,8 +47,8 @@ T_POSE_PASSES = (
 UP_TOLERANCE_DEG = 30.0
 MIN_HEIGHT_M, MAX_HEIGHT_M = 0.5, 2.6
 # a size outside MIN..MAX read in another unit when that makes it PLAUSIBLE_M tall (most likely first)
-UNIT_GUESSES = ((0.01, "centimetres"), (0.001, "millimetres"), (0.0254, "inches"), (0.1, "decimetres"),
-                (0.3048, "feet"), (10.0, "decametres"), (100.0, "hectometres"))
+# (feet are not guessed: a stylised figure 3-5 units tall would become a child that cannot reach the pedals)
+UNIT_GUESSES = ((0.01, "centimetres"), (0.001, "millimetres"), (0.0254, "inches"), (0.1, "decimetres"))
 PLAUSIBLE_M = (1.0, 2.2)
 PELVIS_LOW, PELVIS_ABOVE_HIPS = 0.015, 0.008  # of the ankle-to-head height (SMPL: pelvis 1 cm above hips)
 CUTOUT_ALPHA = 0.5     # faces whose texture alpha averages below this are invisible: dropped
@@ -458,7 +458,7 @@ def plausible_scale(height, leg, height_m, what):
     """(scale to metres, what was assumed) for a body `height` tall with legs (hip joint to ankle, in the
     T-pose) `leg` long, in Blender's units after the file's own unit settings and object matrices (the
     importers apply them).  A person's size is kept; a size that is a person's in another unit (cm, mm,
-    inches, dm, feet) is read in it; otherwise (a stylised figure 3 units tall, a tiny armature with no
+    inches, dm) is read in it; otherwise (a stylised figure 3 units tall, a tiny armature with no
     unit) the legs are given an adult's length (LEG_M), which is what reaching the pedals needs.
     Refused: legs that are not a plausible share of the height (not a person)."""
     if height_m is not None:
