@@ -92,7 +92,8 @@ _RIGIFY_SPINE = re.compile(r"^(?:def|org)?[-_.]?spine(?:\.(\d{3}))?$", re.IGNORE
 @dataclass
 class Mapping:
     bone_of: dict                 # joint -> bone name (None for a placed joint)
-    virtual: dict = field(default_factory=dict)  # joint -> (carrier bone, rest position (3,)) or ("toe", ankle bone)
+    virtual: dict = field(default_factory=dict)  # joint -> (carrier bone, rest position (3,)), or ("toe", ankle
+    #                                              bone) / ("hand", wrist bone): placed from the mesh by the caller
     how: dict = field(default_factory=dict)      # joint -> "names:<family>" | "topology" | "interpolated" | "derived"
     scheme: str = "names"
 
@@ -464,15 +465,8 @@ def _assemble(tree, parts, how_found, what, usable):
         hand = s.get("hand")
         if hand and tree.is_below(hand, s["wrist"]):
             put(f"{side}_hand", hand)
-        else:
-            w, e = tree.head[s["wrist"]], tree.head[s["forearm"]]
-            t = tree.tail[s["wrist"]]
-            fore = float(np.linalg.norm(w - e))
-            if np.linalg.norm(t - w) >= 0.2 * fore and (t - w) @ (w - e) > 0:
-                p = t
-            else:
-                p = w + (w - e) / max(fore, 1e-9) * 0.35 * fore
-            virtual[f"{side}_hand"] = (s["wrist"], p)
+        else:  # placed from the hand's mesh by the caller (rider_rig), like a toe
+            virtual[f"{side}_hand"] = ("hand", s["wrist"])
             how[f"{side}_hand"] = "derived"
     # the torso: the path pelvis -> head
     path = tree.path(pelvis, head)

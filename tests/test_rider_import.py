@@ -102,6 +102,8 @@ FAMILIES = {
                                                  "{s}ShldrBend", "{s}ForearmBend", "{s}Hand", "{s}Mid1"))), "l", "r"),
     "humanik": {j: "Character1_" + n.split(":")[1] for j, n in MIXAMO.items()},
     "no_names": {j: f"Bone{(7 * i + 3) % 24:02d}" for i, j in enumerate(JOINT_NAMES)},
+    # no toe and no finger bones (many low-poly game rigs)
+    "no_toes_no_fingers": {j: ("-" if j.endswith(("_foot", "_hand")) else n.split(":")[1]) for j, n in MIXAMO.items()},
 }
 # unmapped bones: (name, parent joint, joint whose weights it takes half of, or None)
 EXTRA = {"mixamo": [("mixamorig:LeftHandThumb1", "left_wrist", "left_wrist"),
@@ -194,8 +196,8 @@ def build_rigged_human(rider, scheme, texture=None, a_pose_deg=0.0, drop=(), pel
         kids = [c for c, p in enumerate(PARENTS) if p == j]
         if kids:
             c = first_child.get(j, kids[0])
-            while JOINT_NAMES[c] in drop:  # the segment runs on to the next joint with a bone
-                c = [k for k, p in enumerate(PARENTS) if p == c][0]
+            while JOINT_NAMES[c] in drop and c in PARENTS:  # the segment runs on to the next joint with a bone
+                c = PARENTS.index(c)
             tail = J[c]
         else:  # a leaf: along its parent segment
             d = J[j] - J[PARENTS[j]]
@@ -717,7 +719,8 @@ def test_texture_layer_reaches_the_training_renders(imported, tmp_path):
 SCHEME_OF = {"mixamo": "mixamo", "mixamo_bare": "mixamo", "mixamo1": "mixamo", "rigify": "rigify",
              "unreal": "unreal", "biped": "biped", "vroid": "vroid", "character_creator": "character_creator",
              "sketchfab": "sketchfab", "no_names": "topology"}
-PLACED = {"kaykit": {"spine2", "neck", "left_collar", "right_collar"}}
+PLACED = {"kaykit": {"spine2", "neck", "left_collar", "right_collar"},
+          "no_toes_no_fingers": {"left_foot", "right_foot", "left_hand", "right_hand"}}
 
 
 def folded_weights(source, names):
@@ -827,10 +830,19 @@ def test_every_naming_family_maps_to_the_smpl_joints(family_models, source, fam)
     if fam in SCHEME_OF:
         assert meta["scheme"] == SCHEME_OF[fam]
     for j in JOINT_NAMES:
-        want = "interpolated" if j in placed else "topology" if fam == "no_names" else "names:"
+        want = ("derived" if j.endswith(("_foot", "_hand")) else "interpolated") if j in placed else \
+            "topology" if fam == "no_names" else "names:"
         assert meta["joint_source"][j].startswith(want), (j, meta["joint_source"][j])
     real = [i for i, j in enumerate(JOINT_NAMES) if j not in placed]
     assert np.abs(a["joints"][real] - source.joints.numpy()[real]).max() < 2e-5
+    J, S = a["joints"], source.joints.numpy()
+    for side in ("left", "right"):
+        i_toe, i_ankle, i_hand = (JOINT_NAMES.index(f"{side}_{k}") for k in ("foot", "ankle", "hand"))
+        if f"{side}_foot" in placed:  # ahead of the ankle, below it, within 5 cm of where the toe bone was
+            assert J[i_toe, 0] > J[i_ankle, 0] + 0.05 and J[i_toe, 1] < J[i_ankle, 1]
+            assert np.linalg.norm(J[i_toe] - S[i_toe]) < 0.05
+        if f"{side}_hand" in placed:  # from the hand's mesh: near where the finger bone began
+            assert np.linalg.norm(J[i_hand] - S[i_hand]) < 0.02
     d, i = nearest(a["vertices"], source.vertices.double().numpy())
     assert d.max() < 2e-5
     W = folded_weights(source, names)[i]
