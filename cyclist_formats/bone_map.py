@@ -6,7 +6,8 @@ body part and a side:
 
 1. Normalise: drop a namespace (`mixamorig:`, `mixamorig1:`, `Armature|`), split camelCase, separators
    (`_ . - space`) and digits into tokens, drop family prefixes (`mixamorig`, `DEF`, `J_Bip_C`,
-   `CC_Base`, `Bip01`, `Skeleton ... joint`...), read a side token (`L/R/Left/Right`, as prefix or
+   `CC_Base`, `Bip01`, `Skeleton ... joint`, and any unknown leading word such as HumanIK's
+   `Character1_`), read a side token (`L/R/Left/Right`, as prefix or
    suffix: `thigh_l`, `DEF-thigh.L`, `Bip01 L Thigh`, `LeftUpLeg`, `Left arm_07`).  The rest is the
    part key, tried with and without a trailing number (Sketchfab's `_07` renumbering, UE's `spine_01`).
 2. Never a joint: helper, IK, control, pole, target, twist, roll, leaf, end, socket bones (name
@@ -29,7 +30,8 @@ body part and a side:
    past the arms ends in the head; long bones along a limb are its segments; left/right from the side
    of the body (forward = the feet's heel->toe direction).
 
-`map_skeleton` returns a Mapping: the bone of each joint (None for placed joints), the placed joints
+`map_bones` (names only, at the end) keeps the strict Mixamo / Rigify table for callers that have bone
+names but no skeleton.  `map_skeleton` returns a Mapping: the bone of each joint (None for placed joints), the placed joints
 with the bone they ride on and their rest position, and for each joint how it was found
 ("names:<family>", "topology", "interpolated", "derived").
 """
@@ -50,7 +52,7 @@ SPINE_FRACTIONS = {"spine1": 0.265, "spine2": 0.44, "spine3": 0.705}
 
 _EXCLUDE = re.compile(r"(ik|fk|ctrl|ctl|control|controller|pole|target|tgt|twist|roll|leaf|end|nub|helper|hlp|"
                       r"aux|socket|slot|prop|weapon|attach|attachment|mch|org|wgt|corrective|dummy|null|"
-                      r"ref|marker|locator|adjust|offset|pv|effector|goal|bend|share|pad|jiggle|physics|"
+                      r"ref|marker|locator|adjust|offset|pv|effector|goal|share|pad|jiggle|physics|"
                       r"dyn|spring|cloth|hair|skirt|cape|tail|ear|eye|jaw|tongue|teeth|lip|brow|cheek|"
                       r"nose|mouth|breast|bust|pec|butt|glute)\d*$")
 _EXCLUDE_SUFFIX = re.compile(r"(ik|ctrl|ctl|twist|roll|end|leaf|slot|socket|target|pole|nub|helper)\d*$")
@@ -63,13 +65,13 @@ _SIDE = {"l": "left", "left": "left", "lft": "left", "r": "right", "right": "rig
 # part key (side removed, tokens joined) -> part; first match wins
 _PARTS = [
     ("pelvis", r"(hips?|pelvis|hipbone|hipsbone|cog)"),
-    ("neck", r"(neck\d*|necktwist0?1|neckbase)"),
+    ("neck", r"(neck\d*|necktwist0?1|neckbase|necklower|neckupper)"),
     ("head", r"(head)"),
-    ("spine", r"(spine\d*|chest\d*|upperchest|abdomen\d*|abdomenupper|abdomenlower|torso|waist|belly|"
+    ("spine", r"(spine\d*|chest\d*|upperchest|chestlower|chestupper|abdomen\d*|abdomenupper|abdomenlower|torso|waist|belly|"
               r"stomach|back|lowerback|upperback|midback|spine(lower|upper|mid|low|up)|ribs|ribcage|thorax)"),
     ("collar", r"(clavicle|collar|collarbone|scapula)"),
     ("shoulder", r"(shoulder)"),
-    ("upperarm", r"(upperarm|uparm|upperarms|humerus|armupper|bicep|arm)"),
+    ("upperarm", r"(upperarm|uparm|upperarms|humerus|armupper|bicep|arm|shldr)"),
     ("forearm", r"(forearm|lowerarm|lowarm|loarm|elbow|armlower|ulna|radius)"),
     ("wrist", r"(wrist)"),
     ("hand", r"(hand|fist|palm)"),
@@ -90,7 +92,8 @@ _RIGIFY_SPINE = re.compile(r"^(?:def|org)?[-_.]?spine(?:\.(\d{3}))?$", re.IGNORE
 @dataclass
 class Mapping:
     bone_of: dict                 # joint -> bone name (None for a placed joint)
-    virtual: dict = field(default_factory=dict)  # joint -> (carrier bone, rest position (3,)) or ("toe", ankle bone)
+    virtual: dict = field(default_factory=dict)  # joint -> (carrier bone, rest position (3,)), or ("toe", ankle
+    #                                              bone) / ("hand", wrist bone): placed from the mesh by the caller
     how: dict = field(default_factory=dict)      # joint -> "names:<family>" | "topology" | "interpolated" | "derived"
     scheme: str = "names"
 
@@ -142,10 +145,13 @@ def classify(name):
         rest.append(t)
     while rest and (rest[0] in _PREFIX_TOKENS or _PREFIX_RE.match(rest[0])) and len(rest) > 1:
         rest = rest[1:]
-    rest = [t for t in rest if t not in ("joint", "jnt", "bone", "bn", "deform")] or rest
-    keys = ["".join(rest)]
-    if len(rest) > 1 and rest[-1].isdigit():
-        keys.append("".join(rest[:-1]))
+    rest = [t for t in rest if t not in ("joint", "jnt", "bone", "bn", "deform", "bend")] or rest
+    keys = []
+    for start in range(len(rest)):  # an unknown leading word (HumanIK's Character1_) is a prefix too
+        tail = rest[start:]
+        keys.append("".join(tail))
+        if len(tail) > 1 and tail[-1].isdigit():
+            keys.append("".join(tail[:-1]))
     for key in keys:
         for part, rx in _PARTS:
             if rx.match(key):
@@ -156,7 +162,7 @@ def classify(name):
 
 
 def _excluded(toks):
-    return any(_EXCLUDE.match(t) or _EXCLUDE_SUFFIX.search(t) for t in toks)
+    return any(t != "bend" and (_EXCLUDE.match(t) or _EXCLUDE_SUFFIX.search(t)) for t in toks)  # Daz's *Bend bones
 
 
 # ---------------------------------------------------------------- the tree
@@ -311,6 +317,14 @@ def _by_topology(tree, usable, body_z=None):
     legs = [tree.path(pelvis, f) for f in feet]
     if any(len(_long_bones(tree, lg, 0.12 * height)) < 2 for lg in legs):
         return None
+    # the thighs may hang from the first spine bone (3ds Max Biped): the pelvis is then its parent,
+    # whose head is nearer the hip joints
+    hips_z = np.mean([tree.head[_long_bones(tree, lg, 0.12 * height)[0]][2] for lg in legs])
+    par = tree.parent[pelvis]
+    if par is not None and par in use and abs(tree.head[par][2] - hips_z) < abs(tree.head[pelvis][2] - hips_z):
+        legs = [tree.path(par, f) for f in feet]
+        legs = [[b for b in lg if b != pelvis] for lg in legs]
+        pelvis = par
     # the head: the highest point reached through a child of the pelvis that is not on a leg
     first_leg = {lg[0] for lg in legs}
     up_roots = [c for c in tree.children[pelvis] if c in use and c not in first_leg] or \
@@ -375,9 +389,14 @@ def _by_topology(tree, usable, body_z=None):
         i_fa = arm.index(fa)
         rest = arm[i_fa + 1:]
         i_ua = arm.index(ua)
+        hand = rest[1] if len(rest) > 1 else None
+        kids = [c for c in tree.children[rest[0]] if c in use] if rest else []
+        if len(kids) >= 3:  # fingers: the middle one, nearest the fingers' mean base
+            mean = np.mean([tree.head[c] for c in kids], axis=0)
+            hand = min(kids, key=lambda c: float(np.linalg.norm(tree.head[c] - mean)))
         s = sides.setdefault(side, {})
         s.update(upperarm=ua, forearm=fa, collar=arm[i_ua - 1] if i_ua > 0 else None,
-                 wrist=rest[0] if rest else None, hand=rest[1] if len(rest) > 1 else None)
+                 wrist=rest[0] if rest else None, hand=hand)
     if set(sides) != {"left", "right"}:
         return None
     out.update(sides)
@@ -446,15 +465,8 @@ def _assemble(tree, parts, how_found, what, usable):
         hand = s.get("hand")
         if hand and tree.is_below(hand, s["wrist"]):
             put(f"{side}_hand", hand)
-        else:
-            w, e = tree.head[s["wrist"]], tree.head[s["forearm"]]
-            t = tree.tail[s["wrist"]]
-            fore = float(np.linalg.norm(w - e))
-            if np.linalg.norm(t - w) >= 0.2 * fore and (t - w) @ (w - e) > 0:
-                p = t
-            else:
-                p = w + (w - e) / max(fore, 1e-9) * 0.35 * fore
-            virtual[f"{side}_hand"] = (s["wrist"], p)
+        else:  # placed from the hand's mesh by the caller (rider_rig), like a toe
+            virtual[f"{side}_hand"] = ("hand", s["wrist"])
             how[f"{side}_hand"] = "derived"
     # the torso: the path pelvis -> head
     path = tree.path(pelvis, head)
@@ -470,6 +482,11 @@ def _assemble(tree, parts, how_found, what, usable):
     else:
         above = [b for b in chain if branch is not None and tree.depth(b) > tree.depth(branch)]
         neck = above[0] if above else None
+        if neck is None and len(chain) >= 2 and chain[-1] == branch:
+            # the arms hang from the neck itself (Biped's clavicles): a branch 80 % of the way up is the neck
+            span = tree.head[head] - tree.head[pelvis]
+            if span @ span > 0 and (tree.head[branch] - tree.head[pelvis]) @ span / (span @ span) >= 0.8:
+                neck = branch
     spine = chain[:chain.index(neck)] if neck else list(chain)
     if neck:
         put("neck", neck)
@@ -587,3 +604,71 @@ def map_skeleton(bones, what="armature", body_z=None):
                         f"(its bones include {sample})")
     bone_of, virtual, how = res
     return Mapping(bone_of=bone_of, virtual=virtual, how=how, scheme=fam)
+
+
+# ---------------------------------------------------------------- names only, two schemes (no skeleton at hand)
+# The strict table of the two most common schemes, for callers that have bone names but no skeleton:
+# every joint must have its Mixamo or Rigify bone (no placing, no shape fallback).
+
+def _sided(table, left, right):
+    """{joint: names} with 'left_x'/'right_x' entries made from one template per side."""
+    out = {}
+    for joint, names in table.items():
+        if joint.startswith("side_"):
+            base = joint[len("side_"):]
+            out["left_" + base] = tuple(n.format(S=left[0], s=left[1]) for n in names)
+            out["right_" + base] = tuple(n.format(S=right[0], s=right[1]) for n in names)
+        else:
+            out[joint] = names
+    return out
+
+
+SCHEMES = {
+    "mixamo": _sided({
+        "pelvis": ("Hips",), "spine1": ("Spine",), "spine2": ("Spine1",), "spine3": ("Spine2",),
+        "neck": ("Neck",), "head": ("Head",),
+        "side_hip": ("{S}UpLeg",), "side_knee": ("{S}Leg",), "side_ankle": ("{S}Foot",), "side_foot": ("{S}ToeBase",),
+        "side_collar": ("{S}Shoulder",), "side_shoulder": ("{S}Arm",), "side_elbow": ("{S}ForeArm",),
+        "side_wrist": ("{S}Hand",), "side_hand": ("{S}HandMiddle1", "{S}HandIndex1"),
+    }, ("Left", "L"), ("Right", "R")),
+    "rigify": _sided({
+        "pelvis": ("DEF-spine",), "spine1": ("DEF-spine.001",), "spine2": ("DEF-spine.002",),
+        "spine3": ("DEF-spine.003",), "neck": ("DEF-spine.004",), "head": ("DEF-spine.006",),
+        "side_hip": ("DEF-thigh.{s}",), "side_knee": ("DEF-shin.{s}",), "side_ankle": ("DEF-foot.{s}",),
+        "side_foot": ("DEF-toe.{s}",), "side_collar": ("DEF-shoulder.{s}",), "side_shoulder": ("DEF-upper_arm.{s}",),
+        "side_elbow": ("DEF-forearm.{s}",), "side_wrist": ("DEF-hand.{s}",),
+        "side_hand": ("DEF-f_middle.01.{s}", "DEF-f_index.01.{s}"),
+    }, ("Left", "L"), ("Right", "R")),
+}
+
+_PREFIX = re.compile(r"^(?:[^:]*:|mixamorig\d*_)", re.IGNORECASE)
+
+
+def _key(name):
+    return _PREFIX.sub("", name).lower()
+
+
+def map_bones(bone_names, what="armature"):
+    """Bone names of one armature -> {SMPL joint: bone name}, with the scheme that matched most.
+
+    UserError (one line) when fewer than half the joints match any scheme ("not a humanoid rig") or
+    when some joints have no bone (they are named, with the names looked for)."""
+    by_key = {}
+    for n in bone_names:
+        by_key.setdefault(_key(n), n)
+    best = None
+    for scheme, table in SCHEMES.items():
+        found = {j: next((by_key[_key(c)] for c in table[j] if _key(c) in by_key), None) for j in SMPL_JOINTS}
+        score = sum(v is not None for v in found.values())
+        if best is None or score > best[2]:
+            best = (scheme, found, score)
+    scheme, found, score = best
+    if score < len(SMPL_JOINTS) // 2:
+        sample = ", ".join(sorted(bone_names)[:8]) or "none"
+        raise UserError(f"{what}: not a humanoid rig of a known naming scheme ({', '.join(SCHEMES)}): "
+                        f"{score} of 24 SMPL joints found; its bones include {sample}")
+    missing = [j for j in SMPL_JOINTS if found[j] is None]
+    if missing:
+        looked = "; ".join(f"{j} ({'/'.join(SCHEMES[scheme][j])})" for j in missing)
+        raise UserError(f"{what}: {scheme} rig without bones for SMPL joints {looked}")
+    return dict(found), scheme

@@ -97,7 +97,14 @@ FAMILIES = {
                     "head": "Head"},
                    dict(zip(LIMB_JOINTS, ("{s}_Hip", "{s}_Knee", "{s}_Ankle", "{s}_Foot", "{s}_Collar",
                                           "{s}_Shoulder", "{s}_Elbow", "{s}_Wrist", "{s}_Hand"))), "L", "R"),
+    "daz_genesis": family({"pelvis": "hip", "spine1": "abdomenLower", "spine2": "abdomenUpper", "spine3": "chestLower",
+                           "neck": "neckLower", "head": "head"},
+                          dict(zip(LIMB_JOINTS, ("{s}ThighBend", "{s}Shin", "{s}Foot", "{s}Toe", "{s}Collar",
+                                                 "{s}ShldrBend", "{s}ForearmBend", "{s}Hand", "{s}Mid1"))), "l", "r"),
+    "humanik": {j: "Character1_" + n.split(":")[1] for j, n in MIXAMO.items()},
     "no_names": {j: f"Bone{(7 * i + 3) % 24:02d}" for i, j in enumerate(JOINT_NAMES)},
+    # no toe and no finger bones (many low-poly game rigs)
+    "no_toes_no_fingers": {j: ("-" if j.endswith(("_foot", "_hand")) else n.split(":")[1]) for j, n in MIXAMO.items()},
 }
 # unmapped bones: (name, parent joint, joint whose weights it takes half of, or None)
 EXTRA = {"mixamo": [("mixamorig:LeftHandThumb1", "left_wrist", "left_wrist"),
@@ -113,6 +120,8 @@ EXTRA = {"mixamo": [("mixamorig:LeftHandThumb1", "left_wrist", "left_wrist"),
                                ("CC_Base_NeckTwist02", "neck", "neck")],
          "sketchfab": [("Head_end_25", "head", None), ("Left thumb1_26", "left_wrist", "left_wrist")],
          "no_names": [("Bone24", "left_wrist", "left_wrist"), ("Bone25", "head", None)],
+         "daz_genesis": [("lThighTwist", "left_hip", "left_hip"), ("rShldrTwist", "right_shoulder", "right_shoulder"),
+                         ("neckUpper", "neck", "neck")],
          "kaykit": [("kneeIK.l", None, None), ("control-toe-roll.l", None, None), ("handslot.l", "left_hand", None)],
          "blender_lr": [("MCH-foot_ik.L", None, None), ("thigh_twist.L", "left_hip", "left_hip")]}
 TEX = 32  # texture: pixel (x, y) = (x / 31, y / 31, 0.25), a ramp bilinear sampling reproduces exactly
@@ -188,8 +197,8 @@ def build_rigged_human(rider, scheme, texture=None, a_pose_deg=0.0, drop=(), pel
         kids = [c for c, p in enumerate(PARENTS) if p == j]
         if kids:
             c = first_child.get(j, kids[0])
-            while JOINT_NAMES[c] in drop:  # the segment runs on to the next joint with a bone
-                c = [k for k, p in enumerate(PARENTS) if p == c][0]
+            while JOINT_NAMES[c] in drop and c in PARENTS:  # the segment runs on to the next joint with a bone
+                c = PARENTS.index(c)
             tail = J[c]
         else:  # a leaf: along its parent segment
             d = J[j] - J[PARENTS[j]]
@@ -712,7 +721,8 @@ def test_texture_layer_reaches_the_training_renders(imported, tmp_path):
 SCHEME_OF = {"mixamo": "mixamo", "mixamo_bare": "mixamo", "mixamo1": "mixamo", "rigify": "rigify",
              "unreal": "unreal", "biped": "biped", "vroid": "vroid", "character_creator": "character_creator",
              "sketchfab": "sketchfab", "no_names": "topology"}
-PLACED = {"kaykit": {"spine2", "neck", "left_collar", "right_collar"}}
+PLACED = {"kaykit": {"spine2", "neck", "left_collar", "right_collar"},
+          "no_toes_no_fingers": {"left_foot", "right_foot", "left_hand", "right_hand"}}
 
 
 def folded_weights(source, names):
@@ -822,10 +832,19 @@ def test_every_naming_family_maps_to_the_smpl_joints(family_models, source, fam)
     if fam in SCHEME_OF:
         assert meta["scheme"] == SCHEME_OF[fam]
     for j in JOINT_NAMES:
-        want = "interpolated" if j in placed else "topology" if fam == "no_names" else "names:"
+        want = ("derived" if j.endswith(("_foot", "_hand")) else "interpolated") if j in placed else \
+            "topology" if fam == "no_names" else "names:"
         assert meta["joint_source"][j].startswith(want), (j, meta["joint_source"][j])
     real = [i for i, j in enumerate(JOINT_NAMES) if j not in placed]
     assert np.abs(a["joints"][real] - source.joints.numpy()[real]).max() < 2e-5
+    J, S = a["joints"], source.joints.numpy()
+    for side in ("left", "right"):
+        i_toe, i_ankle, i_hand = (JOINT_NAMES.index(f"{side}_{k}") for k in ("foot", "ankle", "hand"))
+        if f"{side}_foot" in placed:  # ahead of the ankle, below it, within 5 cm of where the toe bone was
+            assert J[i_toe, 0] > J[i_ankle, 0] + 0.05 and J[i_toe, 1] < J[i_ankle, 1]
+            assert np.linalg.norm(J[i_toe] - S[i_toe]) < 0.05
+        if f"{side}_hand" in placed:  # from the hand's mesh: near where the finger bone began
+            assert np.linalg.norm(J[i_hand] - S[i_hand]) < 0.02
     d, i = nearest(a["vertices"], source.vertices.double().numpy())
     assert d.max() < 2e-5
     W = folded_weights(source, names)[i]
@@ -974,8 +993,9 @@ DEV_MODELS = ("mh_woman/human.glb", "mh_man/man.glb", "quaternius_superhero_fema
 
 @pytest.mark.parametrize("model", DEV_MODELS)
 def test_development_riders_import_and_ride(model):
-    """The six rigged humans of ../shared/riders (skipped where absent) import without options, and the
-    IK seats them on a bike sized for a 1.75 m adult with hands, feet and pelvis within 2.5 cm."""
+    """The six rigged humans of ../shared/riders (skipped where absent) import without options, the same
+    joints come out of their skeletons' shape alone (bones renamed), and the IK seats them on a city
+    bike with hands, feet and pelvis within 2.5 cm."""
     from addon.core.procedural import layout, spec as bike_spec
     from splatting.rider import ik
     from splatting.rider.kinematics import JOINT_INDEX
@@ -986,6 +1006,18 @@ def test_development_riders_import_and_ride(model):
     assert 1.5 < meta["height_m"] < 2.1 and a["vertices"][:, 1].min() == 0.0
     if model.startswith("mh_"):  # MakeHuman's skirt, tights and joint cubes are gone
         assert meta["helper_faces_dropped"] > 5000
+    # the same rig with every bone renamed to nothing meaningful: the skeleton's shape finds the same joints
+    from addon.core import rider_rig
+    from addon.core.curation.importers import import_model
+    from addon.core.scene import reset_scene
+    reset_scene()
+    objects = import_model(path)
+    arm = next(o for o in objects if o.type == "ARMATURE")
+    for k, b in enumerate(list(arm.data.bones)):
+        b.name = f"b{k:03d}"  # Blender renames the meshes' vertex groups with it
+    a2, meta2 = rider_rig.rider_from_objects(objects, "anon", "anon")
+    assert set(meta2["joint_source"].values()) <= {"topology", "interpolated", "derived"}
+    assert np.abs(a2["joints"] - a["joints"]).max() < 1e-5
     J = torch.as_tensor(a["joints"], dtype=torch.float64)
     kp = layout.keypoints(bike_spec.sample_spec("city", 0, 0))
     poses = torch.tensor([[p, 0, 0, 0, 0, 0, 0, 0] for p in (0, 90, 180, 270)], dtype=torch.float64)
@@ -993,3 +1025,16 @@ def test_development_riders_import_and_ride(model):
     res = ik.solve(J, targets, saddle_fit=True, saddle_shared=True)
     worst = max(float(r.max()) for r in res.residuals.values())
     assert worst < 0.025, {k: float(v.max()) for k, v in res.residuals.items()}
+
+
+@pytest.mark.parametrize("height,leg,scale,words", [
+    (1.70, 0.80, 1.0, "as in the file"), (172.0, 80.0, 0.01, "centimetres"), (1750.0, 820.0, 0.001, "millimetres"),
+    (68.0, 32.0, 0.0254, "inches"), (4.5, 2.05, 0.82 / 2.05, "no unit fits a person"),
+    (0.3, 0.13, 0.82 / 0.13, "no unit fits a person")])
+def test_sizes_are_read_in_a_plausible_unit(height, leg, scale, words):
+    from addon.core import rider_rig
+    s, said = rider_rig.plausible_scale(height, leg, None, "m")
+    assert abs(s - scale) < 1e-12 and words in said
+    assert rider_rig.plausible_scale(height, leg, 1.6, "m")[0] == 1.6 / height  # --height-m wins
+    with pytest.raises(UserError, match="not a person's proportions"):
+        rider_rig.plausible_scale(height, 0.05 * height, None, "m")

@@ -47,10 +47,11 @@ T_POSE_PASSES = (
 UP_TOLERANCE_DEG = 30.0
 MIN_HEIGHT_M, MAX_HEIGHT_M = 0.5, 2.6
 # a size outside MIN..MAX read in another unit when that makes it PLAUSIBLE_M tall (most likely first)
-UNIT_GUESSES = ((0.01, "centimetres"), (0.001, "millimetres"), (0.0254, "inches"), (0.1, "decimetres"),
-                (0.3048, "feet"), (10.0, "decametres"), (100.0, "hectometres"))
+# (feet are not guessed: a stylised figure 3-5 units tall would become a child that cannot reach the pedals)
+UNIT_GUESSES = ((0.01, "centimetres"), (0.001, "millimetres"), (0.0254, "inches"), (0.1, "decimetres"))
 PLAUSIBLE_M = (1.0, 2.2)
 PELVIS_LOW, PELVIS_ABOVE_HIPS = 0.015, 0.008  # of the ankle-to-head height (SMPL: pelvis 1 cm above hips)
+END_HAND_FRACTION = 0.47  # SMPL's hand joint (knuckles) along wrist -> fingertips
 CUTOUT_ALPHA = 0.5     # faces whose texture alpha averages below this are invisible: dropped
 LEG_M = 0.82          # an adult's leg, hip joint to ankle (a 1.75 m person)
 MIN_LEG_SHARE = 0.15  # legs under 15 % of the height: not a person (a chibi figure's are ~25 %)
@@ -155,39 +156,45 @@ def _lift_pelvis(heads, M, pelvis_bone):
     return {"pelvis": (pelvis_bone, heads[J["pelvis"]] + up * (below + PELVIS_ABOVE_HIPS * body))}
 
 
-def _derive_toes(arm, mapping, skinned, M, heads):
-    """A toe joint for a foot without a toe bone: 3/4 of the way from the ankle to the foot's most forward
-    vertex (the vertices its ankle bone and the bones below it weigh most), else along the foot bone."""
+def _end_points(arm, bone, skinned):
+    """World rest positions of the vertices `bone` and the bones below it weigh most."""
+    names = {bone} | {c.name for c in arm.data.bones[bone].children_recursive}
+    out = []
+    for obj in skinned:
+        groups = {g.index for g in obj.vertex_groups if g.name in names}
+        if obj.parent_type == "BONE" and obj.parent_bone in names:
+            out.append(_evaluated_world_vertices(obj))
+        elif groups:
+            co = _evaluated_world_vertices(obj)
+            sel = [v.index for v in obj.data.vertices if sum(g.weight for g in v.groups if g.group in groups) > 0.5]
+            out.append(co[sel])
+    return np.concatenate(out) if out else np.zeros((0, 3))
+
+
+def _derive_ends(arm, mapping, skinned, M, heads):
+    """Toe and hand joints for limbs without toe or finger bones, from the mesh: a toe 3/4 of the way
+    from the ankle to the foot's most forward vertex, a hand (SMPL's knuckles) END_HAND_FRACTION of the
+    way from the wrist to the hand's farthest vertex along the forearm; the bone's tail, else a step
+    along the limb, where the mesh says nothing (glTF bone tails are the importer's guess)."""
     J = {n: i for i, n in enumerate(_joints())}
     out = {}
     for j, v in mapping.virtual.items():
-        if v[0] != "toe":
+        if v[0] not in ("toe", "hand"):
             continue
-        ankle_bone = v[1]
-        side = j.split("_")[0]
-        ankle = heads[J[f"{side}_ankle"]]
-        names = {ankle_bone} | {c.name for c in arm.data.bones[ankle_bone].children_recursive}
-        best = None
-        for obj in skinned:
-            groups = {g.index for g in obj.vertex_groups if g.name in names}
-            if obj.parent_type == "BONE" and obj.parent_bone in names:
-                pts = _evaluated_world_vertices(obj)
-            elif groups:
-                co = _evaluated_world_vertices(obj)
-                sel = [v.index for v in obj.data.vertices
-                       if sum(g.weight for g in v.groups if g.group in groups) > 0.5]
-                pts = co[sel]
-            else:
-                continue
-            if len(pts):
-                f = pts[np.argmax(pts @ M[0])]
-                if best is None or f @ M[0] > best @ M[0]:
-                    best = f
-        if best is None or (best - ankle) @ M[0] <= 0:
-            tail = np.array(list(arm.matrix_world @ arm.data.bones[ankle_bone].tail_local))
-            best = tail if (tail - ankle) @ M[0] > 0 else ankle + M[0] * 0.12 * np.linalg.norm(
-                heads[J[f"{side}_knee"]] - ankle)
-        out[j] = (ankle_bone, ankle + 0.75 * (best - ankle))
+        bone, side = v[1], j.split("_")[0]
+        if v[0] == "toe":
+            base, d, frac = heads[J[f"{side}_ankle"]], M[0], 0.75
+            step = 0.12 * np.linalg.norm(heads[J[f"{side}_knee"]] - base)
+        else:
+            base, e = heads[J[f"{side}_wrist"]], heads[J[f"{side}_elbow"]]
+            d = (base - e) / max(np.linalg.norm(base - e), 1e-12)
+            frac, step = END_HAND_FRACTION, 0.35 * np.linalg.norm(base - e)
+        pts = _end_points(arm, bone, skinned)
+        far = pts[np.argmax((pts - base) @ d)] if len(pts) else None
+        if far is None or (far - base) @ d <= 0:
+            tail = np.array(list(arm.matrix_world @ arm.data.bones[bone].tail_local))
+            far = tail if (tail - base) @ d > 0 else base + d * step / frac
+        out[j] = (bone, base + frac * (far - base))
     return out
 
 
@@ -359,15 +366,15 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, mod
         for pb in arm.pose.bones:
             pb.matrix_basis = Matrix.Identity(4)
         bpy.context.view_layer.update()
-        placed = _placed_offsets(arm, {j: v for j, v in mapping.virtual.items() if v[0] != "toe"})
-        toes = [j for j, v in mapping.virtual.items() if v[0] == "toe"]
+        placed = _placed_offsets(arm, {j: v for j, v in mapping.virtual.items() if v[0] not in ("toe", "hand")})
+        toes = [j for j, v in mapping.virtual.items() if v[0] in ("toe", "hand")]
         for j in toes:  # a stand-in until the body frame is known
             placed[j] = (mapping.virtual[j][1], Vector((0.0, 0.0, 0.0)))
         heads_rest = _posed_heads(arm, bone_of, placed)
         M = body_frame(heads_rest)
         _check_humanoid(heads_rest, M, what)
         if toes:
-            placed.update(_placed_offsets(arm, _derive_toes(arm, mapping, skinned, M, heads_rest)))
+            placed.update(_placed_offsets(arm, _derive_ends(arm, mapping, skinned, M, heads_rest)))
         lifted = _lift_pelvis(heads_rest, M, bone_of["pelvis"])
         placed.update(_placed_offsets(arm, lifted))
         heads_rest = _posed_heads(arm, bone_of, placed)
@@ -458,7 +465,7 @@ def plausible_scale(height, leg, height_m, what):
     """(scale to metres, what was assumed) for a body `height` tall with legs (hip joint to ankle, in the
     T-pose) `leg` long, in Blender's units after the file's own unit settings and object matrices (the
     importers apply them).  A person's size is kept; a size that is a person's in another unit (cm, mm,
-    inches, dm, feet) is read in it; otherwise (a stylised figure 3 units tall, a tiny armature with no
+    inches, dm) is read in it; otherwise (a stylised figure 3 units tall, a tiny armature with no
     unit) the legs are given an adult's length (LEG_M), which is what reaching the pedals needs.
     Refused: legs that are not a plausible share of the height (not a person)."""
     if height_m is not None:
