@@ -147,8 +147,10 @@ def run(results, out_dir, bike_dir=None, cams=CAMERAS, picture=None, modes=MODES
             ims = {}
             for mode in modes:
                 bl, m_bl = _png(os.path.join(work, f"{mode}_{c:04d}.png"))
-                rows[mode].append({"psnr_box_vs_mesh": box_psnr(bl, mesh, m_bl, m_mesh), "iou_vs_mesh": mask_iou(m_bl, m_mesh),
-                                   "psnr_box_vs_raster": box_psnr(bl, ras, m_bl, m_ras), "iou_vs_raster": mask_iou(m_bl, m_ras)})
+                rows[mode].append({"psnr_box_vs_mesh": box_psnr(bl, mesh, m_bl, m_mesh),
+                                   "iou_vs_mesh": mask_iou(m_bl, m_mesh),
+                                   "psnr_box_vs_raster": box_psnr(bl, ras, m_bl, m_ras),
+                                   "iou_vs_raster": mask_iou(m_bl, m_ras)})
                 ims[mode] = bl
             pics.append((ras, ims, mesh))
     summary = {"cameras": list(cams), "gaussians": len(g), "bike": os.path.basename(bike_dir.rstrip("/")),

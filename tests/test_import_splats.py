@@ -246,6 +246,21 @@ def test_sh_degree1_colour_follows_the_view_as_the_rasterizer(tmp_path, fresh_sc
     assert abs(cols[2][0] - (0.5 + C0 * 0.5)) < 6 / 255  # side view: the DC colour only
 
 
+def test_sh_colour_is_taken_toward_the_centre_as_the_rasterizer(tmp_path, fresh_scene):
+    """The rasterizer evaluates a Gaussian's SH once, toward its centre; a big Gaussian seen from
+    the side then has one colour across.  Toward each shading point instead, its two sides
+    would differ: 24 px off the centre the view direction's x is 24 / 391 = 0.061, so each side
+    would move by 3 * C1 * 0.061 = 0.09 (23/255)."""
+    ply = str(tmp_path / "g.ply")
+    sh1 = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [3.0, 0.0, -3.0]]  # Y_3 = -C1 x
+    g = _one_gaussian(ply, sh1, scales=(0.8, 0.8, 0.8), quat=[1.0, 0, 0, 0], logit=6.0)
+    ((ras, bl),) = _both_renders(tmp_path, g, ply, (0,))
+    c, off = 48, 24  # about 1 sigma either side of the centre (0.8 m at 12 m, f = 391 px: 26 px)
+    for u in (c - off, c + off):
+        col_r, col_b = np.clip(ras[c, u, :3] / ras[c, u, 3], 0, 1), bl[c, u, :3] / bl[c, u, 3]
+        np.testing.assert_allclose(col_b, col_r, atol=6 / 255)
+
+
 def _stack(kind, seed=0):
     """Known Gaussians, 0.3 m around (0, 1, 0): one; two overlapping (red over blue); a tyre-like
     stack of ten, nine dark ones in front of a bright one; ten sub-pixel ones piled in depth."""

@@ -16,11 +16,12 @@ fixed exactly:
   projected centre, cut to the box of the ellipse where alpha reaches 1/255, so Cycles and the
   rasterizer draw the same pixels.
 - Opacity (shader): the quad's object coordinates (ox, oy) in [-1, 1]^2 are the pixel offsets
-  from the projected centre over the half-widths (ex, ey), exactly (the plane is at constant depth z, where a metre is
-  f / z pixels).  alpha = o exp(-0.5 (a ox^2 + 2 b ox oy + c oy^2)) with (a, b, c) from the
-  rasterizer's conic: the projected covariance with the perspective Jacobian (at the
-  FOV-clamped point), plus eps2d px^2, and o times the mip filter's compensation where the
-  model was trained antialiased, with (a, b, c) scaled by (ex^2, ex ey, ey^2).  Below 1/255 it is 0 and it is capped at 0.99, as 3DGS does.
+  from the projected centre over the half-widths (ex, ey), exactly (the plane is at constant
+  depth z, where a metre is f / z pixels).  alpha = o exp(-0.5 (a ox^2 + 2 b ox oy + c oy^2))
+  with (a, b, c) the rasterizer's conic scaled by (ex^2, ex ey, ey^2): the projected covariance
+  with the perspective Jacobian (at the FOV-clamped point) plus eps2d px^2, and o times the mip
+  filter's compensation where the model was trained antialiased.  Below 1/255 it is 0 and it
+  is capped at 0.99, as 3DGS does.
 - Colour: the SH evaluated at the direction camera -> centre (as eval_sh), max(0, .), the sRGB
   display value, emitted as is under the Raw view transform (splat_gaussian.DISPLAY_VIEW_TRANSFORM)
   so that Cycles blends display values as the rasterizer does.

@@ -17,7 +17,7 @@ below 1/255 and capped at 0.99 as 3DGS does.  Back faces are transparent, so eac
 once, and Cycles composites the hits front to back along each ray (per-pixel sorted blending).
 
 Colour (shader): colour = max(0, 0.5 + sum_k Y_k(d) sh_k) in the INRIA 3DGS basis and order
-(splatting/gaussians/sh.py), d the unit direction camera -> shading point in the canonical frame;
+(splatting/gaussians/sh.py), d the unit direction camera -> the Gaussian's centre (as eval_sh);
 the result is the sRGB display value 3DGS trains against.  It is emitted as is, and rendered
 through the Raw view transform, so Cycles composites display values front to back exactly as the
 rasterizer does (see DISPLAY_VIEW_TRANSFORM).  SH coefficient k of a point is the instance
@@ -216,10 +216,15 @@ def gaussian_material(degree, name="splat_gaussian"):
     alpha = b.mul(alpha, b.math("GREATER_THAN", alpha, ALPHA_MIN))
     alpha = b.math("MINIMUM", alpha, ALPHA_MAX)
 
-    # view direction camera -> point = -Incoming, Blender (x, y, z) -> canonical (x, z, -y)
+    # view direction camera -> the Gaussian's centre, as the rasterizer's eval_sh: the camera is
+    # at P + Incoming * (view distance), the centre is the instance's location; Blender (x, y, z)
+    # -> canonical (x, z, -y)
+    cam_data, info = b.n.new("ShaderNodeCameraData"), b.n.new("ShaderNodeObjectInfo")
+    cam_pos = b.vmath("ADD", geo.outputs["Position"],
+                      b.vmath("SCALE", geo.outputs["Incoming"], scale=cam_data.outputs["View Distance"]))
     sep = b.n.new("ShaderNodeSeparateXYZ")
-    b.link(b.vmath("NORMALIZE", geo.outputs["Incoming"]), sep.inputs[0])
-    x, y, z = b.mul(sep.outputs[0], -1.0), b.mul(sep.outputs[2], -1.0), sep.outputs[1]
+    b.link(b.vmath("NORMALIZE", b.vmath("SUBTRACT", info.outputs["Location"], cam_pos)), sep.inputs[0])
+    x, y, z = sep.outputs[0], sep.outputs[2], b.mul(sep.outputs[1], -1.0)
     col = b.vmath("SCALE", b.attr("sh_0"), scale=C0)
     for k, Y in enumerate(_sh_basis(b, x, y, z, degree), start=1):
         col = b.vmath("ADD", col, b.vmath("SCALE", b.attr(f"sh_{k}"), scale=Y))

@@ -1,8 +1,9 @@
 """Import INRIA 3DGS .ply files (docs/contract.md layout) into Blender.
 
-import_splats(mode="gaussian") (the default) draws each Gaussian as a Gaussian: see
-splat_gaussian.py.  This module holds the reader, the dispatch, the sequence keyframing and
-the fast "preview" mode.
+import_splats(mode="gaussian") (the default) draws each Gaussian as a Gaussian, for any camera:
+see splat_gaussian.py.  mode="camera" draws them exactly as our rasterizer does, for one camera:
+see splat_billboard.py.  This module holds the reader, the dispatch, the sequence keyframing and
+the fast "preview" mode; splat_nodes.py the node helpers all three share.
 
 The .ply is read by cyclist_formats.ply (numpy only: Blender 3.4's bundled Python has numpy but
 neither plyfile nor torch).
