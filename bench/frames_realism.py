@@ -78,12 +78,18 @@ def read_rows(path):
 
 
 def main(argv=None):
-    import mediapipe as mp  # here, not at the top: it lives in its own venv (numpy < 2), not the project's
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("dataset")
     ap.add_argument("--frames", required=True, help="the KITTI folder the dataset was made from")
     ap.add_argument("--min-px", type=float, default=64)
     a = ap.parse_args(argv)
+    for p in (os.path.join(a.dataset, "annotations.json"), os.path.join(a.frames, "image_2")):
+        if not os.path.exists(p):
+            raise SystemExit(f"frames_realism: error: no {p}")
+    try:
+        import mediapipe as mp  # here, not at the top: it lives in its own venv (numpy < 2), not the project's
+    except ImportError:
+        raise SystemExit("frames_realism: error: needs mediapipe==0.10.21 (its own venv; see the module's docstring)")
     with open(os.path.join(a.dataset, "annotations.json")) as f:
         doc = json.load(f)
     rider = next(c["id"] for c in doc["categories"] if c.get("key") == "rider")

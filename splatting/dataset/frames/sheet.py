@@ -104,7 +104,18 @@ def main(argv=None):
     ap.add_argument("out")
     ap.add_argument("--samples", help="comma list of sample indices (default: all)")
     a = ap.parse_args(argv)
-    sheet(a.dataset, a.out, None if not a.samples else [int(x) for x in a.samples.split(",")])
+    if not os.path.isfile(os.path.join(a.dataset, "annotations.json")):
+        raise SystemExit(f"sheet: error: {a.dataset} holds no annotations.json (a finished dataset)")
+    try:
+        samples = None if not a.samples else [int(x) for x in a.samples.split(",")]
+    except ValueError:
+        raise SystemExit(f"sheet: error: --samples wants a comma list of indices, got {a.samples!r}")
+    with open(os.path.join(a.dataset, "annotations.json")) as f:
+        n = len(json.load(f)["images"])
+    bad = [i for i in samples or [] if not 0 <= i < n]
+    if bad:
+        raise SystemExit(f"sheet: error: sample {bad[0]} is not in the dataset (0..{n - 1})")
+    sheet(a.dataset, a.out, samples)
 
 
 if __name__ == "__main__":
