@@ -40,7 +40,7 @@ def motion_record(inst, f):
                    wheel_angle_deg=round(math.degrees(float(tr["wheel_rad"][f])) % 360.0, 4),
                    wheel_rate_rad_s=round(float(tr["wheel_rate"][f]), 5),
                    crank_rate_rad_s=round(float(tr["crank_rate"][f]), 5), gear_ratio=round(inst["gear_ratio"], 5),
-                   pedalling=bool(tr["pedalling"][f]))
+                   pedalling=bool(tr["pedalling"][f]), signal=inst["signal"][f])
     return rec
 
 
@@ -67,4 +67,6 @@ def make_frame(cfg, index, assets):
                           "visibility": float(a["visibility"])}
     kit = [[o["instance"], {key: (float(v) if isinstance(v, float) else v) for key, v in o.items()}]
            for o in extras["kitti"]]
-    return rgb, image, anns, {"kitti": kit, "mot": sorted(([k, r] for k, r in mot.items())), "calib": extras["calib"]}
+    signals = [[k + 1, inst["signal"][f]] for k, inst in enumerate(sd["instances"]) if "signal" in inst]
+    return rgb, image, anns, {"kitti": kit, "mot": sorted(([k, r] for k, r in mot.items())), "calib": extras["calib"],
+                              "signal": signals}
