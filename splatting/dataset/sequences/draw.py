@@ -195,6 +195,7 @@ def draw_sequence(cfg, seq):
                     shift = np.array([x - xz[anchor, 0], ego_z[anchor] + z_rel - xz[anchor, 1]])
                 for key in ("origin_xz", "rear_xz"):
                     traj[key] = traj[key] + shift
+                traj["fine_pose"] = traj["fine_pose"] + np.array([0, 0, 0, 0, 0, shift[0], 0, shift[1]])
                 pose = tj.poses(traj)
             track = pose[:, [5, 7]]
             if all(np.min(np.sum((track - p) ** 2, 1)) >= (2 * r_fp) ** 2 for p in placed):
@@ -232,9 +233,14 @@ def frame_draw(sd, f):
 
 def ego_camera(sd, f):
     """The driving camera at frame f: the preset's camera moved by the ego's travel along +Z."""
+    return ego_camera_at(sd, sd["ego_z"][f])
+
+
+def ego_camera_at(sd, z):
+    """The driving camera after z metres of travel along +Z (a sub-frame instant: z = speed x t)."""
     from splatting.raster.camera import from_numpy
     spec = sd["spec"]
     R, T = camera_presets.pose(spec)
-    T = T - R @ np.array([0.0, 0.0, sd["ego_z"][f]])
+    T = T - R @ np.array([0.0, 0.0, z])
     return from_numpy(camera_presets.intrinsics(spec), R, T, spec["width"], spec["height"])
 
