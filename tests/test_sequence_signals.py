@@ -242,3 +242,25 @@ def test_blur_of_a_moving_cyclist_differs_only_around_it(bikes):
             x, y, w, h = a["bbox_amodal"]
             box = [min(box[0], x), min(box[1], y), max(box[2], x + w), max(box[3], y + h)]
     assert xs.min() >= box[0] - 2 and xs.max() <= box[2] + 2 and ys.min() >= box[1] - 2 and ys.max() <= box[3] + 2
+
+
+# ---------------------------------------------------------------- still datasets
+
+def test_still_signals_optional_and_default_off(bikes):
+    torch.set_num_threads(1)
+    from helpers import small_config
+    from splatting.dataset.config import validate
+    from splatting.dataset.generate import Assets, draw, make_sample
+    cfg = validate(small_config(bikes, count=4))
+    assert all("signal" not in i for n in range(4) for i in draw(cfg, n)["instances"])
+    cfg1 = validate(small_config(bikes, count=4, sequence={"still_signal_share": 1.0}))
+    d0, d1 = draw(cfg, 2), draw(cfg1, 2)
+    assert [i["pose"] for i in d0["instances"]] == [i["pose"] for i in d1["instances"]]  # other draws unchanged
+    sig = [i["signal"] for n in range(4) for i in draw(cfg1, n)["instances"]]
+    assert set(sig) <= {"left", "right", "stop", "one_handed"} and len(set(sig)) >= 2
+    rgb, image, anns, _ = make_sample(cfg1, 2, Assets(cfg1))
+    assert image["ik"]["signal"] == d1["instances"][0]["signal"] and all(a["signal"] == image["ik"]["signal"] for a in anns)
+    assert len(image["ik"]["residual_m"]) == 4  # the released hand's pair is left out
+    rgb0, image0, anns0, _ = make_sample(cfg, 2, Assets(cfg))
+    assert "signal" not in image0["instances"][0] and all("signal" not in a for a in anns0)
+    assert rgb.tobytes() != rgb0.tobytes()  # the arm moved

@@ -56,6 +56,7 @@ SEQUENCE_DEFAULTS = {
     "one_handed_share": 0.2,      # share of `straight` riders riding one-handed for a while
     "exposure_s": 0.0,            # motion blur: shutter time (0 = off: the instant's image)
     "blur_subframes": 5,          # renders averaged over the exposure (odd: the middle one is the frame's instant)
+    "still_signal_share": 0.0,    # still sets (sequence.enabled false): share of riders showing an arm signal
 }
 
 DEFAULTS = {
@@ -283,6 +284,8 @@ def _validate_sequence(cfg):
     sq = cfg["sequence"]
     if not isinstance(sq["enabled"], bool):
         raise _err("sequence.enabled", f"expected true or false, got {sq['enabled']!r}")
+    if not (_num(sq["still_signal_share"]) and 0 <= sq["still_signal_share"] <= 1):
+        raise _err("sequence.still_signal_share", f"expected a number within [0, 1], got {sq['still_signal_share']!r}")
     if not sq["enabled"]:
         if "mot" in cfg["labels"]["formats"]:
             raise _err("labels.formats", "mot (MOTChallenge) is a tracking format: it needs sequence.enabled: true")

@@ -135,8 +135,26 @@ def draw(cfg, index):
         instances, dropped = [{"kind": "cyclist" if rider else "parked", "bike": bike, "rider": rider, "pose": pose}], 0
     kind = cfg["backgrounds"]["kinds"][int(rng.integers(len(cfg["backgrounds"]["kinds"])))]
     bg_seed = int(rng.integers(2 ** 31))
+    still_signals(cfg, index, instances)
     return {"instances": instances, "dropped": dropped, "camera": camera,
             "background": {"kind": kind, "seed": bg_seed}}
+
+
+STILL_SIGNALS = ("left", "right", "stop", "one_handed")
+
+
+def still_signals(cfg, index, instances):
+    """Arm signals in still sets (sequence.still_signal_share, default 0: nothing drawn, no `signal`
+    key, bytes as before): each rider shows one of STILL_SIGNALS, uniformly, with that probability.
+    Its own Generator, so the sample's other draws are unchanged."""
+    share = float((cfg.get("sequence") or {}).get("still_signal_share", 0.0))
+    if share <= 0:
+        return
+    rng = np.random.default_rng([cfg["seed"], index, 2029, 7])
+    for inst in instances:
+        if inst["rider"] is not None:
+            u, k = float(rng.uniform()), int(rng.integers(len(STILL_SIGNALS)))
+            inst["signal"] = STILL_SIGNALS[k] if u < share else "none"
 
 
 def background(kind, seed, size):
@@ -486,5 +504,8 @@ def config_record(cfg):
     if cfg.get("mode") != "frames":
         cfg = {k: v for k, v in cfg.items() if k not in ("frames", "insert")}
     if not (cfg.get("sequence") or {}).get("enabled"):  # (config.json of still sets stays as it was)
+        share = (cfg.get("sequence") or {}).get("still_signal_share", 0.0)
         cfg = {k: v for k, v in cfg.items() if k != "sequence"}
+        if share:  # ... unless it draws arm signals
+            cfg["sequence"] = {"still_signal_share": share}
     return json.loads(json.dumps(cfg))
