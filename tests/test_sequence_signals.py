@@ -116,6 +116,34 @@ def test_signal_frames_lead_the_turn():
     assert sig == ["none"] * 15 + ["stop"] * 15 + ["none"] * 30
 
 
+def test_one_handed_span_on_straight_rides():
+    from splatting.dataset.sequences.draw import signal_frames
+    tr, speed, _ = turn_traj()
+    sq = {"signal_share": 1.0, "signal_lead_s": [1.0, 3.0], "one_handed_share": 1.0}
+    for seed in range(5):
+        sig = np.array(signal_frames(np.random.default_rng(seed), "straight", tr, speed, [], sq, 5.9))
+        on = np.flatnonzero(sig != "none")
+        assert set(sig[on]) == {"one_handed"} and np.all(np.diff(on) == 1)
+        assert 0.9 <= len(on) / 10.0 <= 4.1  # 1-4 s at 10 fps
+    assert set(signal_frames(np.random.default_rng(0), "straight", tr, speed, [], dict(sq, one_handed_share=0.0), 5.9)) == {"none"}
+
+
+def test_subframe_poses_follow_the_trajectory(bikes):
+    from splatting.dataset.config import validate
+    from splatting.dataset.sequences.blur import pose_at
+    from splatting.dataset.sequences.draw import draw_sequence
+    cfg = validate(street_config(bikes, count=2, sequence={"enabled": True, "length": 30, "fps": 10.0},
+                                 street={"cyclists": [3, 3], "parked_bikes": [1, 1], "distance_m": [6, 30]}))
+    for s in range(2):
+        for inst in draw_sequence(cfg, s)["instances"]:
+            for f in (0, 7, 29):  # at a frame's instant: the frame's pose
+                p, q = np.array(pose_at(inst, f / 10.0)), inst["poses"][f]
+                assert abs(((p[0] - q[0]) + 180) % 360 - 180) < 1e-6 and np.allclose(p[1:], q[1:], atol=1e-6)
+            if inst["kind"] == "cyclist":  # between two frames: between their positions
+                a, b, m = inst["poses"][10], inst["poses"][11], np.array(pose_at(inst, 1.05))
+                assert np.linalg.norm(m[[5, 7]] - 0.5 * (a[[5, 7]] + b[[5, 7]])) < 0.01 + 1e-3 * np.linalg.norm(b[[5, 7]] - a[[5, 7]])
+
+
 def test_drawn_turns_are_signalled_before_they_start_and_deterministic(bikes):
     from splatting.dataset.config import validate
     from splatting.dataset.sequences.draw import draw_sequence
