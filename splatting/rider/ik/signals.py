@@ -21,6 +21,7 @@ import math
 
 import torch
 
+from cyclist_formats.errors import UserError
 from splatting.rider.ik.slots import SLOT_JOINTS, HINGE_SLOTS, hinge_axes, pair_name
 from splatting.rider.ik.solver import IKResult, solve
 from splatting.rider.ik.start import _frame, _two_bone, _unit
@@ -81,7 +82,7 @@ def solve_with_signals(rest_joints, targets, signals, pairs, **kw):
     hand's pair (its residual is the wrist's distance from the grip, not an IK error)."""
     bad = [s for s in signals if s not in SIGNALS]
     if bad:
-        raise ValueError(f"unknown arm signal {bad[0]!r} (known: {', '.join(SIGNALS)})")
+        raise UserError(f"unknown arm signal {bad[0]!r} (known: {', '.join(SIGNALS)})")
     rest = torch.as_tensor(rest_joints, dtype=torch.float64)
     B = len(signals)
     groups = {}
@@ -93,7 +94,7 @@ def solve_with_signals(rest_joints, targets, signals, pairs, **kw):
         tg = {k: (v[idx] if torch.is_tensor(v) and v.dim() == 2 and v.shape[0] == B else v) for k, v in targets.items()}
         res = solve(rest, tg, pairs=held, **kw)
         if hand is not None:
-            grip = dict(pairs)[f"{hand}_wrist"] if f"{hand}_wrist" in dict(pairs) else None
+            grip = dict(pairs).get(f"{hand}_wrist")  # None: the bike has no such grip (nothing to release)
             la = res.local_aa.clone()
             for s in sorted({signals[b] for b in idx}):
                 rows = [k for k, b in enumerate(idx) if signals[b] == s]
