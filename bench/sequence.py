@@ -88,7 +88,7 @@ def plausibility(bikes_root, bikes, n_seq=25):
     from splatting.dataset.config import validate
     from splatting.dataset.sequences.draw import draw_sequence
     from splatting.dataset.sequences.trajectory import G
-    from splatting.rider.ik.targets import posed_bike_keypoints
+    from splatting.bike.pose import posed_bike_keypoints
     fps = 100.0
     cfg = validate({"mode": "street", "camera": {"preset": "nuscenes"}, "bikes": bikes, "bikes_root": bikes_root,
                     "riders": [RIDER], "street": {"cyclists": [4, 4], "parked_bikes": [0, 0]},

@@ -46,7 +46,7 @@ def test_bike_geometry_of_the_city_bike():
 
 def test_wheels_roll_without_slip_and_pedals_follow_the_gear():
     import torch
-    from splatting.rider.ik.targets import posed_bike_keypoints
+    from splatting.bike.pose import posed_bike_keypoints
     from splatting.dataset.sequences.trajectory import poses
     tr, fps = turn()
     P = torch.tensor(poses(tr), dtype=torch.float64)

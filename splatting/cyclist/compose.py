@@ -15,6 +15,7 @@ from splatting.bike.pose import check_poses, posed_bike_keypoints
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians
 from splatting.rider import ik
+from splatting.rider.ik.signals import solve_with_signals
 from splatting.rider.kinematics import JOINT_NAMES
 from cyclist_formats.instances import IDS
 from cyclist_formats import instances
@@ -87,18 +88,25 @@ class Cyclist:
             self.saddle_mask, self.saddle_axis = saddle_slide(bike) if self.saddle_fit else (None, None)
         self.ids = ids
 
-    def fit_rider(self, poses, saddle_shared=False, init_local_aa=None):
-        """IK of the rider onto the bike at poses (B, 8) (bike frame; H_g is applied later)."""
+    def fit_rider(self, poses, saddle_shared=False, init_local_aa=None, signals=None):
+        """IK of the rider onto the bike at poses (B, 8) (bike frame; H_g is applied later).
+        signals: None or per pose one of ik.signals.SIGNALS (an arm signal: that hand off the bar)."""
         p = check_poses(poses).clone()
         p[:, 2:] = 0.0
         targets = posed_bike_keypoints(self.bike.keypoints, p)
+        if signals is not None and any(s != "none" for s in signals):
+            return solve_with_signals(self.avatar.rest_joints, targets, list(signals), self.pairs,
+                                      init_local_aa=init_local_aa, iterations=self.ik_iterations,
+                                      saddle_fit=self.saddle_fit, saddle_shared=saddle_shared and self.saddle_fit)
         return ik.solve(self.avatar.rest_joints, targets, init_local_aa=init_local_aa, iterations=self.ik_iterations,
                         saddle_fit=self.saddle_fit, saddle_shared=saddle_shared and self.saddle_fit,
                         pairs=self.pairs)
 
-    def pose(self, poses, saddle_shared=False, init_local_aa=None, fit=None):
+    def pose(self, poses, saddle_shared=False, init_local_aa=None, fit=None, signals=None):
         """poses (B, 8) or (8,) -> list of B CyclistFrame.  fit: a fit_rider() result for exactly
-        these poses (a sequence fits all its frames at once, then poses them chunk by chunk)."""
+        these poses (a sequence fits all its frames at once, then poses them chunk by chunk).
+        signals: None or per pose an arm signal (fit_rider); the released hand's pair is left out
+        of the frame's `ik` record, which then names the signal."""
         p = check_poses(poses)
         B = p.shape[0]
         bt = self.bike.pose_tensors(p)
@@ -106,7 +114,7 @@ class Cyclist:
         frames = []
         rider_out = slide = None
         if self.avatar is not None:
-            res = fit if fit is not None else self.fit_rider(p, saddle_shared, init_local_aa)
+            res = fit if fit is not None else self.fit_rider(p, saddle_shared, init_local_aa, signals)
             Hg = self.bike.part_transforms(p)["frame"].float()  # H_g: the frame part is H_g alone
             Rg, tg = Hg[:, :3, :3], Hg[:, :3, 3]
             rot = roma.rotvec_to_rotmat(res.local_aa.float())
@@ -132,9 +140,12 @@ class Cyclist:
                 ag = self.avatar.gaussians
                 parts.append(Gaussians(out["means"][b], out["quats"][b], ag.log_scales, ag.opacity_logits, out["sh"][b]))
                 joints = J[b].double().numpy()
-                ikd = {"residual_m": {k: float(v[b]) for k, v in res.residuals.items()},
-                       "flagged": {k: bool(v[b]) for k, v in res.flagged.items()},
+                free = {k for k, v in (res.free or {}).items() if bool(v[b])}
+                ikd = {"residual_m": {k: float(v[b]) for k, v in res.residuals.items() if k not in free},
+                       "flagged": {k: bool(v[b]) for k, v in res.flagged.items() if k not in free},
                        "seat_offset_m": None if res.seat_offset is None else float(res.seat_offset[b])}
+                if signals is not None:
+                    ikd["signal"] = signals[b]
             frames.append(CyclistFrame(p[b].numpy(), Gaussians.cat(parts), self.ids, kp, joints, ikd))
         return frames
 
@@ -145,6 +156,7 @@ def take_fit(res, idx):
     return replace(res, local_aa=res.local_aa[idx], root_trans=res.root_trans[idx], joints=res.joints[idx],
                    loss=res.loss[idx], residuals={k: v[idx] for k, v in res.residuals.items()},
                    flagged={k: v[idx] for k, v in res.flagged.items()}, seat_offset=pick(res.seat_offset),
+                   free=None if res.free is None else {k: v[idx] for k, v in res.free.items()},
                    history=res.history[:, idx], seat=pick(res.seat))
 
 

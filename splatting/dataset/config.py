@@ -51,6 +51,12 @@ SEQUENCE_DEFAULTS = {
     "cadence_rpm": [60.0, 90.0],  # cruising cadence; sets each cyclist's gear ratio
     "lane_half_width_m": 1.5,     # the ego's lane about its path X = 0 (the crossing label)
     "ego": {"motion": "moving", "speed_mps": [4.0, 10.0]},  # moving | static
+    "signal_share": 0.6,          # share of turns, crossings and stops announced by an arm signal
+    "signal_lead_s": [1.0, 3.0],  # the signal shows from this long before the turn / braking until it starts
+    "one_handed_share": 0.2,      # share of `straight` riders riding one-handed for a while
+    "exposure_s": 0.0,            # motion blur: shutter time (0 = off: the instant's image)
+    "blur_subframes": 5,          # renders averaged over the exposure (odd: the middle one is the frame's instant)
+    "still_signal_share": 0.0,    # still sets (sequence.enabled false): share of riders showing an arm signal
 }
 
 DEFAULTS = {
@@ -278,6 +284,8 @@ def _validate_sequence(cfg):
     sq = cfg["sequence"]
     if not isinstance(sq["enabled"], bool):
         raise _err("sequence.enabled", f"expected true or false, got {sq['enabled']!r}")
+    if not (_num(sq["still_signal_share"]) and 0 <= sq["still_signal_share"] <= 1):
+        raise _err("sequence.still_signal_share", f"expected a number within [0, 1], got {sq['still_signal_share']!r}")
     if not sq["enabled"]:
         if "mot" in cfg["labels"]["formats"]:
             raise _err("labels.formats", "mot (MOTChallenge) is a tracking format: it needs sequence.enabled: true")
@@ -301,6 +309,16 @@ def _validate_sequence(cfg):
     for f, lo, hi in (("max_lateral_accel_mps2", 0.5, 9.81), ("lane_half_width_m", 0.5, 10)):
         if not (_num(sq[f]) and lo <= sq[f] <= hi):
             raise _err(f"sequence.{f}", f"expected a number within [{lo}, {hi}], got {sq[f]!r}")
+    for f, lo, hi in (("signal_share", 0, 1), ("one_handed_share", 0, 1), ("exposure_s", 0, 1)):
+        if not (_num(sq[f]) and lo <= sq[f] <= hi):
+            raise _err(f"sequence.{f}", f"expected a number within [{lo}, {hi}], got {sq[f]!r}")
+    if sq["exposure_s"] > 1.0 / sq["fps"]:
+        raise _err("sequence.exposure_s", f"the shutter cannot stay open longer than a frame (1 / fps = "
+                   f"{1.0 / sq['fps']:.4g} s), got {sq['exposure_s']!r}")
+    _range(cfg, "sequence.signal_lead_s", 0, 30)
+    k = sq["blur_subframes"]
+    if not (isinstance(k, int) and not isinstance(k, bool) and 1 <= k <= 99 and k % 2 == 1):
+        raise _err("sequence.blur_subframes", f"expected an odd integer within 1..99, got {k!r}")
     if sq["ego"]["motion"] not in ("moving", "static"):
         raise _err("sequence.ego.motion", f"expected moving or static, got {sq['ego']['motion']!r}")
 

@@ -135,8 +135,26 @@ def draw(cfg, index):
         instances, dropped = [{"kind": "cyclist" if rider else "parked", "bike": bike, "rider": rider, "pose": pose}], 0
     kind = cfg["backgrounds"]["kinds"][int(rng.integers(len(cfg["backgrounds"]["kinds"])))]
     bg_seed = int(rng.integers(2 ** 31))
+    still_signals(cfg, index, instances)
     return {"instances": instances, "dropped": dropped, "camera": camera,
             "background": {"kind": kind, "seed": bg_seed}}
+
+
+STILL_SIGNALS = ("left", "right", "stop", "one_handed")
+
+
+def still_signals(cfg, index, instances):
+    """Arm signals in still sets (sequence.still_signal_share, default 0: nothing drawn, no `signal`
+    key, bytes as before): each rider shows one of STILL_SIGNALS, uniformly, with that probability.
+    Its own Generator, so the sample's other draws are unchanged."""
+    share = float((cfg.get("sequence") or {}).get("still_signal_share", 0.0))
+    if share <= 0:
+        return
+    rng = np.random.default_rng([cfg["seed"], index, 2029, 7])
+    for inst in instances:
+        if inst["rider"] is not None:
+            u, k = float(rng.uniform()), int(rng.integers(len(STILL_SIGNALS)))
+            inst["signal"] = STILL_SIGNALS[k] if u < share else "none"
 
 
 def background(kind, seed, size):
@@ -248,7 +266,9 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
         if fs is not None:  # both tyres on the frame's road plane (frames.contact)
             for j in js:
                 d["instances"][j]["pose"] = contact.seat(cyc.bike.keypoints, d["instances"][j]["pose"])
-        posed = cyc.pose(torch.tensor([d["instances"][j]["pose"] for j in js], dtype=torch.float64))
+        sig = [d["instances"][j].get("signal", "none") for j in js]  # arm signals (sequences; stills optional)
+        posed = cyc.pose(torch.tensor([d["instances"][j]["pose"] for j in js], dtype=torch.float64),
+                         signals=sig if rider is not None and any(x != "none" for x in sig) else None)
         people = [None] * len(js)
         if rider is not None:
             if kp_cfg["person"] == "coco17":
@@ -381,6 +401,8 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
                              "dimensions_hwl_m": [bx["h"], bx["w"], bx["l"]],
                              "location_cam_m": [float(x) for x in loc], "rotation_y": float(ry), "alpha": float(alpha),
                              "depth_m": float(loc[2])}}
+        if "signal" in inst:  # only where the draw has signals: other sets keep their bytes
+            extra["signal"] = inst["signal"]
         bk = np.array([frame.bike_keypoints.get(n, [np.nan] * 3) for n in BIKE_KEYPOINTS], dtype=np.float64)
         have = np.isfinite(bk).all(1)
         uv, z = project_points(np.nan_to_num(bk), cam)
@@ -413,8 +435,8 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
     if street:
         cam_rec.update(height_m=spec["height_m"], pitch_deg=spec["pitch_deg"], roll_deg=spec["roll_deg"])
     image = {"id": index + 1, "file_name": f"{index:06d}.png", "width": W, "height": H,
-             "instances": [{"kind": i["kind"], "bike": i["bike"], "rider": i["rider"], "pose": i["pose"]}
-                           for i, _, _ in frames],
+             "instances": [{"kind": i["kind"], "bike": i["bike"], "rider": i["rider"], "pose": i["pose"],
+                            **({"signal": i["signal"]} if "signal" in i else {})} for i, _, _ in frames],
              "pose_fields": list(POSE_KEYS), "camera": cam_rec, "background": bg_rec}
     if street or fs is not None:
         image["dropped_placements"] = d["dropped"]
@@ -482,5 +504,8 @@ def config_record(cfg):
     if cfg.get("mode") != "frames":
         cfg = {k: v for k, v in cfg.items() if k not in ("frames", "insert")}
     if not (cfg.get("sequence") or {}).get("enabled"):  # (config.json of still sets stays as it was)
+        share = (cfg.get("sequence") or {}).get("still_signal_share", 0.0)
         cfg = {k: v for k, v in cfg.items() if k != "sequence"}
+        if share:  # ... unless it draws arm signals
+            cfg["sequence"] = {"still_signal_share": share}
     return json.loads(json.dumps(cfg))

@@ -21,6 +21,7 @@ from splatting.dataset.sequences import trajectory as tj
 from splatting.dataset.street import road_heading
 
 TAG = 2029
+SIGNAL_TAG = 7  # the arm signals' own Generator: [seed, sequence, TAG, SIGNAL_TAG, track index]
 MAX_RAMP_ACCEL = 3.5  # m/s^2: the hardest stop or start a short sequence may ask for  # keeps the sequence draws apart from the single-image draws of the same seed
 
 
@@ -102,6 +103,35 @@ def intention(manoeuvre, traj, crossing):
     return out
 
 
+def turn_start(bumps):
+    """(arc length s0 at which the path starts to turn, 'left' | 'right') of a turn or crossing."""
+    s0, _, peak = bumps[0]
+    return s0, "left" if peak > 0 else "right"
+
+
+def signal_frames(rng, manoeuvre, traj, speed, bumps, sq, duration):
+    """Per frame the arm signal of one cyclist (docs/sequences.md, signals): with probability
+    signal_share a turn or crossing is announced by the left / right arm from a drawn lead time
+    before the turn starts (its curvature leaves 0) until it starts, a stop by the stop signal
+    before the braking starts; with probability one_handed_share a `straight` rider rides
+    one-handed for a drawn 1-4 s.  Always three draws (share, lead, span), so the count of draws
+    does not depend on the manoeuvre."""
+    t = traj["t"]
+    out = np.full(len(t), "none", dtype=object)
+    u, lead, start = float(rng.uniform()), float(rng.uniform(*sq["signal_lead_s"])), float(rng.uniform())
+    span = 1.0 + 3.0 * float(rng.uniform())
+    if manoeuvre in ("turn_left", "turn_right", "cross") and bumps and u < sq["signal_share"]:
+        s0, side = turn_start(bumps)
+        t0 = float(np.interp(s0, traj["s"], t)) if s0 < traj["s"][-1] else math.inf
+        out[(t >= t0 - lead) & (t < t0)] = side
+    elif manoeuvre == "stop" and u < sq["signal_share"]:
+        out[(t >= speed["t0"] - lead) & (t < speed["t0"])] = "stop"
+    elif manoeuvre == "straight" and u < sq["one_handed_share"]:
+        a = start * max(duration - span, 0.0)
+        out[(t >= a) & (t < a + span)] = "one_handed"
+    return [str(x) for x in out]
+
+
 def draw_sequence(cfg, seq):
     """Sequence `seq` -> {"ego_speed", "camera", "background", "instances": [...], "dropped"}; each
     instance {kind, bike, rider, manoeuvre, poses (n, 8), traj, crossing, intention, gear_ratio, geometry}."""
@@ -165,23 +195,29 @@ def draw_sequence(cfg, seq):
                     shift = np.array([x - xz[anchor, 0], ego_z[anchor] + z_rel - xz[anchor, 1]])
                 for key in ("origin_xz", "rear_xz"):
                     traj[key] = traj[key] + shift
+                traj["fine_pose"] = traj["fine_pose"] + np.array([0, 0, 0, 0, 0, shift[0], 0, shift[1]])
                 pose = tj.poses(traj)
             track = pose[:, [5, 7]]
             if all(np.min(np.sum((track - p) ** 2, 1)) >= (2 * r_fp) ** 2 for p in placed):
-                got = (pose, traj, gear)
+                got = (pose, traj, gear, (speed, bumps) if kind == "cyclist" else None)
                 break
         if got is None:
             dropped += 1
             continue
-        pose, traj, gear = got
+        pose, traj, gear, plan = got
         placed.append(pose[:, [5, 7]])
+        rec = {}
         if kind == "cyclist":
             crossing = tj.crossing_frames(traj["origin_xz"][:, 0], traj["theta_y_deg"], sq["lane_half_width_m"])
             inten = intention(man, traj, crossing)
+            # its own Generator: the signal draws leave every other draw of the sequence as it was
+            sig_rng = np.random.default_rng([cfg["seed"], seq, TAG, SIGNAL_TAG, len(out)])
+            rec["signal"] = signal_frames(sig_rng, man, traj, plan[0], plan[1], sq, duration)
         else:
             crossing, inten = np.zeros(n, bool), ["parked"] * n
         out.append({"kind": kind, "bike": bike, "rider": rider, "manoeuvre": man, "poses": pose, "traj": traj,
-                    "crossing": crossing, "intention": inten, "gear_ratio": gear, "geometry": geom})
+                    "crossing": crossing, "intention": inten, "gear_ratio": gear, "geometry": geom,
+                    "plan": plan, **rec})
     kinds = cfg["backgrounds"]["kinds"]
     bg = {"kind": kinds[int(rng.integers(len(kinds)))], "seed": int(rng.integers(2 ** 31))}
     return {"ego_speed": ego_speed, "ego_z": ego_z, "camera": {"preset": cam["preset"]}, "spec": cam,
@@ -190,16 +226,21 @@ def draw_sequence(cfg, seq):
 
 def frame_draw(sd, f):
     """make_sample's draw dict for frame f of a drawn sequence."""
-    inst = [{"kind": i["kind"], "bike": i["bike"], "rider": i["rider"], "pose": [float(x) for x in i["poses"][f]]}
-            for i in sd["instances"]]
+    inst = [{"kind": i["kind"], "bike": i["bike"], "rider": i["rider"], "pose": [float(x) for x in i["poses"][f]],
+             **({"signal": i["signal"][f]} if "signal" in i else {})} for i in sd["instances"]]
     return {"instances": inst, "dropped": sd["dropped"], "camera": dict(sd["camera"]), "background": dict(sd["background"])}
 
 
 def ego_camera(sd, f):
     """The driving camera at frame f: the preset's camera moved by the ego's travel along +Z."""
+    return ego_camera_at(sd, sd["ego_z"][f])
+
+
+def ego_camera_at(sd, z):
+    """The driving camera after z metres of travel along +Z (a sub-frame instant: z = speed x t)."""
     from splatting.raster.camera import from_numpy
     spec = sd["spec"]
     R, T = camera_presets.pose(spec)
-    T = T - R @ np.array([0.0, 0.0, sd["ego_z"][f]])
+    T = T - R @ np.array([0.0, 0.0, z])
     return from_numpy(camera_presets.intrinsics(spec), R, T, spec["width"], spec["height"])
 

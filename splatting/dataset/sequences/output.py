@@ -5,6 +5,8 @@ DIR/images/SEQ/FFFFFF.png, DIR/shards/SEQ/FFFFFF.json (the frame's image record,
 tracking rows; written last: it marks the frame done), DIR/annotations.json (COCO-video);
 `kitti`: DIR/kitti_tracking/training/{image_02/SEQ/FFFFFF.png, label_02/SEQ.txt, calib/SEQ.txt};
 `mot`: DIR/mot/SEQ/{img1/%06d.png (1-based), gt/gt.txt, seqinfo.ini}.  SEQ = %04d.
+The arm signal per cyclist and frame, which neither text format has a column for, goes beside
+them: kitti_tracking/training/signal_02/SEQ.txt and mot/SEQ/gt/signals.txt (writers.signal_text).
 Images in the kitti and mot trees are hard links to DIR/images (copies where links fail).
 """
 import json
@@ -33,7 +35,7 @@ def write_frame(cfg, index, out_dir, assets):
     calib = {k: [float(x) for x in v.ravel()] for k, v in rows["calib"].items()}
     os.makedirs(os.path.dirname(shard), exist_ok=True)
     write_json(shard, {"image": image, "annotations": anns, "kitti": rows["kitti"], "mot": rows["mot"],
-                       "calib": calib}, indent=None)
+                       "calib": calib, "signal": rows["signal"]}, indent=None)
     return index
 
 
@@ -68,7 +70,7 @@ def assemble(out_dir, cfg, info, cats):
     fm = cfg["labels"]["formats"]
     images, anns, videos = [], [], []
     for s in range(int(cfg["count"])):
-        kit, mot = [], []
+        kit, mot, sig = [], [], []
         for f in range(n):
             img, shard = paths(out_dir, s * n + f, cfg)
             with open(shard) as fh:
@@ -79,6 +81,7 @@ def assemble(out_dir, cfg, info, cats):
                 anns.append(dict(a, id=len(anns) + 1, image_id=im["id"]))
             kit.append((f, doc["kitti"]))
             mot.append((f, doc["mot"]))
+            sig.append((f, doc.get("signal", [])))
             if "kitti" in fm:
                 _link(img, os.path.join(out_dir, "kitti_tracking", "training", "image_02", f"{s:04d}", f"{f:06d}.png"))
             if "mot" in fm:
@@ -90,10 +93,12 @@ def assemble(out_dir, cfg, info, cats):
             base = os.path.join(out_dir, "kitti_tracking", "training")
             _text(os.path.join(base, "label_02", f"{s:04d}.txt"), writers.kitti_tracking_text(kit))
             _text(os.path.join(base, "calib", f"{s:04d}.txt"), calib_text(calib))
+            _text(os.path.join(base, "signal_02", f"{s:04d}.txt"), writers.signal_text(sig, " ", 0))
         if "mot" in fm:
             d = os.path.join(out_dir, "mot", f"{s:04d}")
             _text(os.path.join(d, "gt", "gt.txt"), writers.mot_gt_text(mot))
             _text(os.path.join(d, "seqinfo.ini"), writers.seqinfo_text(f"{s:04d}", fps, n, W, H))
+            _text(os.path.join(d, "gt", "signals.txt"), writers.signal_text(sig, ",", 1))
     imgs, tracks = writers.coco_video(images, anns, videos)
     doc = {"info": info, "licenses": [], "videos": videos, "images": imgs, "annotations": anns, "tracks": tracks,
            "categories": cats}

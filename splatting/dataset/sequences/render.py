@@ -8,6 +8,7 @@ import math
 
 from splatting.dataset.generate import make_sample
 from splatting.dataset.labels import CATEGORY_IDS
+from splatting.dataset.sequences.blur import blurred_sample
 from splatting.dataset.sequences.draw import draw_sequence, ego_camera, frame_draw
 
 COMBINED_IDS = (CATEGORY_IDS["cyclist"], CATEGORY_IDS["motorcyclist"])
@@ -40,7 +41,7 @@ def motion_record(inst, f):
                    wheel_angle_deg=round(math.degrees(float(tr["wheel_rad"][f])) % 360.0, 4),
                    wheel_rate_rad_s=round(float(tr["wheel_rate"][f]), 5),
                    crank_rate_rad_s=round(float(tr["crank_rate"][f]), 5), gear_ratio=round(inst["gear_ratio"], 5),
-                   pedalling=bool(tr["pedalling"][f]))
+                   pedalling=bool(tr["pedalling"][f]), signal=inst["signal"][f])
     return rec
 
 
@@ -48,8 +49,12 @@ def make_frame(cfg, index, assets):
     """Frame `index` (global) -> (rgb, image record, annotations, {"kitti": [(track, obj)], "mot": [(track, row)]})."""
     seq, f = sequence_of(cfg, index)
     sd = drawn(cfg, seq, assets)
-    rgb, image, anns, extras = make_sample(cfg, index, assets, drawn=frame_draw(sd, f), camera=ego_camera(sd, f),
-                                           look_index=seq)
+    exposure = float(cfg["sequence"]["exposure_s"])
+    if exposure > 0:  # motion blur: sub-frame renders averaged, the labels of the frame's instant
+        rgb, image, anns, extras = blurred_sample(cfg, index, assets, sd, f, exposure, int(cfg["sequence"]["blur_subframes"]))
+    else:
+        rgb, image, anns, extras = make_sample(cfg, index, assets, drawn=frame_draw(sd, f), camera=ego_camera(sd, f),
+                                               look_index=seq)
     image.update(file_name=f"{seq:04d}/{f:06d}.png", video_id=seq + 1, frame_id=f,
                  sequence={"time_s": round(f / float(cfg["sequence"]["fps"]), 6),
                            "ego_speed_mps": round(sd["ego_speed"], 6), "ego_z_m": round(float(sd["ego_z"][f]), 6)})
@@ -67,4 +72,6 @@ def make_frame(cfg, index, assets):
                           "visibility": float(a["visibility"])}
     kit = [[o["instance"], {key: (float(v) if isinstance(v, float) else v) for key, v in o.items()}]
            for o in extras["kitti"]]
-    return rgb, image, anns, {"kitti": kit, "mot": sorted(([k, r] for k, r in mot.items())), "calib": extras["calib"]}
+    signals = [[k + 1, inst["signal"][f]] for k, inst in enumerate(sd["instances"]) if "signal" in inst]
+    return rgb, image, anns, {"kitti": kit, "mot": sorted(([k, r] for k, r in mot.items())), "calib": extras["calib"],
+                              "signal": signals}

@@ -123,6 +123,9 @@ def integrate(n_frames, fps, speed, curvature, geom, start_xz, start_heading_deg
         "pedalling": pedalling[f], "wheel_rad": s[f] / geom["r"], "wheel_rate": v[f] / geom["r"],
         "rear_xz": rear[f], "origin_xz": origin[f], "velocity_xz": vel[f],
         "lateral_accel": v[f] ** 2 * kap[f],
+        # the fine grid's poses (crank and heading unwrapped): sub-frame poses for motion blur (blur.py)
+        "fine_t": t, "fine_pose": np.column_stack([np.degrees(crank), np.degrees(theta_s), np.degrees(lean), np.degrees(psi),
+                                                   np.zeros(n_fine), origin[:, 0], np.zeros(n_fine), origin[:, 1]]),
     }
 
 

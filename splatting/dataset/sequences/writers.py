@@ -52,6 +52,13 @@ def mot_gt_text(frames):
     return "".join(mot_line(f, tid, r) for f, rows in frames for tid, r in sorted(rows, key=lambda x: x[0]))
 
 
+def signal_text(frames, sep, first_frame):
+    """The arm-signal side file of a sequence: one line `frame<sep>track_id<sep>signal` per cyclist
+    and frame (riderless bikes have none), frames numbered from first_frame (KITTI 0, MOT 1) as the
+    format's labels are, so a reader joins them on (frame, track_id).  frames: [(frame, [[track, signal]])]."""
+    return "".join(f"{f + first_frame}{sep}{tid}{sep}{sig}\n" for f, rows in frames for tid, sig in sorted(rows))
+
+
 def seqinfo_text(name, fps, length, width, height, ext=".png"):
     return (f"[Sequence]\nname={name}\nimDir=img1\nframeRate={fps:g}\nseqLength={length}\n"
             f"imWidth={width}\nimHeight={height}\nimExt={ext}\n")

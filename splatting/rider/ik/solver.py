@@ -28,6 +28,7 @@ class IKResult:
     history: torch.Tensor       # (iterations, B) loss at every iteration
     threshold_m: float
     seat: torch.Tensor = None   # (B, 3) the (fitted) seat position, or None without a seat pair
+    free: dict = None           # "joint->target" -> (B,) bool: a hand released for an arm signal (ik/signals.py)
 
 
 def solve(rest_joints, targets, init_local_aa=None, init_root=None, objective="pairs", iterations=50,
