@@ -3,7 +3,7 @@
     python blender_scripts/render_rider_on_bike.py --bike BIKE_DIR --jobs JOBS.json [--size 360 --samples 16]
 
 JOBS.json: [{"rider": posed rider.npz (canonical frame), "out": FILE.png}, ...], written by
-splatting/rider/import_sheet.py.  The bike is BIKE_DIR/bike.blend at its rest pose (crank angle 0), the
+bench/rider_import_sheet.py.  The bike is BIKE_DIR/bike.blend at its rest pose (crank angle 0), the
 rider its posed rider file with its textures (rider_import.import_rider), seen from the rider's left.
 A job whose FILE.png exists is skipped.
 """

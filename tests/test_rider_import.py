@@ -17,6 +17,7 @@ import torch
 
 from cyclist_formats import rider_file
 from cyclist_formats.errors import UserError
+from splatting.bike.pose import posed_bike_keypoints
 from splatting.rider.kinematics import JOINT_NAMES, PARENTS
 from ci_needs import missing
 
@@ -1021,7 +1022,7 @@ def test_development_riders_import_and_ride(model):
     J = torch.as_tensor(a["joints"], dtype=torch.float64)
     kp = layout.keypoints(bike_spec.sample_spec("city", 0, 0))
     poses = torch.tensor([[p, 0, 0, 0, 0, 0, 0, 0] for p in (0, 90, 180, 270)], dtype=torch.float64)
-    targets = ik.posed_bike_keypoints(kp, poses)
+    targets = posed_bike_keypoints(kp, poses)
     res = ik.solve(J, targets, saddle_fit=True, saddle_shared=True)
     worst = max(float(r.max()) for r in res.residuals.values())
     assert worst < 0.025, {k: float(v.max()) for k, v in res.residuals.items()}

@@ -1,6 +1,6 @@
 """Imported riders on a bike: the IK's residuals and posed textured meshes for a contact sheet.
 
-    python -m splatting.rider.import_sheet --bike out/demo/bikes/city_00 --rider NAME=rider.npz ... \
+    python -m bench.rider_import_sheet --bike out/demo/bikes/city_00 --rider NAME=rider.npz ... \
         --work DIR [--out docs/img/riders_import.png] [--table FILE.md]
 
 For each rider file: the IK (saddle fitted, one seat post) at four crank angles on the bike's keypoints,
@@ -29,13 +29,14 @@ SCRIPT = paths.blender_script("render_rider_on_bike.py")
 
 def ride(npz, keypoints):
     """(residuals {hands, feet, pelvis} metres (worst over CRANK_DEG), posed vertices at crank 0 (V,3))."""
+    from splatting.bike.pose import posed_bike_keypoints
     from splatting.rider import ik
     from splatting.rider.body import pose_vertices
     from splatting.rider.imported import load_imported_rider
     from splatting.rotations import rodrigues
     rider = load_imported_rider(npz)
     poses = torch.tensor([[p, 0, 0, 0, 0, 0, 0, 0] for p in CRANK_DEG], dtype=torch.float64)
-    targets = ik.posed_bike_keypoints(keypoints, poses)
+    targets = posed_bike_keypoints(keypoints, poses)
     res = ik.solve(rider.joints.double(), targets, saddle_fit=True, saddle_shared=True)
     worst = {}
     for part, pairs in (("hands", ("left_wrist->handle_left", "right_wrist->handle_right")),
@@ -48,7 +49,7 @@ def ride(npz, keypoints):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(prog="python -m splatting.rider.import_sheet", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python -m bench.rider_import_sheet", description=__doc__.splitlines()[0])
     p.add_argument("--bike", required=True, help="a bike folder with keypoints.json and bike.blend")
     p.add_argument("--rider", action="append", required=True, help="NAME=rider.npz (repeatable)")
     p.add_argument("--work", required=True, help="folder for the posed rider files and the pictures")
