@@ -1,0 +1,316 @@
+"""The dataset config as typed models: one model per block, defaults and ranges in the declarations.
+
+This is the one place the config's fields, defaults and limits are written (docs/cyclists_and_datasets.md
+lists them).  `splatting.dataset.config.load_config` validates a YAML file against DatasetConfig and
+passes on `model_dump()`: a plain dict with the fields in declaration order, values as written (so
+the config.json stored beside a dataset keeps its bytes).  Checks that span several fields (a street
+camera for street mode, distinct category names...) are in DatasetConfig's model validator.
+
+Adding a block: write a `class MyBlock(Block)` with its fields, then one field
+`my_block: MyBlock = Field(default_factory=MyBlock, description=...)` in DatasetConfig; a new block
+that older datasets lack is left out of their config record in generate.config_record.
+
+Torch-free on purpose: the dataset command builds its flags from DatasetConfig at `--help` time.
+"""
+from typing import Annotated, Literal, Optional, Union
+
+from pydantic import PlainValidator, model_validator
+from pydantic_core import PydanticCustomError
+
+from cyclist_formats import checks
+from cyclist_formats.pose import POSE_FIELDS
+from cyclist_formats.typed_config import (AutoOr, Block, Bool, Field, Int, IntRange, Number, Range, Str, Vec3,
+                                          field_error)
+from splatting.cyclist.look_defaults import DEFAULT_COMPENSATE, DEFAULT_LEVELS, RECOLOUR
+
+# ------------------------------------------------------------------ camera
+
+RING = "ring"
+# Driving cameras (values as the datasets publish them; splatting/dataset/camera_presets.py):
+# - kitti: KITTI object benchmark, left colour camera P2 of the 2011_09_26 calibration; 1.65 m.
+# - nuscenes: CAM_FRONT, ~1.51 m.  waymo: FRONT, ~2.1 m.  dashcam: 1920x1080, 90 deg hfov, 1.3 m.
+CAMERA_PRESETS = {
+    "kitti": {"width": 1242, "height": 375, "fx": 721.5377, "fy": 721.5377, "cx": 609.5593, "cy": 172.854,
+              "height_m": 1.65},
+    "nuscenes": {"width": 1600, "height": 900, "fx": 1266.4, "fy": 1266.4, "cx": 816.3, "cy": 491.5,
+                 "height_m": 1.51},
+    "waymo": {"width": 1920, "height": 1280, "fx": 2055.6, "fy": 2055.6, "cx": 939.7, "cy": 641.1,
+              "height_m": 2.1},
+    "dashcam": {"width": 1920, "height": 1080, "hfov_deg": 90.0, "height_m": 1.3},
+}
+CameraPreset = Literal["ring", "kitti", "nuscenes", "waymo", "dashcam", "custom"]
+
+Positive = Annotated[Number, Field(gt=0)]
+
+
+class Camera(Block):
+    """`camera`: the ring (object-centred, size from image_size) or a driving camera; a preset's
+    fields can be overridden one by one, `custom` takes them all from here."""
+    preset: CameraPreset = RING
+    width: Optional[Annotated[Int, Field(ge=16)]] = None
+    height: Optional[Annotated[Int, Field(ge=16)]] = None
+    fx: Optional[Positive] = None
+    fy: Optional[Positive] = None
+    cx: Optional[Number] = None
+    cy: Optional[Number] = None
+    hfov_deg: Optional[Annotated[Number, Field(ge=1, le=170)]] = None
+    height_m: Optional[Positive] = None
+    pitch_deg: Annotated[Number, Field(ge=-60, le=60, description="positive = nose down")] = 0.0
+    roll_deg: Annotated[Number, Field(ge=-45, le=45)] = 0.0
+    scale: Annotated[Number, Field(ge=0.05, le=4, description="render at this fraction of the resolution")] = 1.0
+
+
+# ------------------------------------------------------------------ what is drawn
+
+class PoseRanges(Block):
+    """`pose`: [min, max] of each of the 8 pose fields (degrees, metres; cyclist_formats.pose)."""
+    theta_p_deg: Range() = [0, 360]
+    theta_s_deg: Range() = [-30, 30]
+    theta_x_deg: Range() = [-5, 5]
+    theta_y_deg: Range() = [-180, 180]
+    theta_z_deg: Range() = [-5, 5]
+    t_x_m: Range() = [0, 0]
+    t_y_m: Range() = [0, 0]
+    t_z_m: Range() = [0, 0]
+
+
+assert tuple(PoseRanges.model_fields) == POSE_FIELDS  # config keys are the contract's field names
+
+
+class Views(Block):
+    """`views`: the ring camera's draws (cyclist and bike-only modes)."""
+    azimuth_deg: Range() = [-180, 180]
+    elevation_deg: Range(-89, 89) = [0, 25]
+    distance_m: Range(0.5, None) = [10, 14]
+    focal_px: Optional[Positive] = Field(None, description="null: the ring's 2084.97 px scaled to image_size")
+    centre_jitter_m: Annotated[Number, Field(ge=0)] = 0.1
+
+
+class Street(Block):
+    """`street` (street and frames modes): counts, distances and headings of the instances."""
+    cyclists: IntRange(0, 64) = [1, 6]
+    parked_bikes: IntRange(0, 64) = [0, 1]
+    distance_m: Range(0.5, None) = [3, 60]
+    lateral_m: Range() = [-15, 15]
+    border_margin: Annotated[Number, Field(ge=0, le=1)] = 0.1
+    heading: Literal["road", "uniform"] = "road"
+    road_heading_deg: Annotated[Number, Field(ge=-360, le=360)] = 0.0
+    heading_spread_deg: Annotated[Number, Field(ge=0, le=180)] = 15.0
+    oncoming_share: Annotated[Number, Field(ge=0, le=1)] = 0.4
+    footprint_radius_m: Annotated[Number, Field(ge=0.05, le=10)] = 1.0
+    max_tries: Annotated[Int, Field(ge=1)] = 50
+    parked_steer_deg: Range(-90, 90) = [-40, 40]
+
+
+class SceneTransform(Block):
+    rotation_deg: Vec3 = [0, 0, 0]
+    translation_m: Vec3 = [0, 0, 0]
+    scale: Positive = 1.0
+
+
+BackgroundKind = Literal["solid", "gradient", "noise", "images", "scene"]
+
+
+class Backgrounds(Block):
+    kinds: Annotated[list[BackgroundKind], Field(min_length=1)] = ["solid", "gradient", "noise"]
+    images_dir: Optional[Str] = None
+    image_files: Optional[list[Str]] = None
+    scene_ply: Optional[Str] = None
+    scene_transform: SceneTransform = Field(default_factory=SceneTransform)
+    shadow: Bool = True
+    shadow_opacity: Annotated[Number, Field(ge=0, le=0.99)] = 0.55
+
+
+class Keypoints(Block):
+    person: Literal["coco17", "smpl24"] = "coco17"
+    tolerance_bike_m: Annotated[Number, Field(ge=0)] = 0.08
+    tolerance_rider_m: Annotated[Number, Field(ge=0)] = 0.15
+
+
+# ------------------------------------------------------------------ labels
+
+NonEmpty = Annotated[Str, Field(min_length=1)]
+Combined = Literal["cyclist", "motorcyclist"]
+
+
+class LabelNames(Block):
+    """Category names written into the labels (must differ)."""
+    bicycle: NonEmpty = "bicycle"
+    rider: NonEmpty = "person"
+    cyclist: NonEmpty = "cyclist"
+    motorcyclist: NonEmpty = "motorcyclist"
+    motorcycle: NonEmpty = "motorcycle"
+    scooter: NonEmpty = "scooter"
+
+
+class LabelCombined(Block):
+    """The combined (vehicle + rider) category of each vehicle."""
+    bicycle: Combined = "cyclist"
+    motorcycle: Combined = "motorcyclist"
+    scooter: Combined = "cyclist"
+
+
+VEHICLES = tuple(LabelCombined.model_fields)
+DEFAULT_NAMES = LabelNames().model_dump()
+DEFAULT_COMBINED = LabelCombined().model_dump()
+
+
+class Labels(Block):
+    formats: Annotated[list[Literal["coco", "kitti"]], Field(min_length=1)] = ["coco"]
+    names: LabelNames = Field(default_factory=LabelNames)
+    combined: LabelCombined = Field(default_factory=LabelCombined)
+    vehicle_of: dict[str, Literal[VEHICLES]] = Field(default_factory=dict, description="bike id -> vehicle")
+
+
+# ------------------------------------------------------------------ looks
+
+class LodLevel(Block):
+    below_px: Positive
+    keep: Annotated[Number, Field(gt=0, le=1)]
+
+
+class Lod(Block):
+    """`lod` (splatting/cyclist/lod.py): instances shorter than a level's below_px on screen are
+    rendered with `keep` of their Gaussians; off by default, on in the street preset."""
+    enabled: Bool = False
+    levels: list[LodLevel] = Field(default_factory=lambda: [LodLevel(**x) for x in DEFAULT_LEVELS])
+    compensate: Annotated[Number, Field(ge=0, le=2)] = DEFAULT_COMPENSATE
+
+
+class Appearance(Block):
+    """`appearance` (splatting/cyclist/appearance.py): per instance, new colours for the listed
+    regions (HSV: any hue, saturation and value in the ranges; each region kept as trained with
+    keep_share) and a gain: brightness x white balance (+-white_balance per channel)."""
+    enabled: Bool = False
+    regions: list[Literal[RECOLOUR]] = list(RECOLOUR)
+    keep_share: Annotated[Number, Field(ge=0, le=1)] = 0.25
+    saturation: Range(0, 1) = [0.15, 0.9]
+    value: Range(0, 1) = [0.12, 0.95]
+    brightness: Range(0.05, 4) = [0.75, 1.25]
+    white_balance: Annotated[Number, Field(ge=0, le=0.5)] = 0.08
+
+
+class Lighting(Block):
+    """`lighting` (splatting/dataset/lighting.py): baked = the trained colour; relit = a sun and
+    sky drawn per image from these ranges, bikes and riders shaded from their relight channels."""
+    mode: Literal["baked", "relit"] = "baked"
+    elevation_deg: Range(0, 90) = [15, 75]
+    azimuth_deg: Range(-360, 360) = [-180, 180]
+    strength: Range(0, 1000) = [2, 5]
+    sky: Range(0, 100) = [0.1, 0.6]
+    sun_tint: Annotated[Number, Field(ge=0, lt=1)] = 0.15
+    shadows: Bool = True
+
+
+# ------------------------------------------------------------------ frames mode (docs/kitti_insert.md)
+
+class Look(Block):
+    """`insert.look`: the inserted cyclists lit and blurred as the frame."""
+    match: Bool = True
+    blur_sigma_px: AutoOr(0, 5) = "auto"
+    noise_sigma: AutoOr(0, 0.2) = "auto"
+    sun_elevation_deg: Annotated[Number, Field(ge=1, le=90)] = 45.0
+    sun_azimuth_deg: Annotated[Number, Field(ge=-360, le=360)] = 120.0
+    cast_shadow: Bool = True
+
+
+class Insert(Block):
+    """`insert`: how cyclists go into real frames (counts, distances and headings come from `street`)."""
+    lidar: Bool = Field(True, description="use velodyne/ when present: plane fallback, road checks, occlusion, scan")
+    box_margin_m: Annotated[Number, Field(ge=0, le=10, description="kept clear around every labelled 3D box")] = 0.5
+    min_ground_points: Annotated[Int, Field(ge=0, description="LiDAR road points for a footprint to be seen road")] = 3
+    camera_height_m: Annotated[Number, Field(ge=0.2, le=10, description="the level road below camera 0 "
+                                                                         "when a frame has neither planes nor LiDAR")] = 1.65
+    occlusion_margin_m: Annotated[Number, Field(ge=0, le=5, description="the frame hides an inserted pixel "
+                                                                         "only when nearer by more than this")] = 0.3
+    behind_cars_share: Annotated[Number, Field(ge=0, le=1, description="share of instances sought just beyond "
+                                                                        "a labelled car")] = 0.0
+    box_occluders: Bool = Field(True, description="the labelled 3D boxes, drawn solid, hide what is behind them")
+    look: Look = Field(default_factory=Look)
+
+
+# ------------------------------------------------------------------ the whole config
+
+def _ids(v):
+    if not (v == "all" or (isinstance(v, list) and v and all(isinstance(x, str) and x for x in v))):
+        raise PydanticCustomError("ids", "expected 'all' or a non-empty list of ids")
+    return v
+
+
+def _safe_name(v):
+    if not (isinstance(v, str) and v):
+        raise PydanticCustomError("name", "expected a non-empty string")
+    if not checks.SAFE_NAME.match(v):  # it names the default output folder out/datasets/<name>
+        raise PydanticCustomError("name", "expected a name of letters, digits, '.', '_' or '-' (starting with a "
+                                          "letter or digit, at most 100)")
+    return v
+
+
+Ids = Annotated[Union[Literal["all"], list[str]], PlainValidator(_ids, json_schema_input_type=Union[Literal["all"], list[str]])]
+SafeName = Annotated[str, PlainValidator(_safe_name, json_schema_input_type=str)]
+
+
+class DatasetConfig(Block):
+    """A dataset config (blend_assets/datasets/*.yaml).  Field order is the stored record's order."""
+    name: SafeName = Field("dataset", description="the dataset's name (default output out/datasets/NAME)")
+    mode: Literal["cyclist", "bike-only", "street", "frames"] = "cyclist"
+    seed: Annotated[Int, Field(ge=0, description="seed of every draw (a sample is a function of seed and index)")] = 0
+    count: Annotated[Int, Field(ge=1, description="number of images")] = 100
+    image_size: Annotated[Int, Field(ge=16, description="square image side in pixels (ring camera)")] = 512
+    riders: Ids = Field(["m_adult_average_185"], description="rider ids ('all': the roster)")
+    riders_root: Str = Field("data/riders", description="folder of trained rider avatars (ID/)")
+    bikes: Ids = Field("all", description="bike ids ('all': every bike folder under bikes_root)")
+    bikes_root: Str = Field("out/bikes", description="folder of bike folders")
+    synthetic_assets: Literal["auto", "always", "never"] = Field(
+        "auto", description="auto: trained Gaussians where they exist, else stand-ins")
+    synthetic_gaussians_per_part: Annotated[Int, Field(ge=10)] = 3000
+    rider_gaussians: Optional[Annotated[Int, Field(ge=100)]] = Field(
+        None, description="subsample an untrained (mesh) avatar; null = every vertex")
+    ik_iterations: Annotated[Int, Field(ge=1)] = 50
+    pose: PoseRanges = Field(default_factory=PoseRanges)
+    views: Views = Field(default_factory=Views)
+    camera: Camera = Field(default_factory=Camera)
+    street: Street = Field(default_factory=Street)
+    backgrounds: Backgrounds = Field(default_factory=Backgrounds)
+    keypoints: Keypoints = Field(default_factory=Keypoints)
+    labels: Labels = Field(default_factory=Labels)
+    depth_maps: Bool = False
+    amodal_max_px: Optional[Annotated[Int, Field(ge=32)]] = Field(
+        None, description="amodal masks of larger parts at reduced resolution (speed)")
+    png_compress_level: Annotated[Int, Field(ge=0, le=9)] = 4
+    lod: Lod = Field(default_factory=Lod)
+    appearance: Appearance = Field(default_factory=Appearance)
+    lighting: Lighting = Field(default_factory=Lighting)
+    frames: Optional[Str] = Field(None, description="frames mode: the KITTI object folder (image_2, calib, label_2; "
+                                                    "planes, velodyne) to insert cyclists into (docs/kitti_insert.md)")
+    insert: Insert = Field(default_factory=Insert)
+
+    @model_validator(mode="after")
+    def _across_fields(self):
+        """Checks that span fields; one UserError naming the field (raised as is through pydantic)."""
+        # the camera's cross-field rules live with its maths, which imports torch: imported here so
+        # that this module (and the command's --help, built from it) stays torch-free
+        from splatting.dataset import camera_presets
+        cam = camera_presets.resolve(self.camera.model_dump())
+        if self.mode == "street" and cam is None:
+            raise field_error("camera.preset", "street mode needs a driving camera (kitti, nuscenes, waymo, dashcam, custom)")
+        if self.mode != "street" and cam is not None:
+            raise field_error("camera.preset", f"{self.mode} mode uses the ring camera (set mode: street for driving cameras)")
+        b = self.backgrounds
+        if "images" in b.kinds and b.images_dir is None and b.image_files is None:
+            raise field_error("backgrounds.images_dir", "the 'images' background needs a folder of JPG/PNG files")
+        if "scene" in b.kinds and b.scene_ply is None:
+            raise field_error("backgrounds.scene_ply", "the 'scene' background needs a 3DGS .ply (INRIA layout)")
+        names = self.labels.names.model_dump()
+        if len(set(names.values())) != len(names):
+            raise field_error("labels.names", "category names must differ")
+        by_h = sorted(self.lod.levels, key=lambda x: -x.below_px)
+        if any(b.keep > a.keep for a, b in zip(by_h, by_h[1:])):
+            raise field_error("lod.levels", "a level for shorter instances must not keep more Gaussians")
+        if self.mode == "frames" and not self.frames:
+            raise field_error("frames", f"frames mode needs a KITTI object folder (or --frames DIR), got {self.frames!r}")
+        return self
+
+
+# the top-level fields the dataset command overrides with flags of the same name
+CLI_OVERRIDES = ("count", "seed", "image_size", "bikes_root", "bikes", "riders", "riders_root", "frames")
