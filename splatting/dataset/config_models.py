@@ -74,7 +74,8 @@ class PoseRanges(Block):
     t_z_m: Range() = [0, 0]
 
 
-assert tuple(PoseRanges.model_fields) == POSE_FIELDS  # config keys are the contract's field names
+POSE_KEYS = tuple(PoseRanges.model_fields)  # the order of the draws (generate.draw)
+assert POSE_KEYS == POSE_FIELDS  # config keys are the contract's field names
 
 
 class Views(Block):
