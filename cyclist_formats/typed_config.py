@@ -10,6 +10,8 @@ Values keep the type they were written with (an int stays an int, a [min, max] l
 given): the validated config is dumped back to a dict, and that dict is stored beside a dataset, so
 its bytes must not depend on how the check was made.
 """
+import argparse
+import dataclasses
 import math
 import types
 import typing
@@ -21,7 +23,8 @@ from pydantic_core import PydanticCustomError
 from .errors import UserError
 
 __all__ = ["Block", "Number", "Int", "Bool", "Str", "Range", "IntRange", "Vec3", "AutoOr", "Field",
-           "validate", "field_error", "add_model_arguments", "overrides_of"]
+           "validate", "field_error", "add_model_arguments", "overrides_of", "add_dataclass_arguments",
+           "dataclass_from_args"]
 
 
 class Block(BaseModel):
@@ -202,7 +205,8 @@ def _flag_kind(annotation):
 
 
 def add_model_arguments(parser, model, fields, help_suffix="overrides the config's {name}"):
-    """One --flag per named field of model, typed from its annotation, help from its description."""
+    """One --flag per named field of a pydantic model, typed from its annotation, help from its
+    description; default None (the flag overrides the config only when given)."""
     for name in fields:
         f = model.model_fields[name]
         if not f.description:
@@ -216,3 +220,54 @@ def overrides_of(args, fields):
     """{field: value} of the flags given on the command line (None: not given)."""
     return {name: getattr(args, name) for name in fields}
 
+
+# Dataclass configs (the training stages'): every field whose metadata has a "help" becomes
+# --field-name with the field's default, type and metadata "choices"; a field holding a dataclass
+# contributes its own fields (dest "outer_inner", flag named after the inner field).
+
+def _dataclass_flags(obj, path=()):
+    """(attribute path, field, default) of every exposed option of the dataclass instance obj."""
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if "help" in f.metadata:
+            yield path + (f.name,), f, value
+        elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+            yield from _dataclass_flags(value, path + (f.name,))
+
+
+def add_dataclass_arguments(parser, defaults):
+    """The options of a dataclass config; defaults: an instance (its values are the defaults)."""
+    for path, f, d in _dataclass_flags(defaults):
+        kw = {"help": f.metadata["help"] + " (default %(default)s)"}
+        if isinstance(d, bool):  # --x / --no-x (type=bool would read "False" as true)
+            kw.update(default=d, action=argparse.BooleanOptionalAction)
+        elif isinstance(d, tuple):
+            kw.update(default=",".join(map(str, d)), type=str)
+        else:
+            kw.update(default=d, type=type(d))
+        if "choices" in f.metadata:
+            kw["choices"] = f.metadata["choices"]
+        parser.add_argument("--" + f.name.replace("_", "-"), dest="_".join(path), **kw)
+
+
+def _int_tuple(flag, text):
+    try:
+        return tuple(int(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise UserError(f"--{flag} wants comma-separated integers, got {text!r}") from None
+
+
+def dataclass_from_args(args, defaults, **extra):
+    """A copy of the dataclass instance defaults with the parsed options set (extra: further fields)."""
+    cfg = dataclasses.replace(defaults, **extra)
+    for path, f, d in _dataclass_flags(defaults):
+        v = getattr(args, "_".join(path))
+        if isinstance(d, tuple):
+            v = _int_tuple(f.name.replace("_", "-"), v)
+        obj = cfg
+        for p in path[:-1]:
+            inner = dataclasses.replace(getattr(obj, p))  # no sharing with defaults' nested instance
+            setattr(obj, p, inner)
+            obj = inner
+        setattr(obj, path[-1], v)
+    return cfg

@@ -21,56 +21,11 @@ import math
 
 import numpy as np
 
-from cyclist_formats.typed_config import field_error
-from splatting.dataset.config_models import CAMERA_PRESETS as PRESETS, Camera, RING
+# the camera block's fields, presets and resolve() live with the config's models (torch-free)
+from splatting.dataset.config_models import CAMERA_PRESETS as PRESETS, RING, resolve_camera as resolve  # noqa: F401
 from splatting.raster.camera import from_numpy
 
-NAMES = (RING, *PRESETS, "custom")
-FIELDS = tuple(Camera.model_fields)
-DEFAULTS = Camera().model_dump()
 R0 = np.diag([-1.0, -1.0, 1.0])  # level camera looking along +Z (ring view 0)
-
-
-def _err(field, msg):
-    return field_error(f"camera.{field}", msg)
-
-
-def resolve(spec):
-    """The config's `camera` mapping (its fields checked one by one by config_models.Camera) -> a
-    complete driving-camera spec (width, height, fx, fy, cx, cy, height_m, pitch_deg, roll_deg), or
-    None for the ring.  The rules across fields are here; errors name the field."""
-    name = spec.get("preset", RING)
-    if name not in NAMES:
-        raise _err("preset", f"expected one of {', '.join(NAMES)}, got {name!r}")
-    if name == RING:
-        extra = [k for k in FIELDS[1:] if spec.get(k) is not None and spec.get(k) != DEFAULTS[k]]
-        if extra:
-            raise _err(extra[0], "the ring camera takes its size from image_size and its view from 'views'; "
-                                 "set camera.preset to a driving camera or custom")
-        return None
-    out = {k: v for k, v in DEFAULTS.items() if v is not None}
-    out.update(PRESETS.get(name, {}))
-    out.update({k: spec[k] for k in FIELDS[1:] if spec.get(k) is not None})
-    for k in ("width", "height"):
-        if out.get(k) is None:
-            raise _err(k, f"expected an integer >= 16, got None (custom cameras need width and height)")
-    if out.get("fx") is None and out.get("hfov_deg") is not None:
-        out["fx"] = out["width"] / 2.0 / math.tan(math.radians(out["hfov_deg"]) / 2.0)
-    if out.get("fy") is None:
-        out["fy"] = out.get("fx")
-    for k, default in (("cx", out["width"] / 2.0), ("cy", out["height"] / 2.0)):
-        if out.get(k) is None:
-            out[k] = default
-    for k in ("fx", "fy", "height_m"):
-        if out.get(k) is None:
-            raise _err(k, "expected a positive number, got None" +
-                       (" (custom cameras need fx or hfov_deg)" if k == "fx" else ""))
-    s = float(out.pop("scale"))
-    out.pop("hfov_deg", None)
-    res = {"preset": name, "width": int(round(out["width"] * s)), "height": int(round(out["height"] * s)),
-           "fx": out["fx"] * s, "fy": out["fy"] * s, "cx": out["cx"] * s, "cy": out["cy"] * s,
-           "height_m": float(out["height_m"]), "pitch_deg": float(out["pitch_deg"]), "roll_deg": float(out["roll_deg"])}
-    return {k: (float(v) if isinstance(v, float) else v) for k, v in res.items()}
 
 
 def intrinsics(c):

@@ -12,6 +12,7 @@ that older datasets lack is left out of their config record in generate.config_r
 
 Torch-free on purpose: the dataset command builds its flags from DatasetConfig at `--help` time.
 """
+import math
 from typing import Annotated, Literal, Optional, Union
 
 from pydantic import PlainValidator, model_validator
@@ -58,6 +59,50 @@ class Camera(Block):
     pitch_deg: Annotated[Number, Field(ge=-60, le=60, description="positive = nose down")] = 0.0
     roll_deg: Annotated[Number, Field(ge=-45, le=45)] = 0.0
     scale: Annotated[Number, Field(ge=0.05, le=4, description="render at this fraction of the resolution")] = 1.0
+
+
+CAMERA_NAMES = (RING, *CAMERA_PRESETS, "custom")
+CAMERA_DEFAULTS = Camera().model_dump()
+
+
+def resolve_camera(spec):
+    """The config's `camera` mapping (its fields checked one by one by Camera) -> a complete
+    driving-camera spec (width, height, fx, fy, cx, cy, height_m, pitch_deg, roll_deg), or None for
+    the ring.  The rules across the camera's fields are here; errors name the field."""
+    def err(field, msg):
+        return field_error(f"camera.{field}", msg)
+    fields = tuple(CAMERA_DEFAULTS)[1:]
+    name = spec.get("preset", RING)
+    if name not in CAMERA_NAMES:
+        raise err("preset", f"expected one of {', '.join(CAMERA_NAMES)}, got {name!r}")
+    if name == RING:
+        extra = [k for k in fields if spec.get(k) is not None and spec.get(k) != CAMERA_DEFAULTS[k]]
+        if extra:
+            raise err(extra[0], "the ring camera takes its size from image_size and its view from 'views'; "
+                                "set camera.preset to a driving camera or custom")
+        return None
+    out = {k: v for k, v in CAMERA_DEFAULTS.items() if v is not None}
+    out.update(CAMERA_PRESETS.get(name, {}))
+    out.update({k: spec[k] for k in fields if spec.get(k) is not None})
+    for k in ("width", "height"):
+        if out.get(k) is None:
+            raise err(k, "expected an integer >= 16, got None (custom cameras need width and height)")
+    if out.get("fx") is None and out.get("hfov_deg") is not None:
+        out["fx"] = out["width"] / 2.0 / math.tan(math.radians(out["hfov_deg"]) / 2.0)
+    if out.get("fy") is None:
+        out["fy"] = out.get("fx")
+    for k, default in (("cx", out["width"] / 2.0), ("cy", out["height"] / 2.0)):
+        if out.get(k) is None:
+            out[k] = default
+    for k in ("fx", "fy", "height_m"):
+        if out.get(k) is None:
+            raise err(k, "expected a positive number, got None" + (" (custom cameras need fx or hfov_deg)" if k == "fx" else ""))
+    s = float(out.pop("scale"))
+    out.pop("hfov_deg", None)
+    res = {"preset": name, "width": int(round(out["width"] * s)), "height": int(round(out["height"] * s)),
+           "fx": out["fx"] * s, "fy": out["fy"] * s, "cx": out["cx"] * s, "cy": out["cy"] * s,
+           "height_m": float(out["height_m"]), "pitch_deg": float(out["pitch_deg"]), "roll_deg": float(out["roll_deg"])}
+    return {k: (float(v) if isinstance(v, float) else v) for k, v in res.items()}
 
 
 # ------------------------------------------------------------------ what is drawn
@@ -289,10 +334,7 @@ class DatasetConfig(Block):
     @model_validator(mode="after")
     def _across_fields(self):
         """Checks that span fields; one UserError naming the field (raised as is through pydantic)."""
-        # the camera's cross-field rules live with its maths, which imports torch: imported here so
-        # that this module (and the command's --help, built from it) stays torch-free
-        from splatting.dataset import camera_presets
-        cam = camera_presets.resolve(self.camera.model_dump())
+        cam = resolve_camera(self.camera.model_dump())
         if self.mode == "street" and cam is None:
             raise field_error("camera.preset", "street mode needs a driving camera (kitti, nuscenes, waymo, dashcam, custom)")
         if self.mode != "street" and cam is not None:
