@@ -23,13 +23,20 @@ from pydantic_core import PydanticCustomError
 from .errors import UserError
 
 __all__ = ["Block", "Number", "Int", "Bool", "Str", "Range", "IntRange", "Vec3", "AutoOr", "Field",
-           "validate", "field_error", "add_model_arguments", "overrides_of", "add_dataclass_arguments",
+           "validate", "field_error", "defaults_of", "add_model_arguments", "overrides_of", "add_dataclass_arguments",
            "dataclass_from_args"]
 
 
 class Block(BaseModel):
     """One config block: unknown fields are errors (a typo would otherwise fall back to a default)."""
-    model_config = ConfigDict(extra="forbid")
+    # defer_build: the validators are built on first use, not at import (the --help builders read
+    # only the field declarations; measured 0.24 s of a loaded 2-core machine's import)
+    model_config = ConfigDict(extra="forbid", defer_build=True)
+
+
+def defaults_of(model):
+    """{field: default} of a block of plain fields, without building its validator (import time)."""
+    return {k: f.get_default(call_default_factory=True) for k, f in model.model_fields.items()}
 
 
 def _is_number(v):

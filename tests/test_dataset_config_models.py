@@ -50,6 +50,12 @@ def test_validated_configs_are_those_of_the_hand_written_checks():
     assert json.dumps(_resolved(), indent=1) + "\n" == want
 
 
+def test_pose_keys_are_the_contracts_pose_fields():
+    from cyclist_formats.pose import POSE_FIELDS
+    from splatting.dataset.config_models import POSE_KEYS
+    assert POSE_KEYS == POSE_FIELDS
+
+
 def test_values_keep_the_type_they_were_written_with():
     cfg = config.validate({"street": {"road_heading_deg": 0, "distance_m": [3, 60.5]}, "views": {"centre_jitter_m": 1}})
     assert type(cfg["street"]["road_heading_deg"]) is int and cfg["street"]["distance_m"] == [3, 60.5]

@@ -19,9 +19,8 @@ from pydantic import PlainValidator, model_validator
 from pydantic_core import PydanticCustomError
 
 from cyclist_formats import checks
-from cyclist_formats.pose import POSE_FIELDS
 from cyclist_formats.typed_config import (AutoOr, Block, Bool, Field, Int, IntRange, Number, Range, Str, Vec3,
-                                          field_error)
+                                          defaults_of, field_error)
 from splatting.cyclist.look_defaults import DEFAULT_COMPENSATE, DEFAULT_LEVELS, RECOLOUR
 
 # ------------------------------------------------------------------ camera
@@ -62,7 +61,7 @@ class Camera(Block):
 
 
 CAMERA_NAMES = (RING, *CAMERA_PRESETS, "custom")
-CAMERA_DEFAULTS = Camera().model_dump()
+CAMERA_DEFAULTS = defaults_of(Camera)
 
 
 def resolve_camera(spec):
@@ -119,8 +118,9 @@ class PoseRanges(Block):
     t_z_m: Range() = [0, 0]
 
 
-POSE_KEYS = tuple(PoseRanges.model_fields)  # the order of the draws (generate.draw)
-assert POSE_KEYS == POSE_FIELDS  # config keys are the contract's field names
+# the order of the draws (generate.draw); the keys are the contract's field names,
+# cyclist_formats.pose.POSE_FIELDS (not imported: it loads numpy, and --help reads this module)
+POSE_KEYS = tuple(PoseRanges.model_fields)
 
 
 class Views(Block):
@@ -197,8 +197,8 @@ class LabelCombined(Block):
 
 
 VEHICLES = tuple(LabelCombined.model_fields)
-DEFAULT_NAMES = LabelNames().model_dump()
-DEFAULT_COMBINED = LabelCombined().model_dump()
+DEFAULT_NAMES = defaults_of(LabelNames)
+DEFAULT_COMBINED = defaults_of(LabelCombined)
 
 
 class Labels(Block):
