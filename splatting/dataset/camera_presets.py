@@ -7,7 +7,8 @@ Pitch turns it about its own x axis (positive = nose down, towards the road), ro
 optical axis (x_cam = Rz(roll) x, so a level horizon appears turned by -roll in the image).  Intrinsics are OpenCV's pinhole K with pixel
 centres at +0.5, principal point anywhere (KITTI's is off centre), non-square images.
 
-Values (rounded as the datasets publish them):
+Values (rounded as the datasets publish them; the table is config_models.CAMERA_PRESETS, the camera
+block's defaults, and resolve() is config_models.resolve_camera):
 - kitti: KITTI object benchmark, left colour camera P2 of the 2011_09_26 calibration: 1242x375,
   fx = fy = 721.5377, (cx, cy) = (609.5593, 172.854); mounted 1.65 m above the road.
 - nuscenes: nuScenes CAM_FRONT: 1600x900, fx = fy = 1266.4, (cx, cy) = (816.3, 491.5); ~1.51 m.
