@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 # the camera block's fields, presets and resolve() live with the config's models (torch-free)
-from splatting.dataset.config_models import CAMERA_PRESETS as PRESETS, RING, resolve_camera as resolve  # noqa: F401
+from splatting.dataset.config_models import resolve_camera as resolve  # noqa: F401 (callers use camera_presets.resolve)
 from splatting.raster.camera import from_numpy
 
 R0 = np.diag([-1.0, -1.0, 1.0])  # level camera looking along +Z (ring view 0)

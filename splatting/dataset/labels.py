@@ -19,8 +19,8 @@ from pycocotools import mask as mask_utils
 import numpy as np
 
 from splatting.bike.model import KEYPOINTS as BIKE_KEYPOINTS
-# the config's defaults (labels.names, labels.combined) and the vehicles live with the config's models
-from splatting.dataset.config_models import DEFAULT_COMBINED, DEFAULT_NAMES, VEHICLES  # noqa: F401
+# the vehicles (and the config's labels.names / labels.combined defaults) live with the config's models
+from splatting.dataset.config_models import VEHICLES
 from splatting.dataset.person_keypoints import COCO17, COCO17_FLIP, COCO17_SIGMAS, COCO17_SKELETON
 from splatting.rider.kinematics import JOINT_NAMES, PARENTS
 
