@@ -32,7 +32,7 @@ import shutil
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from PIL import Image
 import numpy as np
@@ -41,6 +41,7 @@ import torch
 from cyclist_formats import bike_folder, checks, ring
 from cyclist_formats.atomic import read_json_or_none, write_json
 from cyclist_formats.errors import UserError
+from cyclist_formats.typed_config import add_dataclass_arguments, dataclass_from_args
 from splatting import paths
 from splatting.bike.model import BikeModel
 from splatting.bike.pose import check_poses, sample_poses
@@ -64,22 +65,32 @@ HELD_OUT = 4  # the last posed views: scored before and after, never trained on
 @dataclass
 class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (training/trainer.py)
     # defaults measured in docs/training.md (whole bike at the 12 blender_compare poses): 48 -> 144
-    # poses +0.39 dB, degree-1 SH +0.24, 1000 -> 3000 iterations +0.18, 3000 -> 6000 +0.25
-    poses: int = 144             # posed whole-bike renders (one random ring camera each)
-    iterations: int = 6000
+    # poses +0.39 dB, degree-1 SH +0.24, 1000 -> 3000 iterations +0.18, 3000 -> 6000 +0.25.
+    # Fields with a "help" are the command line's options (typed_config.add_dataclass_arguments).
+    poses: int = field(default=144, metadata={"help": "posed whole-bike renders (one random ring camera each)"})
+    iterations: int = field(default=6000, metadata={"help": "fine-tuning steps"})
     rest_fraction: float = 0.25  # share of steps on the rest-pose whole-bike ring (views/whole)
-    samples: int = 128           # Cycles samples of the posed renders (the training views' default)
+    samples: int = field(default=128, metadata={"help": "Cycles samples of the posed renders"})
     denoise: str = "FAST"
     seed: int = 0
     crop_margin_px: int = 8
-    sh_degree: int = 1           # 1 (2): the fine-tune adds degree-1 (and 2) SH (view-dependent colour), rotated with each part
+    # 1 (2): the fine-tune adds degree-1 (and 2) SH (view-dependent colour), rotated with each part
+    sh_degree: int = field(default=1, metadata={"help": "1 or 2: add view-dependent (degree-1 or 2 SH) colour in "
+                                                        "the fine-tune", "choices": (0, 1, 2)})
     lr_shN: float = 2.5e-3       # the band-1 coefficients' rate (the DC's; INRIA's /20 gained less)
-    densify: bool = False        # adaptive density control per part in the first half (docs/training.md)
-    densify_max: int = 30000     # ... up to this many Gaussians per part
-    lr_decay: float = 1.0        # every rate ends at this fraction of its start, exponentially (1: constant) ...
-    lr_tail: int = 0             # ... falling over the last lr_tail steps only (0: over the whole fine-tune)
-    eps2d: float = EPS2D         # the splats' screen-space low-pass (px^2) the fine-tune renders with; the bike
-                                 # keeps it (posed_train.json) and every renderer draws its parts with it
+    # adaptive density control per part in the first half (docs/training.md)
+    densify: bool = field(default=False, metadata={"help": "grow each part's Gaussians (adaptive density control) "
+                                                           "in the first half of the fine-tune"})
+    densify_max: int = field(default=30000, metadata={"help": "with --densify: most Gaussians per part"})
+    lr_decay: float = field(default=1.0, metadata={"help": "every learning rate decays exponentially to this "
+                                                           "fraction of its start by the last step (1: constant)"})
+    lr_tail: int = field(default=0, metadata={"help": "with --lr-decay: constant rates, then the decay over the "
+                                                      "last N steps only (0: over the whole fine-tune)"})
+    # the bike keeps it (posed_train.json) and every renderer draws its parts with it
+    eps2d: float = field(default=EPS2D, metadata={"help": "screen-space low-pass variance in px^2 added to every "
+                                                          "splat in the fine-tune and kept with the bike for every "
+                                                          "later render (Cycles' 1.5 px Blackman-Harris pixel "
+                                                          "filter has variance 0.173)"})
     progress: bool = True
 
 
@@ -374,30 +385,11 @@ def model_keypoints_doc(bike_dir):
 
 
 def add_arguments(p):
-    d = PosedTrainConfig()
     p.add_argument("--bike", required=True, help="a bike folder with trained parts (gaussians/) and views/whole")
     p.add_argument("--from-rest", action="store_true",
                    help="start from gaussians/<part>_rest.ply as they are and never write them (the layout "
                         "`library build` leaves; default: keep the current <part>.ply as <part>_rest.ply first)")
-    p.add_argument("--poses", type=int, default=d.poses, help="posed whole-bike renders (default %(default)s)")
-    p.add_argument("--iterations", type=int, default=d.iterations, help="fine-tuning steps (default %(default)s)")
-    p.add_argument("--samples", type=int, default=d.samples, help="Cycles samples of the posed renders (default %(default)s)")
-    p.add_argument("--sh-degree", type=int, choices=(0, 1, 2), default=d.sh_degree,
-                   help="1 or 2: add view-dependent (degree-1 or 2 SH) colour in the fine-tune (default %(default)s)")
-    p.add_argument("--densify", action="store_true",
-                   help="grow each part's Gaussians (adaptive density control) in the first half of the fine-tune")
-    p.add_argument("--densify-max", type=int, default=d.densify_max,
-                   help="with --densify: most Gaussians per part (default %(default)s)")
-    p.add_argument("--lr-decay", type=float, default=d.lr_decay,
-                   help="every learning rate decays exponentially to this fraction of its start by the last "
-                        "step (default %(default)s: constant)")
-    p.add_argument("--lr-tail", type=int, default=d.lr_tail,
-                   help="with --lr-decay: constant rates, then the decay over the last N steps only "
-                        "(default %(default)s: over the whole fine-tune)")
-    p.add_argument("--eps2d", type=float, default=d.eps2d,
-                   help="screen-space low-pass variance in px^2 added to every splat in the fine-tune and kept "
-                        "with the bike for every later render (default %(default)s; Cycles' 1.5 px "
-                        "Blackman-Harris pixel filter has variance 0.173)")
+    add_dataclass_arguments(p, PosedTrainConfig())  # --poses ... --eps2d, defaults from the dataclass
     p.add_argument("--render-threads", type=int,
                    help="Blender's CPU threads for the posed renders (default: its own, 2); the fine-tune uses one")
     p.add_argument("--quiet", action="store_true", help="no progress line")
@@ -422,9 +414,7 @@ def check_args(args):
 
 def config_from_args(args):
     """The PosedTrainConfig of a parsed command line (after check_args)."""
-    return PosedTrainConfig(poses=args.poses, iterations=args.iterations, samples=args.samples,
-                            sh_degree=args.sh_degree, densify=args.densify, densify_max=args.densify_max,
-                            lr_decay=args.lr_decay, lr_tail=args.lr_tail, eps2d=args.eps2d, progress=not args.quiet)
+    return dataclass_from_args(args, PosedTrainConfig(), progress=not args.quiet)
 
 
 def run(args):

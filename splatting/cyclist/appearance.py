@@ -24,10 +24,10 @@ import numpy as np
 import torch
 
 from cyclist_formats.instances import RIDER_ID
+from splatting.cyclist.look_defaults import RECOLOUR
 from splatting.gaussians.sh import C0
 from splatting.rider.body import REGIONS
 
-RECOLOUR = ("top", "bottom", "shoes", "helmet", "paint")
 PAINT_MIN_SAT = 0.2
 PAINT_HUE_DEG = 30.0
 TAG = 0xA99E  # separates these draws from the sample's main stream

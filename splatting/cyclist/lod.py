@@ -17,9 +17,7 @@ from dataclasses import replace
 
 import torch
 
-# measured by bench/lod.py (docs/street_scenes.md): each level costs <= 0.5 dB box PSNR below its height
-DEFAULT_LEVELS = [{"below_px": 55, "keep": 0.7}, {"below_px": 45, "keep": 0.5}]
-DEFAULT_COMPENSATE = 1.0
+from splatting.cyclist.look_defaults import DEFAULT_COMPENSATE, DEFAULT_LEVELS  # noqa: F401 (bench/lod.py reads them here)
 
 
 def importance(g):

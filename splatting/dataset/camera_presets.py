@@ -7,7 +7,8 @@ Pitch turns it about its own x axis (positive = nose down, towards the road), ro
 optical axis (x_cam = Rz(roll) x, so a level horizon appears turned by -roll in the image).  Intrinsics are OpenCV's pinhole K with pixel
 centres at +0.5, principal point anywhere (KITTI's is off centre), non-square images.
 
-Values (rounded as the datasets publish them):
+Values (rounded as the datasets publish them; the table is config_models.CAMERA_PRESETS, the camera
+block's defaults, and resolve() is config_models.resolve_camera):
 - kitti: KITTI object benchmark, left colour camera P2 of the 2011_09_26 calibration: 1242x375,
   fx = fy = 721.5377, (cx, cy) = (609.5593, 172.854); mounted 1.65 m above the road.
 - nuscenes: nuScenes CAM_FRONT: 1600x900, fx = fy = 1266.4, (cx, cy) = (816.3, 491.5); ~1.51 m.
@@ -21,82 +22,11 @@ import math
 
 import numpy as np
 
-from cyclist_formats.errors import UserError
+# the camera block's fields, presets and resolve() live with the config's models (torch-free)
+from splatting.dataset.config_models import resolve_camera as resolve  # noqa: F401 (callers use camera_presets.resolve)
 from splatting.raster.camera import from_numpy
 
-RING = "ring"
-PRESETS = {
-    "kitti": {"width": 1242, "height": 375, "fx": 721.5377, "fy": 721.5377, "cx": 609.5593, "cy": 172.854,
-              "height_m": 1.65},
-    "nuscenes": {"width": 1600, "height": 900, "fx": 1266.4, "fy": 1266.4, "cx": 816.3, "cy": 491.5,
-                 "height_m": 1.51},
-    "waymo": {"width": 1920, "height": 1280, "fx": 2055.6, "fy": 2055.6, "cx": 939.7, "cy": 641.1,
-              "height_m": 2.1},
-    "dashcam": {"width": 1920, "height": 1080, "hfov_deg": 90.0, "height_m": 1.3},
-}
-NAMES = (RING, *PRESETS, "custom")
-FIELDS = ("preset", "width", "height", "fx", "fy", "cx", "cy", "hfov_deg", "height_m", "pitch_deg", "roll_deg",
-          "scale")
-DEFAULTS = {k: None for k in FIELDS}
-DEFAULTS.update(preset=RING, pitch_deg=0.0, roll_deg=0.0, scale=1.0)
 R0 = np.diag([-1.0, -1.0, 1.0])  # level camera looking along +Z (ring view 0)
-
-
-def _err(field, msg):
-    return UserError(f"config field 'camera.{field}': {msg}")
-
-
-def _num(v):
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-
-def resolve(spec):
-    """The config's `camera` mapping -> a complete driving-camera spec (width, height, fx, fy, cx, cy,
-    height_m, pitch_deg, roll_deg), or None for the ring.  Errors name the field."""
-    name = spec.get("preset")
-    if name not in NAMES:
-        raise _err("preset", f"expected one of {', '.join(NAMES)}, got {name!r}")
-    for k in FIELDS[1:]:
-        v = spec.get(k)
-        if v is not None and not _num(v):
-            raise _err(k, f"expected a number, got {v!r}")
-    if name == RING:
-        extra = [k for k in FIELDS[1:] if spec.get(k) is not None and spec.get(k) != DEFAULTS[k]]
-        if extra:
-            raise _err(extra[0], "the ring camera takes its size from image_size and its view from 'views'; "
-                                 "set camera.preset to a driving camera or custom")
-        return None
-    out = dict(PRESETS.get(name, {}))
-    out.update({k: spec[k] for k in FIELDS[1:] if spec.get(k) is not None})
-    for k in ("width", "height"):
-        if not isinstance(out.get(k), int) or isinstance(out.get(k), bool) or out[k] < 16:
-            raise _err(k, f"expected an integer >= 16, got {out.get(k)!r}")
-    if out.get("fx") is None and out.get("hfov_deg") is not None:
-        if not 1.0 <= out["hfov_deg"] <= 170.0:
-            raise _err("hfov_deg", f"expected 1..170 degrees, got {out['hfov_deg']!r}")
-        out["fx"] = out["width"] / 2.0 / math.tan(math.radians(out["hfov_deg"]) / 2.0)
-    out.setdefault("fy", out.get("fx"))
-    if out.get("fy") is None:
-        out["fy"] = out.get("fx")
-    for k, default in (("cx", out["width"] / 2.0), ("cy", out["height"] / 2.0)):
-        if out.get(k) is None:
-            out[k] = default
-    for k in ("fx", "fy", "height_m"):
-        if out.get(k) is None or not out[k] > 0:
-            raise _err(k, f"expected a positive number, got {out.get(k)!r}" +
-                       (" (custom cameras need fx or hfov_deg)" if k == "fx" else ""))
-    if not -60 <= out["pitch_deg"] <= 60:
-        raise _err("pitch_deg", f"expected -60..60 degrees, got {out['pitch_deg']!r}")
-    if not -45 <= out["roll_deg"] <= 45:
-        raise _err("roll_deg", f"expected -45..45 degrees, got {out['roll_deg']!r}")
-    if not 0.05 <= out["scale"] <= 4:
-        raise _err("scale", f"expected 0.05..4, got {out['scale']!r}")
-    s = float(out.pop("scale"))
-    out.pop("hfov_deg", None)
-    res = {"preset": name, "width": int(round(out["width"] * s)), "height": int(round(out["height"] * s)),
-           "fx": out["fx"] * s, "fy": out["fy"] * s, "cx": out["cx"] * s, "cy": out["cy"] * s,
-           "height_m": float(out["height_m"]), "pitch_deg": float(out["pitch_deg"]), "roll_deg": float(out["roll_deg"])}
-    return {k: (float(v) if isinstance(v, float) else v) for k, v in res.items()}
 
 
 def intrinsics(c):

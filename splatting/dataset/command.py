@@ -15,10 +15,13 @@ from cyclist_formats import checks
 from cyclist_formats.atomic import write_json
 from cyclist_formats.errors import UserError
 from cyclist_formats.text_files import read_json
+from cyclist_formats.typed_config import add_model_arguments, overrides_of
+from splatting.dataset.config_models import CLI_OVERRIDES, DatasetConfig
 from splatting.library.ray_address import check_address
 
 # The stage's modules are imported inside the functions below, not at the top: they load torch
 # (~2.5 s, python -X importtime), and `--help` and the argument checks answer before that (0.2-0.5 s).
+# config_models is torch-free (pydantic and the field declarations), so the flags come from it here.
 
 
 def add_arguments(p):
@@ -26,19 +29,12 @@ def add_arguments(p):
     src.add_argument("--config", help="YAML config (see docs/cyclists_and_datasets.md)")
     src.add_argument("--preset", help="built-in config from blend_assets/datasets/ (bike-only, cyclist, street, street-sequence, kitti-insert)")
     p.add_argument("--out", help="output folder (default: out/datasets/<name>)")
-    p.add_argument("--count", type=int, help="override the config's count")
-    p.add_argument("--seed", type=int, help="override the config's seed")
-    p.add_argument("--image-size", type=int, help="override the config's image_size")
-    p.add_argument("--bikes-root", help="override the config's bikes_root")
-    p.add_argument("--bikes", nargs="+", metavar="ID", help="override the config's bikes: these bike ids only")
-    p.add_argument("--riders", nargs="+", metavar="ID", help="override the config's riders: these rider ids only")
-    p.add_argument("--riders-root", help="override the config's riders_root")
+    # the top-level fields a run may override: flags typed and described by the config's models
+    add_model_arguments(p, DatasetConfig, CLI_OVERRIDES)
     p.add_argument("--format", action="append", choices=("coco", "kitti", "mot"),
                    help="label format(s) to write (repeat for several); overrides the config's labels.formats "
                         "(sequences: kitti = KITTI tracking, mot = MOTChallenge; docs/sequences.md)")
     p.add_argument("--camera", help="override the config's camera.preset (street mode)")
-    p.add_argument("--frames", help="frames mode: the KITTI object folder (image_2, calib, label_2; planes, velodyne) "
-                                    "to insert cyclists into; overrides the config's frames (docs/kitti_insert.md)")
     p.add_argument("--workers", type=int, default=1, help="worker processes, one torch thread each (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     # scale-out (docs/scale_out.md)
@@ -166,11 +162,7 @@ def run(args):
         nested["labels"] = {"formats": list(dict.fromkeys(args.format))}
     if args.camera:
         nested["camera"] = {"preset": args.camera}
-    cfg = load_config(args.config, args.preset, {"count": args.count, "seed": args.seed,
-                                                 "image_size": args.image_size, "bikes_root": args.bikes_root,
-                                                 "bikes": args.bikes, "riders": args.riders,
-                                                 "riders_root": args.riders_root, "frames": args.frames},
-                      nested)
+    cfg = load_config(args.config, args.preset, overrides_of(args, CLI_OVERRIDES), nested)
     if args.frames is not None and cfg["mode"] != "frames":
         raise UserError(f"--frames goes with mode: frames (e.g. --preset kitti-insert); this config's mode is {cfg['mode']}")
     if cfg["sequence"]["enabled"] and args.engine == "ray":

@@ -21,7 +21,7 @@ from splatting.cyclist.render import keypoint_visibility, orbit_camera, over, pr
 from splatting.cyclist.scene_render import MASK_ALPHA, render_scene, union
 from splatting.dataset import camera_presets, kitti, lighting, png
 from splatting.dataset.backgrounds import contact_shadows, generated, load_scene, photo
-from splatting.dataset.config import POSE_KEYS
+from splatting.dataset.config_models import POSE_KEYS
 from splatting.dataset.frames import contact, output as frames_output
 from splatting.dataset.frames.placement import draw_frame
 from splatting.dataset.frames.sample import FrameSample

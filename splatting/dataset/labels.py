@@ -19,15 +19,13 @@ from pycocotools import mask as mask_utils
 import numpy as np
 
 from splatting.bike.model import KEYPOINTS as BIKE_KEYPOINTS
+# the vehicles (and the config's labels.names / labels.combined defaults) live with the config's models
+from splatting.dataset.config_models import VEHICLES
 from splatting.dataset.person_keypoints import COCO17, COCO17_FLIP, COCO17_SIGMAS, COCO17_SKELETON
 from splatting.rider.kinematics import JOINT_NAMES, PARENTS
 
 CATEGORY_KEYS = ("bicycle", "rider", "cyclist", "motorcyclist", "motorcycle", "scooter")
 CATEGORY_IDS = {k: i + 1 for i, k in enumerate(CATEGORY_KEYS)}
-DEFAULT_NAMES = {"bicycle": "bicycle", "rider": "person", "cyclist": "cyclist", "motorcyclist": "motorcyclist",
-                 "motorcycle": "motorcycle", "scooter": "scooter"}
-VEHICLES = ("bicycle", "motorcycle", "scooter")
-DEFAULT_COMBINED = {"bicycle": "cyclist", "motorcycle": "motorcyclist", "scooter": "cyclist"}
 SUPER = {"bicycle": "vehicle", "rider": "person", "cyclist": "person", "motorcyclist": "person",
          "motorcycle": "vehicle", "scooter": "vehicle"}
 

@@ -11,7 +11,6 @@ draws are those of the baked set.  The image record gets "lighting": the sun use
 and the camera frame.  Only the RGB changes: masks, boxes, depth and keypoints come from the
 same rasterization as in baked mode.
 """
-import math
 import os
 
 import numpy as np
@@ -32,34 +31,12 @@ from splatting.relight.shading import Light, SKY_TINT, srgb_decode, sun_directio
 from splatting.relight import shadow  # shadow.X at call time: the maps are swapped in tests
 from splatting.rider.avatar import PLY_NAME, SKINNING_NAME
 
-MODES = ("baked", "relit")
 TAG = 0x5A11  # separates the light's draws from the sample's other streams
-DEFAULTS = {"mode": "baked", "elevation_deg": [15, 75], "azimuth_deg": [-180, 180], "strength": [2, 5],
-            "sky": [0.1, 0.6], "sun_tint": 0.15, "shadows": True}
+# the section's fields, defaults and ranges: splatting/dataset/config_models.py (Lighting)
 
 
 def _err(field, msg):
     return UserError(f"config field 'lighting.{field}': {msg}")
-
-
-def _num(v):
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-
-def validate(lc):
-    """The merged `lighting` section: one UserError naming the first bad field."""
-    if lc["mode"] not in MODES:
-        raise _err("mode", f"expected one of {', '.join(MODES)}, got {lc['mode']!r}")
-    for f, lo, hi in (("elevation_deg", 0, 90), ("azimuth_deg", -360, 360), ("strength", 0, 1000), ("sky", 0, 100)):
-        v = lc[f]
-        if not (isinstance(v, list) and len(v) == 2 and all(_num(x) for x in v) and v[0] <= v[1]):
-            raise _err(f, f"expected [min, max] with min <= max, got {v!r}")
-        if v[0] < lo or v[1] > hi:
-            raise _err(f, f"expected values within [{lo}, {hi}], got {v!r}")
-    if not (_num(lc["sun_tint"]) and 0 <= lc["sun_tint"] < 1):
-        raise _err("sun_tint", f"expected a number within [0, 1), got {lc['sun_tint']!r}")
-    if not isinstance(lc["shadows"], bool):
-        raise _err("shadows", f"expected true or false, got {lc['shadows']!r}")
 
 
 def relit(cfg):

@@ -1,58 +1,20 @@
 """`python -m splatting train --views OUT/bikes/ID/views/PART [--out FILE.ply]`: fit one part's Gaussians.
 
-The options are derived from TrainConfig (and its DensifyConfig): every field whose metadata has a
-"help" becomes `--field-name` with the field's default, type and choices, so the defaults have one
-source of truth.  The training itself is splatting.training.trainer.train.
+The options are derived from TrainConfig (and its DensifyConfig) by cyclist_formats.typed_config's
+builder: every field whose metadata has a "help" becomes `--field-name` with the field's default,
+type and choices, so the defaults have one source of truth.  The training itself is splatting.training.trainer.train.
 """
-import argparse
-import dataclasses
-
 from cyclist_formats import checks
 from cyclist_formats.errors import UserError
+from cyclist_formats.typed_config import add_dataclass_arguments, dataclass_from_args
 
-from splatting.training.strategy import DensifyConfig
 from splatting.training.trainer import TrainConfig, default_out, train
-
-
-def _cli_fields():
-    """(config attribute path, dataclass field) of every exposed option."""
-    for f in dataclasses.fields(TrainConfig):
-        if "help" in f.metadata:
-            yield (f.name,), f
-    for f in dataclasses.fields(DensifyConfig):
-        if "help" in f.metadata:
-            yield ("densify", f.name), f
-
-
-def _default(path):
-    obj = TrainConfig()
-    for p in path:
-        obj = getattr(obj, p)
-    return obj
-
-
-def _int_list(s):
-    try:
-        return tuple(int(x) for x in s.split(",") if x.strip())
-    except ValueError:
-        raise UserError(f"--holdout wants comma-separated view indices, got {s!r}") from None
 
 
 def add_arguments(p):
     p.add_argument("--views", required=True, help="a part's views folder: OUT/bikes/ID/views/PART")
     p.add_argument("--out", help="output .ply (default OUT/bikes/ID/gaussians/PART.ply; metrics in PART.json beside it)")
-    for path, f in _cli_fields():
-        d = _default(path)
-        kw = {"help": f.metadata["help"] + " (default %(default)s)"}
-        if isinstance(d, bool):  # --x / --no-x (type=bool would read "False" as true)
-            kw.update(default=d, action=argparse.BooleanOptionalAction)
-        elif isinstance(d, tuple):
-            kw.update(default=",".join(map(str, d)), type=str)
-        else:
-            kw.update(default=d, type=type(d))
-        if "choices" in f.metadata:
-            kw["choices"] = f.metadata["choices"]
-        p.add_argument("--" + f.name.replace("_", "-"), dest="_".join(path), **kw)
+    add_dataclass_arguments(p, TrainConfig())
     p.add_argument("--no-early-stop", action="store_true", help="run all iterations")
     p.add_argument("--quiet", action="store_true", help="no progress line")
 
@@ -66,15 +28,7 @@ def config_from_args(args):
     checks.threads("threads", args.threads)
     checks.integer("seed", args.seed, 0)
     checks.positive("eps2d", args.eps2d, 10.0)
-    cfg = TrainConfig(progress=not args.quiet)
-    for path, _ in _cli_fields():
-        v = getattr(args, "_".join(path))
-        if isinstance(_default(path), tuple):
-            v = _int_list(v)
-        obj = cfg
-        for p in path[:-1]:
-            obj = getattr(obj, p)
-        setattr(obj, path[-1], v)
+    cfg = dataclass_from_args(args, TrainConfig(), progress=not args.quiet)
     if any(i < 0 for i in cfg.holdout):
         raise UserError(f"--holdout view indices must be >= 0, got {args.holdout!r}")
     if args.no_early_stop:

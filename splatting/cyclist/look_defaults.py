@@ -1,0 +1,8 @@
+"""The looks' config-facing constants, without torch: the dataset config's models
+(splatting/dataset/config_models.py) take their defaults from here, and `--help` stays fast."""
+
+# measured by bench/lod.py (docs/street_scenes.md): each level costs <= 0.5 dB box PSNR below its height
+DEFAULT_LEVELS = [{"below_px": 55, "keep": 0.7}, {"below_px": 45, "keep": 0.5}]
+DEFAULT_COMPENSATE = 1.0
+
+RECOLOUR = ("top", "bottom", "shoes", "helmet", "paint")  # regions appearance variety can recolour
