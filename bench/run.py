@@ -37,6 +37,7 @@ STAGES = {
     "dataset": ("bench.dataset", lambda m, r, out: m.run(r, out)),
     "street": ("bench.street", lambda m, r, out: m.run(r, out)),
     "frames": ("bench.frames", lambda m, r, out: m.run(r, out)),  # cyclists inserted into KITTI frames (issue 26)
+    "lidar": ("bench.lidar", lambda m, r, out: m.run(r, out)),  # road plane, LiDAR depth, scan insertion (issue 26)
     "sequence": ("bench.sequence", lambda m, r, out: m.run(r, out)),  # street sequences (issue 29)
     "motion_blur": ("bench.motion_blur", lambda m, r, out: m.run(r, out)),  # sub-frame blur vs a 33-sub-frame reference
     "lod": ("bench.lod", lambda m, r, out: m.run(r, out, chart_png=os.path.join(out, "lod_chart.png"))),
