@@ -38,7 +38,7 @@ from PIL import Image
 import numpy as np
 import torch
 
-from cyclist_formats import bike_folder, checks, ring
+from cyclist_formats import bike_folder, ring
 from cyclist_formats.atomic import read_json_or_none, write_json
 from cyclist_formats.errors import UserError
 from splatting import paths
@@ -371,62 +371,3 @@ def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print, from_res
 
 def model_keypoints_doc(bike_dir):
     return bike_folder.read_json(os.path.join(bike_dir, "keypoints.json"), "keypoints.json")
-
-
-def add_arguments(p):
-    d = PosedTrainConfig()
-    p.add_argument("--bike", required=True, help="a bike folder with trained parts (gaussians/) and views/whole")
-    p.add_argument("--from-rest", action="store_true",
-                   help="start from gaussians/<part>_rest.ply as they are and never write them (the layout "
-                        "`library build` leaves; default: keep the current <part>.ply as <part>_rest.ply first)")
-    p.add_argument("--poses", type=int, default=d.poses, help="posed whole-bike renders (default %(default)s)")
-    p.add_argument("--iterations", type=int, default=d.iterations, help="fine-tuning steps (default %(default)s)")
-    p.add_argument("--samples", type=int, default=d.samples, help="Cycles samples of the posed renders (default %(default)s)")
-    p.add_argument("--sh-degree", type=int, choices=(0, 1, 2), default=d.sh_degree,
-                   help="1 or 2: add view-dependent (degree-1 or 2 SH) colour in the fine-tune (default %(default)s)")
-    p.add_argument("--densify", action="store_true",
-                   help="grow each part's Gaussians (adaptive density control) in the first half of the fine-tune")
-    p.add_argument("--densify-max", type=int, default=d.densify_max,
-                   help="with --densify: most Gaussians per part (default %(default)s)")
-    p.add_argument("--lr-decay", type=float, default=d.lr_decay,
-                   help="every learning rate decays exponentially to this fraction of its start by the last "
-                        "step (default %(default)s: constant)")
-    p.add_argument("--lr-tail", type=int, default=d.lr_tail,
-                   help="with --lr-decay: constant rates, then the decay over the last N steps only "
-                        "(default %(default)s: over the whole fine-tune)")
-    p.add_argument("--eps2d", type=float, default=d.eps2d,
-                   help="screen-space low-pass variance in px^2 added to every splat in the fine-tune and kept "
-                        "with the bike for every later render (default %(default)s; Cycles' 1.5 px "
-                        "Blackman-Harris pixel filter has variance 0.173)")
-    p.add_argument("--render-threads", type=int,
-                   help="Blender's CPU threads for the posed renders (default: its own, 2); the fine-tune uses one")
-    p.add_argument("--quiet", action="store_true", help="no progress line")
-
-
-def check_args(args):
-    checks.input_dir("bike", args.bike)
-    checks.integer("poses", args.poses, HELD_OUT + 1, 10_000)
-    checks.count("iterations", args.iterations, hi=10_000_000)
-    checks.count("samples", args.samples, hi=1 << 16)
-    checks.count("densify-max", args.densify_max, hi=10_000_000)
-    checks.number("lr-decay", args.lr_decay, 0.0, 1.0, lo_open=True)
-    checks.integer("lr-tail", args.lr_tail, 0, args.iterations)
-    checks.positive("eps2d", args.eps2d, 10.0)
-    if args.render_threads is not None:
-        checks.threads("render-threads", args.render_threads)
-    for p in ("frame", "steering"):
-        f = p + ("_rest.ply" if args.from_rest else ".ply")
-        if not os.path.isfile(os.path.join(args.bike, "gaussians", f)):
-            raise UserError(f"{args.bike} has no trained gaussians/{f} (python -m splatting train first)")
-
-
-def config_from_args(args):
-    """The PosedTrainConfig of a parsed command line (after check_args)."""
-    return PosedTrainConfig(poses=args.poses, iterations=args.iterations, samples=args.samples,
-                            sh_degree=args.sh_degree, densify=args.densify, densify_max=args.densify_max,
-                            lr_decay=args.lr_decay, lr_tail=args.lr_tail, eps2d=args.eps2d, progress=not args.quiet)
-
-
-def run(args):
-    train_bike_posed(args.bike, config_from_args(args), from_rest=args.from_rest, render_threads=args.render_threads)
-    return 0

@@ -205,3 +205,25 @@ def parse_shard(text):
     if not (n >= 1 and 0 <= k < n):
         raise UserError(f"--shard {text}: need N >= 1 and 0 <= K < N")
     return k, n
+
+
+class Merge:
+    """`python -m splatting dataset merge --out DIR`: a sharded dataset's samples -> DIR/annotations.json
+    (splatting/dataset/merge.py)."""
+
+    @staticmethod
+    def add_arguments(p):
+        p.add_argument("--out", required=True, help="the dataset folder the shard runs wrote (holds config.json, shards/)")
+
+    @staticmethod
+    def check_args(args):
+        checks.input_dir("out", args.out)
+
+    @staticmethod
+    def run(args):
+        from splatting.dataset.merge import merge_dataset, read_config
+
+        path = merge_dataset(args.out)
+        cfg = read_config(args.out)
+        print(f"dataset merge: {cfg['count']} samples -> {path}")
+        return 0
