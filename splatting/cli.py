@@ -2,9 +2,10 @@
 
 Every command lives in its stage's command module (splatting/<stage>/command.py): the stage's own
 command as the module's `add_arguments(parser)`, `check_args(args)` (optional) and `run(args)`, a
-further command of the stage as a class of the module holding the same three functions; the
-Blender stages (blender_scripts/) run through splatting/blender/command.py.  Modules are imported
-only when their command is used, so `--help` stays fast.
+further command of the stage as a class of the module holding the same three functions (or
+`main(argv)` where the implementation module still parses its own arguments); the Blender stages
+(blender_scripts/) run through splatting/blender/command.py.  Modules are imported only when their
+command is used, so `--help` stays fast.
 """
 import argparse
 import importlib
@@ -30,7 +31,12 @@ COMMANDS = {
     # two-word commands: `python -m splatting dataset merge ...`
     "rider import": ("splatting.rider.import_command", "a rigged human (.glb/.fbx, Mixamo/Rigify bones) becomes a "
                                                         "roster rider (bones -> 24 SMPL joints, weights, textures)"),
+    "rider import-sheet": ("splatting.rider.command:ImportSheet", "imported riders posed on a bike by the IK: "
+                                                                   "residuals table and contact sheet"),
     "dataset merge": ("splatting.dataset.command:Merge", "merge a dataset's per-sample shards into annotations.json (idempotent)"),
+    "dataset looks-sheet": ("splatting.dataset.command:LooksSheet", "one cyclist in N sampled looks (appearance variety) on one PNG"),
+    "dataset frames-sheet": ("splatting.dataset.command:FramesSheet", "a frames-mode (KITTI insert) dataset's samples with their labels on one PNG"),
+    "dataset strip": ("splatting.dataset.command:SequenceStrip", "a sequence dataset's frames with track boxes, ids and trails on one PNG"),
     "library build": ("splatting.library.command", "build every bike's views + part Gaussians + posed fine-tune + ground-truth check "
                                                    "and every rider's avatar, resumable, into library.json"),
 }
@@ -76,10 +82,13 @@ def main(argv=None):
     if name.startswith("blender "):  # a Blender stage: its script parses its own arguments
         return BLENDER_STAGES[name.split(" ", 1)[1]].main(rest)
     command = load(cmds[name][0])
-    parser = OneLineParser(prog=f"python -m splatting {name}", description=cmds[name][1])
-    command.add_arguments(parser)
-    args = parser.parse_args(rest)
+    if not hasattr(command, "main"):  # a module that parses its own arguments is handed them as they are
+        parser = OneLineParser(prog=f"python -m splatting {name}", description=cmds[name][1])
+        command.add_arguments(parser)
+        args = parser.parse_args(rest)
     try:
+        if hasattr(command, "main"):
+            return command.main(rest) or 0
         if hasattr(command, "check_args"):  # impossible values, unusable paths: refused before any work
             command.check_args(args)
         return command.run(args) or 0

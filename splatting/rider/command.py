@@ -139,3 +139,38 @@ class PosedTrain:
         train_avatar_posed(args.avatar, PosedTrainConfig(poses=args.poses, cameras=args.cameras, iterations=args.iterations,
                                                          samples=args.samples, scale=args.scale, progress=not args.quiet))
         return 0
+
+
+class ImportSheet:
+    """`python -m splatting rider import-sheet --bike DIR --rider NAME=rider.npz ... --work DIR`: imported
+    riders on a bike, the IK's residuals and a contact sheet (splatting/rider/import_sheet.py)."""
+
+    @staticmethod
+    def add_arguments(p):
+        p.add_argument("--bike", required=True, help="a bike folder with keypoints.json and bike.blend")
+        p.add_argument("--rider", action="append", required=True, help="NAME=rider.npz (repeatable)")
+        p.add_argument("--work", required=True, help="folder for the posed rider files and the pictures")
+        p.add_argument("--out", help="the contact sheet .png")
+        p.add_argument("--table", help="write the residual table (markdown) here")
+        p.add_argument("--size", type=int, default=360, help="pixels per picture (default 360)")
+        p.add_argument("--samples", type=int, default=16, help="Cycles samples per picture (default 16)")
+
+    @staticmethod
+    def riders(args):
+        """[(name, path)] of the --rider NAME=rider.npz flags."""
+        out = []
+        for r in args.rider:
+            name, _, path = r.partition("=")
+            if not path or not os.path.isfile(path):
+                raise UserError(f"--rider {r}: give NAME=an existing rider.npz")
+            out.append((name, path))
+        return out
+
+    @staticmethod
+    def run(args):
+        from splatting.rider.import_sheet import import_sheet
+
+        if not os.path.isfile(os.path.join(args.bike, "keypoints.json")):
+            raise UserError(f"--bike {args.bike}: no keypoints.json")
+        import_sheet(args.bike, ImportSheet.riders(args), args.work, args.out, args.table, args.size, args.samples)
+        return 0

@@ -1,6 +1,6 @@
 """Imported riders on a bike: the IK's residuals and posed textured meshes for a contact sheet.
 
-    python -m splatting.rider.import_sheet --bike out/demo/bikes/city_00 --rider NAME=rider.npz ... \
+    python -m splatting rider import-sheet --bike out/demo/bikes/city_00 --rider NAME=rider.npz ... \
         --work DIR [--out docs/img/riders_import.png] [--table FILE.md]
 
 For each rider file: the IK (saddle fitted, one seat post) at four crank angles on the bike's keypoints,
@@ -9,7 +9,6 @@ them, and the rider posed at crank angle 0 written as a rider file (the same fac
 which blender_scripts/render_rider_on_bike.py draws on the bike at its rest pose (crank angle 0) into
 one picture per rider; the pictures are tiled into the contact sheet with a label each.
 """
-import argparse
 import json
 import math
 import os
@@ -47,27 +46,14 @@ def ride(npz, keypoints):
     return worst, verts
 
 
-def main(argv=None):
-    p = argparse.ArgumentParser(prog="python -m splatting.rider.import_sheet", description=__doc__.splitlines()[0])
-    p.add_argument("--bike", required=True, help="a bike folder with keypoints.json and bike.blend")
-    p.add_argument("--rider", action="append", required=True, help="NAME=rider.npz (repeatable)")
-    p.add_argument("--work", required=True, help="folder for the posed rider files and the pictures")
-    p.add_argument("--out", help="the contact sheet .png")
-    p.add_argument("--table", help="write the residual table (markdown) here")
-    p.add_argument("--size", type=int, default=360, help="pixels per picture (default 360)")
-    p.add_argument("--samples", type=int, default=16, help="Cycles samples per picture (default 16)")
-    args = p.parse_args(argv)
-    kp_path = os.path.join(args.bike, "keypoints.json")
+def import_sheet(bike, riders, work, out=None, table=None, size=360, samples=16):
+    """riders: [(name, rider.npz)]; the residuals printed one rider a line, the table (markdown) written
+    to `table`, the pictures rendered into `work` and tiled into `out` (each optional)."""
+    kp_path = os.path.join(bike, "keypoints.json")
     if not os.path.isfile(kp_path):
-        raise UserError(f"--bike {args.bike}: no keypoints.json")
+        raise UserError(f"--bike {bike}: no keypoints.json")
     keypoints = json.load(open(kp_path))["keypoints"]
-    riders = []
-    for r in args.rider:
-        name, _, path = r.partition("=")
-        if not path or not os.path.isfile(path):
-            raise UserError(f"--rider {r}: give NAME=an existing rider.npz")
-        riders.append((name, path))
-    os.makedirs(args.work, exist_ok=True)
+    os.makedirs(work, exist_ok=True)
     rows, jobs = [], []
     for name, path in riders:
         worst, verts = ride(path, keypoints)
@@ -75,18 +61,18 @@ def main(argv=None):
         extra = {k: a[k] for k in ("uv", "face_texture") if k in a}
         if "uv" in a:
             extra["textures"] = rider_file.textures_of(a)
-        posed = os.path.join(args.work, f"{name}_posed.npz")
+        posed = os.path.join(work, f"{name}_posed.npz")
         W = np.zeros_like(a["weights"])
         W[:, 0] = 1.0  # a posed snapshot: not for skinning
-        rider_file.write_rider_file(posed, meta=dict(meta, posed="crank 0 on " + os.path.basename(args.bike)),
+        rider_file.write_rider_file(posed, meta=dict(meta, posed="crank 0 on " + os.path.basename(bike)),
                                     vertices=verts, faces=a["faces"], joints=a["joints"], weights=W,
                                     colors=a["colors"], **extra)
-        png = os.path.join(args.work, f"{name}.png")
+        png = os.path.join(work, f"{name}.png")
         jobs.append({"rider": posed, "out": png, "label": name})
         rows.append((name, meta, worst))
         print(f"{name}: hands {worst['hands'] * 100:.2f} cm, feet {worst['feet'] * 100:.2f} cm, "
               f"pelvis {worst['pelvis'] * 100:.2f} cm", flush=True)
-    if args.table:
+    if table:
         lines = ["| rider | rig (scheme) | rest pose | size | placed joints | missing textures | hands / feet / pelvis (cm, worst of 4 crank angles) |",
                  "| --- | --- | --- | --- | --- | --- | --- |"]
         for name, meta, w in rows:
@@ -94,32 +80,25 @@ def main(argv=None):
             lines.append(f"| {name} | {meta['scheme']} | {meta['rest_pose']} | {meta.get('size', '')} | {placed} | "
                          f"{len(meta.get('missing_textures') or [])} | {w['hands'] * 100:.2f} / {w['feet'] * 100:.2f} / "
                          f"{w['pelvis'] * 100:.2f} |")
-        open(args.table, "w").write("\n".join(lines) + "\n")
-    if args.out:
-        job_file = os.path.join(args.work, "jobs.json")
+        open(table, "w").write("\n".join(lines) + "\n")
+    if out:
+        job_file = os.path.join(work, "jobs.json")
         json.dump(jobs, open(job_file, "w"))
-        r = subprocess.run([sys.executable, SCRIPT, "--bike", args.bike, "--jobs", job_file, "--size", str(args.size),
-                            "--samples", str(args.samples)])
+        r = subprocess.run([sys.executable, SCRIPT, "--bike", bike, "--jobs", job_file, "--size", str(size),
+                            "--samples", str(samples)])
         if r.returncode != 0:
             raise UserError("render_rider_on_bike.py failed")
         from PIL import Image, ImageDraw
         tiles = [Image.open(j["out"]).convert("RGB") for j in jobs]
         cols = 3
         rows_n = math.ceil(len(tiles) / cols)
-        sheet = Image.new("RGB", (cols * args.size, rows_n * args.size), "white")
+        sheet = Image.new("RGB", (cols * size, rows_n * size), "white")
         for k, (t, j) in enumerate(zip(tiles, jobs)):
-            x, y = (k % cols) * args.size, (k // cols) * args.size
+            x, y = (k % cols) * size, (k // cols) * size
             sheet.paste(t, (x, y))
             ImageDraw.Draw(sheet).text((x + 6, y + 6), j["label"], fill=(0, 0, 0))
-        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-        sheet.save(args.out)
-        print(f"wrote {args.out}")
+        os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+        sheet.save(out)
+        print(f"wrote {out}")
     return 0
 
-
-if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except UserError as e:
-        print(f"import_sheet: error: {e}", file=sys.stderr)
-        sys.exit(2)
