@@ -118,6 +118,16 @@ def test_a_blender_stage_refuses_bad_input_in_one_line(tmp_path, args, says):
     assert sorted(os.listdir(tmp_path)) == before
 
 
+def test_a_blender_stage_runs_through_the_surface(tmp_path):
+    """The script does its work with the bpy module of this Python; its output comes back as it is."""
+    pytest.importorskip("bpy")
+    r = splatting("blender", "make-bikes", "--out", str(tmp_path), "--count", "1", "--no-extras")
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "make_bikes: 1 bikes in" in r.stdout
+    (bike,) = os.listdir(tmp_path / "bikes")
+    assert {"bike.blend", "keypoints.json", "meta.json"} <= set(os.listdir(tmp_path / "bikes" / bike))
+
+
 def test_split_blender():
     assert split_blender(["--bike", "b"]) == (None, ["--bike", "b"])
     assert split_blender(["--blender", "/b", "--", "--bike", "b"]) == ("/b", ["--bike", "b"])
