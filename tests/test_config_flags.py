@@ -8,7 +8,7 @@ import pytest
 
 from cyclist_formats.errors import UserError
 from cyclist_formats.typed_config import add_dataclass_arguments, dataclass_from_args
-from splatting.bike import posed_train
+from splatting.bike.command import PosedTrain
 from splatting.bike.posed_train import PosedTrainConfig
 from splatting.training import command as train_command
 from splatting.training.trainer import TrainConfig
@@ -25,7 +25,7 @@ def _options(p):
 
 
 def test_posed_train_options_are_its_config_fields():
-    p = _parser(posed_train.add_arguments)
+    p = _parser(PosedTrain.add_arguments)
     opts = _options(p)
     exposed = [f.name for f in dataclasses.fields(PosedTrainConfig) if "help" in f.metadata]
     assert exposed == ["poses", "iterations", "samples", "sh_degree", "densify", "densify_max", "lr_decay",
@@ -36,9 +36,9 @@ def test_posed_train_options_are_its_config_fields():
     assert opts["sh_degree"].choices == (0, 1, 2)
     # no options given: the dataclass's defaults (with progress from --quiet)
     args = p.parse_args(["--bike", "b", "--quiet"])
-    assert posed_train.config_from_args(args) == PosedTrainConfig(progress=False)
+    assert PosedTrain.config_from_args(args) == PosedTrainConfig(progress=False)
     args = p.parse_args(["--bike", "b", "--poses", "200", "--densify", "--lr-decay", "0.5", "--sh-degree", "2"])
-    assert posed_train.config_from_args(args) == PosedTrainConfig(poses=200, densify=True, lr_decay=0.5, sh_degree=2)
+    assert PosedTrain.config_from_args(args) == PosedTrainConfig(poses=200, densify=True, lr_decay=0.5, sh_degree=2)
     with pytest.raises(SystemExit):
         p.parse_args(["--bike", "b", "--poses", "many"])
 

@@ -154,7 +154,7 @@ def test_fidelity_recipe_trains_antialiased_and_runs_its_fine_tune(tmp_path, mon
     no setting, so libraries built before the option still match."""
     import argparse
 
-    from splatting.bike import posed_train
+    from splatting.bike.command import PosedTrain
     from splatting.bike.recipes import posed_config
     from splatting.library import tasks
     d = write_test_bike(str(tmp_path / "bikes"), "city_a")
@@ -176,10 +176,10 @@ def test_fidelity_recipe_trains_antialiased_and_runs_its_fine_tune(tmp_path, mon
     with pytest.raises(FileNotFoundError):
         tasks.run_posed(posed, str(tmp_path), fid)
     p = argparse.ArgumentParser()
-    posed_train.add_arguments(p)
+    PosedTrain.add_arguments(p)
     cmd = ran[-1]
     args = p.parse_args(cmd[cmd.index("bike-posed-train") + 1:])
-    assert posed_train.config_from_args(args) == posed_config("fidelity", samples=fid["posed_samples"], progress=False)
+    assert PosedTrain.config_from_args(args) == posed_config("fidelity", samples=fid["posed_samples"], progress=False)
 
 
 def _manifest(tmp_path, gt_iou, part_psnr=30.0, complete=True):

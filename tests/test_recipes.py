@@ -5,6 +5,7 @@ import shlex
 import pytest
 
 from splatting.bike import posed_train, recipes
+from splatting.bike.command import PosedTrain
 from splatting.training import command
 
 # the fidelity recipe as recipes.py's docstring (and docs/training.md) spell it
@@ -20,8 +21,8 @@ def _parse(add_arguments, line):
 
 def test_fidelity_recipe_is_its_documented_command_lines():
     assert FIDELITY_POSED in " ".join(recipes.__doc__.split()) and FIDELITY_TRAIN in recipes.__doc__
-    args = _parse(posed_train.add_arguments, "--bike b " + FIDELITY_POSED)
-    assert recipes.posed_config("fidelity") == posed_train.config_from_args(args)
+    args = _parse(PosedTrain.add_arguments, "--bike b " + FIDELITY_POSED)
+    assert recipes.posed_config("fidelity") == PosedTrain.config_from_args(args)
     assert recipes.posed_config("fidelity") != recipes.posed_config("default")
     targs = _parse(command.add_arguments, "--views v " + FIDELITY_TRAIN)
     assert recipes.train_config("fidelity", progress=True) == command.config_from_args(targs)

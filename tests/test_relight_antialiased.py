@@ -155,17 +155,18 @@ def test_relight_fit_defaults_differ_for_a_bike_and_a_views_folder(tmp_path, mon
     # avatar (the config's defaults: the relit loss shades with the bike's roughness, so off)
     import argparse
 
+    import splatting.relight.command as command
     import splatting.relight.fit as fit
 
     seen = []
     monkeypatch.setattr(fit, "fit_bike", lambda d, cfg: seen.append(cfg) or {})
     monkeypatch.setattr(fit, "fit_file", lambda v, p, cfg: seen.append(cfg) or {"path": "x", "wall_s": 0})
     p = argparse.ArgumentParser()
-    fit.add_arguments(p)
+    command.add_arguments(p)
     for argv in (["--bike", str(tmp_path)], ["--views", str(tmp_path)], ["--bike", str(tmp_path), "--iterations", "7",
                                                                           "--relit-loss", "0", "--no-view-normals"],
                  ["--views", str(tmp_path), "--view-normals"]):
-        assert fit.run(p.parse_args(argv)) == 0
+        assert command.run(p.parse_args(argv)) == 0
     bike, views, given, views_vn = seen
     assert (bike.iterations, bike.relit_loss) == (fit.BIKE_ITERATIONS, fit.BIKE_RELIT_LOSS) == (150, 3.0)
     assert bike.view_normals is fit.BIKE_VIEW_NORMALS is True

@@ -1,4 +1,5 @@
-"""`python -m splatting pose-bike`: re-pose a bike's part Gaussians with the 8-DoF pose.
+"""`python -m splatting pose-bike`: re-pose a bike's part Gaussians with the 8-DoF pose; the bike stage's
+other commands, `bike-posed-train` and `contact-sheet`, are the classes at the end.
 
 One pose:  --pose "p,s,X,Y,Z,tx,ty,tz" --out FILE.ply [--keypoints-out FILE.json]
 A batch:   --poses FILE.json --out DIR  ->  DIR/pose_%05d.ply + DIR/pose_%05d.json (keypoints)
@@ -13,6 +14,7 @@ from cyclist_formats import checks
 from cyclist_formats.atomic import write_json
 from cyclist_formats.errors import UserError
 
+from cyclist_formats.typed_config import add_dataclass_arguments, dataclass_from_args
 from cyclist_formats.pose import FIELDS_HELP  # numpy only: --help does not import torch
 
 # The stage's modules are imported inside the functions below, not at the top: they load torch
@@ -97,3 +99,82 @@ def run(args):
         prev = out
         sys.stderr.write(f"pose-bike: {min(start + BATCH_CHUNK, n)}/{n} poses\n")
     return 0
+
+
+class PosedTrain:
+    """`python -m splatting bike-posed-train --bike OUT/bikes/ID`: the parts fine-tuned together on
+    renders of the posed bike (splatting/bike/posed_train.py)."""
+
+    @staticmethod
+    def add_arguments(p):
+        from splatting.bike.posed_train import PosedTrainConfig
+
+        p.add_argument("--bike", required=True, help="a bike folder with trained parts (gaussians/) and views/whole")
+        p.add_argument("--from-rest", action="store_true",
+                       help="start from gaussians/<part>_rest.ply as they are and never write them (the layout "
+                            "`library build` leaves; default: keep the current <part>.ply as <part>_rest.ply first)")
+        add_dataclass_arguments(p, PosedTrainConfig())  # --poses ... --eps2d, defaults from the dataclass
+        p.add_argument("--render-threads", type=int,
+                       help="Blender's CPU threads for the posed renders (default: its own, 2); the fine-tune uses one")
+        p.add_argument("--quiet", action="store_true", help="no progress line")
+
+    @staticmethod
+    def check_args(args):
+        from splatting.bike.posed_train import HELD_OUT
+
+        checks.input_dir("bike", args.bike)
+        checks.integer("poses", args.poses, HELD_OUT + 1, 10_000)
+        checks.count("iterations", args.iterations, hi=10_000_000)
+        checks.count("samples", args.samples, hi=1 << 16)
+        checks.count("densify-max", args.densify_max, hi=10_000_000)
+        checks.number("lr-decay", args.lr_decay, 0.0, 1.0, lo_open=True)
+        checks.integer("lr-tail", args.lr_tail, 0, args.iterations)
+        checks.positive("eps2d", args.eps2d, 10.0)
+        if args.render_threads is not None:
+            checks.threads("render-threads", args.render_threads)
+        for p in ("frame", "steering"):
+            f = p + ("_rest.ply" if args.from_rest else ".ply")
+            if not os.path.isfile(os.path.join(args.bike, "gaussians", f)):
+                raise UserError(f"{args.bike} has no trained gaussians/{f} (python -m splatting train first)")
+
+    @staticmethod
+    def config_from_args(args):
+        """The PosedTrainConfig of a parsed command line (after check_args)."""
+        from splatting.bike.posed_train import PosedTrainConfig
+
+        return dataclass_from_args(args, PosedTrainConfig(), progress=not args.quiet)
+
+    @staticmethod
+    def run(args):
+        from splatting.bike.posed_train import train_bike_posed
+
+        train_bike_posed(args.bike, PosedTrain.config_from_args(args), from_rest=args.from_rest,
+                         render_threads=args.render_threads)
+        return 0
+
+
+class ContactSheet:
+    """`python -m splatting contact-sheet --bikes OUT/bikes --out FILE.png` (splatting/bike/contact_sheet.py)."""
+
+    @staticmethod
+    def add_arguments(p):
+        p.add_argument("--bikes", required=True, help="folder holding <bike_id>/views/whole/")
+        p.add_argument("--out", required=True, help="output PNG")
+        p.add_argument("--view", type=int, default=3, help="ring view index to show (default 3: front-left three-quarter)")
+        p.add_argument("--cols", type=int, default=6)
+        p.add_argument("--tile", type=int, default=256, help="tile size in pixels")
+
+    @staticmethod
+    def check_args(args):
+        checks.input_dir("bikes", args.bikes)
+        checks.index("view", args.view, 36)
+        checks.integer("cols", args.cols, 1, 1000)
+        checks.image_size("tile", args.tile)
+        checks.output_file("out", args.out, (".png",))
+
+    @staticmethod
+    def run(args):
+        from splatting.bike.contact_sheet import contact_sheet
+
+        n = contact_sheet(args.bikes, args.out, args.view, args.cols, args.tile)
+        print(f"contact sheet of {n} bikes -> {args.out}")

@@ -1,4 +1,4 @@
-"""`contact-sheet`: one rendered view of every bike in a library, labelled, on one PNG."""
+"""`contact-sheet` (the command: bike/command.py): one rendered view of every bike in a library, labelled, on one PNG."""
 import glob
 import json
 import math
@@ -6,17 +6,8 @@ import os
 
 from PIL import Image, ImageDraw, ImageFont
 
-from cyclist_formats import checks
 from cyclist_formats.atomic import atomic_path
 from cyclist_formats.errors import UserError
-
-
-def add_arguments(p):
-    p.add_argument("--bikes", required=True, help="folder holding <bike_id>/views/whole/")
-    p.add_argument("--out", required=True, help="output PNG")
-    p.add_argument("--view", type=int, default=3, help="ring view index to show (default 3: front-left three-quarter)")
-    p.add_argument("--cols", type=int, default=6)
-    p.add_argument("--tile", type=int, default=256, help="tile size in pixels")
 
 
 def contact_sheet(bikes_dir, out, view=3, cols=6, tile=256):
@@ -54,16 +45,3 @@ def _square(bbox, size, pad):
     x0, y0, x1, y1 = bbox
     cx, cy, half = (x0 + x1) / 2, (y0 + y1) / 2, max(x1 - x0, y1 - y0) / 2 + pad
     return (int(cx - half), int(cy - half), int(cx + half), int(cy + half))
-
-
-def check_args(args):
-    checks.input_dir("bikes", args.bikes)
-    checks.index("view", args.view, 36)
-    checks.integer("cols", args.cols, 1, 1000)
-    checks.image_size("tile", args.tile)
-    checks.output_file("out", args.out, (".png",))
-
-
-def run(args):
-    n = contact_sheet(args.bikes, args.out, args.view, args.cols, args.tile)
-    print(f"contact sheet of {n} bikes -> {args.out}")

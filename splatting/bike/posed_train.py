@@ -38,10 +38,9 @@ from PIL import Image
 import numpy as np
 import torch
 
-from cyclist_formats import bike_folder, checks, ring
+from cyclist_formats import bike_folder, ring
 from cyclist_formats.atomic import read_json_or_none, write_json
 from cyclist_formats.errors import UserError
-from cyclist_formats.typed_config import add_dataclass_arguments, dataclass_from_args
 from splatting import paths
 from splatting.bike.model import BikeModel
 from splatting.bike.pose import check_poses, sample_poses
@@ -382,41 +381,3 @@ def train_bike_posed(bike_dir, cfg: PosedTrainConfig = None, log=print, from_res
 
 def model_keypoints_doc(bike_dir):
     return bike_folder.read_json(os.path.join(bike_dir, "keypoints.json"), "keypoints.json")
-
-
-def add_arguments(p):
-    p.add_argument("--bike", required=True, help="a bike folder with trained parts (gaussians/) and views/whole")
-    p.add_argument("--from-rest", action="store_true",
-                   help="start from gaussians/<part>_rest.ply as they are and never write them (the layout "
-                        "`library build` leaves; default: keep the current <part>.ply as <part>_rest.ply first)")
-    add_dataclass_arguments(p, PosedTrainConfig())  # --poses ... --eps2d, defaults from the dataclass
-    p.add_argument("--render-threads", type=int,
-                   help="Blender's CPU threads for the posed renders (default: its own, 2); the fine-tune uses one")
-    p.add_argument("--quiet", action="store_true", help="no progress line")
-
-
-def check_args(args):
-    checks.input_dir("bike", args.bike)
-    checks.integer("poses", args.poses, HELD_OUT + 1, 10_000)
-    checks.count("iterations", args.iterations, hi=10_000_000)
-    checks.count("samples", args.samples, hi=1 << 16)
-    checks.count("densify-max", args.densify_max, hi=10_000_000)
-    checks.number("lr-decay", args.lr_decay, 0.0, 1.0, lo_open=True)
-    checks.integer("lr-tail", args.lr_tail, 0, args.iterations)
-    checks.positive("eps2d", args.eps2d, 10.0)
-    if args.render_threads is not None:
-        checks.threads("render-threads", args.render_threads)
-    for p in ("frame", "steering"):
-        f = p + ("_rest.ply" if args.from_rest else ".ply")
-        if not os.path.isfile(os.path.join(args.bike, "gaussians", f)):
-            raise UserError(f"{args.bike} has no trained gaussians/{f} (python -m splatting train first)")
-
-
-def config_from_args(args):
-    """The PosedTrainConfig of a parsed command line (after check_args)."""
-    return dataclass_from_args(args, PosedTrainConfig(), progress=not args.quiet)
-
-
-def run(args):
-    train_bike_posed(args.bike, config_from_args(args), from_rest=args.from_rest, render_threads=args.render_threads)
-    return 0

@@ -197,3 +197,75 @@ def parse_shard(text):
     if not (n >= 1 and 0 <= k < n):
         raise UserError(f"--shard {text}: need N >= 1 and 0 <= K < N")
     return k, n
+
+
+class Merge:
+    """`python -m splatting dataset merge --out DIR`: a sharded dataset's samples -> DIR/annotations.json
+    (splatting/dataset/merge.py)."""
+
+    @staticmethod
+    def add_arguments(p):
+        p.add_argument("--out", required=True, help="the dataset folder the shard runs wrote (holds config.json, shards/)")
+
+    @staticmethod
+    def check_args(args):
+        checks.input_dir("out", args.out)
+
+    @staticmethod
+    def run(args):
+        from splatting.dataset.merge import merge_dataset, read_config
+
+        path = merge_dataset(args.out)
+        cfg = read_config(args.out)
+        print(f"dataset merge: {cfg['count']} samples -> {path}")
+        return 0
+
+
+class LooksSheet:
+    """`python -m splatting dataset looks-sheet --out FILE.png`: one cyclist in N sampled looks
+    (splatting/dataset/looks_sheet.py)."""
+
+    @staticmethod
+    def add_arguments(p):
+        p.add_argument("--out", required=True, help="PNG to write")
+        p.add_argument("--bike", help="bike folder (default: a stand-in from the procedural spec)")
+        p.add_argument("--rider", default="m_adult_average_185", help="roster rider id")
+        p.add_argument("--riders-root", default="data/riders")
+        p.add_argument("--count", type=int, default=12)
+        p.add_argument("--seed", type=int, default=0)
+
+    @staticmethod
+    def check_args(args):
+        if args.count < 1:
+            raise UserError("--count must be >= 1")
+        if not args.out.lower().endswith(".png"):
+            raise UserError("--out must be a .png file")
+
+    @staticmethod
+    def run(args):
+        from splatting.dataset.looks_sheet import write_looks_sheet
+
+        print(write_looks_sheet(args.out, args.bike, args.rider, args.riders_root, args.count, args.seed))
+        return 0
+
+
+class FramesSheet:
+    """`python -m splatting dataset frames-sheet DATASET OUT.png`: a frames-mode dataset's samples with their
+    labels on one PNG; the module parses its own arguments (splatting/dataset/frames/sheet.py)."""
+
+    @staticmethod
+    def main(argv):
+        from splatting.dataset.frames.sheet import main
+
+        return main(argv)
+
+
+class SequenceStrip:
+    """`python -m splatting dataset strip --dataset DIR --out FILE.png`: a sequence's frames with track boxes;
+    the module parses its own arguments (splatting/dataset/sequences/strip.py)."""
+
+    @staticmethod
+    def main(argv):
+        from splatting.dataset.sequences.strip import main
+
+        return main(argv)

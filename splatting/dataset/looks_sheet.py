@@ -1,12 +1,11 @@
 """Contact sheet of appearance variety: one cyclist (bike + rider, one pose) in N sampled looks
 (appearance.draw_look for sample indices 0..N-1), rendered side-on in a grid.
 
-    python -m splatting.dataset.looks_sheet --out docs/img/rider_looks.png [--bike DIR] [--rider ID]
+    python -m splatting dataset looks-sheet --out docs/img/rider_looks.png [--bike DIR] [--rider ID]
 
 Without --bike a stand-in bike is built from the procedural generator's spec (keypoints only);
 the rider is a trained avatar from --riders-root when one exists, else the mesh avatar.
 """
-import argparse
 import os
 import shutil
 import sys
@@ -17,7 +16,6 @@ import numpy as np
 import torch
 
 from cyclist_formats.atomic import atomic_path
-from cyclist_formats.errors import UserError
 from cyclist_formats.instances import RIDER_ID
 from splatting import paths
 from splatting.cyclist import appearance
@@ -62,40 +60,21 @@ def render_sheet(cfg, bike, rider, n=12, cols=4, log=print):
     return sheet
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m splatting.dataset.looks_sheet", description=__doc__.splitlines()[0])
-    ap.add_argument("--out", required=True, help="PNG to write")
-    ap.add_argument("--bike", help="bike folder (default: a stand-in from the procedural spec)")
-    ap.add_argument("--rider", default="m_adult_average_185", help="roster rider id")
-    ap.add_argument("--riders-root", default="data/riders")
-    ap.add_argument("--count", type=int, default=12)
-    ap.add_argument("--seed", type=int, default=0)
-    args = ap.parse_args(argv)
-    if args.count < 1:
-        ap.error("--count must be >= 1")
-    if not args.out.lower().endswith(".png"):
-        ap.error("--out must be a .png file")
-    try:
-        with tempfile.TemporaryDirectory() as scratch:
-            if args.bike:
-                root, bike = os.path.dirname(os.path.abspath(args.bike)), os.path.basename(os.path.abspath(args.bike))
-            else:
-                root, bike = scratch, STAND_IN_BIKE
-                shutil.copytree(os.path.join(paths.BLEND_ASSETS, "stand_in_bike", STAND_IN_BIKE), os.path.join(scratch, bike))
-            cfg = resolve_assets(validate({"mode": "street", "camera": {"preset": "nuscenes"}, "seed": args.seed,
-                                           "bikes": [bike], "bikes_root": root, "riders": [args.rider],
-                                           "riders_root": args.riders_root, "appearance": {"enabled": True,
-                                                                                           "keep_share": 0.0}}))
-            sheet = render_sheet(cfg, bike, args.rider, args.count, log=lambda m: print(m, file=sys.stderr))
-    except UserError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with atomic_path(args.out) as tmp:
+def write_looks_sheet(out, bike=None, rider="m_adult_average_185", riders_root="data/riders", count=12, seed=0,
+                      log=lambda m: print(m, file=sys.stderr)):
+    """The sheet of `count` looks of `rider` on `bike` (a bike folder; None: the stand-in) written to out (.png)."""
+    with tempfile.TemporaryDirectory() as scratch:
+        if bike:
+            root, bike_id = os.path.dirname(os.path.abspath(bike)), os.path.basename(os.path.abspath(bike))
+        else:
+            root, bike_id = scratch, STAND_IN_BIKE
+            shutil.copytree(os.path.join(paths.BLEND_ASSETS, "stand_in_bike", STAND_IN_BIKE), os.path.join(scratch, bike_id))
+        cfg = resolve_assets(validate({"mode": "street", "camera": {"preset": "nuscenes"}, "seed": seed,
+                                       "bikes": [bike_id], "bikes_root": root, "riders": [rider],
+                                       "riders_root": riders_root, "appearance": {"enabled": True,
+                                                                                  "keep_share": 0.0}}))
+        sheet = render_sheet(cfg, bike_id, rider, count, log=log)
+    os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+    with atomic_path(out) as tmp:
         Image.fromarray(sheet).save(tmp, format="PNG")
-    print(args.out)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+    return out

@@ -1,4 +1,4 @@
-"""`python -m splatting dataset merge --out DIR`: per-sample shards -> DIR/annotations.json.
+"""Per-sample shards -> DIR/annotations.json (the command: `python -m splatting dataset merge --out DIR`).
 
 The step after sharded or distributed generation (`dataset --shard K/N`, a Slurm array, a
 Kubernetes Indexed Job, `--engine ray`): it reads the resolved config the generators stored in
@@ -9,7 +9,6 @@ the output, so running it twice, or after a single-process run, gives the same b
 import json
 import os
 
-from cyclist_formats import checks
 from cyclist_formats.errors import UserError
 from splatting.dataset.coco import merge
 from splatting.dataset.generate import sample_done
@@ -61,18 +60,3 @@ def merge_dataset(out_dir):
     if "kitti" in cfg["labels"]["formats"]:
         write_imagesets(out_dir, cfg["count"])
     return path
-
-
-def add_arguments(p):
-    p.add_argument("--out", required=True, help="the dataset folder the shard runs wrote (holds config.json, shards/)")
-
-
-def check_args(args):
-    checks.input_dir("out", args.out)
-
-
-def run(args):
-    path = merge_dataset(args.out)
-    cfg = read_config(args.out)
-    print(f"dataset merge: {cfg['count']} samples -> {path}")
-    return 0

@@ -9,7 +9,6 @@ with its backward: seconds, not minutes.  Loss: L1 of the composited (premultipl
 gloss and of the composited unit normals against the passes, in the object's box of each training
 view, plus shading_loss (how the normals shade under random light directions against the pass).
 """
-import argparse
 import math
 import os
 import time
@@ -350,55 +349,12 @@ def fit_bike(bike_dir, cfg: RelightFitConfig = None, log=print):
     out = {}
     for p in bike_parts(bike_dir):
         out[p] = fit_file(bike_folder.views_dir(bike_dir, p), bike_folder.gaussians_path(bike_dir, p), cfg)
-        log(_summary(out[p]))
+        log(fit_summary(out[p]))
     return out
 
 
-def _summary(m):
+def fit_summary(m):
+    """One line of a fit's metrics (the command's output, fit_bike's log)."""
     return (f"{m['path']}: albedo PSNR {m.get('heldout_albedo_psnr')} dB, normal error "
             f"{m.get('heldout_normal_err_deg')} deg (held-out views), {m['wall_s']} s"
             + (", mip filter" if m.get("antialiased") else ""))
-
-
-def add_arguments(p):
-    what = p.add_mutually_exclusive_group(required=True)
-    what.add_argument("--views", help="a part's views folder with albedo/ and normal/ passes")
-    what.add_argument("--bike", help="a trained bike folder: fit every part on its views (views/PART), e.g. "
-                                     "after bike-posed-train")
-    p.add_argument("--ply", help="with --views: the trained Gaussians (default OUT/bikes/ID/gaussians/PART.ply)")
-    p.add_argument("--iterations", type=int, help=f"optimisation steps (default {BIKE_ITERATIONS} with --bike, "
-                                                  f"{RelightFitConfig.iterations} with --views)")
-    p.add_argument("--max-size", type=int, default=RelightFitConfig.max_size,
-                   help="fit at most at this image size in px (default %(default)s)")
-    p.add_argument("--relit-loss", type=float,
-                   help=f"weight of the relit loss (display colours under random suns, a bike's materials; 0: off; "
-                        f"default {BIKE_RELIT_LOSS:g} with --bike, {RelightFitConfig.relit_loss:g} with --views)")
-    p.add_argument("--view-normals", action=argparse.BooleanOptionalAction, default=None,
-                   help="view-dependent normals, normalize(n + B v) per Gaussian (default on with --bike, "
-                        "off with --views)")
-    p.add_argument("--quiet", action="store_true", help="no progress line")
-
-
-def run(args):
-    if args.iterations is not None and args.iterations < 1:
-        raise UserError("--iterations must be >= 1")
-    if args.max_size < 16:
-        raise UserError("--max-size must be >= 16")
-    if args.relit_loss is not None and not args.relit_loss >= 0:
-        raise UserError("--relit-loss must be >= 0")
-    base = bike_fit_config() if args.bike else RelightFitConfig()  # a bike's parts, or one part / an avatar
-    cfg = RelightFitConfig(iterations=args.iterations if args.iterations is not None else base.iterations,
-                           max_size=args.max_size, progress=not args.quiet,
-                           relit_loss=args.relit_loss if args.relit_loss is not None else base.relit_loss,
-                           view_normals=args.view_normals if args.view_normals is not None else base.view_normals)
-    if args.bike:
-        if args.ply:
-            raise UserError("--ply goes with --views, not --bike")
-        if not os.path.isdir(args.bike):
-            raise UserError(f"bike folder not found: {args.bike}")
-        fit_bike(args.bike, cfg)
-        return 0
-    if not os.path.isdir(args.views):
-        raise UserError(f"views folder not found: {args.views}")
-    print(_summary(fit_file(args.views, args.ply, cfg)))
-    return 0

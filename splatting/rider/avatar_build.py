@@ -1,4 +1,4 @@
-"""`python -m splatting rider-avatar --id ID --out data/riders/ID`: build a rider's Gaussian avatar.
+"""Build a rider's Gaussian avatar (the command: `python -m splatting rider-avatar --id ID`, rider/command.py).
 
 Steps, each skipped when its output exists (so a killed run resumes):
   1. rest_mesh.ply   the T-posed rider mesh with vertex colours (body.export_rider)
@@ -12,7 +12,6 @@ import subprocess
 import sys
 import time
 
-from cyclist_formats import checks
 import torch
 
 from cyclist_formats.errors import UserError
@@ -91,34 +90,3 @@ def build_avatar(rider_id, out_dir, iterations=None, time_budget_s=None, max_gau
     metrics_path = os.path.join(out_dir, "rider.json")
     metrics = json.load(open(metrics_path)) if os.path.isfile(metrics_path) else None
     return {"avatar": out_dir, "steps": steps, "train": metrics}
-
-
-def add_arguments(p):
-    p.add_argument("--id", required=True, help="rider id from the roster (python -m splatting rider --list)")
-    p.add_argument("--out", help="avatar folder (default data/riders/ID)")
-    p.add_argument("--iterations", type=int, default=None, help="training iterations (reduced budget: e.g. 1500)")
-    p.add_argument("--time-budget-s", type=float, default=None, help="training wall-time cap")
-    p.add_argument("--max-gaussians", type=int, default=None)
-    p.add_argument("--samples", type=int, default=None, help="Cycles samples for the 36 views")
-    p.add_argument("--threads", type=int, default=1, help="torch threads for training")
-
-
-def check_args(args):
-    checks.count("iterations", args.iterations)
-    checks.positive("time_budget_s", args.time_budget_s)
-    checks.gaussians("max_gaussians", args.max_gaussians)
-    checks.count("samples", args.samples, hi=1 << 16)
-    checks.threads("threads", args.threads)
-    checks.output_dir("out", args.out)
-
-
-def run(args):
-    for name in ("iterations", "max_gaussians", "samples"):
-        v = getattr(args, name)
-        if v is not None and v < 1:
-            raise UserError(f"--{name.replace('_', '-')} must be >= 1")
-    out = args.out or os.path.join(paths.DATA, "riders", args.id)
-    res = build_avatar(args.id, out, args.iterations, args.time_budget_s, args.max_gaussians, args.samples,
-                       args.threads)
-    print(f"{out}: avatar ready ({', '.join(f'{k} {v}' for k, v in res['steps'].items())})")
-    return 0

@@ -1,5 +1,8 @@
-"""`python -m splatting rider`: list the roster, export a rider's mesh (rest or posed)."""
+"""`python -m splatting rider`: list the roster, export a rider's mesh (rest or posed); the rider stage's
+other commands, `rider-avatar` and `rider-posed-train`, are the classes at the end (`rider import`:
+import_command.py)."""
 import math
+import os
 
 import torch
 
@@ -64,3 +67,76 @@ def run(args):
     print(f"wrote {args.out} ({rider.vertices.shape[0]} vertices, rider {rider.id}, "
           f"{rider.height_m:.3f} m)")
     return 0
+
+
+class Avatar:
+    """`python -m splatting rider-avatar --id ID [--out data/riders/ID]`: render, train and skin a rider's
+    Gaussian avatar, resumable (splatting/rider/avatar_build.py)."""
+
+    @staticmethod
+    def add_arguments(p):
+        p.add_argument("--id", required=True, help="rider id from the roster (python -m splatting rider --list)")
+        p.add_argument("--out", help="avatar folder (default data/riders/ID)")
+        p.add_argument("--iterations", type=int, default=None, help="training iterations (reduced budget: e.g. 1500)")
+        p.add_argument("--time-budget-s", type=float, default=None, help="training wall-time cap")
+        p.add_argument("--max-gaussians", type=int, default=None)
+        p.add_argument("--samples", type=int, default=None, help="Cycles samples for the 36 views")
+        p.add_argument("--threads", type=int, default=1, help="torch threads for training")
+
+    @staticmethod
+    def check_args(args):
+        checks.count("iterations", args.iterations)
+        checks.positive("time_budget_s", args.time_budget_s)
+        checks.gaussians("max_gaussians", args.max_gaussians)
+        checks.count("samples", args.samples, hi=1 << 16)
+        checks.threads("threads", args.threads)
+        checks.output_dir("out", args.out)
+
+    @staticmethod
+    def run(args):
+        from splatting import paths
+        from splatting.rider.avatar_build import build_avatar
+
+        for name in ("iterations", "max_gaussians", "samples"):
+            v = getattr(args, name)
+            if v is not None and v < 1:
+                raise UserError(f"--{name.replace('_', '-')} must be >= 1")
+        out = args.out or os.path.join(paths.DATA, "riders", args.id)
+        res = build_avatar(args.id, out, args.iterations, args.time_budget_s, args.max_gaussians, args.samples,
+                           args.threads)
+        print(f"{out}: avatar ready ({', '.join(f'{k} {v}' for k, v in res['steps'].items())})")
+        return 0
+
+
+class PosedTrain:
+    """`python -m splatting rider-posed-train --avatar DIR`: an avatar's Gaussians trained through its
+    skinning on renders of the posed rider (splatting/rider/posed_train.py)."""
+
+    @staticmethod
+    def add_arguments(p):
+        from splatting.rider.posed_train import PosedTrainConfig
+
+        p.add_argument("--avatar", required=True, help="a rider avatar folder (rider.ply, skinning.npz, views/)")
+        p.add_argument("--poses", type=int, default=PosedTrainConfig.poses, help="pedalling poses (default %(default)s)")
+        p.add_argument("--cameras", type=int, default=PosedTrainConfig.cameras, help="ring cameras per pose (default %(default)s)")
+        p.add_argument("--iterations", type=int, default=PosedTrainConfig.iterations)
+        p.add_argument("--samples", type=int, default=None, help="Cycles samples for the posed renders")
+        p.add_argument("--scale", type=float, default=PosedTrainConfig.scale, help="training image scale (default %(default)s)")
+        p.add_argument("--quiet", action="store_true")
+
+    @staticmethod
+    def run(args):
+        from splatting.rider.posed_train import PosedTrainConfig, train_avatar_posed
+
+        if not 0.05 <= args.scale <= 1.0:
+            raise UserError(f"--scale must be in 0.05..1, got {args.scale}")
+        for name, lo, hi in (("poses", 1, 36), ("cameras", 2, 36), ("iterations", 1, 10 ** 7)):
+            v = getattr(args, name)
+            if not lo <= v <= hi:
+                raise UserError(f"--{name} must be in {lo}..{hi}, got {v}")
+        if not os.path.isfile(os.path.join(args.avatar, "skinning.npz")):
+            raise UserError(f"not a rider avatar folder (no skinning.npz): {args.avatar}")
+        train_avatar_posed(args.avatar, PosedTrainConfig(poses=args.poses, cameras=args.cameras, iterations=args.iterations,
+                                                         samples=args.samples, scale=args.scale, progress=not args.quiet))
+        return 0
+

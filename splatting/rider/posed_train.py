@@ -202,37 +202,3 @@ def train_avatar_posed(avatar_dir, cfg: PosedTrainConfig = None, log=print):
             json.dump(metrics, f, indent=1)
     log(f"rider-posed-train: {metrics}")
     return metrics
-
-
-def add_arguments(p):
-    p.add_argument("--avatar", required=True, help="a rider avatar folder (rider.ply, skinning.npz, views/)")
-    p.add_argument("--poses", type=int, default=PosedTrainConfig.poses, help="pedalling poses (default %(default)s)")
-    p.add_argument("--cameras", type=int, default=PosedTrainConfig.cameras, help="ring cameras per pose (default %(default)s)")
-    p.add_argument("--iterations", type=int, default=PosedTrainConfig.iterations)
-    p.add_argument("--samples", type=int, default=None, help="Cycles samples for the posed renders")
-    p.add_argument("--scale", type=float, default=PosedTrainConfig.scale, help="training image scale (default %(default)s)")
-    p.add_argument("--quiet", action="store_true")
-
-
-def run(args):
-    if not 0.05 <= args.scale <= 1.0:
-        raise UserError(f"--scale must be in 0.05..1, got {args.scale}")
-    for name, lo, hi in (("poses", 1, 36), ("cameras", 2, 36), ("iterations", 1, 10 ** 7)):
-        v = getattr(args, name)
-        if not lo <= v <= hi:
-            raise UserError(f"--{name} must be in {lo}..{hi}, got {v}")
-    if not os.path.isfile(os.path.join(args.avatar, "skinning.npz")):
-        raise UserError(f"not a rider avatar folder (no skinning.npz): {args.avatar}")
-    train_avatar_posed(args.avatar, PosedTrainConfig(poses=args.poses, cameras=args.cameras, iterations=args.iterations,
-                                                     samples=args.samples, scale=args.scale, progress=not args.quiet))
-    return 0
-
-
-if __name__ == "__main__":
-    import argparse
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_arguments(ap)
-    try:
-        sys.exit(run(ap.parse_args()))
-    except UserError as e:
-        sys.exit(f"error: {e}")

@@ -5,7 +5,7 @@ stop, one-handed; Cyclist.pose with signals);
 row 2: a frame of a street sequence where a turning or crossing cyclist signals, cropped around
 it: the instant (exposure 0) and the same frame with motion blur (the ego camera driving).
 
-    python -m splatting.dataset.sequences.signal_sheet --out docs/img/sequence_signal.png \
+    python -m bench.sequence_signal_sheet --out docs/img/sequence_signal.png \
         --bikes-root out/demo/bikes --riders-root out/demo/riders [--bike city_00] [--exposure 0.05]
 """
 import argparse
@@ -123,7 +123,7 @@ def compose(rows, pad=6):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m splatting.dataset.sequences.signal_sheet",
+    ap = argparse.ArgumentParser(prog="python -m bench.sequence_signal_sheet",
                                  description=__doc__.splitlines()[0])
     ap.add_argument("--out", required=True, help="PNG to write")
     ap.add_argument("--bikes-root", required=True, help="folder of bikes (e.g. out/demo/bikes)")

@@ -1,0 +1,1 @@
+"""The Blender stages (blender_scripts/) as `python -m splatting blender STAGE` commands (command.py)."""
