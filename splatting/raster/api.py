@@ -94,7 +94,11 @@ def rasterization(means, quats, scales, opacities, colors, viewmats=None, Ks=Non
     batched = _one_pass(cams, means, backend, groups, shade, (means, quats, scales, opacities, sh, backgrounds),
                         features)
     if batched:
-        outs = _render_cameras_at_once(means, quats, scales, opacities, sh, cams, backgrounds, **kw)
+        outs, packed = _render_cameras_at_once(means, quats, scales, opacities, sh, cams, backgrounds, **kw)
+        if not per_camera:  # the images are already (C, H, W, ...): no per-camera stacking
+            meta = _pack_meta(outs, True)
+            meta.update({"depths": packed[2]} if depth else {})
+            return packed[0], packed[1], meta
     else:
         outs = [_rasterize_one(means, quats, scales, opacities, sh, cam,
                                None if backgrounds is None else backgrounds if backgrounds.dim() == 1 else backgrounds[i],
@@ -115,7 +119,8 @@ def _one_pass(cams, means, backend, groups, shade, tensors, features):
 
 def _render_cameras_at_once(means, quats, scales, opacities, sh, cams, backgrounds, sh_degree, near, eps2d,
                             features, antialiased, backend, groups, depth, shade):
-    """The per-camera dicts of sparse.rasterize, computed for all cameras in one C++ pass."""
+    """The per-camera dicts of sparse.rasterize, computed for all cameras in one C++ pass, and
+    (render_colors, render_alphas, depths or None) of all cameras."""
     C, n = len(cams), means.shape[0]
     eps2d = check_eps2d(eps2d, n)
     means2d, conics, depths, colors, radii, boxes, visible = preprocess_cameras(means, quats, scales, sh, cams,
@@ -138,19 +143,24 @@ def _render_cameras_at_once(means, quats, scales, opacities, sh, cams, backgroun
         if fparts:
             o["features"] = images[1][c]
         outs.append(o)
-    return outs
+    colors_all = torch.cat([images[0], images[1]], -1) if fparts else images[0]
+    return outs, (colors_all, alpha[..., None], images[-1] if depth else None)
 
 
 def _pack(outs, batched):
     chans = [torch.cat([o["rgb"], o["features"]], -1) if "features" in o else o["rgb"] for o in outs]
-    meta = {"means2d": [o["means2d"] for o in outs], "radii": torch.stack([o["radii"] for o in outs]),
-            "visible": torch.stack([o["visible"] for o in outs]), "backend": outs[0]["backend"],
-            "batched": batched}
+    meta = _pack_meta(outs, batched)
     if "depth" in outs[0]:
         meta["depths"] = torch.stack([o["depth"] for o in outs])
     if "group_alpha" in outs[0]:
         meta["group_alphas"] = torch.stack([o["group_alpha"] for o in outs])
     return torch.stack(chans), torch.stack([o["alpha"] for o in outs])[..., None], meta
+
+
+def _pack_meta(outs, batched):
+    return {"means2d": [o["means2d"] for o in outs], "radii": torch.stack([o["radii"] for o in outs]),
+            "visible": torch.stack([o["visible"] for o in outs]), "backend": outs[0]["backend"],
+            "batched": batched}
 
 
 def rasterize(means, quats, scales, opacities, sh, camera, background=None, **kw):
