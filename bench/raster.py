@@ -72,7 +72,7 @@ def _camera_and_params(n):
 
 
 def _fwdbwd_once(params, cam, backend=None):
-    from splatting.raster.sparse import rasterize
+    from splatting.raster.api import rasterize
 
     t0 = time.perf_counter()
     out = rasterize(*params, cam, backend=backend)
@@ -95,7 +95,7 @@ def time_fwdbwd(n, iters=7, warmup=2, camera=None, backend=None):
 
 
 def time_fwd_ms(n, iters=9, warmup=2, backend=None):
-    from splatting.raster.sparse import rasterize
+    from splatting.raster.api import rasterize
 
     cam, params = _camera_and_params(n)
     params = [p.detach() for p in params]
@@ -193,7 +193,7 @@ class _StageClock:
 def stage_cpu_ms(n, iters=9, warmup=2):
     """One thread, CPU ms per stage of a fwd + bwd (L1 loss) and the glue between them; medians."""
     from splatting.raster import build
-    from splatting.raster.sparse import rasterize
+    from splatting.raster.api import rasterize
 
     cam, params = _camera_and_params(n)
     old, lib = torch.get_num_threads(), build.load()

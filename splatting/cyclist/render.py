@@ -13,7 +13,7 @@ import torch
 from cyclist_formats import instances
 from cyclist_formats import ring as formats_ring
 from splatting.raster.camera import RING_FOCAL, RING_SIZE, from_numpy
-from splatting.raster.sparse import EPS2D, rasterize
+from splatting.raster.api import EPS2D, rasterize
 
 IDS, ID_NAMES = instances.IDS, instances.ID_NAMES
 MASK_ALPHA = 0.5
