@@ -127,3 +127,13 @@ def test_bad_camera_arguments_are_one_clear_error():
         rasterization(means, quats, scales, opac, sh, cameras=cams(), backgrounds=torch.zeros(3, 3))
     with pytest.raises(ValueError, match="not both"):
         rasterization(means, quats, scales, opac, sh)
+
+
+def test_no_gaussians_gives_empty_images_over_the_backgrounds():
+    means, quats, scales, opac, sh = (t[:0] for t in scene(n=10))
+    bgs = torch.tensor([[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]])
+    with torch.no_grad():
+        colors, alphas, meta = rasterization(means, quats, scales, opac, sh, cameras=cams()[:2], backgrounds=bgs)
+    assert meta["batched"] and colors.shape == (2, 96, 96, 3)
+    assert alphas.abs().max() == 0 and meta["depths"].abs().max() == 0
+    assert torch.equal(colors, bgs[:, None, None, :].expand(2, 96, 96, 3))
