@@ -457,10 +457,12 @@ struct BlendScratch {
         lst(NV), gdone((size_t)NG * NV) {}
 };
 
-// Blend tile t front to back (the forward's per-tile step; its n list entries list_t, with recs and
-// feats in depth order): writes the tile's pixels of the out planes and alpha, T_final and last
-// where not null, with GROUPS the group alphas. One function for a single camera's forward and for
-// each camera of forward_cameras, so a camera's image is the same bits either way.
+// Blend tile t front to back for forward_cameras (its n list entries list_t, with recs and feats in
+// depth order): writes the tile's pixels of the out planes and alpha, T_final and last where not
+// null, with GROUPS the group alphas. The same steps as forward()'s tile loop, whose copy stays
+// inline there: calling this from forward() made its blend 1-3 % slower at one thread (CPU time,
+// three alternating pairs), so a single camera's render keeps its code and speed;
+// tests/test_rasterization_cameras.py checks that the two give the same bits.
 template <typename S, bool GROUPS, int CF>
 __attribute__((always_inline)) inline void blend_tile(int t, int TX, int W, int H, int Cf_, const Rec<S>* recs,
                                                       const int32_t* list_t, int64_t n, const S* feats,
@@ -473,14 +475,15 @@ __attribute__((always_inline)) inline void blend_tile(int t, int TX, int W, int 
   typedef typename std::remove_reference<decltype(I{}[0])>::type IS;
   constexpr int L = VT<S>::L, NV = TPIX / L, NJ = TILE / L;
   const int Cf = CF > 0 ? CF : Cf_;
-  const V* const lane_xc = sc.lane_xc.data();
-  V* const T = sc.T.data();
-  V* const acc_p = sc.acc.data();
-  V* const fv = sc.fv.data();
-  V* const TG = sc.TG.data();
-  I* const done = sc.done.data();
-  I* const lst = sc.lst.data();
-  I* const gdone = sc.gdone.data();
+  // separate buffers: __restrict lets the compiler keep their values in registers across stores
+  const V* __restrict const lane_xc = sc.lane_xc.data();
+  V* __restrict const T = sc.T.data();
+  V* __restrict const acc_p = sc.acc.data();
+  V* __restrict const fv = sc.fv.data();
+  V* __restrict const TG = sc.TG.data();
+  I* __restrict const done = sc.done.data();
+  I* __restrict const lst = sc.lst.data();
+  I* __restrict const gdone = sc.gdone.data();
   const auto [ox, oy, ex, ey] = TileRect(t, TX, W, H);
   if (n == 0) {  // empty (most tiles of a bike image): nothing to blend
     for (int y = oy; y <= ey; ++y) {
@@ -665,12 +668,145 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf_, int
           if (slot) slot[p] = k++;
         }
     });  // (over_chunks ends with a barrier: every list is filled before any tile blends)
-    BlendScratch<S> sc(Cf, GROUPS ? NG : 0);
+    typedef typename VT<S>::V V;
+    typedef typename VT<S>::I I;
+    typedef typename std::remove_reference<decltype(I{}[0])>::type IS;
+    constexpr int L = VT<S>::L, NV = TPIX / L, NJ = TILE / L;
+    const std::vector<V> lane_xc = Entry<S>::lane_centres();
+    std::vector<V> T(NV);
+    std::vector<I> done(NV), lst(NV);
+    std::vector<V> acc((size_t)NV * Cf), fv(Cf);
+    std::vector<V> TG(GROUPS ? (size_t)NG * NV : 0);  // per group and pixel: its own transmittance
+    std::vector<I> gdone(GROUPS ? (size_t)NG * NV : 0);
 #pragma omp for schedule(dynamic, 1) nowait  // the region's end is the barrier
     for (int it = 0; it < NT; ++it) {
       const int t = torder[it];
-      blend_tile<S, GROUPS, CF>(t, TX, W, H, Cf, recs, list + tile_off[t], tile_off[t + 1] - tile_off[t], feats, out,
-                                T_final, alpha, last, NG, grp, A_grp, bg, shade_prm, shade_flags, sc);
+      const auto [ox, oy, ex, ey] = TileRect(t, TX, W, H);
+      if (tile_off[t + 1] == tile_off[t]) {  // empty (most tiles of a bike image): nothing to blend
+        for (int y = oy; y <= ey; ++y) {
+          const int64_t p = (int64_t)y * W + ox, nx = ex - ox + 1;
+          if (T_final) std::fill_n(T_final + p, nx, (S)1);
+          std::fill_n(alpha + p, nx, (S)0);
+          if (last) std::fill_n(last + p, nx, 0);
+          for (int q = 0; q < out.n; ++q)
+            if (out.ptr[q]) std::fill_n(out.ptr[q] + p * out.size[q], nx * out.size[q], (S)0);
+          if (bg)
+            for (int64_t i = 0; i < nx; ++i)
+              for (int c = 0; c < out.size[0]; ++c) out.ptr[0][(p + i) * out.size[0] + c] = (S)0 + (S)1 * bg[c];
+          for (int q = 0; q < (GROUPS ? NG : 0); ++q) std::fill_n(A_grp + (int64_t)q * H * W + p, nx, (S)0);
+        }
+        continue;
+      }
+      int active = 0;
+      for (int v = 0; v < NV; ++v) {
+        T[v] = (V){} + (S)1;
+        lst[v] = (I){};
+        for (int l = 0; l < L; ++l) {
+          const int i = v * L + l;
+          const bool inside = ox + i % TILE <= ex && oy + i / TILE <= ey;
+          done[v][l] = inside ? 0 : -1;
+          active += inside;
+        }
+      }
+      if (GROUPS)
+        for (int q = 0; q < NG; ++q)
+          for (int v = 0; v < NV; ++v) {
+            TG[(size_t)q * NV + v] = (V){} + (S)1;
+            gdone[(size_t)q * NV + v] = done[v];
+          }
+      std::fill(acc.begin(), acc.end(), (V){});
+      const int64_t t0 = tile_off[t], n = tile_off[t + 1] - t0;
+      // with groups the list is walked to its end: a group's pixels close only when its own
+      // transmittance runs out, and pixels that no Gaussian of a group reaches never do
+      for (int64_t k = 0; k < n && (GROUPS || active > 0); ++k) {
+        if (k + PF < n) {
+          __builtin_prefetch(recs + list[t0 + k + PF]);
+          __builtin_prefetch(feats + (int64_t)list[t0 + k + PF] * Cf);
+        }
+        const int32_t sp = list[t0 + k];
+        const Rec<S>& g = recs[sp];
+        const int q = GROUPS ? grp[sp] : -1;
+        if (GROUPS && q < 0 && active == 0) continue;
+        V* const Tq = q >= 0 ? TG.data() + (size_t)q * NV : nullptr;
+        I* const dq = q >= 0 ? gdone.data() + (size_t)q * NV : nullptr;
+        const Entry<S> en(g, ox, oy, ex, ey, lane_xc.data());
+        const S* f = feats + (int64_t)sp * Cf;
+        for (int c = 0; c < Cf; ++c) fv[c] = (V){} + f[c];  // broadcast once per entry, not per chunk
+        const I kk = (I){} + (IS)(k + 1);
+        for (int y = en.y0; y <= en.y1; ++y) {
+          V by, cyy;
+          Entry<S>::row(g, y, by, cyy);
+          for (int j = en.j0; j <= en.j1; ++j) {
+            const int v = (y - oy) * NJ + j;
+            const I live = GROUPS && q >= 0 ? en.box[j] & ~(done[v] & dq[v]) : en.box[j] & ~done[v];
+            if (!any(live)) continue;  // finished pixels: no sigma, no exp
+            const V sigma = en.sigma(j, by, cyy);
+            const I pre = live & (sigma <= g.tau);
+            if (!any(pre)) continue;
+            const V ar = Entry<S>::alpha_raw(g, sigma);
+            const I mg = pre & (ar >= (S)ALPHA_MIN);
+            if (!any(mg)) continue;
+            const V al = ar < (S)ALPHA_MAX ? ar : (V){} + (S)ALPHA_MAX;
+            if (GROUPS && q >= 0) {  // the group alone: the same steps on its own transmittance
+              const I mq = mg & ~dq[v];
+              const V test_q = Tq[v] * ((S)1 - al);
+              const I term_q = mq & (test_q < (S)T_MIN);
+              dq[v] |= term_q;
+              Tq[v] = (mq & ~term_q) ? test_q : Tq[v];
+            }
+            const I m = GROUPS ? mg & ~done[v] : mg;  // without groups live already excludes done
+            if (GROUPS && !any(m)) continue;
+            const V test_T = T[v] * ((S)1 - al);
+            const I term = m & (test_T < (S)T_MIN);
+            if (any(term)) {
+              done[v] |= term;
+              active -= count(term);
+            }
+            const I ok = m & ~term;
+            const V w = ok ? al * T[v] : (V){};
+            V* a = acc.data() + (size_t)v * Cf;
+            for (int c = 0; c < Cf; ++c) a[c] = vfma(w, fv[c], a[c]);
+            T[v] = ok ? test_T : T[v];
+            lst[v] = ok ? kk : lst[v];
+          }
+        }
+      }
+      if constexpr (std::is_same<S, float>::value)
+        if (shade_prm)  // (Cf checked by the caller, gs_forward)
+          rl_shade_tile_f32((const float*)acc.data(), Cf, (const float*)T.data(), TILE, ox, oy, ex, ey, W,
+                            out.ptr[0], shade_prm, shade_flags);
+      for (int y = oy; y <= ey; ++y)
+        for (int j = 0; j < NJ && ox + j * L <= ex; ++j) {
+          const int v = (y - oy) * NJ + j, nl = std::min(L, ex - (ox + j * L) + 1);
+          const int64_t p = (int64_t)y * W + ox + j * L;
+          for (int q = 0; q < (GROUPS ? NG : 0); ++q)
+            store_lanes(A_grp + (int64_t)q * H * W + p, (S)1 - TG[(size_t)q * NV + v], nl);
+          if (T_final) store_lanes(T_final + p, T[v], nl);
+          store_lanes(alpha + p, (S)1 - T[v], nl);
+          if (!last) {
+          } else if (sizeof(IS) == 4) {
+            store_lanes(last + p, lst[v], nl);
+          } else {
+            for (int l = 0; l < nl; ++l) last[p + l] = (int32_t)lst[v][l];
+          }
+          const V* a = acc.data() + (size_t)v * Cf;
+          for (int q = 0, c0 = 0; q < out.n; c0 += out.size[q++]) {  // pixel-major per plane
+            const int cq = out.size[q];
+            if (!out.ptr[q] || (q == 0 && shade_prm)) continue;  // not wanted, or shaded above
+            S* __restrict const o = out.ptr[q] + p * cq;
+            if (q == 0 && bg) {  // over the background: c + T_final bg (as rgb + T_final * bg in torch)
+              for (int l = 0; l < nl; ++l)
+                for (int c = 0; c < cq; ++c) o[l * cq + c] = a[c][l] + T[v][l] * bg[c];
+              continue;
+            }
+            if (cq == 1) {  // one channel (depth): the lanes are the pixels
+              store_lanes(o, a[c0], nl);
+              continue;
+            }
+            for (int l = 0; l < nl; ++l)
+              for (int c = 0; c < cq; ++c) o[l * cq + c] = a[c0 + c][l];
+          }
+        }
     }
   }
 }
