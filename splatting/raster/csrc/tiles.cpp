@@ -816,8 +816,9 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf_, int
 // as one more item, so the serial sorts of two cameras run side by side), camera x chunk (tile
 // counts, then the tile lists), and camera x tile (blending, the busiest tiles of all cameras
 // first). Each camera's image comes from the same steps as forward() after bin(): the same
-// records, depth order, tile lists and blend_tile, so it is bit-identical to a render of that
-// camera alone. Five barriers for all cameras instead of ~6 per camera, and one call from Python.
+// records, depth order, tile lists and tile blending (blend_tile), so it is bit-identical to a
+// render of that camera alone. Five barriers for all cameras where bin() and forward() take two
+// each and two ends of parallel regions, per camera.
 // means2d, conics, opac, depths, radii, boxes: camera-major (C, N, ...). in: NI parts of the
 // channels, part i read at in.ptr[i] + c * in_stride[i] for camera c (stride 0: shared by every
 // camera, e.g. instance one-hots; N * size: per camera, e.g. the SH colour and the depth).
