@@ -61,7 +61,7 @@ def compare(bike_dir, poses, cams, gt_dir):
     from bench.compare import load_rgba, mask_iou, psnr, union_box
     from splatting.bike.model import BikeModel
     from splatting.raster.camera import load_cameras
-    from splatting.raster.sparse import render_gaussians
+    from splatting.raster.api import render_gaussians
 
     model = BikeModel.load(bike_dir)
     ring, _ = load_cameras(os.path.join(bike_dir, "views", "whole", "cameras.json"))

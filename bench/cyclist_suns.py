@@ -99,7 +99,7 @@ def render_relit_cyclist(g, refl, nrm, gl, rough, sky, camera, light, antialiase
     antialiased, eps2d: rasterize's (posed_cyclist's draw), the sun's shadow map's too."""
     from splatting.gaussians.container import Gaussians
     from splatting.gaussians.sh import C0
-    from splatting.raster.sparse import render_gaussians
+    from splatting.raster.api import render_gaussians
     from splatting.relight.render import relight_features, shade_composited
     from splatting.relight.shadow import sun_visibility
 

@@ -61,7 +61,7 @@ def _reference(g, cam, box):
     (the same alpha field, sampled SUPER^2 times per pixel) and box-averaged back to the native
     pixels of box (u0, v0, w, h): an anti-aliased camera's view of the model -> (h, w, 3)."""
     from splatting.cyclist.scene_render import cropped_camera
-    from splatting.raster.sparse import render_gaussians
+    from splatting.raster.api import render_gaussians
     u0, v0, w, h = box
     big = cropped_camera(cam.scaled(SUPER), (SUPER * u0, SUPER * v0, SUPER * w, SUPER * h))
     rgb = render_gaussians(g, big, eps2d=0.3 * SUPER * SUPER)["rgb"].numpy()

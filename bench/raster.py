@@ -7,6 +7,10 @@ Keys (medians, 512^2, `threads` OpenMP threads, 2 by default as on the target ma
                         measured interleaved (one of each per round), so machine load hits both
   raster_thread_scaling {"1_thread_s", "2_threads_s", "speedup", "speedup_of_fastest"}: fwd+bwd at
                         50k, 1 vs 2 threads, interleaved (medians; and the fastest round of each)
+  raster_cameras        {"one_call_ms", "calls_ms", "speedup", "cameras", "threads"}: 4 cameras at
+                        50k, no grad (a dataset's views), rendered by ONE rasterization() call (one
+                        C++ pass over camera x tile) against one call per camera; alternating rounds,
+                        medians
   raster_stages_cpu_ms  at 50k, ONE thread, CPU time (time.process_time: the least sensitive to
                         other processes on a shared machine), medians: each C++ stage of the tiled
                         back end (preprocess, bin, blend, blend_bwd, preprocess_bwd) and the torch /
@@ -14,7 +18,7 @@ Keys (medians, 512^2, `threads` OpenMP threads, 2 by default as on the target ma
                         loss and its backward count as glue), fwd_total, bwd_total
 A synthetic bike-like part (two wheels, tubes, a few mm-to-cm Gaussians) about 1.7 m long around
 the origin, seen by ring view 3 (12 m away, focal 2085, 512^2): it spans ~300 px like the real
-parts. Run alone: `python -m bench.raster [--threads N] [--sizes 10k,50k]`.
+parts. Run alone: `python -m bench.raster [--threads N] [--sizes 10k,50k] [--only cameras]`.
 
 OMP_WAIT_POLICY=PASSIVE: on the shared 2-core machine, torch's OpenMP threads otherwise spin at
 every barrier while the other core runs someone else's process; measured 2.2 s -> 0.3 s per 50k
@@ -68,7 +72,7 @@ def _camera_and_params(n):
 
 
 def _fwdbwd_once(params, cam, backend=None):
-    from splatting.raster.sparse import rasterize
+    from splatting.raster.api import rasterize
 
     t0 = time.perf_counter()
     out = rasterize(*params, cam, backend=backend)
@@ -91,7 +95,7 @@ def time_fwdbwd(n, iters=7, warmup=2, camera=None, backend=None):
 
 
 def time_fwd_ms(n, iters=9, warmup=2, backend=None):
-    from splatting.raster.sparse import rasterize
+    from splatting.raster.api import rasterize
 
     cam, params = _camera_and_params(n)
     params = [p.detach() for p in params]
@@ -122,6 +126,47 @@ def interleaved(n, variants, rounds=7, warmup=1):
     return {k: statistics.median(v) for k, v in times.items()}, {k: min(v) for k, v in times.items()}
 
 
+def time_cameras(n, cameras=4, threads=2, rounds=9, warmup=1):
+    """Forward without grad of `cameras` ring views (90 degrees apart / cameras): all of them in one
+    rasterization() call against one call per camera, alternating within each round (so the
+    machine's load hits both alike). Medians in ms, and the medians of the per-round ratios."""
+    from splatting.raster.api import rasterization
+    from splatting.raster.camera import ring_camera
+
+    params = [p.detach() for p in bike_like_gaussians(n)]
+    cams = [ring_camera(30.0 + 360.0 * i / cameras) for i in range(cameras)]
+    one, calls = [], []
+    old = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        with torch.no_grad():
+            for r in range(warmup + rounds):
+                t0 = time.perf_counter()
+                out = rasterization(*params, cameras=cams, per_camera=True)
+                t1 = time.perf_counter()
+                for cam in cams:
+                    rasterization(*params, cameras=[cam], per_camera=True)
+                t2 = time.perf_counter()
+                if r >= warmup:
+                    one.append(t1 - t0)
+                    calls.append(t2 - t1)
+    finally:
+        torch.set_num_threads(old)
+    assert all(o["alpha"].max() > 0.5 for o in out)  # every view sees the bike
+    ratio = statistics.median(c / o for c, o in zip(calls, one))
+    return {"one_call_ms": round(1e3 * statistics.median(one), 2), "calls_ms": round(1e3 * statistics.median(calls), 2),
+            "speedup": round(ratio, 2), "cameras": cameras, "threads": threads}
+
+
+def run_cameras(results, threads=2):
+    r = time_cameras(SIZES["50k"], threads=threads)
+    results["raster_cameras"] = r
+    print(f"raster {r['cameras']} cameras 50k, no grad, {threads} thread(s): one call {r['one_call_ms']:.1f} ms, "
+          f"one call each {r['calls_ms']:.1f} ms, {r['speedup']:.2f}x (median of per-round ratios; {_load()})",
+          flush=True)
+    return results
+
+
 class _StageClock:
     """Stands in for the tiled back end's ctypes library and times each C call (CPU time)."""
 
@@ -148,7 +193,7 @@ class _StageClock:
 def stage_cpu_ms(n, iters=9, warmup=2):
     """One thread, CPU ms per stage of a fwd + bwd (L1 loss) and the glue between them; medians."""
     from splatting.raster import build
-    from splatting.raster.sparse import rasterize
+    from splatting.raster.api import rasterize
 
     cam, params = _camera_and_params(n)
     old, lib = torch.get_num_threads(), build.load()
@@ -205,6 +250,7 @@ def run(results, threads=2, sizes=None):
                                         "speedup": round(m["torch"] / m["tiles"], 2)}
     print(f"raster fwd+bwd 50k interleaved, {threads} threads: torch {m['torch']:.3f} s, tiles {m['tiles']:.3f} s, "
           f"{m['torch'] / m['tiles']:.1f}x ({_load()})", flush=True)
+    run_cameras(results, threads)
     st = stage_cpu_ms(SIZES["50k"])
     results["raster_stages_cpu_ms"] = st
     print("raster stages 50k, 1 thread, CPU ms: " + ", ".join(f"{k} {v:.1f}" for k, v in st.items())
@@ -224,5 +270,9 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--sizes", default=",".join(SIZES))
+    ap.add_argument("--only", choices=["cameras"], help="measure only this (cameras: 4 cameras in one call "
+                    "against 4 calls)")
     a = ap.parse_args()
-    print(run({}, a.threads, a.sizes.split(",")))
+    if a.threads < 1:
+        ap.error("--threads must be >= 1")
+    print(run_cameras({}, a.threads) if a.only == "cameras" else run({}, a.threads, a.sizes.split(",")))

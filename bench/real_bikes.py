@@ -29,7 +29,7 @@ def check_bike(bike_dir, n_poses, seed, samples):
     from splatting.training.metrics import box_psnr, union_box
     from splatting.bike.model import BikeModel
     from splatting.raster.camera import load_cameras
-    from splatting.raster.sparse import render_gaussians
+    from splatting.raster.api import render_gaussians
 
     poses, cams = sample_poses(n_poses, seed)
     gt_dir = os.path.join(bike_dir, "gt_check")

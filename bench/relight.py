@@ -230,7 +230,7 @@ def run(results, out_dir, n_poses=None, seed=0, size=GT_SIZE, repeats=5, bike=No
     from bench.compare import REFERENCE, renders_for, score_png, side_by_side, write_table
     from cyclist_formats import bike_folder
     from splatting.raster.camera import load_cameras
-    from splatting.raster.sparse import render_gaussians
+    from splatting.raster.api import render_gaussians
     from splatting.relight.bike import RelightableBike
     from splatting.relight.render import render_relit
     from splatting.relight.shading import random_light

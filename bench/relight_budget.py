@@ -165,7 +165,7 @@ def gaussian_visibility(bike, poses, cams_json, lights):
     import torch
 
     from splatting.raster.camera import from_numpy
-    from splatting.raster.sparse import render_gaussians
+    from splatting.raster.api import render_gaussians
     from splatting.relight.bike import RelightableBike
     from splatting.relight.shading import Light
     from splatting.relight.shadow import sun_visibility

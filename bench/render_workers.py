@@ -114,7 +114,7 @@ class GaussianScene:
         from PIL import Image
 
         from splatting.raster.camera import from_numpy
-        from splatting.raster.sparse import render_gaussians
+        from splatting.raster.api import render_gaussians
 
         torch = self.torch
         cam = from_numpy(K, R, T)

@@ -133,7 +133,7 @@ def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, tim
     import torch
 
     from bench.compare import psnr, score_png, side_by_side
-    from splatting.raster.sparse import render_gaussians
+    from splatting.raster.api import render_gaussians
     from splatting.rider.avatar import RiderAvatar
     from splatting.rider.avatar_build import build_avatar
     from splatting.rider.roster import load_rider

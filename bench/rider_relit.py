@@ -51,7 +51,7 @@ def run(results, out_dir, avatar_dir=None, n_poses=12, seed=0, progress=print):
     from bench.relight import light_json
     from bench.rider import RIDER_ID, posed_batch, posed_jobs, sample_poses
     from cyclist_formats import bike_folder
-    from splatting.raster.sparse import render_gaussians
+    from splatting.raster.api import render_gaussians
     from splatting.relight.avatar import RIDER_ROUGHNESS, RelightableAvatar
     from splatting.relight.fit import RelightFitConfig, fit_file
     from splatting.relight.render import render_relit

@@ -124,7 +124,7 @@ def run(results, out_dir, bike_dir=None, cams=CAMERAS, picture=None, modes=MODES
     from splatting.training.metrics import box_psnr
     from splatting.raster.camera import load_cameras
     from splatting.gaussians.container import read_ply
-    from splatting.raster.sparse import render_gaussians
+    from splatting.raster.api import render_gaussians
 
     work = os.path.join(out_dir, "splat_import")
     os.makedirs(work, exist_ok=True)

@@ -99,7 +99,7 @@ def clean_fidelity(g, reference_dir, antialiased=False, eps2d=0.3):
     from bench.compare import load_rgba, union_box
     from bench.compare import mask_iou, psnr
     from splatting.raster.camera import load_cameras
-    from splatting.raster.sparse import render_gaussians
+    from splatting.raster.api import render_gaussians
 
     cams, _ = load_cameras(os.path.join(reference_dir, "cameras.json"))
     ps, ious = [], []
@@ -223,7 +223,7 @@ def bike_fidelity(bike_dir, reference_dir, model=None):
     from cyclist_formats.atomic import atomic_path
     from splatting.bike.model import BikeModel, part_metrics_path
     from splatting.raster.camera import from_numpy
-    from splatting.raster.sparse import render_gaussians
+    from splatting.raster.api import render_gaussians
 
     with open(os.path.join(reference_dir, "job.json")) as f:
         job = json.load(f)

@@ -27,7 +27,7 @@ from cyclist_formats import bike_folder
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, read_ply
 from splatting.gaussians.sh_rotation import BANDS, sh_band_matrices
-from splatting.raster.sparse import EPS2D
+from splatting.raster.api import EPS2D
 # the training-record rules live in training.record; these names stay importable from here
 from splatting.training.record import check_model_eps2d, part_metrics_path, trained_antialiased, trained_eps2d  # noqa: F401
 

@@ -46,7 +46,7 @@ from splatting.bike.model import BikeModel
 from splatting.bike.pose import check_poses, sample_poses
 from splatting.progress import Progress
 from splatting.raster.camera import from_numpy
-from splatting.raster.sparse import EPS2D, rasterize
+from splatting.raster.api import EPS2D, rasterize
 from splatting.training.trainer import FineTuneRates, finite_grads, rgba_loss
 from splatting.gaussians.container import Gaussians, read_ply, write_ply
 from splatting.gaussians.sh_rotation import BANDS, sh_band_matrices

@@ -20,7 +20,7 @@ from splatting.rider.kinematics import JOINT_NAMES
 from cyclist_formats.instances import IDS
 from cyclist_formats import instances
 from cyclist_formats.pose import POSE_FIELDS
-from splatting.raster.sparse import eps2d_where
+from splatting.raster.api import eps2d_where
 
 PART_IDS = {**instances.PART_IDS, **instances.SUB_PART_IDS}
 

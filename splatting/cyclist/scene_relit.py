@@ -15,7 +15,7 @@ import torch
 from splatting.cyclist.scene_render import cropped_camera, render_scene
 from splatting.gaussians.container import Gaussians
 from splatting.gaussians.sh import C0
-from splatting.raster.sparse import EPS2D
+from splatting.raster.api import EPS2D
 from splatting.relight.render import shade_composited
 
 

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from splatting.raster.camera import Camera
-from splatting.raster.sparse import EPS2D, rasterize
+from splatting.raster.api import EPS2D, rasterize
 
 MASK_ALPHA = 0.5
 BOX_MARGIN_PX = 2.0  # >= 3 sqrt(eps2d = 0.3) = 1.64 px: the screen-space low-pass widens every splat

@@ -17,7 +17,8 @@ from cyclist_formats.errors import UserError
 from splatting.bike.model import KEYPOINTS
 from splatting.bike.pose import posed_bike_keypoints
 from splatting.cyclist.compose import frame_eps2d, frame_record, take_fit
-from splatting.cyclist.render import keypoint_visibility, orbit_camera, project_points, render_layers, rgba_image
+from splatting.cyclist.render import (keypoint_visibility, orbit_camera, project_points, render_layers_cameras,
+                                      rgba_image)
 from splatting.gaussians.container import write_ply
 from splatting.rider import ik
 from splatting.rider.body import posed_joints
@@ -109,10 +110,11 @@ def render_sequence(cyc, poses, views, out, size=512, elevation=0.0, distance=12
         idx = todo[c:c + chunk]
         frames = cyc.pose(poses[idx], fit=None if fit is None else take_fit(fit, idx))
         for i, fr in zip(idx, frames):
-            for az, cam in cams.items():
+            # every view of the frame in one rasterization call (one pass of the C++ back end)
+            layers = render_layers_cameras(fr.gaussians, fr.ids, list(cams.values()), antialiased=cyc.bike.antialiased,
+                                           eps2d=frame_eps2d(fr.ids, cyc.bike, cyc.avatar))
+            for (az, cam), L in zip(cams.items(), layers):
                 d = os.path.join(out, view_name(az))
-                L = render_layers(fr.gaussians, fr.ids, cam, antialiased=cyc.bike.antialiased,
-                                  eps2d=frame_eps2d(fr.ids, cyc.bike, cyc.avatar))
                 _save_png(os.path.join(d, f"{i:05d}.png"), rgba_image(L))
                 _save_png(os.path.join(d, f"{i:05d}_mask.png"), L["ids"])
                 _save_png(os.path.join(d, f"{i:05d}_depth.png"),

@@ -29,7 +29,7 @@ from splatting.dataset.labels import BoxMask, annotation, vehicle_class
 from splatting.dataset.person_keypoints import COCO17_TOLERANCE_M, PersonKeypoints, RecordingAvatar
 from splatting.dataset.street import draw_street
 from splatting.gaussians.container import Gaussians
-from splatting.raster.sparse import EPS2D, eps2d_cat
+from splatting.raster.api import EPS2D, eps2d_cat
 
 
 class Assets:

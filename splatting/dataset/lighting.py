@@ -23,7 +23,7 @@ from splatting.cyclist.assets import bike_dir, has_trained_gaussians
 from splatting.cyclist.scene_relit import render_scene_relit
 from splatting.dataset.backgrounds import contact_shadows
 from splatting.gaussians.sh import C0
-from splatting.raster.sparse import EPS2D, render_gaussians
+from splatting.raster.api import EPS2D, render_gaussians
 from splatting.relight.avatar import cyclist_static, RelightableAvatar
 from splatting.relight.bike import RelightableBike
 from splatting.relight.render import leading_view_normals, relight_features

@@ -19,7 +19,7 @@ from cyclist_formats.atomic import atomic_path
 from splatting.bike.model import BikeModel
 from splatting.bike.pose import sample_poses
 from splatting.raster.camera import load_cameras
-from splatting.raster.sparse import render_gaussians
+from splatting.raster.api import render_gaussians
 from splatting.training.metrics import box_psnr, mask_iou
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

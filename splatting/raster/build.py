@@ -93,6 +93,10 @@ def load():
             f.argtypes, f.restype = [i64, p, p, p, i32, i32, p, p, p, p, p, i32, i32, i32, p, p, p, p, p, p, p], None
             f = getattr(lib, f"gs_preprocess_bwd_{sfx}")
             f.argtypes, f.restype = [i64, p, p, p, i32, i32, p, p, p, p, p, i32, i32, i32, p, p, p, p, p, p, p, p, p], None
+            f = getattr(lib, f"gs_preprocess_fwd_cams_{sfx}")
+            f.argtypes, f.restype = [i32, i64, p, p, p, i32, i32, p, p, p, p, p, i32, i32, i32, p, p, p, p, p, p, p], None
+            f = getattr(lib, f"gs_forward_cameras_{sfx}")
+            f.argtypes, f.restype = [i32, i64, p, p, p, p, p, p, i32, i32, i32, i32, p, p, p, i32, i32, p, p, p, p], None
         _lib = lib
     return _lib
 

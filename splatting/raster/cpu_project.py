@@ -93,3 +93,40 @@ def preprocess(means, quats, scales, sh, camera, sh_degree=None, near=0.01, eps2
     per = torch.is_tensor(eps2d)
     return _Preprocess.apply(means, quats, scales, sh, camera, nb, float(near), 0.0 if per else eps2d,
                              eps2d if per else None)
+
+
+def preprocess_cameras(means, quats, scales, sh, cameras, sh_degree=None, near=0.01, eps2d=EPS2D):
+    """preprocess() for C cameras of one size in one C call (threads over camera x Gaussian block),
+    forward only (no gradient: the several-camera render of rasterization()). Returns the same
+    outputs with a leading camera axis: means2d (C,N,2), conics (C,N,3), depths (C,N), colors (C,N,3),
+    radii (C,N), boxes (C,N,4), visible (C,N); camera c's are bit-identical to preprocess(..., cameras[c]).
+    """
+    if any(t.device.type != "cpu" for t in (means, quats, scales, sh)):
+        raise ValueError("the tiled rasterizer runs on CPU tensors; use backend='torch' for "
+                         f"{means.device.type} tensors")
+    if means.dtype not in _SUFFIX:
+        raise TypeError(f"tiled rasterizer: float32 or float64 tensors, got {means.dtype}")
+    if len({(c.width, c.height) for c in cameras}) != 1:
+        raise ValueError("preprocess_cameras: cameras of one size")
+    k = sh.shape[1]
+    degree = int(round(k ** 0.5)) - 1 if sh_degree is None else int(sh_degree)
+    nb = (degree + 1) ** 2
+    if not 0 <= degree <= 3 or nb > k:
+        raise ValueError(f"sh_degree {degree} needs {nb} SH coefficients (have {k}, degrees 0-3)")
+    eps2d = check_eps2d(eps2d, means.shape[0], "preprocess")
+    per = torch.is_tensor(eps2d)
+    dt = means.dtype
+    C, n = len(cameras), means.shape[0]
+    args = [_camera_args(c, float(near), 0.0 if per else eps2d) for c in cameras]
+    R, T, intr = (torch.stack([a[i] for a in args]).contiguous() for i in range(3))
+    m, q, s, f = (t.detach().to(dt).contiguous() for t in (means, quats, scales, sh))
+    eps = eps2d.to(dt).contiguous() if per else None
+    means2d, conics = torch.empty(C, n, 2, dtype=dt), torch.empty(C, n, 3, dtype=dt)
+    depths, colors = torch.empty(C, n, dtype=dt), torch.empty(C, n, 3, dtype=dt)
+    radii, boxes = torch.empty(C, n, dtype=torch.int64), torch.empty(C, n, 4, dtype=torch.int64)
+    visible = torch.empty(C, n, dtype=torch.bool)
+    getattr(build.load(), f"gs_preprocess_fwd_cams_{_SUFFIX[dt]}")(
+        C, n, _ptr(R), _ptr(T), _ptr(intr), cameras[0].width, cameras[0].height, _ptr(m), _ptr(q), _ptr(s), _ptr(f),
+        _nptr(eps), f.shape[1], nb, max(1, torch.get_num_threads()), _ptr(means2d), _ptr(conics), _ptr(depths),
+        _ptr(colors), _ptr(radii), _ptr(boxes), _ptr(visible))
+    return means2d, conics, depths, colors, radii, boxes, visible

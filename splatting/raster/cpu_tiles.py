@@ -252,3 +252,44 @@ def composite_tiles(means2d, conics, opacities, planes, depths, radii, boxes, H,
                                     n_groups, keep, None, (), nparts, *parts)
     return _TileComposite.apply(means2d, conics, opacities, depths, radii, boxes, background, H, W, None, 0, keep,
                                 shade, unwritten, nparts, *parts)[:-1]
+
+
+def composite_cameras(means2d, conics, opacities, planes, depths, radii, boxes, H, W, background=None):
+    """composite_tiles() for C cameras of one size in one C call (csrc/tiles.cpp forward_cameras:
+    threads over camera x chunk and camera x tile), forward only (no gradient).
+    means2d (C,N,2), conics (C,N,3), opacities (C,N), depths (C,N) (the sort key), radii (C,N),
+    boxes (C,N,4): each camera's projection (preprocess_cameras). planes: a list of planes, each a
+    tensor or a list of parts; a part is (C, N, c) (per camera: the colour, the depth as (C, N, 1))
+    or (N, c) / (N,) (shared by every camera: instance one-hots, labels). background: None or
+    (C, c0) for the first plane. -> ([per plane (C, H, W, c), or (C, H, W) for one channel], alpha
+    (C, H, W)); camera c's images are bit-identical to composite_tiles() of that camera alone."""
+    C, n = means2d.shape[:2]
+    dt = means2d.dtype
+    if dt not in _SUFFIX:
+        raise TypeError(f"tiled rasterizer: float32 or float64 tensors, got {dt}")
+    if torch.is_grad_enabled() and any(t.requires_grad for t in (means2d, conics, opacities)):
+        raise ValueError("composite_cameras renders without a gradient (use composite_tiles per camera)")
+    nparts = [1 if torch.is_tensor(p) else len(p) for p in planes]
+    parts = [q for p in planes for q in ((p,) if torch.is_tensor(p) else p)]
+    isz, stride, fe = [], [], []
+    for p in parts:
+        per = p.dim() == 3
+        if (per and p.shape[:2] != (C, n)) or (not per and (p.dim() not in (1, 2) or p.shape[0] != n)):
+            raise ValueError(f"composite_cameras: a part must be ({C}, {n}, c), ({n}, c) or ({n},), got {tuple(p.shape)}")
+        c = 1 if p.dim() == 1 else p.shape[-1]
+        isz.append(c)
+        stride.append(n * c if per else 0)
+        fe.append(p.detach().to(dt).contiguous())
+    split = [sum(isz[sum(nparts[:i]):sum(nparts[:i + 1])]) for i in range(len(nparts))]
+    if background is not None and tuple(background.shape) != (C, split[0]):
+        raise ValueError(f"composite_cameras: background must be ({C}, {split[0]}), got {tuple(background.shape)}")
+    outs = [torch.empty((C, H, W, c) if c > 1 else (C, H, W), dtype=dt) for c in split]
+    alpha = torch.empty(C, H, W, dtype=dt)
+    bg = None if background is None else background.detach().to(dt).contiguous()
+    m2, cn, op, z = (t.detach().to(dt).contiguous() for t in (means2d, conics, opacities, depths))
+    rd, bx = radii.to(torch.int64).contiguous(), boxes.to(torch.int64).contiguous()
+    getattr(build.load(), f"gs_forward_cameras_{_SUFFIX[dt]}")(
+        C, n, _ptr(m2), _ptr(cn), _ptr(op), _ptr(z), _ptr(rd), _ptr(bx), W, H, max(1, torch.get_num_threads()),
+        len(fe), (ctypes.c_int * len(fe))(*isz), _ptrs(fe), (ctypes.c_int64 * len(fe))(*stride), sum(isz),
+        len(split), (ctypes.c_int * len(split))(*split), _ptrs(outs), _ptr(alpha), _nptr(bg))
+    return outs, alpha

@@ -1,5 +1,6 @@
-"""The rasterizer's dispatch: `rasterize(...)` renders N Gaussians into one camera by one of two back
-ends; see docs/rasterizer.md.  Shapes (N Gaussians, K SH coeffs):
+"""The rasterizer's one-camera dispatch (internal: callers render through splatting.raster.api's
+rasterization()): `rasterize(...)` renders N Gaussians into one camera by one of two back ends; see
+docs/rasterizer.md.  Shapes (N Gaussians, K SH coeffs):
   means (N,3) world, quats (N,4) wxyz (normalised here), scales (N,3) std devs,
   opacities (N,) in [0,1], sh (N,K,3); camera: splatting.raster.camera.Camera.
 eps2d: the screen-space low-pass (px^2) added to every projected covariance: a number, or a (N,)

@@ -23,7 +23,7 @@ from cyclist_formats.errors import UserError
 from splatting.bike.model import present_parts, trained_antialiased as parts_antialiased
 from splatting.gaussians.container import read_ply
 from splatting.progress import Progress
-from splatting.raster.sparse import EPS2D
+from splatting.raster.api import EPS2D
 from splatting.relight.render import composite_features, prepare, view_normals
 from splatting.gaussians.sh import C0
 from splatting.relight.shading import HIGHLIGHT, ROUGHNESS, random_light, srgb_decode, srgb_encode, view_directions

@@ -13,8 +13,10 @@ import torch
 from splatting.gaussians.container import Gaussians
 from splatting.gaussians.sh import rgb_to_sh0
 from splatting.raster import build
-from splatting.raster.cpu_tiles import TileShade
-from splatting.raster.sparse import antialias_opacities, composite, EPS2D, intersect, project, render_gaussians
+from splatting.raster.api import EPS2D, TileShade, render_gaussians
+# the relight fit's fixed pair list: the torch compositor's stages, reused across iterations
+from splatting.raster.projection import antialias_opacities, project
+from splatting.raster.torch_composite import composite, intersect
 from splatting.relight.shading import HIGHLIGHT, ROUGHNESS, Light, _shade_cm, _view_directions_cm
 from splatting.relight import shadow  # shadow.X at call time: the maps are swapped in tests
 

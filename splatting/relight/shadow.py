@@ -13,7 +13,7 @@ import math
 import torch
 
 from splatting.raster.camera import Camera
-from splatting.raster.sparse import EPS2D, render_gaussians
+from splatting.raster.api import EPS2D, render_gaussians
 from splatting.relight.shading import Light
 
 SIZE = 256        # shadow map pixels (square)

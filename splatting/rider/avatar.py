@@ -23,7 +23,7 @@ from cyclist_formats.atomic import atomic_path
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, read_ply, write_ply
 from splatting.gaussians.sh_rotation import rotate_sh
-from splatting.raster.sparse import EPS2D
+from splatting.raster.api import EPS2D
 from splatting.rotations import quat_mul, rotmat_to_quat_wxyz  # noqa: F401
 from splatting.rider.kinematics import forward_kinematics
 from splatting.training.record import avatar_trained_eps2d as trained_eps2d

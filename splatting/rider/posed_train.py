@@ -34,7 +34,7 @@ from splatting import paths
 from splatting.gaussians.container import write_ply
 from splatting.progress import Progress
 from splatting.raster.camera import ring_camera
-from splatting.raster.sparse import rasterize
+from splatting.raster.api import rasterize
 from splatting.rider.avatar import PLY_NAME, RiderAvatar
 from splatting.rider.body import export_rider, pose_vertices
 from splatting.rider.motion import pedal_pose

@@ -19,7 +19,7 @@ import os
 from cyclist_formats import bike_folder
 from cyclist_formats.atomic import read_json_or_none
 from cyclist_formats.errors import UserError
-from splatting.raster.sparse import EPS2D
+from splatting.raster.api import EPS2D
 
 
 def check_model_eps2d(v, source):

@@ -19,7 +19,7 @@ from cyclist_formats.atomic import write_json
 from splatting.training.strategy import STRATEGIES, DensifyConfig, make_strategy
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, write_ply
-from splatting.raster.sparse import EPS2D, rasterize
+from splatting.raster.api import EPS2D, rasterize
 from splatting.training.views import Views, load_views
 from splatting.training.metrics import psnr, ssim
 from splatting.training.targets import Targets, crop_camera, split_views  # noqa: F401

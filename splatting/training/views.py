@@ -21,7 +21,7 @@ from splatting.raster.camera import Camera, load_cameras, ring
 from cyclist_formats import bike_folder, ply
 from cyclist_formats import ring as formats_ring
 from cyclist_formats.errors import UserError
-from splatting.raster.sparse import render_gaussians
+from splatting.raster.api import render_gaussians
 
 
 

@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <vector>
 
 #include <omp.h>
 
@@ -160,12 +161,13 @@ inline void direction(const Cam& cam, const S* mean, S* d, S& n) {
 }
 
 // nb (the number of SH coefficients used) is a template constant: the SH loops unroll.
+// Gaussian n of one camera (the forward's per-Gaussian step, for one camera or several).
 template <typename S, int nb>
-void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, const S* scales, const S* sh,
-                    const S* eps, int K, int nt, S* means2d, S* conics, S* depths, S* colors, int64_t* radii,
-                    int64_t* boxes, bool* visible) {
-#pragma omp parallel for num_threads(nt) schedule(dynamic, 2048)  // a late thread delays by one block
-  for (int64_t n = 0; n < N; ++n) {
+__attribute__((always_inline)) inline void preprocess_one(int64_t n, const Cam& cam, const S* means, const S* quats,
+                                                          const S* scales, const S* sh, const S* eps, int K,
+                                                          S* means2d, S* conics, S* depths, S* colors,
+                                                          int64_t* radii, int64_t* boxes, bool* visible) {
+  {
     Geo<S> g;
     geometry(cam, means + 3 * n, quats + 4 * n, scales + 3 * n, eps ? eps[n] : (S)cam.eps2d, g);
     const S u = (S)cam.fx * g.p[0] / g.zs + (S)cam.cx, v = (S)cam.fy * g.p[1] / g.zs + (S)cam.cy;
@@ -200,6 +202,33 @@ void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, c
       for (int k = 0; k < nb; ++k) acc += Y[k] * f[3 * k + ch];
       colors[3 * n + ch] = std::max(acc + (S)0.5, (S)0);
     }
+  }
+}
+
+template <typename S, int nb>
+void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, const S* scales, const S* sh,
+                    const S* eps, int K, int nt, S* means2d, S* conics, S* depths, S* colors, int64_t* radii,
+                    int64_t* boxes, bool* visible) {
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 2048)  // a late thread delays by one block
+  for (int64_t n = 0; n < N; ++n)
+    preprocess_one<S, nb>(n, cam, means, quats, scales, sh, eps, K, means2d, conics, depths, colors, radii, boxes,
+                          visible);
+}
+
+// C cameras at once: one parallel loop over camera x Gaussian (blocks of 2048 of one camera's
+// Gaussians), the outputs camera-major (camera c's at c * N).
+template <typename S, int nb>
+void preprocess_fwd_cams(int C, int64_t N, const Cam* cams, const S* means, const S* quats, const S* scales,
+                         const S* sh, const S* eps, int K, int nt, S* means2d, S* conics, S* depths, S* colors,
+                         int64_t* radii, int64_t* boxes, bool* visible) {
+  const int64_t NB = (N + 2047) / 2048;
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 1)
+  for (int64_t it = 0; it < C * NB; ++it) {
+    const int64_t c = it / NB, b = it % NB * 2048, e = std::min(b + 2048, N);
+    const int64_t o = c * N;
+    for (int64_t n = b; n < e; ++n)
+      preprocess_one<S, nb>(n, cams[c], means, quats, scales, sh, eps, K, means2d + 2 * o, conics + 3 * o,
+                            depths + o, colors + 3 * o, radii + o, boxes + 4 * o, visible + o);
   }
 }
 
@@ -365,5 +394,21 @@ extern "C" {
 
 GS_PRE_EXPORT(f32, float)
 GS_PRE_EXPORT(f64, double)
+
+// C cameras of one size W x H: cam_R (C, 9), cam_T (C, 3), intr (C, 6) as above; outputs (C, N, ...).
+#define GS_PRE_CAMS_EXPORT(SUFFIX, S)                                                                    \
+  void gs_preprocess_fwd_cams_##SUFFIX(int C, int64_t N, const double* R, const double* T, const double* intr, \
+                                       int W, int H, const S* means, const S* quats, const S* scales,     \
+                                       const S* sh, const S* eps2d, int K, int nb, int nt, S* means2d,    \
+                                       S* conics, S* depths, S* colors, int64_t* radii, int64_t* boxes,   \
+                                       bool* visible) {                                                   \
+    std::vector<Cam> cams(C);                                                                             \
+    for (int c = 0; c < C; ++c) cams[c] = make_cam(R + 9 * c, T + 3 * c, intr + 6 * c, W, H);              \
+    SH_DISPATCH(nb, preprocess_fwd_cams, S, C, N, cams.data(), means, quats, scales, sh, eps2d, K, nt, means2d, \
+                conics, depths, colors, radii, boxes, visible);                                           \
+  }
+
+GS_PRE_CAMS_EXPORT(f32, float)
+GS_PRE_CAMS_EXPORT(f64, double)
 
 }  // extern "C"

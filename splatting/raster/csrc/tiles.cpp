@@ -443,6 +443,174 @@ struct Planes {
   const P* ptr;
 };
 
+// Per-thread scratch of blend_tile: a tile's transmittance, finished lanes, last contributors and
+// accumulated channels, and with groups each group's own transmittance and finished lanes.
+template <typename S>
+struct BlendScratch {
+  typedef typename VT<S>::V V;
+  typedef typename VT<S>::I I;
+  static constexpr int NV = TPIX / VT<S>::L;
+  std::vector<V> lane_xc, T, acc, fv, TG;
+  std::vector<I> done, lst, gdone;
+  BlendScratch(int Cf, int NG)
+      : lane_xc(Entry<S>::lane_centres()), T(NV), acc((size_t)NV * Cf), fv(Cf), TG((size_t)NG * NV), done(NV),
+        lst(NV), gdone((size_t)NG * NV) {}
+};
+
+// Blend tile t front to back for forward_cameras (its n list entries list_t, with recs and feats in
+// depth order): writes the tile's pixels of the out planes and alpha, T_final and last where not
+// null, with GROUPS the group alphas. The same steps as forward()'s tile loop, whose copy stays
+// inline there: calling this from forward() made its blend 1-3 % slower at one thread (CPU time,
+// three alternating pairs), so a single camera's render keeps its code and speed;
+// tests/test_rasterization_cameras.py checks that the two give the same bits.
+template <typename S, bool GROUPS, int CF>
+__attribute__((always_inline)) inline void blend_tile(int t, int TX, int W, int H, int Cf_, const Rec<S>* recs,
+                                                      const int32_t* list_t, int64_t n, const S* feats,
+                                                      Planes<S*> out, S* T_final, S* alpha, int32_t* last,
+                                                      int NG, const int32_t* grp, S* A_grp, const S* bg,
+                                                      const float* shade_prm, int32_t shade_flags,
+                                                      BlendScratch<S>& sc) {
+  typedef typename VT<S>::V V;
+  typedef typename VT<S>::I I;
+  typedef typename std::remove_reference<decltype(I{}[0])>::type IS;
+  constexpr int L = VT<S>::L, NV = TPIX / L, NJ = TILE / L;
+  const int Cf = CF > 0 ? CF : Cf_;
+  // separate buffers: __restrict lets the compiler keep their values in registers across stores
+  const V* __restrict const lane_xc = sc.lane_xc.data();
+  V* __restrict const T = sc.T.data();
+  V* __restrict const acc_p = sc.acc.data();
+  V* __restrict const fv = sc.fv.data();
+  V* __restrict const TG = sc.TG.data();
+  I* __restrict const done = sc.done.data();
+  I* __restrict const lst = sc.lst.data();
+  I* __restrict const gdone = sc.gdone.data();
+  const auto [ox, oy, ex, ey] = TileRect(t, TX, W, H);
+  if (n == 0) {  // empty (most tiles of a bike image): nothing to blend
+    for (int y = oy; y <= ey; ++y) {
+      const int64_t p = (int64_t)y * W + ox, nx = ex - ox + 1;
+      if (T_final) std::fill_n(T_final + p, nx, (S)1);
+      std::fill_n(alpha + p, nx, (S)0);
+      if (last) std::fill_n(last + p, nx, 0);
+      for (int q = 0; q < out.n; ++q)
+        if (out.ptr[q]) std::fill_n(out.ptr[q] + p * out.size[q], nx * out.size[q], (S)0);
+      if (bg)
+        for (int64_t i = 0; i < nx; ++i)
+          for (int c = 0; c < out.size[0]; ++c) out.ptr[0][(p + i) * out.size[0] + c] = (S)0 + (S)1 * bg[c];
+      for (int q = 0; q < (GROUPS ? NG : 0); ++q) std::fill_n(A_grp + (int64_t)q * H * W + p, nx, (S)0);
+    }
+    return;
+  }
+  int active = 0;
+  for (int v = 0; v < NV; ++v) {
+    T[v] = (V){} + (S)1;
+    lst[v] = (I){};
+    for (int l = 0; l < L; ++l) {
+      const int i = v * L + l;
+      const bool inside = ox + i % TILE <= ex && oy + i / TILE <= ey;
+      done[v][l] = inside ? 0 : -1;
+      active += inside;
+    }
+  }
+  if (GROUPS)
+    for (int q = 0; q < NG; ++q)
+      for (int v = 0; v < NV; ++v) {
+        TG[(size_t)q * NV + v] = (V){} + (S)1;
+        gdone[(size_t)q * NV + v] = done[v];
+      }
+  std::fill_n(acc_p, (size_t)NV * Cf, (V){});
+  // with groups the list is walked to its end: a group's pixels close only when its own
+  // transmittance runs out, and pixels that no Gaussian of a group reaches never do
+  for (int64_t k = 0; k < n && (GROUPS || active > 0); ++k) {
+    if (k + PF < n) {
+      __builtin_prefetch(recs + list_t[k + PF]);
+      __builtin_prefetch(feats + (int64_t)list_t[k + PF] * Cf);
+    }
+    const int32_t sp = list_t[k];
+    const Rec<S>& g = recs[sp];
+    const int q = GROUPS ? grp[sp] : -1;
+    if (GROUPS && q < 0 && active == 0) continue;
+    V* const Tq = q >= 0 ? TG + (size_t)q * NV : nullptr;
+    I* const dq = q >= 0 ? gdone + (size_t)q * NV : nullptr;
+    const Entry<S> en(g, ox, oy, ex, ey, lane_xc);
+    const S* f = feats + (int64_t)sp * Cf;
+    for (int c = 0; c < Cf; ++c) fv[c] = (V){} + f[c];  // broadcast once per entry, not per chunk
+    const I kk = (I){} + (IS)(k + 1);
+    for (int y = en.y0; y <= en.y1; ++y) {
+      V by, cyy;
+      Entry<S>::row(g, y, by, cyy);
+      for (int j = en.j0; j <= en.j1; ++j) {
+        const int v = (y - oy) * NJ + j;
+        const I live = GROUPS && q >= 0 ? en.box[j] & ~(done[v] & dq[v]) : en.box[j] & ~done[v];
+        if (!any(live)) continue;  // finished pixels: no sigma, no exp
+        const V sigma = en.sigma(j, by, cyy);
+        const I pre = live & (sigma <= g.tau);
+        if (!any(pre)) continue;
+        const V ar = Entry<S>::alpha_raw(g, sigma);
+        const I mg = pre & (ar >= (S)ALPHA_MIN);
+        if (!any(mg)) continue;
+        const V al = ar < (S)ALPHA_MAX ? ar : (V){} + (S)ALPHA_MAX;
+        if (GROUPS && q >= 0) {  // the group alone: the same steps on its own transmittance
+          const I mq = mg & ~dq[v];
+          const V test_q = Tq[v] * ((S)1 - al);
+          const I term_q = mq & (test_q < (S)T_MIN);
+          dq[v] |= term_q;
+          Tq[v] = (mq & ~term_q) ? test_q : Tq[v];
+        }
+        const I m = GROUPS ? mg & ~done[v] : mg;  // without groups live already excludes done
+        if (GROUPS && !any(m)) continue;
+        const V test_T = T[v] * ((S)1 - al);
+        const I term = m & (test_T < (S)T_MIN);
+        if (any(term)) {
+          done[v] |= term;
+          active -= count(term);
+        }
+        const I ok = m & ~term;
+        const V w = ok ? al * T[v] : (V){};
+        V* a = acc_p + (size_t)v * Cf;
+        for (int c = 0; c < Cf; ++c) a[c] = vfma(w, fv[c], a[c]);
+        T[v] = ok ? test_T : T[v];
+        lst[v] = ok ? kk : lst[v];
+      }
+    }
+  }
+  if constexpr (std::is_same<S, float>::value)
+    if (shade_prm)  // (Cf checked by the caller, gs_forward)
+      rl_shade_tile_f32((const float*)acc_p, Cf, (const float*)T, TILE, ox, oy, ex, ey, W,
+                        out.ptr[0], shade_prm, shade_flags);
+  for (int y = oy; y <= ey; ++y)
+    for (int j = 0; j < NJ && ox + j * L <= ex; ++j) {
+      const int v = (y - oy) * NJ + j, nl = std::min(L, ex - (ox + j * L) + 1);
+      const int64_t p = (int64_t)y * W + ox + j * L;
+      for (int q = 0; q < (GROUPS ? NG : 0); ++q)
+        store_lanes(A_grp + (int64_t)q * H * W + p, (S)1 - TG[(size_t)q * NV + v], nl);
+      if (T_final) store_lanes(T_final + p, T[v], nl);
+      store_lanes(alpha + p, (S)1 - T[v], nl);
+      if (!last) {
+      } else if (sizeof(IS) == 4) {
+        store_lanes(last + p, lst[v], nl);
+      } else {
+        for (int l = 0; l < nl; ++l) last[p + l] = (int32_t)lst[v][l];
+      }
+      const V* a = acc_p + (size_t)v * Cf;
+      for (int q = 0, c0 = 0; q < out.n; c0 += out.size[q++]) {  // pixel-major per plane
+        const int cq = out.size[q];
+        if (!out.ptr[q] || (q == 0 && shade_prm)) continue;  // not wanted, or shaded above
+        S* __restrict const o = out.ptr[q] + p * cq;
+        if (q == 0 && bg) {  // over the background: c + T_final bg (as rgb + T_final * bg in torch)
+          for (int l = 0; l < nl; ++l)
+            for (int c = 0; c < cq; ++c) o[l * cq + c] = a[c][l] + T[v][l] * bg[c];
+          continue;
+        }
+        if (cq == 1) {  // one channel (depth): the lanes are the pixels
+          store_lanes(o, a[c0], nl);
+          continue;
+        }
+        for (int l = 0; l < nl; ++l)
+          for (int c = 0; c < cq; ++c) o[l * cq + c] = a[c0 + c][l];
+      }
+    }
+}
+
 // Phase 2: fill the tile lists with depth-order positions (depth order kept: each thread writes
 // its depth-ordered chunk after the chunks in front of it), gather the Cf channels into depth
 // order (feats, from the input Planes in: plane q holds size[q] channels per Gaussian, so the
@@ -639,6 +807,171 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf_, int
               for (int c = 0; c < cq; ++c) o[l * cq + c] = a[c0 + c][l];
           }
         }
+    }
+  }
+}
+
+// Several cameras of one size in one parallel region (no backward: a render for a dataset, a
+// preview, a figure): threads over camera x Gaussian block (records, and each camera's depth sort
+// as one more item, so the serial sorts of two cameras run side by side), camera x chunk (tile
+// counts, then the tile lists), and camera x tile (blending, the busiest tiles of all cameras
+// first). Each camera's image comes from the same steps as forward() after bin(): the same
+// records, depth order, tile lists and tile blending (blend_tile), so it is bit-identical to a
+// render of that camera alone. Five barriers for all cameras where bin() and forward() take two
+// each and two ends of parallel regions, per camera.
+// means2d, conics, opac, depths, radii, boxes: camera-major (C, N, ...). in: NI parts of the
+// channels, part i read at in.ptr[i] + c * in_stride[i] for camera c (stride 0: shared by every
+// camera, e.g. instance one-hots; N * size: per camera, e.g. the SH colour and the depth).
+// out: the planes of every camera, plane q of camera c at out.ptr[q] + c * H * W * out.size[q]
+// (null: not written); alpha (C, H, W); bg: (C, out.size[0]) or null.
+template <typename S, int CF>
+void forward_cameras(int C, int64_t N, const S* means2d, const S* conics, const S* opac, const S* depths,
+                     const int64_t* radii, const int64_t* boxes, int W, int H, int nt, Planes<const S*> in,
+                     const int64_t* in_stride, int Cf_, Planes<S*> out, S* alpha, const S* bg) {
+  const int Cf = CF > 0 ? CF : Cf_;
+  const int TX = (W + TILE - 1) / TILE, TY = (H + TILE - 1) / TILE, NT = TX * TY;
+  const int NC = n_chunks(nt);
+  const int64_t NB = (N + GAUSS_BLOCK - 1) / GAUSS_BLOCK, HW = (int64_t)H * W;
+  typedef decltype(fkey(S())) K;
+  // scratch reused across calls (the calling thread's; the OpenMP threads use plain pointers)
+  static thread_local std::vector<Rec<S>> rec_buf, by_index_buf;
+  static thread_local std::vector<K> key_buf;
+  static thread_local std::vector<int32_t> idx_buf, order_buf, list_buf;
+  static thread_local std::vector<int64_t> cursor_buf, toff_buf;
+  static thread_local std::vector<S> feat_buf;
+  const int64_t CN = (int64_t)C * N;
+  if ((int64_t)rec_buf.size() < CN) {
+    rec_buf.resize(CN), by_index_buf.resize(CN), key_buf.resize(2 * CN), idx_buf.resize(2 * CN);
+    order_buf.resize(CN);
+  }
+  if ((int64_t)feat_buf.size() < CN * Cf) feat_buf.resize(CN * Cf);
+  cursor_buf.assign((size_t)C * NC * NT, 0);
+  toff_buf.resize((size_t)C * (NT + 1));
+  Rec<S>* const recs = rec_buf.data();
+  Rec<S>* const by_index = by_index_buf.data();
+  K* const key = key_buf.data();
+  int32_t* const idx = idx_buf.data();
+  int32_t* const order = order_buf.data();
+  int64_t* const cursor = cursor_buf.data();
+  int64_t* const tile_off = toff_buf.data();
+  S* const feats = feat_buf.data();
+  std::vector<int64_t> nv(C, 0), list_off(C + 1, 0);
+  std::vector<const S*> in_ptr((size_t)C * in.n);
+  std::vector<S*> out_ptr((size_t)C * out.n);
+  for (int c = 0; c < C; ++c) {
+    for (int i = 0; i < in.n; ++i) in_ptr[(size_t)c * in.n + i] = in.ptr[i] + c * in_stride[i];
+    for (int q = 0; q < out.n; ++q) out_ptr[(size_t)c * out.n + q] = out.ptr[q] ? out.ptr[q] + c * HW * out.size[q] : nullptr;
+  }
+  int32_t* list = nullptr;
+  std::vector<int64_t> torder;  // camera * NT + tile, busiest first over every camera
+#pragma omp parallel num_threads(nt)
+  {
+    // 1. records (index order) and, as the first C items, each camera's depth sort
+#pragma omp for schedule(dynamic, 1)
+    for (int64_t it = 0; it < C + C * NB; ++it) {
+      if (it < C) {
+        const int64_t c = it, o = c * N;
+        K* const kc = key + 2 * o;
+        int32_t* const ic = idx + 2 * o;
+        int64_t m = 0;
+        for (int64_t i = 0; i < N; ++i)
+          if (radii[o + i] > 0) {
+            kc[m] = fkey(depths[o + i]);
+            ic[m++] = (int32_t)i;
+          }
+        radix_sort(m, kc, ic, kc + N, ic + N);
+        std::copy_n(ic, m, order + o);
+        nv[c] = m;
+        continue;
+      }
+      const int64_t c = (it - C) / NB, b = (it - C) % NB * GAUSS_BLOCK, e = std::min(b + GAUSS_BLOCK, N);
+      const int64_t o = c * N;
+      for (int64_t i = b; i < e; ++i)
+        make_rec(by_index[o + i], i, means2d + 2 * o, conics + 3 * o, opac + o, radii + o, boxes + 4 * o, W, H);
+    }
+    // 2. records gathered into depth order, tile counts per (camera, chunk)
+#pragma omp for schedule(dynamic, 1)
+    for (int it = 0; it < C * NC; ++it) {
+      const int c = it / NC;
+      const int64_t o = (int64_t)c * N;
+      int64_t b, e;
+      chunk(nv[c], NC, it % NC, b, e);
+      int64_t* const cnt = cursor + (int64_t)it * NT;
+      for (int64_t s = b; s < e; ++s) {
+        if (s + 16 < e) __builtin_prefetch(by_index + o + order[o + s + 16]);
+        const Rec<S>& r = recs[o + s] = by_index[o + order[o + s]];
+        if (r.u1 < r.u0 || r.v1 < r.v0) continue;
+        const int tx0 = r.u0 / TILE, tx1 = r.u1 / TILE, ty0 = r.v0 / TILE, ty1 = r.v1 / TILE;
+        for (int ty = ty0; ty <= ty1; ++ty)
+          for (int tx = tx0; tx <= tx1; ++tx) cnt[ty * TX + tx]++;
+      }
+    }
+    // 3. per camera: tile offsets, each chunk's first write position per tile
+#pragma omp for schedule(dynamic, 1)
+    for (int c = 0; c < C; ++c) {
+      int64_t* const to = tile_off + (int64_t)c * (NT + 1);
+      int64_t* const cu = cursor + (int64_t)c * NC * NT;
+      int64_t pos = 0;
+      for (int t = 0; t < NT; ++t) {
+        to[t] = pos;
+        for (int ch = 0; ch < NC; ++ch) {
+          const int64_t n = cu[(int64_t)ch * NT + t];
+          cu[(int64_t)ch * NT + t] = pos;
+          pos += n;
+        }
+      }
+      to[NT] = pos;
+    }
+    // 4. the calling thread (its thread_local list buffer): list storage, the tiles' order
+#pragma omp master
+    {
+      for (int c = 0; c < C; ++c) list_off[c + 1] = list_off[c] + tile_off[(int64_t)c * (NT + 1) + NT];
+      if ((int64_t)list_buf.size() < std::max<int64_t>(list_off[C], 1)) list_buf.resize(std::max<int64_t>(list_off[C], 1));
+      list = list_buf.data();
+      torder.resize((size_t)C * NT);
+      for (int64_t i = 0; i < (int64_t)C * NT; ++i) torder[i] = i;
+      auto len = [&](int64_t i) {
+        const int64_t* to = tile_off + i / NT * (NT + 1);
+        return to[i % NT + 1] - to[i % NT];
+      };
+      std::stable_sort(torder.begin(), torder.end(), [&](int64_t a, int64_t b) { return len(a) > len(b); });
+    }
+#pragma omp barrier
+    // 5. tile lists filled in depth order, channels gathered into depth order
+#pragma omp for schedule(dynamic, 1)
+    for (int it = 0; it < C * NC; ++it) {
+      const int c = it / NC;
+      const int64_t o = (int64_t)c * N;
+      int64_t b, e;
+      chunk(nv[c], NC, it % NC, b, e);
+      int64_t* const cur = cursor + (int64_t)it * NT;
+      int32_t* const lc = list + list_off[c];
+      const S* const* ip = in_ptr.data() + (size_t)c * in.n;
+      for (int64_t s = b; s < e; ++s) {
+        const int64_t gi = order[o + s], gn = s + 16 < e ? order[o + s + 16] : gi;
+        for (int q = 0, c0 = 0; q < in.n; c0 += in.size[q++]) {
+          const int cq = in.size[q];
+          __builtin_prefetch(ip[q] + gn * cq);
+          const S* src = ip[q] + gi * cq;
+          S* dst = feats + (o + s) * Cf + c0;
+          for (int k = 0; k < cq; ++k) dst[k] = src[k];
+        }
+        const Rec<S>& r = recs[o + s];
+        if (r.u1 < r.u0 || r.v1 < r.v0) continue;
+        for (int ty = r.v0 / TILE; ty <= r.v1 / TILE; ++ty)
+          for (int tx = r.u0 / TILE; tx <= r.u1 / TILE; ++tx) lc[cur[ty * TX + tx]++] = (int32_t)s;
+      }
+    }
+    // 6. blending, camera x tile
+    BlendScratch<S> sc(Cf, 0);
+#pragma omp for schedule(dynamic, 1) nowait  // the region's end is the barrier
+    for (int64_t it = 0; it < (int64_t)C * NT; ++it) {
+      const int c = (int)(torder[it] / NT), t = (int)(torder[it] % NT);
+      const int64_t* to = tile_off + (int64_t)c * (NT + 1);
+      const Planes<S*> oc{out.n, out.size, out_ptr.data() + (size_t)c * out.n};
+      blend_tile<S, false, CF>(t, TX, W, H, Cf, recs + (int64_t)c * N, list + list_off[c] + to[t], to[t + 1] - to[t],
+                               feats + (int64_t)c * N * Cf, oc, nullptr, alpha + c * HW, nullptr, 0, nullptr,
+                               nullptr, bg ? bg + (int64_t)c * out.size[0] : nullptr, nullptr, 0, sc);
     }
   }
 }
@@ -895,5 +1228,26 @@ int gs_rec_bytes_f64() { return (int)sizeof(Rec<double>); }
 
 GS_EXPORT(f32, float)
 GS_EXPORT(f64, double)
+
+// forward_cameras (no backward): C cameras of one size; see there for the layouts. NI input
+// parts (isz channels each, camera stride in_stride), NO output planes (osz channels each).
+#define GS_CAMS_EXPORT(SUFFIX, S)                                                                   \
+  void gs_forward_cameras_##SUFFIX(int C, int64_t N, const S* means2d, const S* conics, const S* opac, \
+                                   const S* depths, const int64_t* radii, const int64_t* boxes, int W, \
+                                   int H, int nt, int NI, const int* isz, const S* const* feats,       \
+                                   const int64_t* in_stride, int Cf, int NO, const int* osz,           \
+                                   S* const* outs, S* alpha, const S* bg) {                            \
+    const Planes<const S*> in{NI, isz, feats};                                                     \
+    const Planes<S*> out{NO, osz, outs};                                                           \
+    if (Cf == 4) /* colour + depth: a plain render */                                              \
+      forward_cameras<S, 4>(C, N, means2d, conics, opac, depths, radii, boxes, W, H, nt, in, in_stride, Cf, out, \
+                            alpha, bg);                                                            \
+    else                                                                                           \
+      forward_cameras<S, 0>(C, N, means2d, conics, opac, depths, radii, boxes, W, H, nt, in, in_stride, Cf, out, \
+                            alpha, bg);                                                            \
+  }
+
+GS_CAMS_EXPORT(f32, float)
+GS_CAMS_EXPORT(f64, double)
 
 }  // extern "C"
