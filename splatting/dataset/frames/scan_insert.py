@@ -35,7 +35,7 @@ import torch
 from splatting.dataset.frames import hdl64
 from splatting.dataset.frames.lidar import _az_el_range, _transform
 from splatting.raster.camera import Camera
-from splatting.raster.sparse import EPS2D, rasterize
+from splatting.raster.api import EPS2D, rasterize
 
 HIT_ALPHA = 0.5
 REFLECTANCE = (0.14, 0.53)
