@@ -3,9 +3,7 @@ every failure, a missing file, bytes that are not UTF-8, bad YAML or JSON, is on
 naming the file, never a traceback (docs/contract.md: text files are UTF-8)."""
 import json
 
-import yaml
-
-from cyclist_formats.errors import UserError
+from .errors import UserError
 
 
 def _read(path, what, missing):
@@ -34,6 +32,10 @@ def read_text(path, what="text file", missing=None):
 def read_yaml(path, what="YAML file", missing=None, invalid="{path} is not valid YAML: {error}"):
     """The file's YAML document (None for an empty file or one of comments only); `invalid`: the
     message for a file that is not UTF-8 YAML, with {path} and {error} (the parser's first line)."""
+    # PyYAML only here: this package is copied into the Blender add-on (relative imports), and
+    # Blender's own Python has no yaml; the add-on reads JSON only
+    import yaml
+
     text = _decode(path, _read(path, what, missing), invalid)
     try:
         return yaml.safe_load(text)

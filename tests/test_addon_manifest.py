@@ -182,3 +182,26 @@ def test_debian_blender_without_numpy_legacy_addon(tmp_path):
     assert result.exists(), r.stdout[-3000:] + r.stderr[-3000:]
     import json
     _check_refusals(json.loads(result.read_text()))
+
+
+def test_the_vendored_formats_import_themselves_relatively_and_need_no_yaml():
+    """cyclist_formats is copied into the add-on zip as articcyclists.cyclist_formats, where an
+    absolute `cyclist_formats` import does not resolve and Blender's own Python has no PyYAML: a
+    module the add-on loads must import its siblings relatively and yaml only where YAML is read."""
+    import ast
+    folder = os.path.join(ROOT, "cyclist_formats")
+    absolute, yaml_at_top = [], []
+    for name in sorted(os.listdir(folder)):
+        if not name.endswith(".py"):
+            continue
+        tree = ast.parse(open(os.path.join(folder, name), encoding="utf-8").read())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.level == 0 and (node.module or "").split(".")[0] == "cyclist_formats":
+                absolute.append(f"{name}:{node.lineno}")
+            if isinstance(node, ast.Import) and any(a.name.split(".")[0] == "cyclist_formats" for a in node.names):
+                absolute.append(f"{name}:{node.lineno}")
+        for node in tree.body:  # module level only: a function may import yaml when it reads YAML
+            if isinstance(node, ast.Import) and any(a.name == "yaml" for a in node.names):
+                yaml_at_top.append(name)
+    assert absolute == [], f"absolute imports of cyclist_formats inside it: {absolute}"
+    assert yaml_at_top == [], f"yaml imported at module level: {yaml_at_top}"
