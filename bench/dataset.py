@@ -68,17 +68,26 @@ def pick_assets(out_dir, scratch):
     return scratch, [b], "auto", "SYNTHETIC keypoint stand-in Gaussians on a generated spec bike (no bike library)"
 
 
-def measure(cfg, workers, scratch, tag):
+def timed_generate(cfg, out, workers):
+    """Generate the dataset `cfg` into `out`; returns its annotations.json, the wall seconds and the
+    1-minute load average before and after (the cores are shared, so a timing says its load)."""
     from splatting.dataset.command import generate
     from splatting.dataset.config import validate
-    out = os.path.join(scratch, tag)
+    load0 = os.getloadavg()[0]
     t = time.time()
     generate(validate(cfg), out, workers=workers, log=lambda m: None, progress=False)
     wall = time.time() - t
+    load = [round(load0, 2), round(os.getloadavg()[0], 2)]
     with open(os.path.join(out, "annotations.json")) as f:
-        n_ann = len(json.load(f)["annotations"])
+        doc = json.load(f)
+    return doc, wall, load
+
+
+def measure(cfg, workers, scratch, tag):
+    out = os.path.join(scratch, tag)
+    doc, wall, _ = timed_generate(cfg, out, workers)
     shutil.rmtree(out, ignore_errors=True)
-    return cfg["count"] * 3600.0 / wall, wall, n_ann
+    return cfg["count"] * 3600.0 / wall, wall, len(doc["annotations"])
 
 
 def gaussian_count(cfg):

@@ -110,21 +110,14 @@ def split_timings(cfg, n):
 def run(results, out_dir, count=12):
     import torch
     torch.set_num_threads(1)
-    from splatting.dataset.command import generate
-    from splatting.dataset.config import validate
+    from bench.dataset import timed_generate
     scratch = tempfile.mkdtemp(prefix="bench_street_")
     try:
         cfg, desc = bench_config(scratch, out_dir, count)
         avatar = "trained avatar" if avatar_trained() else "untrained mesh avatar"
         print(f"street bench: bikes: {desc}; rider {RIDER}: {avatar}")
         out = os.path.join(scratch, "out")
-        load0 = os.getloadavg()[0]
-        t = time.time()
-        generate(validate(cfg), out, workers=2, log=lambda m: None, progress=False)
-        wall = time.time() - t
-        load = [round(load0, 2), round(os.getloadavg()[0], 2)]
-        with open(os.path.join(out, "annotations.json")) as f:
-            doc = json.load(f)
+        doc, wall, load = timed_generate(cfg, out, workers=2)
         n_inst = sum(len(im["instances"]) for im in doc["images"])
         iph = count * 3600.0 / wall
         print(f"street bench: {count} images 1600x900 ({n_inst} instances, {len(doc['annotations'])} annotations) "
