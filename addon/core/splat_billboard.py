@@ -35,7 +35,7 @@ quads face it, and their alpha and colour were computed for it.  Move the camera
 import numpy as np
 
 from . import frames
-from .splat_gaussian import ALPHA_MAX, ALPHA_MIN, C0, C1, C2, C3, quat_to_matrix, matrix_to_euler_xyz, sh_degree_of
+from .splat_gaussian import ALPHA_MAX, ALPHA_MIN, C0, quat_to_matrix, matrix_to_euler_xyz, sh_degree_of, sh_terms
 from .splat_nodes import ShaderExpr, enabled_output, link_with_nodes, new_socket
 
 EPS2D = 0.3  # the rasterizer's default screen-space low-pass, px^2 (splatting/raster/sparse.py)
@@ -53,17 +53,7 @@ TRANSPARENT_BOUNCES = 1024  # also Cycles' largest (its RNA clamps higher values
 def sh_basis(d, degree):
     """Unit directions (N, 3) -> (N, (degree+1)^2) INRIA real SH basis (splatting/gaussians/sh.py)."""
     x, y, z = d.T
-    out = [np.full_like(x, C0)]
-    if degree >= 1:
-        out += [-C1 * y, C1 * z, -C1 * x]
-    if degree >= 2:
-        xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
-        out += [C2[0] * xy, C2[1] * yz, C2[2] * (2 * zz - xx - yy), C2[3] * xz, C2[4] * (xx - yy)]
-    if degree >= 3:
-        out += [C3[0] * y * (3 * xx - yy), C3[1] * xy * z, C3[2] * y * (4 * zz - xx - yy),
-                C3[3] * z * (2 * zz - 3 * xx - 3 * yy), C3[4] * x * (4 * zz - xx - yy),
-                C3[5] * z * (xx - yy), C3[6] * x * (xx - 3 * yy)]
-    return np.stack(out, 1)
+    return np.stack(sh_terms(x, y, z, np.full_like(x, C0), degree), 1)
 
 
 def billboard_points(data, K, R, T, width, height, eps2d=EPS2D, antialiased=False, max_degree=3):

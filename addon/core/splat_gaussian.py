@@ -26,6 +26,7 @@ attribute `sh_k` (RGB as a vector); degrees 0-3 follow the file's f_rest count.
 import numpy as np
 
 from . import frames
+from .contract import sh_basis
 from .splat_nodes import ShaderExpr, enabled_output, link_with_nodes, new_socket
 
 K_SIGMA = 3.0  # largest proxy extent in standard deviations (3DGS's screen-space cut-off is 3 sigma too)
@@ -48,11 +49,8 @@ MIN_TRANSPARENT = 32  # Cycles min_transparent_bounces: hits before Russian roul
 # 0.735 instead of 0.5), the speckles on dark tyres and tubes of the trained bike.
 DISPLAY_VIEW_TRANSFORM = "Raw"
 ICO_INRADIUS = 0.7946544722917661  # inscribed radius of the unit-circumradius icosahedron
-C0 = 0.28209479177387814
-C1 = 0.4886025119029199
-C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
-C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-      -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
+# INRIA 3DGS real SH, the constants and the numpy basis terms shared with splatting/gaussians/sh.py
+C0, C1, C2, C3, sh_terms = sh_basis.C0, sh_basis.C1, sh_basis.C2, sh_basis.C3, sh_basis.sh_terms
 
 
 # ---- numpy side --------------------------------------------------------------------------
