@@ -10,7 +10,6 @@ else the untrained mesh avatar.
 Chart (out_dir/dataset_throughput.png): images/hour (1 worker) against image size and against
 the Gaussian count.  Run alone: `python -m bench.dataset [--out DIR] [--count N] [--no-chart]`.
 """
-import argparse
 import json
 import os
 import shutil
@@ -21,6 +20,8 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
+
+from bench import bench_parser  # noqa: E402
 
 RIDER = "m_adult_average_185"
 
@@ -162,8 +163,7 @@ def _chart(sweep, path, desc):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m bench.dataset", description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench"))
+    ap = bench_parser("dataset", __doc__)
     ap.add_argument("--count", type=int, default=24)
     ap.add_argument("--no-chart", action="store_true")
     args = ap.parse_args(argv)

@@ -19,7 +19,6 @@ Keys:
 
 Run alone: `python -m bench.sequence [--out DIR] [--frames N] [--bikes-root DIR --riders-root DIR]`.
 """
-import argparse
 import json
 import os
 import shutil
@@ -31,6 +30,8 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
+
+from bench import bench_parser  # noqa: E402
 
 RIDER = "m_adult_average_185"
 
@@ -169,8 +170,7 @@ def run(results, out_dir, frames=20, bikes_root=None, riders_root=None, plaus_se
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m bench.sequence", description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench"))
+    ap = bench_parser("sequence", __doc__)
     ap.add_argument("--frames", type=int, default=20, help="sequence length measured (the issue's is 100)")
     ap.add_argument("--bikes-root", help="a folder of trained bikes (default: bench.dataset's pick)")
     ap.add_argument("--riders-root", help="a folder of rider avatars (default: data/riders)")

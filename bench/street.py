@@ -14,7 +14,6 @@ rendering (one joint rasterization + the amodal ones) and the rest (labels, PNG,
 in-process on the same config.  Assets as in bench.dataset: trained ones where they exist, else
 stand-ins (said in the results).  Run alone: `python -m bench.street [--out DIR] [--count N]`.
 """
-import argparse
 import json
 import os
 import shutil
@@ -26,6 +25,8 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
+
+from bench import bench_parser  # noqa: E402
 
 RIDER = "m_adult_average_185"
 
@@ -148,8 +149,7 @@ def run(results, out_dir, count=12):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m bench.street", description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench"))
+    ap = bench_parser("street", __doc__)
     ap.add_argument("--count", type=int, default=12)
     args = ap.parse_args(argv)
     results = {}
