@@ -11,3 +11,15 @@ def bench_parser(name, doc):
     ap = argparse.ArgumentParser(prog=f"python -m bench.{name}", description=doc.splitlines()[0])
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench"))
     return ap
+
+
+def worker_or_standalone(ap, worker):
+    """A Blender comparison bench's command line, parsed: with --worker JOB this is the bpy side, which
+    runs `worker(JOB)` and gets None back; a standalone run needs --out and gets the arguments."""
+    a = ap.parse_args()
+    if a.worker:
+        worker(a.worker)
+        return None
+    if not a.out:
+        ap.error("--out is required")
+    return a
