@@ -86,7 +86,7 @@ def compare(bike_dir, poses, cams, gt_dir):
 
 
 def run(results, out_dir, n_poses=POSES, seed=0, samples=16):
-    from bench.compare import renders_for
+    from bench.compare import renders_for, side_by_side, write_table
     from bench.provenance import RENDER_CODE, bike_assets, code_version, file_hash, not_measured, record
 
     bike_dir = find_bike(os.path.join(out_dir, "bikes"))
@@ -110,7 +110,6 @@ def run(results, out_dir, n_poses=POSES, seed=0, samples=16):
     iou, ps = np.array([r["iou"] for r in rows]), np.array([r["psnr"] for r in rows])
     box = np.array([r["box_psnr"] for r in rows])
     worst = int(np.argmin(ps))
-    from bench.compare import side_by_side
 
     side_by_side(*renders[worst], os.path.join(out_dir, "bike_gt_worst.png"))
     results["bike_gt"] = {"poses": len(rows), "iou_mean": float(iou.mean()), "psnr_mean": float(ps.mean()),
@@ -126,7 +125,6 @@ def run(results, out_dir, n_poses=POSES, seed=0, samples=16):
         lines.append(f"| {i} | {', '.join(f'{v:.1f}' for v in r['pose'][:5])}, {', '.join(f'{v:.2f}' for v in r['pose'][5:])} "
                      f"| {r['camera']} | {r['iou']:.4f} | {r['psnr']:.2f} | {r['box_psnr']:.2f} | {r['kp_err_mm']:.4f} |")
     lines.append(f"\nWorst case: pose {worst} (GT | Gaussians | 4x |diff|) in bike_gt_worst.png; bike {os.path.basename(bike_dir)}.")
-    from bench.compare import write_table
     write_table(out_dir, "bike_gt_table.md", lines)
     return rows
 

@@ -10,7 +10,6 @@ else the untrained mesh avatar.
 Chart (out_dir/dataset_throughput.png): images/hour (1 worker) against image size and against
 the Gaussian count.  Run alone: `python -m bench.dataset [--out DIR] [--count N] [--no-chart]`.
 """
-import argparse
 import json
 import os
 import shutil
@@ -21,6 +20,8 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
+
+from bench import bench_parser  # noqa: E402
 
 RIDER = "m_adult_average_185"
 
@@ -68,17 +69,26 @@ def pick_assets(out_dir, scratch):
     return scratch, [b], "auto", "SYNTHETIC keypoint stand-in Gaussians on a generated spec bike (no bike library)"
 
 
-def measure(cfg, workers, scratch, tag):
+def timed_generate(cfg, out, workers):
+    """Generate the dataset `cfg` into `out`; returns its annotations.json, the wall seconds and the
+    1-minute load average before and after (the cores are shared, so a timing says its load)."""
     from splatting.dataset.command import generate
     from splatting.dataset.config import validate
-    out = os.path.join(scratch, tag)
+    load0 = os.getloadavg()[0]
     t = time.time()
     generate(validate(cfg), out, workers=workers, log=lambda m: None, progress=False)
     wall = time.time() - t
+    load = [round(load0, 2), round(os.getloadavg()[0], 2)]
     with open(os.path.join(out, "annotations.json")) as f:
-        n_ann = len(json.load(f)["annotations"])
+        doc = json.load(f)
+    return doc, wall, load
+
+
+def measure(cfg, workers, scratch, tag):
+    out = os.path.join(scratch, tag)
+    doc, wall, _ = timed_generate(cfg, out, workers)
     shutil.rmtree(out, ignore_errors=True)
-    return cfg["count"] * 3600.0 / wall, wall, n_ann
+    return cfg["count"] * 3600.0 / wall, wall, len(doc["annotations"])
 
 
 def gaussian_count(cfg):
@@ -153,8 +163,7 @@ def _chart(sweep, path, desc):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m bench.dataset", description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench"))
+    ap = bench_parser("dataset", __doc__)
     ap.add_argument("--count", type=int, default=24)
     ap.add_argument("--no-chart", action="store_true")
     args = ap.parse_args(argv)

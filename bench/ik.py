@@ -9,7 +9,6 @@ Charts (out_dir): ik_stability.png (worst residual over rider height x bike, bef
 saddle auto-fit) and ik_convergence.png (residual against iterations).
 Run alone: `python -m bench.ik [--out DIR] [--no-charts]`.
 """
-import argparse
 import json
 import os
 import statistics
@@ -23,6 +22,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
+from bench import bench_parser  # noqa: E402
 from splatting.bike.pose import posed_bike_keypoints  # noqa: E402
 from splatting.rider import ik  # noqa: E402
 from splatting.rider.skeleton_template import template_rest_joints  # noqa: E402
@@ -199,8 +199,7 @@ def run(results, out_dir=None, charts=True):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m bench.ik", description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench"))
+    ap = bench_parser("ik", __doc__)
     ap.add_argument("--no-charts", action="store_true")
     args = ap.parse_args(argv)
     results = run({}, args.out, charts=not args.no_charts)

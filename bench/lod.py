@@ -21,7 +21,6 @@ default LOD (the street bench's config: nuScenes, 1-6 cyclists, photo background
 make_sample, no file writing; the same images interleaved, one thread).  Chart: docs/img/lod_chart.png with --chart.
 Run alone: `python -m bench.lod [--out DIR] [--images N] [--chart PNG]`.
 """
-import argparse
 import json
 import os
 import statistics
@@ -34,6 +33,8 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
+
+from bench import bench_parser  # noqa: E402
 
 HEIGHTS_PX = (20, 30, 45, 55, 65, 90, 130, 180, 260, 380)
 KEEPS = (0.7, 0.5, 0.35, 0.25)
@@ -228,8 +229,7 @@ def run(results, out_dir, images=6, chart_png=None, log=print):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m bench.lod", description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench"))
+    ap = bench_parser("lod", __doc__)
     ap.add_argument("--images", type=int, default=6, help="street images timed with LOD off and on")
     ap.add_argument("--chart", help="write the chart PNG here (e.g. docs/img/lod_chart.png)")
     args = ap.parse_args(argv)

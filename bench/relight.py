@@ -22,6 +22,11 @@ import time
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if ROOT not in sys.path:  # run as a script (the bpy worker, a standalone run)
+    sys.path.insert(0, ROOT)
+
+from bench import worker_or_standalone  # noqa: E402
+
 PY = sys.executable
 PARTS = ("frame", "steering", "crank")
 SIZE = 256             # the small bike's training views (when no trained bike is given)
@@ -357,13 +362,8 @@ if __name__ == "__main__":
     ap.add_argument("--poses", type=int, help="random poses (default: bike_gt's, 20)")
     ap.add_argument("--size", type=int, default=GT_SIZE, help="comparison image size in px (default %(default)s)")
     ap.add_argument("--bike", help="a trained bike folder (views with passes + gaussians/); default: build a small one")
-    a = ap.parse_args()
-    if a.worker:
-        blender_worker(a.worker)
-    else:
-        if not a.out:
-            ap.error("--out is required")
-        sys.path.insert(0, ROOT)
+    a = worker_or_standalone(ap, blender_worker)
+    if a is not None:
         if a.bike and not os.path.isfile(os.path.join(a.bike, "gaussians", "frame.ply")):
             sys.exit(f"error: {a.bike}: no trained gaussians/frame.ply")
         if (a.poses is not None and a.poses < 1) or not 16 <= a.size <= 4096:

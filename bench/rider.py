@@ -132,7 +132,7 @@ def repose_timing(avatar, rot, root, n_bike=100_000, reps=20):
 def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, time_budget_s=480, rider_id=RIDER_ID):
     import torch
 
-    from bench.compare import psnr, score_png, side_by_side
+    from bench.compare import psnr, renders_for, score_png, side_by_side, write_table
     from splatting.raster.api import render_gaussians
     from splatting.rider.avatar import RiderAvatar
     from splatting.rider.avatar_build import build_avatar
@@ -146,7 +146,6 @@ def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, tim
 
     theta_p, theta_s, yaw, cams = sample_poses(n_poses, seed)
     rot, root = posed_batch(rider, theta_p, theta_s, yaw)
-    from bench.compare import renders_for
     from bench.provenance import RENDER_CODE, code_version
 
     # stills reused only for this rider, poses, cameras, samples and code (the roster mesh is posed by splatting/rider)
@@ -195,7 +194,6 @@ def run(results, out_dir, n_poses=12, seed=0, samples=None, iterations=2000, tim
     lines.append(f"\nrider_repose_ms: {repose_ms:.2f} ms per frame (LBS re-pose of {len(avatar)} Gaussians + "
                  f"concatenation with a 100k-Gaussian bike, {n_total} in total; median of 20, one thread).")
     lines.append(f"\nWorst IoU: pose {worst} (Blender | Gaussians | 4x |diff|, rider box, 2x) in rider_gt_worst.png.")
-    from bench.compare import write_table
     write_table(out_dir, "rider_gt_table.md", lines)
     return rows
 

@@ -19,6 +19,11 @@ import sys
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if ROOT not in sys.path:  # run as a script (the bpy worker, a standalone run)
+    sys.path.insert(0, ROOT)
+
+from bench import worker_or_standalone  # noqa: E402
+
 
 
 def blender_worker(job_path):
@@ -139,17 +144,12 @@ if __name__ == "__main__":
     ap.add_argument("--out", help="bench output folder")
     ap.add_argument("--avatar", help="an avatar folder (rider.ply, skinning.npz, views/ with passes); default: build one")
     ap.add_argument("--poses", type=int, default=12)
-    a = ap.parse_args()
-    if a.worker:
-        blender_worker(a.worker)
-    else:
-        if not a.out:
-            ap.error("--out is required")
+    a = worker_or_standalone(ap, blender_worker)
+    if a is not None:
         if a.poses < 1:
             ap.error("--poses must be >= 1")
         if a.avatar and not os.path.isfile(os.path.join(a.avatar, "rider.ply")):
             sys.exit(f"error: no rider.ply in {a.avatar}")
-        sys.path.insert(0, ROOT)
         res = {}
         run(res, a.out, a.avatar, a.poses)
         print(json.dumps(res, indent=1))

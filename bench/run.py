@@ -5,7 +5,6 @@ Each stage module exposes run(results, ...) and adds only the keys it measured i
 absent and report.md says "not measured: <reason>".  Every key carries its provenance
 (bench/provenance.py): fresh or reused, from which assets, with which fallback.
 """
-import argparse
 import importlib
 import json
 import os
@@ -17,6 +16,7 @@ import traceback
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
+from bench import bench_parser  # noqa: E402
 from bench.provenance import META, not_measured, record  # noqa: E402
 
 # name -> (module, how to call run)
@@ -144,8 +144,7 @@ def report(results, out_dir, timings):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m bench.run", description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench"))
+    ap = bench_parser("run", __doc__)
     ap.add_argument("--stages", default=",".join(STAGES), help=f"comma list of {', '.join(STAGES)}")
     args = ap.parse_args(argv)
     stages = [s.strip() for s in args.stages.split(",") if s.strip()]

@@ -19,7 +19,6 @@ Keys:
 
 Run alone: `python -m bench.sequence [--out DIR] [--frames N] [--bikes-root DIR --riders-root DIR]`.
 """
-import argparse
 import json
 import os
 import shutil
@@ -31,6 +30,8 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
+
+from bench import bench_parser  # noqa: E402
 
 RIDER = "m_adult_average_185"
 
@@ -141,20 +142,13 @@ def plausibility(bikes_root, bikes, n_seq=25):
 def run(results, out_dir, frames=20, bikes_root=None, riders_root=None, plaus_sequences=25, cpu_frames=8):
     import torch
     torch.set_num_threads(1)
-    from splatting.dataset.command import generate
-    from splatting.dataset.config import validate
+    from bench.dataset import timed_generate
     scratch = tempfile.mkdtemp(prefix="bench_sequence_")
     try:
         cfg, desc = bench_config(scratch, out_dir, frames, bikes_root, riders_root)
         print(f"sequence bench: bikes: {desc}; rider from {cfg['riders_root']} ({cfg['synthetic_assets']})")
         out = os.path.join(scratch, "out")
-        load0 = os.getloadavg()[0]
-        t = time.time()
-        generate(validate(cfg), out, workers=2, log=lambda m: None, progress=False)
-        wall = time.time() - t
-        load = [round(load0, 2), round(os.getloadavg()[0], 2)]
-        with open(os.path.join(out, "annotations.json")) as f:
-            doc = json.load(f)
+        doc, wall, load = timed_generate(cfg, out, workers=2)
         fph = frames * 3600.0 / wall
         print(f"sequence bench: 1 sequence of {frames} frames 1600x900, 4 cyclists, {len(doc['annotations'])} "
               f"annotations, COCO-video + KITTI tracking + MOT, 2 workers: {wall:.1f} s -> {fph:.0f} frames/hour "
@@ -176,8 +170,7 @@ def run(results, out_dir, frames=20, bikes_root=None, riders_root=None, plaus_se
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m bench.sequence", description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench"))
+    ap = bench_parser("sequence", __doc__)
     ap.add_argument("--frames", type=int, default=20, help="sequence length measured (the issue's is 100)")
     ap.add_argument("--bikes-root", help="a folder of trained bikes (default: bench.dataset's pick)")
     ap.add_argument("--riders-root", help="a folder of rider avatars (default: data/riders)")

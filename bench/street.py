@@ -14,7 +14,6 @@ rendering (one joint rasterization + the amodal ones) and the rest (labels, PNG,
 in-process on the same config.  Assets as in bench.dataset: trained ones where they exist, else
 stand-ins (said in the results).  Run alone: `python -m bench.street [--out DIR] [--count N]`.
 """
-import argparse
 import json
 import os
 import shutil
@@ -26,6 +25,8 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
+
+from bench import bench_parser  # noqa: E402
 
 RIDER = "m_adult_average_185"
 
@@ -110,21 +111,14 @@ def split_timings(cfg, n):
 def run(results, out_dir, count=12):
     import torch
     torch.set_num_threads(1)
-    from splatting.dataset.command import generate
-    from splatting.dataset.config import validate
+    from bench.dataset import timed_generate
     scratch = tempfile.mkdtemp(prefix="bench_street_")
     try:
         cfg, desc = bench_config(scratch, out_dir, count)
         avatar = "trained avatar" if avatar_trained() else "untrained mesh avatar"
         print(f"street bench: bikes: {desc}; rider {RIDER}: {avatar}")
         out = os.path.join(scratch, "out")
-        load0 = os.getloadavg()[0]
-        t = time.time()
-        generate(validate(cfg), out, workers=2, log=lambda m: None, progress=False)
-        wall = time.time() - t
-        load = [round(load0, 2), round(os.getloadavg()[0], 2)]
-        with open(os.path.join(out, "annotations.json")) as f:
-            doc = json.load(f)
+        doc, wall, load = timed_generate(cfg, out, workers=2)
         n_inst = sum(len(im["instances"]) for im in doc["images"])
         iph = count * 3600.0 / wall
         print(f"street bench: {count} images 1600x900 ({n_inst} instances, {len(doc['annotations'])} annotations) "
@@ -155,8 +149,7 @@ def run(results, out_dir, count=12):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m bench.street", description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench"))
+    ap = bench_parser("street", __doc__)
     ap.add_argument("--count", type=int, default=12)
     args = ap.parse_args(argv)
     results = {}

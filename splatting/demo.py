@@ -119,13 +119,8 @@ def run(args):
            [py, "-m", "splatting", "cyclist", "--rider", args.rider, "--bike", bike, "--riders-root", riders,
             "--frames", str(args.frames), "--views=0,90,180,-90", "--ply", "--synthetic", "never", "--out", cyc])
     cfg_path = os.path.join(out, "dataset.yaml")
-    with open(os.path.join(ROOT, "blend_assets", "datasets", "cyclist.yaml")) as f:
-        cfg = yaml.safe_load(f)
-    cfg.update({"name": "demo", "count": args.coco_count, "riders": [args.rider], "riders_root": riders,
-                "bikes": [os.path.basename(bike)], "bikes_root": os.path.join(out, "bikes"), "synthetic_assets": "never"})
-    with atomic_path(cfg_path) as tmp:
-        with open(tmp, "w") as f:
-            yaml.safe_dump(cfg, f, sort_keys=False)
+    cfg = dataset_config("cyclist", out, args.rider, riders, bike, {"name": "demo", "count": args.coco_count})
+    write_config(cfg_path, cfg)
     coco = os.path.join(out, "coco")
     st.run("COCO set", [py, "-m", "splatting", "dataset", "--config", cfg_path, "--out", coco, "--quiet"])
     from splatting.dataset.preview import coco_preview, relit_preview
@@ -133,23 +128,16 @@ def run(args):
     coco_preview(coco, os.path.join(out, "coco_preview.png"))
     # the COCO set's first samples relit, each under its own sun (same seed: same poses and cameras)
     rcfg_path = os.path.join(out, "relit.yaml")
-    with atomic_path(rcfg_path) as tmp:
-        with open(tmp, "w") as f:
-            yaml.safe_dump(dict(cfg, name="demo_relit", count=args.relit_count, lighting={"mode": "relit"}), f, sort_keys=False)
+    write_config(rcfg_path, dict(cfg, name="demo_relit", count=args.relit_count, lighting={"mode": "relit"}))
     relit = os.path.join(out, "relit")
     st.run("relit images", [py, "-m", "splatting", "dataset", "--config", rcfg_path, "--out", relit, "--quiet"])
     relit_preview(coco, relit, os.path.join(out, "relit_preview.png"), n=args.relit_count)
     # a few street images (docs/street_scenes.md): the same rider and bike, several per image
-    with open(os.path.join(ROOT, "blend_assets", "datasets", "street.yaml")) as f:
-        scfg = yaml.safe_load(f)
-    scfg.update({"name": "demo_street", "count": 3, "riders": [args.rider], "riders_root": riders,
-                 "bikes": [os.path.basename(bike)], "bikes_root": os.path.join(out, "bikes"), "synthetic_assets": "never",
-                 "labels": {"formats": ["coco", "kitti"]}})
+    scfg = dataset_config("street", out, args.rider, riders, bike, {"name": "demo_street", "count": 3},
+                          {"labels": {"formats": ["coco", "kitti"]}})
     scfg["camera"] = dict(scfg.get("camera", {}), scale=0.5)
     scfg_path = os.path.join(out, "street.yaml")
-    with atomic_path(scfg_path) as tmp:
-        with open(tmp, "w") as f:
-            yaml.safe_dump(scfg, f, sort_keys=False)
+    write_config(scfg_path, scfg)
     street = os.path.join(out, "street")
     st.run("street images", [py, "-m", "splatting", "dataset", "--config", scfg_path, "--out", street, "--quiet"])
     coco_preview(street, os.path.join(out, "street_preview.png"), n=3)
@@ -168,6 +156,22 @@ def run(args):
     print(f"demo: finished; see {os.path.join(out, 'report.md')}")
 
 
+def dataset_config(template, out, rider, riders, bike, head, tail=None):
+    """blend_assets/datasets/<template>.yaml with the demo's rider and trained bike; `head` keys go
+    before the asset keys and `tail` keys after them (the written YAML keeps that order)."""
+    with open(os.path.join(ROOT, "blend_assets", "datasets", template + ".yaml")) as f:
+        cfg = yaml.safe_load(f)
+    cfg.update({**head, "riders": [rider], "riders_root": riders, "bikes": [os.path.basename(bike)],
+                "bikes_root": os.path.join(out, "bikes"), "synthetic_assets": "never", **(tail or {})})
+    return cfg
+
+
+def write_config(path, cfg):
+    with atomic_path(path) as tmp:
+        with open(tmp, "w") as f:
+            yaml.safe_dump(cfg, f, sort_keys=False)
+
+
 def kitti_frames(st, py, out, rider, riders, bike):
     """A few real KITTI development frames with the demo's cyclist inserted (docs/kitti_insert.md),
     when ../shared/realism/kitti_dev is there; says so when it is not."""
@@ -177,14 +181,9 @@ def kitti_frames(st, py, out, rider, riders, bike):
     if dev is None:
         print("demo: KITTI frames: no development frames (../shared/realism/kitti_dev), step skipped", flush=True)
         return
-    with open(os.path.join(ROOT, "blend_assets", "datasets", "kitti-insert.yaml")) as f:
-        kcfg = yaml.safe_load(f)
-    kcfg.update({"name": "demo_kitti", "count": 4, "frames": dev, "riders": [rider], "riders_root": riders,
-                 "bikes": [os.path.basename(bike)], "bikes_root": os.path.join(out, "bikes"), "synthetic_assets": "never"})
+    kcfg = dataset_config("kitti-insert", out, rider, riders, bike, {"name": "demo_kitti", "count": 4, "frames": dev})
     kpath = os.path.join(out, "kitti_insert.yaml")
-    with atomic_path(kpath) as tmp:
-        with open(tmp, "w") as f:
-            yaml.safe_dump(kcfg, f, sort_keys=False)
+    write_config(kpath, kcfg)
     kout = os.path.join(out, "kitti_insert")
     st.run("KITTI frames with cyclists", [py, "-m", "splatting", "dataset", "--config", kpath, "--out", kout, "--quiet"])
     sheet(kout, os.path.join(out, "kitti_insert.png"))
@@ -194,19 +193,14 @@ def street_sequence(st, py, out, rider, riders, bike):
     """A short street sequence (docs/sequences.md): cyclists crossing, turning and overtaking in
     front of a moving camera, in the three tracking formats, and a strip of its frames with tracks."""
     from splatting.dataset.sequences.strip import main as strip
-    with open(os.path.join(ROOT, "blend_assets", "datasets", "street-sequence.yaml")) as f:
-        qcfg = yaml.safe_load(f)
-    qcfg.update({"name": "demo_sequence", "count": 1, "seed": 4, "riders": [rider], "riders_root": riders,
-                 "bikes": [os.path.basename(bike)], "bikes_root": os.path.join(out, "bikes"), "synthetic_assets": "never"})
+    qcfg = dataset_config("street-sequence", out, rider, riders, bike, {"name": "demo_sequence", "count": 1, "seed": 4})
     qcfg["camera"] = dict(qcfg.get("camera", {}), scale=0.5)
     qcfg["street"] = dict(qcfg["street"], cyclists=[3, 3], parked_bikes=[1, 1], distance_m=[8, 25])
     qcfg["sequence"] = dict(qcfg["sequence"], length=30, fps=5,
                             manoeuvres={"straight": 0, "turn_left": 1, "turn_right": 0, "cross": 3, "overtake": 1,
                                         "stop": 0, "start": 0, "swerve": 0}, ego={"motion": "moving", "speed_mps": [2, 3]})
     qpath = os.path.join(out, "sequence.yaml")
-    with atomic_path(qpath) as tmp:
-        with open(tmp, "w") as f:
-            yaml.safe_dump(qcfg, f, sort_keys=False)
+    write_config(qpath, qcfg)
     qout = os.path.join(out, "sequence")
     st.run("street sequence", [py, "-m", "splatting", "dataset", "--config", qpath, "--out", qout, "--quiet"],
            done=os.path.join(qout, "annotations.json"))

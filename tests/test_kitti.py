@@ -125,3 +125,15 @@ def test_ring_presets_write_valid_kitti_files(tmp_path):
         objs = [parse_label_line(line) for line in f]
     assert len(objs) == 1 and objs[0]["type"] == "Cyclist" and objs[0]["z"] > 5
     assert os.path.isfile(tmp_path / "o" / "kitti" / "training" / "image_2" / "000000.png")
+
+
+def test_the_kitti_image_is_a_hard_link_to_the_coco_image(tmp_path):
+    # docs/labels.md: image_2 is a hard link to images/ where the file system allows (tmp_path does)
+    from splatting.dataset.kitti import link_or_copy
+    src = tmp_path / "images" / "000000.png"
+    src.parent.mkdir()
+    src.write_bytes(b"\x89PNG not decoded here")
+    dst = tmp_path / "kitti" / "training" / "image_2" / "000000.png"
+    link_or_copy(str(src), str(dst))
+    assert os.path.samefile(src, dst)
+    assert not [n for n in os.listdir(dst.parent) if n != dst.name]  # no temporary left beside it

@@ -35,8 +35,8 @@ quads face it, and their alpha and colour were computed for it.  Move the camera
 import numpy as np
 
 from . import frames
-from .splat_gaussian import ALPHA_MAX, ALPHA_MIN, C0, C1, C2, C3, quat_to_matrix, matrix_to_euler_xyz, sh_degree_of
-from .splat_nodes import ShaderExpr, enabled_output, link_with_nodes, new_socket
+from .splat_gaussian import ALPHA_MAX, ALPHA_MIN, C0, quat_to_matrix, matrix_to_euler_xyz, sh_degree_of, sh_terms
+from .splat_nodes import emission_over_clear, finish_material, instance_node_group, link_with_nodes, new_material
 
 EPS2D = 0.3  # the rasterizer's default screen-space low-pass, px^2 (splatting/raster/sparse.py)
 NEAR = 0.01  # the rasterizer's near cut, metres
@@ -53,17 +53,7 @@ TRANSPARENT_BOUNCES = 1024  # also Cycles' largest (its RNA clamps higher values
 def sh_basis(d, degree):
     """Unit directions (N, 3) -> (N, (degree+1)^2) INRIA real SH basis (splatting/gaussians/sh.py)."""
     x, y, z = d.T
-    out = [np.full_like(x, C0)]
-    if degree >= 1:
-        out += [-C1 * y, C1 * z, -C1 * x]
-    if degree >= 2:
-        xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
-        out += [C2[0] * xy, C2[1] * yz, C2[2] * (2 * zz - xx - yy), C2[3] * xz, C2[4] * (xx - yy)]
-    if degree >= 3:
-        out += [C3[0] * y * (3 * xx - yy), C3[1] * xy * z, C3[2] * y * (4 * zz - xx - yy),
-                C3[3] * z * (2 * zz - 3 * xx - 3 * yy), C3[4] * x * (4 * zz - xx - yy),
-                C3[5] * z * (xx - yy), C3[6] * x * (xx - 3 * yy)]
-    return np.stack(out, 1)
+    return np.stack(sh_terms(x, y, z, np.full_like(x, C0), degree), 1)
 
 
 def billboard_points(data, K, R, T, width, height, eps2d=EPS2D, antialiased=False, max_degree=3):
@@ -145,47 +135,18 @@ def _unit(v):
 
 def billboard_node_group(material, name="splat_camera_quads"):
     """Geometry Nodes: vertices -> points -> a [-1, 1]^2 quad instance per point (g_rot, g_scale)."""
-    import bpy
+    def quad(n):
+        grid = n.new("GeometryNodeMeshGrid")
+        grid.inputs["Size X"].default_value = grid.inputs["Size Y"].default_value = 2.0
+        grid.inputs["Vertices X"].default_value = grid.inputs["Vertices Y"].default_value = 2
+        return grid
 
-    ng = bpy.data.node_groups.new(name, "GeometryNodeTree")
-    new_socket(ng, "Geometry", "INPUT", "NodeSocketGeometry")
-    new_socket(ng, "Geometry", "OUTPUT", "NodeSocketGeometry")
-    n, link = ng.nodes, ng.links.new
-    gin, gout = n.new("NodeGroupInput"), n.new("NodeGroupOutput")
-    to_points = n.new("GeometryNodeMeshToPoints")
-    to_points.mode = "VERTICES"
-    quad = n.new("GeometryNodeMeshGrid")
-    quad.inputs["Size X"].default_value = quad.inputs["Size Y"].default_value = 2.0
-    quad.inputs["Vertices X"].default_value = quad.inputs["Vertices Y"].default_value = 2
-    set_mat = n.new("GeometryNodeSetMaterial")
-    set_mat.inputs["Material"].default_value = material
-    inst = n.new("GeometryNodeInstanceOnPoints")
-    link(gin.outputs[0], to_points.inputs["Mesh"])
-    link(quad.outputs["Mesh"], set_mat.inputs["Geometry"])
-    link(to_points.outputs["Points"], inst.inputs["Points"])
-    link(set_mat.outputs["Geometry"], inst.inputs["Instance"])
-    for attr, sock in (("g_rot", "Rotation"), ("g_scale", "Scale")):
-        a = n.new("GeometryNodeInputNamedAttribute")
-        a.data_type = "FLOAT_VECTOR"
-        a.inputs["Name"].default_value = attr
-        link(enabled_output(a, "Attribute"), inst.inputs[sock])  # a vector into a 4.x Rotation socket is an Euler
-    link(inst.outputs["Instances"], gout.inputs[0])
-    for i, node in enumerate((gin, to_points, inst, gout)):
-        node.location = (220 * i, 0)
-    quad.location, set_mat.location = (220, -250), (440, -250)
-    return ng
+    return instance_node_group(name, material, quad)
 
 
 def billboard_material(name="splat_camera_quad"):
     """Emission of the display colour g_rgb, alpha from the conic g_conic (see the module docstring)."""
-    import bpy
-
-    mat = bpy.data.materials.new(name)
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    b = ShaderExpr(nt)
+    mat, b = new_material(name)
     tex = b.n.new("ShaderNodeTexCoord")
     sep = b.n.new("ShaderNodeSeparateXYZ")
     b.link(tex.outputs["Object"], sep.inputs[0])
@@ -197,25 +158,7 @@ def billboard_material(name="splat_camera_quad"):
     alpha = b.mul(b.attr("opacity", "Fac"), b.math("EXPONENT", b.mul(b.math("MAXIMUM", q, 0.0), -0.5)))
     alpha = b.mul(alpha, b.math("GREATER_THAN", alpha, ALPHA_MIN - 1e-7))  # >= 1/255, as 3DGS
     alpha = b.math("MINIMUM", alpha, ALPHA_MAX)
-    emit = b.n.new("ShaderNodeEmission")
-    emit.inputs["Strength"].default_value = 1.0
-    b.link(b.attr("g_rgb"), emit.inputs["Color"])
-    clear = b.n.new("ShaderNodeBsdfTransparent")
-    mix = b.n.new("ShaderNodeMixShader")
-    b.link(alpha, mix.inputs["Fac"])
-    b.link(clear.outputs[0], mix.inputs[1])
-    b.link(emit.outputs[0], mix.inputs[2])
-    out = b.n.new("ShaderNodeOutputMaterial")
-    b.link(mix.outputs[0], out.inputs["Surface"])
-    if hasattr(mat, "blend_method"):  # EEVEE Legacy (3.x - 4.1): alpha blending, no shadows
-        try:
-            mat.blend_method = "BLEND"
-            mat.shadow_method = "NONE"
-        except (AttributeError, TypeError):
-            pass
-    for i, node in enumerate(nt.nodes):
-        node.location = (200 * (i % 10), -160 * (i // 10))
-    return mat
+    return finish_material(mat, b, emission_over_clear(b, b.attr("g_rgb"), alpha), columns=10)
 
 
 def make_billboard_object(name, pts, material, node_group, collection=None):

@@ -26,7 +26,8 @@ attribute `sh_k` (RGB as a vector); degrees 0-3 follow the file's f_rest count.
 import numpy as np
 
 from . import frames
-from .splat_nodes import ShaderExpr, enabled_output, link_with_nodes, new_socket
+from .contract import sh_basis
+from .splat_nodes import emission_over_clear, finish_material, instance_node_group, link_with_nodes, new_material
 
 K_SIGMA = 3.0  # largest proxy extent in standard deviations (3DGS's screen-space cut-off is 3 sigma too)
 # The rasterizer adds 0.3 px^2 to every projected covariance (eps2d, 3DGS's low-pass), so the
@@ -48,11 +49,8 @@ MIN_TRANSPARENT = 32  # Cycles min_transparent_bounces: hits before Russian roul
 # 0.735 instead of 0.5), the speckles on dark tyres and tubes of the trained bike.
 DISPLAY_VIEW_TRANSFORM = "Raw"
 ICO_INRADIUS = 0.7946544722917661  # inscribed radius of the unit-circumradius icosahedron
-C0 = 0.28209479177387814
-C1 = 0.4886025119029199
-C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
-C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-      -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
+# INRIA 3DGS real SH, the constants and the numpy basis terms shared with splatting/gaussians/sh.py
+C0, C1, C2, C3, sh_terms = sh_basis.C0, sh_basis.C1, sh_basis.C2, sh_basis.C3, sh_basis.sh_terms
 
 
 # ---- numpy side --------------------------------------------------------------------------
@@ -132,41 +130,15 @@ def gaussian_points(data, max_degree=3, lowpass_m=LOWPASS_M):
 
 # ---- bpy side ----------------------------------------------------------------------------
 
-def _named_vector(n, name):
-    a = n.new("GeometryNodeInputNamedAttribute")
-    a.data_type = "FLOAT_VECTOR"
-    a.inputs["Name"].default_value = name
-    return enabled_output(a, "Attribute")
-
-
 def gaussian_node_group(material, name="splat_gaussians"):
     """Geometry Nodes: vertices -> points -> an icosahedron instance per point (g_rot, g_scale)."""
-    import bpy
+    def icosahedron(n):
+        ico = n.new("GeometryNodeMeshIcoSphere")
+        ico.inputs["Radius"].default_value = 1.0 / ICO_INRADIUS
+        ico.inputs["Subdivisions"].default_value = 1
+        return ico
 
-    ng = bpy.data.node_groups.new(name, "GeometryNodeTree")
-    new_socket(ng, "Geometry", "INPUT", "NodeSocketGeometry")
-    new_socket(ng, "Geometry", "OUTPUT", "NodeSocketGeometry")
-    n, link = ng.nodes, ng.links.new
-    gin, gout = n.new("NodeGroupInput"), n.new("NodeGroupOutput")
-    to_points = n.new("GeometryNodeMeshToPoints")
-    to_points.mode = "VERTICES"
-    ico = n.new("GeometryNodeMeshIcoSphere")
-    ico.inputs["Radius"].default_value = 1.0 / ICO_INRADIUS
-    ico.inputs["Subdivisions"].default_value = 1
-    set_mat = n.new("GeometryNodeSetMaterial")
-    set_mat.inputs["Material"].default_value = material
-    inst = n.new("GeometryNodeInstanceOnPoints")
-    link(gin.outputs[0], to_points.inputs["Mesh"])
-    link(ico.outputs["Mesh"], set_mat.inputs["Geometry"])
-    link(to_points.outputs["Points"], inst.inputs["Points"])
-    link(set_mat.outputs["Geometry"], inst.inputs["Instance"])
-    link(_named_vector(n, "g_rot"), inst.inputs["Rotation"])  # a vector into a 4.x Rotation socket is an Euler
-    link(_named_vector(n, "g_scale"), inst.inputs["Scale"])
-    link(inst.outputs["Instances"], gout.inputs[0])
-    for i, node in enumerate((gin, to_points, inst, gout)):
-        node.location = (220 * i, 0)
-    ico.location, set_mat.location = (220, -250), (440, -250)
-    return ng
+    return instance_node_group(name, material, icosahedron)
 
 
 def _sh_basis(b, x, y, z, degree):
@@ -193,14 +165,7 @@ def _sh_basis(b, x, y, z, degree):
 
 def gaussian_material(degree, name="splat_gaussian"):
     """Emission material with the Gaussian falloff and SH colour (see the module docstring)."""
-    import bpy
-
-    mat = bpy.data.materials.new(name)
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    b = ShaderExpr(nt)
+    mat, b = new_material(name)
     tex = b.n.new("ShaderNodeTexCoord")
     geo = b.n.new("ShaderNodeNewGeometry")
     # Object coordinates and World->Object vectors use the instance's own transform, so both
@@ -234,29 +199,13 @@ def gaussian_material(degree, name="splat_gaussian"):
     # composited as is and written through the Raw view transform (DISPLAY_VIEW_TRANSFORM)
     col = b.vmath("MAXIMUM", col, (0.0, 0.0, 0.0))
 
-    emit = b.n.new("ShaderNodeEmission")
-    emit.inputs["Strength"].default_value = 1.0
-    b.link(col, emit.inputs["Color"])
-    clear, clear_back = b.n.new("ShaderNodeBsdfTransparent"), b.n.new("ShaderNodeBsdfTransparent")
-    mix = b.n.new("ShaderNodeMixShader")
-    b.link(alpha, mix.inputs["Fac"])
-    b.link(clear.outputs[0], mix.inputs[1])
-    b.link(emit.outputs[0], mix.inputs[2])
-    back = b.n.new("ShaderNodeMixShader")
+    front = emission_over_clear(b, col, alpha)
+    clear_back = b.n.new("ShaderNodeBsdfTransparent")
+    back = b.n.new("ShaderNodeMixShader")  # back faces transparent: each Gaussian is met once
     b.link(geo.outputs["Backfacing"], back.inputs["Fac"])
-    b.link(mix.outputs[0], back.inputs[1])
+    b.link(front, back.inputs[1])
     b.link(clear_back.outputs[0], back.inputs[2])
-    out = b.n.new("ShaderNodeOutputMaterial")
-    b.link(back.outputs[0], out.inputs["Surface"])
-    if hasattr(mat, "blend_method"):  # EEVEE Legacy (3.x - 4.1): alpha blending, no shadows
-        try:
-            mat.blend_method = "BLEND"
-            mat.shadow_method = "NONE"
-        except (AttributeError, TypeError):
-            pass
-    for i, node in enumerate(nt.nodes):  # a readable grid in the node editor
-        node.location = (200 * (i % 12), -160 * (i // 12))
-    return mat
+    return finish_material(mat, b, back.outputs[0], columns=12)
 
 
 def make_gaussian_object(name, pts, material, node_group, collection=None):

@@ -1,7 +1,8 @@
-"""Node helpers shared by the splat import's two modes (splat_import.py's preview spheres and
-splat_gaussian.py's Gaussians): node-group sockets across Blender 3.x-5.x, a node's live
-output, the object + Geometry Nodes modifier, and a small expression builder over shader math
-nodes.  Both modes import this module; it imports neither of them."""
+"""Node helpers shared by the splat import's modes (splat_import.py's preview spheres,
+splat_gaussian.py's Gaussians and splat_billboard.py's camera quads): node-group sockets across
+Blender 3.x-5.x, a node's live output, the instancing node group and the material scaffolding
+the Gaussian and quad modes share, the object + Geometry Nodes modifier, and a small expression
+builder over shader math nodes.  The modes import this module; it imports none of them."""
 
 
 def new_socket(ng, name, in_out, socket_type):
@@ -14,6 +15,78 @@ def new_socket(ng, name, in_out, socket_type):
 def enabled_output(node, name):
     """The live output called `name` (3.x nodes keep one hidden socket per data type)."""
     return next(s for s in node.outputs if s.name == name and getattr(s, "enabled", True))
+
+
+def instance_node_group(name, material, make_mesh):
+    """Geometry Nodes: vertices -> points -> an instance of the mesh node `make_mesh(nodes)` per
+    point, rotated and scaled by the points' g_rot and g_scale, with `material`."""
+    import bpy
+
+    ng = bpy.data.node_groups.new(name, "GeometryNodeTree")
+    new_socket(ng, "Geometry", "INPUT", "NodeSocketGeometry")
+    new_socket(ng, "Geometry", "OUTPUT", "NodeSocketGeometry")
+    n, link = ng.nodes, ng.links.new
+    gin, gout = n.new("NodeGroupInput"), n.new("NodeGroupOutput")
+    to_points = n.new("GeometryNodeMeshToPoints")
+    to_points.mode = "VERTICES"
+    shape = make_mesh(n)
+    set_mat = n.new("GeometryNodeSetMaterial")
+    set_mat.inputs["Material"].default_value = material
+    inst = n.new("GeometryNodeInstanceOnPoints")
+    link(gin.outputs[0], to_points.inputs["Mesh"])
+    link(shape.outputs["Mesh"], set_mat.inputs["Geometry"])
+    link(to_points.outputs["Points"], inst.inputs["Points"])
+    link(set_mat.outputs["Geometry"], inst.inputs["Instance"])
+    for attr, sock in (("g_rot", "Rotation"), ("g_scale", "Scale")):
+        a = n.new("GeometryNodeInputNamedAttribute")
+        a.data_type = "FLOAT_VECTOR"
+        a.inputs["Name"].default_value = attr
+        link(enabled_output(a, "Attribute"), inst.inputs[sock])  # a vector into a 4.x Rotation socket is an Euler
+    link(inst.outputs["Instances"], gout.inputs[0])
+    for i, node in enumerate((gin, to_points, inst, gout)):
+        node.location = (220 * i, 0)
+    shape.location, set_mat.location = (220, -250), (440, -250)
+    return ng
+
+
+def new_material(name):
+    """An empty node material and a ShaderExpr over its tree."""
+    import bpy
+
+    mat = bpy.data.materials.new(name)
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    return mat, ShaderExpr(nt)
+
+
+def emission_over_clear(b, colour, alpha):
+    """The shader socket mix(transparent, emission of `colour`, alpha) (3DGS's one splat)."""
+    emit = b.n.new("ShaderNodeEmission")
+    emit.inputs["Strength"].default_value = 1.0
+    b.link(colour, emit.inputs["Color"])
+    clear = b.n.new("ShaderNodeBsdfTransparent")
+    mix = b.n.new("ShaderNodeMixShader")
+    b.link(alpha, mix.inputs["Fac"])
+    b.link(clear.outputs[0], mix.inputs[1])
+    b.link(emit.outputs[0], mix.inputs[2])
+    return mix.outputs[0]
+
+
+def finish_material(mat, b, surface, columns):
+    """Output `surface`, alpha blending for EEVEE Legacy, the nodes on a readable grid."""
+    out = b.n.new("ShaderNodeOutputMaterial")
+    b.link(surface, out.inputs["Surface"])
+    if hasattr(mat, "blend_method"):  # EEVEE Legacy (3.x - 4.1): alpha blending, no shadows
+        try:
+            mat.blend_method = "BLEND"
+            mat.shadow_method = "NONE"
+        except (AttributeError, TypeError):
+            pass
+    for i, node in enumerate(b.n):
+        node.location = (200 * (i % columns), -160 * (i // columns))
+    return mat
 
 
 def link_with_nodes(name, mesh, node_group, modifier, collection=None):

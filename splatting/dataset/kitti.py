@@ -104,16 +104,23 @@ def kitti_paths(out_dir, index):
             "calib": os.path.join(base, "calib", f"{index:06d}.txt")}
 
 
+def link_or_copy(src, dst):
+    """`dst` (atomic) a hard link to `src` where the file system allows, else a copy."""
+    os.makedirs(os.path.dirname(dst), exist_ok=True)
+    with atomic_path(dst) as tmp:
+        os.remove(tmp)  # temp_name made the file; os.link needs the name free
+        try:
+            os.link(src, tmp)
+        except OSError:
+            shutil.copyfile(src, tmp)
+
+
 def write_sample(out_dir, index, image_path, objects, calib_dict):
     """Image (hard link to the COCO image where the file system allows, else a copy), label, calib."""
     p = kitti_paths(out_dir, index)
     for k in ("image", "label", "calib"):
         os.makedirs(os.path.dirname(p[k]), exist_ok=True)
-    with atomic_path(p["image"]) as tmp:
-        try:
-            os.link(image_path, tmp)
-        except OSError:
-            shutil.copyfile(image_path, tmp)
+    link_or_copy(image_path, p["image"])
     with atomic_path(p["calib"]) as tmp:
         with open(tmp, "w") as f:
             f.write(calib_text(calib_dict))

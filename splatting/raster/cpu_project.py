@@ -77,8 +77,9 @@ class _Preprocess(torch.autograd.Function):
         return gm.to(dm), gq.to(dq), gs.to(ds), gf.to(df), None, None, None, None, None
 
 
-def preprocess(means, quats, scales, sh, camera, sh_degree=None, near=0.01, eps2d=EPS2D):
-    """See the module docstring. CPU tensors, float32 or float64 (means' dtype)."""
+def _checked(means, quats, scales, sh, sh_degree, eps2d):
+    """The inputs' checks shared by preprocess and preprocess_cameras: returns the number of SH
+    bases, eps2d (a float or a per-Gaussian tensor) and whether it is per-Gaussian."""
     if any(t.device.type != "cpu" for t in (means, quats, scales, sh)):
         raise ValueError("the tiled rasterizer runs on CPU tensors; use backend='torch' for "
                          f"{means.device.type} tensors")
@@ -91,6 +92,12 @@ def preprocess(means, quats, scales, sh, camera, sh_degree=None, near=0.01, eps2
         raise ValueError(f"sh_degree {degree} needs {nb} SH coefficients (have {k}, degrees 0-3)")
     eps2d = check_eps2d(eps2d, means.shape[0], "preprocess")
     per = torch.is_tensor(eps2d)
+    return nb, eps2d, per
+
+
+def preprocess(means, quats, scales, sh, camera, sh_degree=None, near=0.01, eps2d=EPS2D):
+    """See the module docstring. CPU tensors, float32 or float64 (means' dtype)."""
+    nb, eps2d, per = _checked(means, quats, scales, sh, sh_degree, eps2d)
     return _Preprocess.apply(means, quats, scales, sh, camera, nb, float(near), 0.0 if per else eps2d,
                              eps2d if per else None)
 
@@ -101,20 +108,9 @@ def preprocess_cameras(means, quats, scales, sh, cameras, sh_degree=None, near=0
     outputs with a leading camera axis: means2d (C,N,2), conics (C,N,3), depths (C,N), colors (C,N,3),
     radii (C,N), boxes (C,N,4), visible (C,N); camera c's are bit-identical to preprocess(..., cameras[c]).
     """
-    if any(t.device.type != "cpu" for t in (means, quats, scales, sh)):
-        raise ValueError("the tiled rasterizer runs on CPU tensors; use backend='torch' for "
-                         f"{means.device.type} tensors")
-    if means.dtype not in _SUFFIX:
-        raise TypeError(f"tiled rasterizer: float32 or float64 tensors, got {means.dtype}")
     if len({(c.width, c.height) for c in cameras}) != 1:
         raise ValueError("preprocess_cameras: cameras of one size")
-    k = sh.shape[1]
-    degree = int(round(k ** 0.5)) - 1 if sh_degree is None else int(sh_degree)
-    nb = (degree + 1) ** 2
-    if not 0 <= degree <= 3 or nb > k:
-        raise ValueError(f"sh_degree {degree} needs {nb} SH coefficients (have {k}, degrees 0-3)")
-    eps2d = check_eps2d(eps2d, means.shape[0], "preprocess")
-    per = torch.is_tensor(eps2d)
+    nb, eps2d, per = _checked(means, quats, scales, sh, sh_degree, eps2d)
     dt = means.dtype
     C, n = len(cameras), means.shape[0]
     args = [_camera_args(c, float(near), 0.0 if per else eps2d) for c in cameras]

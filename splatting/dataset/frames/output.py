@@ -41,11 +41,7 @@ def write_sample(out_dir, index, image_path, objects, fx):
     p = paths(out_dir, index)
     for k in SUBDIRS:
         os.makedirs(os.path.dirname(p[k]), exist_ok=True)
-    with atomic_path(p["image_2"]) as tmp:
-        try:
-            os.link(image_path, tmp)
-        except OSError:
-            shutil.copyfile(image_path, tmp)
+    kitti.link_or_copy(image_path, p["image_2"])
     src = kitti_frame.frame_paths(fx["folder"], fx["frame_id"])
     _copy(src["calib"], p["calib"])
     if os.path.isfile(src["plane"]):

@@ -11,11 +11,10 @@ Images in the kitti and mot trees are hard links to DIR/images (copies where lin
 """
 import json
 import os
-import shutil
 
 from cyclist_formats.atomic import atomic_path, write_json
 from splatting.dataset import png
-from splatting.dataset.kitti import calib_text
+from splatting.dataset.kitti import calib_text, link_or_copy
 from splatting.dataset.sequences import writers
 from splatting.dataset.sequences.render import make_frame, sequence_of
 
@@ -54,16 +53,6 @@ def _text(path, text):
             f.write(text)
 
 
-def _link(src, dst):
-    os.makedirs(os.path.dirname(dst), exist_ok=True)
-    with atomic_path(dst) as tmp:
-        os.remove(tmp)
-        try:
-            os.link(src, tmp)
-        except OSError:
-            shutil.copyfile(src, tmp)
-
-
 def assemble(out_dir, cfg, info, cats):
     """Every sequence's text files and the COCO-video annotations.json (atomic); returns its path."""
     n, fps = int(cfg["sequence"]["length"]), float(cfg["sequence"]["fps"])
@@ -83,9 +72,9 @@ def assemble(out_dir, cfg, info, cats):
             mot.append((f, doc["mot"]))
             sig.append((f, doc.get("signal", [])))
             if "kitti" in fm:
-                _link(img, os.path.join(out_dir, "kitti_tracking", "training", "image_02", f"{s:04d}", f"{f:06d}.png"))
+                link_or_copy(img, os.path.join(out_dir, "kitti_tracking", "training", "image_02", f"{s:04d}", f"{f:06d}.png"))
             if "mot" in fm:
-                _link(img, os.path.join(out_dir, "mot", f"{s:04d}", "img1", f"{f + 1:06d}.png"))
+                link_or_copy(img, os.path.join(out_dir, "mot", f"{s:04d}", "img1", f"{f + 1:06d}.png"))
             if f == 0:
                 calib, W, H = doc["calib"], im["width"], im["height"]
         videos.append({"id": s + 1, "name": f"{s:04d}", "width": W, "height": H, "length": n, "fps": fps})
