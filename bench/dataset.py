@@ -94,7 +94,7 @@ def measure(cfg, workers, scratch, tag):
 def gaussian_count(cfg):
     from splatting.dataset.generate import Assets
     a = Assets(cfg)
-    c = a.cyclist(cfg["bikes"][0], cfg["riders"][0])
+    c = a.cyclist(cfg.bikes[0], cfg.riders[0])
     return len(c.ids)
 
 

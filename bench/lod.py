@@ -81,7 +81,7 @@ def quality_table(cfg, bike, rider, compensate=None, heights=HEIGHTS_PX, keeps=K
     compensate = lod.DEFAULT_COMPENSATE if compensate is None else compensate
     assets = Assets(cfg)
     cyc = assets.cyclist(bike, rider)
-    spec = camera_presets.resolve(dict(cfg["camera"], preset="nuscenes", scale=1.0))
+    spec = camera_presets.resolve(cfg.camera.model_copy(update={"preset": "nuscenes", "scale": 1.0}))
     cam = camera_presets.street_camera(spec)
     base = [90.0, 5.0, 0.0, 180.0, 0.0, 0.0, 0.0, 10.0]  # side-on: crossing the road towards image-right
     f0 = cyc.pose(torch.tensor(base, dtype=torch.float64))[0]
@@ -213,7 +213,7 @@ def run(results, out_dir, images=6, chart_png=None, log=print):
     cfg, desc = bench_config(scratch, out_dir, images + 1)
     rcfg = resolve_assets(validate(cfg))
     log(f"lod bench: bikes: {desc}")
-    rows = quality_table(rcfg, rcfg["bikes"][0], RIDER, log=log)
+    rows = quality_table(rcfg, rcfg.bikes[0], RIDER, log=log)
     chosen = choose_levels(rows)
     drop = drop_at(rows, DEFAULT_LEVELS)
     t_off, t_on, ratio = speed(cfg, images, log=log)

@@ -89,7 +89,7 @@ def run(results, out_dir=None, bikes_root=None, riders_root=None, frames=2, expo
         cfg = resolve_assets(cfg)
         assets = Assets(cfg)
         sd = drawn(cfg, 0, assets)
-        n_len = cfg["sequence"]["length"]
+        n_len = cfg.sequence.length
         rows = {n: [] for n in SUBFRAMES}
         blurred_sample(cfg, 1, assets, sd, 1, e, 1)  # assets loaded outside the timing
         for f in [int(x) for x in np.linspace(3, n_len - 4, frames)]:

@@ -71,7 +71,7 @@ def cpu_per_frame(cfg, n):
     try:
         write_frame(cfg, 0, scratch, assets)
         rows = []
-        length = cfg["sequence"]["length"]
+        length = cfg.sequence.length
         for i in sorted({int(round(x)) for x in np.linspace(1, length - 1, n)}):  # spread over the sequence
             c = time.process_time()
             write_frame(cfg, i, scratch, assets)
@@ -94,7 +94,7 @@ def plausibility(bikes_root, bikes, n_seq=25):
     cfg = validate({"mode": "street", "camera": {"preset": "nuscenes"}, "bikes": bikes, "bikes_root": bikes_root,
                     "riders": [RIDER], "street": {"cyclists": [4, 4], "parked_bikes": [0, 0]},
                     "sequence": {"enabled": True, "length": 1001, "fps": fps}})
-    a_max = cfg["sequence"]["max_lateral_accel_mps2"]
+    a_max = cfg.sequence.max_lateral_accel_mps2
     worst = {"max_lateral_accel_mps2": 0.0, "lean_error_deg": 0.0, "slip_mps": 0.0, "cadence_error_rad_s": 0.0}
     count = 0
     for seq in range(n_seq):

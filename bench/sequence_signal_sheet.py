@@ -23,6 +23,7 @@ from splatting.cyclist.render import over
 from splatting.cyclist.scene_render import render_scene, slot_boxes, union
 from splatting.dataset import camera_presets
 from splatting.dataset.config import resolve_assets, validate
+from splatting.dataset.config_models import Camera
 from splatting.dataset.generate import Assets
 from splatting.dataset.sequences.draw import draw_sequence
 from splatting.dataset.sequences.render import make_frame
@@ -39,7 +40,7 @@ def signal_row(cfg, bike, rider):
     pose = [60.0, 0.0, 0.0, -70.0, 0.0, 0.4, 0.0, 4.5]  # riding away, seen from behind-left
     P = torch.tensor([pose] * len(SIGNALS), dtype=torch.float64)
     frames = cyc.pose(P, signals=list(SIGNALS))
-    spec = camera_presets.resolve({"preset": "nuscenes", "pitch_deg": 0.0, "roll_deg": 0.0, "scale": 1.0})
+    spec = camera_presets.resolve(Camera(preset="nuscenes", pitch_deg=0.0, roll_deg=0.0, scale=1.0))
     cam = camera_presets.street_camera(spec)
     renders, boxes = [], []
     for fr in frames:
@@ -59,7 +60,7 @@ def signal_row(cfg, bike, rider):
 def find_signalling_frame(cfg, sequences=60):
     """(sequence, frame, track) of a signalling cyclist 4-20 m ahead and in view, in the middle of
     its signal, whose screen motion (of a point 1.2 m above its origin, over one frame) is largest."""
-    spec = camera_presets.resolve(cfg["camera"])
+    spec = camera_presets.resolve(cfg.camera)
     best = None
     for s in range(sequences):
         sd = draw_sequence(cfg, s)
@@ -86,9 +87,10 @@ def find_signalling_frame(cfg, sequences=60):
 
 def sequence_row(cfg, exposure, subframes):
     s, f, k = find_signalling_frame(cfg)
-    n = cfg["sequence"]["length"]
+    n = cfg.sequence.length
     still = make_frame(cfg, s * n + f, Assets(cfg))
-    cfg_b = dict(cfg, sequence=dict(cfg["sequence"], exposure_s=exposure, blur_subframes=subframes))
+    cfg_b = cfg.model_copy(update={"sequence": cfg.sequence.model_copy(update={"exposure_s": exposure,
+                                                                               "blur_subframes": subframes})})
     blurred = make_frame(cfg_b, s * n + f, Assets(cfg_b))
     ann = [a for a in still[2] if a["instance"] == k + 1 and a["category_id"] in (3, 4)][0]
     x, y, w, h = ann["bbox_amodal"]

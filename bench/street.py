@@ -94,7 +94,7 @@ def split_timings(cfg, n):
     rows = []
     scratch = tempfile.mkdtemp(prefix="bench_street_split_")
     try:
-        G.write_sample(cfg, cfg["count"] - 1, scratch, assets)  # load assets outside the timing
+        G.write_sample(cfg, cfg.count - 1, scratch, assets)  # load assets outside the timing
         for i in range(n):
             spent.update(pose=0.0, render=0.0)
             t, c = time.perf_counter(), time.process_time()

@@ -193,7 +193,7 @@ def fixed_scene(monkeypatch, instances, kind="solid"):
     inst = [{"kind": "cyclist" if r else "parked", "bike": "city_t", "rider": r,
              "pose": [30.0, 0.0, 0.0, yaw, 0.0, x, 0.0, z]} for r, yaw, x, z in instances]
     monkeypatch.setattr(generate, "draw", lambda cfg, index: {
-        "instances": inst, "dropped": 0, "camera": {"preset": cfg["camera"]["preset"]},
+        "instances": inst, "dropped": 0, "camera": {"preset": cfg.camera.preset},
         "background": {"kind": kind, "seed": 1}})
 
 

@@ -77,12 +77,12 @@ def test_gain_scales_the_evaluated_colour_exactly():
 def test_looks_are_a_function_of_config_and_index(setup):
     _, cfg, _, _ = setup
     from splatting.cyclist.appearance import draw_look
-    a, ga = draw_look(cfg, 3, 7, 1)
-    b, gb = draw_look(cfg, 3, 7, 1)
+    a, ga = draw_look(cfg.appearance, 3, 7, 1)
+    b, gb = draw_look(cfg.appearance, 3, 7, 1)
     assert all((a[k] is None and b[k] is None) or np.array_equal(a[k], b[k]) for k in a) and np.array_equal(ga, gb)
-    others = [draw_look(cfg, 3, 8, 1), draw_look(cfg, 3, 7, 2), draw_look(cfg, 4, 7, 1)]
+    others = [draw_look(cfg.appearance, 3, 8, 1), draw_look(cfg.appearance, 3, 7, 2), draw_look(cfg.appearance, 4, 7, 1)]
     assert all(not np.array_equal(g, ga) for _, g in others)
-    lo, hi = cfg["appearance"]["brightness"]
+    lo, hi = cfg.appearance.brightness
     assert lo * 0.9 <= ga.mean() <= hi * 1.1
 
 

@@ -78,7 +78,7 @@ def test_a_safe_name_is_accepted():
     from splatting.dataset.config import DEFAULTS, validate
 
     for name in ("cyclist", "bike-only", "demo_street", "v1.2"):
-        assert validate(dict(DEFAULTS, name=name))["name"] == name
+        assert validate(dict(DEFAULTS, name=name)).name == name
 
 
 def test_the_output_root_check_resolves_links(tmp_path):
@@ -156,8 +156,8 @@ def test_bikes_and_riders_on_the_command_line_override_the_config(tmp_path, caps
 
     cfg = load_config(None, "cyclist", {"bikes": ["city_00", "road_01"], "riders": ["m_adult_average_185"],
                                         "riders_root": "somewhere"})
-    assert cfg["bikes"] == ["city_00", "road_01"] and cfg["riders"] == ["m_adult_average_185"]
-    assert cfg["riders_root"] == "somewhere"
+    assert cfg.bikes == ["city_00", "road_01"] and cfg.riders == ["m_adult_average_185"]
+    assert cfg.riders_root == "somewhere"
     shutil.copytree(os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "blend_assets",
                                  "stand_in_bike"), tmp_path / "bikes")
     base = ["dataset", "--preset", "cyclist", "--bikes-root", "bikes", "--out", "d", "--count", "1"]

@@ -225,8 +225,8 @@ def test_presets_are_valid():
     a = load_config(preset="bike-only")
     b = load_config(preset="cyclist")
     c = load_config(preset="street")
-    assert a["mode"] == "bike-only" and b["mode"] == "cyclist" and c["mode"] == "street"
-    assert a["camera"]["preset"] == b["camera"]["preset"] == "ring" and c["camera"]["preset"] == "nuscenes"
+    assert a.mode == "bike-only" and b.mode == "cyclist" and c.mode == "street"
+    assert a.camera.preset == b.camera.preset == "ring" and c.camera.preset == "nuscenes"
 
 
 def test_other_config_in_same_folder_is_refused(built, tmp_path):

@@ -39,7 +39,7 @@ def _resolved():
     out["street_custom"] = config.validate({
         "mode": "street", "camera": {"preset": "custom", "width": 640, "height": 480, "fx": 500, "height_m": 1.2},
         "backgrounds": {"kinds": ["images"], "images_dir": "d"}})
-    return out
+    return {k: v.model_dump() for k, v in out.items()}
 
 
 def test_validated_configs_are_those_of_the_hand_written_checks():
@@ -58,8 +58,8 @@ def test_pose_keys_are_the_contracts_pose_fields():
 
 def test_values_keep_the_type_they_were_written_with():
     cfg = config.validate({"street": {"road_heading_deg": 0, "distance_m": [3, 60.5]}, "views": {"centre_jitter_m": 1}})
-    assert type(cfg["street"]["road_heading_deg"]) is int and cfg["street"]["distance_m"] == [3, 60.5]
-    assert type(cfg["street"]["distance_m"][0]) is int and type(cfg["views"]["centre_jitter_m"]) is int
+    assert type(cfg.street.road_heading_deg) is int and cfg.street.distance_m == [3, 60.5]
+    assert type(cfg.street.distance_m[0]) is int and type(cfg.views.centre_jitter_m) is int
 
 
 @pytest.mark.parametrize("patch, field, words", [
@@ -137,6 +137,6 @@ def test_the_dataset_command_overrides_through_the_models(tmp_path):
     add_arguments(p)
     a = p.parse_args(["--preset", "cyclist", "--count", "2", "--bikes", "b1"])
     cfg = config.load_config(preset="cyclist", overrides=overrides_of(a, CLI_OVERRIDES))
-    assert cfg["count"] == 2 and cfg["bikes"] == ["b1"] and cfg["riders"] == "all" and cfg["seed"] == 0
+    assert cfg.count == 2 and cfg.bikes == ["b1"] and cfg.riders == "all" and cfg.seed == 0
     with pytest.raises(UserError, match="config field 'count'"):
         config.load_config(preset="cyclist", overrides={"count": 0})

@@ -100,8 +100,8 @@ def test_relit_refuses_assets_without_relight_channels(assets, tmp_path):
 
 def _sample(cfg, index):
     from splatting.dataset.config import resolve_assets, validate
-    from splatting.dataset.generate import Assets, config_record, make_sample
-    c = config_record(resolve_assets(validate(cfg)))
+    from splatting.dataset.generate import Assets, make_sample
+    c = resolve_assets(validate(cfg))  # what the command's workers receive
     return make_sample(c, index, Assets(c))
 
 

@@ -231,7 +231,7 @@ def test_datasets_use_trained_usable_assets_only(tmp_path):
     cfg = validate(small_config(str(root / "bikes"), bikes=["city_a"], mode="bike-only", synthetic_assets="auto"))
     with pytest.raises(UserError, match="library build --out .* --bikes city_a"):
         check_dataset_assets(cfg)
-    check_dataset_assets(dict(cfg, synthetic_assets="always"))  # the explicit opt-in to stand-ins
+    check_dataset_assets(cfg.model_copy(update={"synthetic_assets": "always"}))  # the explicit opt-in to stand-ins
     _trained(d)
     check_dataset_assets(cfg)  # trained, no manifest: fine
     _manifest(root, gt_iou=0.5)  # library.json beside bikes/ marks city_a below the floor

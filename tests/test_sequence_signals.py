@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from helpers import CITY_KEYPOINTS, street_config, write_test_bike
+from splatting.dataset.config_models import Sequence
 
 
 @pytest.fixture(scope="module")
@@ -103,12 +104,12 @@ def turn_traj(v=5.0, s0=10.0, fps=10.0, n=60):
 def test_signal_frames_lead_the_turn():
     from splatting.dataset.sequences.draw import signal_frames
     tr, speed, bumps = turn_traj()
-    sq = {"signal_share": 1.0, "signal_lead_s": [1.5, 1.5], "one_handed_share": 0.0}
+    sq = Sequence(signal_share=1.0, signal_lead_s=[1.5, 1.5], one_handed_share=0.0)
     sig = signal_frames(np.random.default_rng(1), "turn_right", tr, speed, bumps, sq, 5.9)
     # the turn starts at s0 = 10 m, t = 2.0 s at 5 m/s: right arm out from 0.5 s until 1.9 s (frames 5..19)
     assert sig == ["none"] * 5 + ["right"] * 15 + ["none"] * 40
     assert np.all(np.abs(tr["kappa"][:20]) < 1e-9) and abs(tr["kappa"][21]) > 1e-4  # the labelled frames precede the turn
-    assert signal_frames(np.random.default_rng(1), "turn_right", tr, speed, bumps, dict(sq, signal_share=0.0), 5.9) == ["none"] * 60
+    assert signal_frames(np.random.default_rng(1), "turn_right", tr, speed, bumps, sq.model_copy(update={"signal_share": 0.0}), 5.9) == ["none"] * 60
     stop = {"kind": "stop", "v": 5.0, "t0": 3.0, "ramp": 1.5}
     sig = signal_frames(np.random.default_rng(1), "stop", tr, stop, [], sq, 5.9)
     assert sig == ["none"] * 15 + ["stop"] * 15 + ["none"] * 30
@@ -117,13 +118,13 @@ def test_signal_frames_lead_the_turn():
 def test_one_handed_span_on_straight_rides():
     from splatting.dataset.sequences.draw import signal_frames
     tr, speed, _ = turn_traj()
-    sq = {"signal_share": 1.0, "signal_lead_s": [1.0, 3.0], "one_handed_share": 1.0}
+    sq = Sequence(signal_share=1.0, signal_lead_s=[1.0, 3.0], one_handed_share=1.0)
     for seed in range(5):
         sig = np.array(signal_frames(np.random.default_rng(seed), "straight", tr, speed, [], sq, 5.9))
         on = np.flatnonzero(sig != "none")
         assert set(sig[on]) == {"one_handed"} and np.all(np.diff(on) == 1)
         assert 0.9 <= len(on) / 10.0 <= 4.1  # 1-4 s at 10 fps
-    assert set(signal_frames(np.random.default_rng(0), "straight", tr, speed, [], dict(sq, one_handed_share=0.0), 5.9)) == {"none"}
+    assert set(signal_frames(np.random.default_rng(0), "straight", tr, speed, [], sq.model_copy(update={"one_handed_share": 0.0}), 5.9)) == {"none"}
 
 
 def test_subframe_poses_follow_the_trajectory(bikes):
@@ -166,11 +167,11 @@ def test_drawn_turns_are_signalled_before_they_start_and_deterministic(bikes):
                 assert np.all(np.diff(on) == 1) and np.all(np.abs(k[on]) < 1e-6)  # one span, before the turn
                 turning = np.flatnonzero(np.abs(k) > 1e-6)
                 assert on[-1] + 1 >= turning[0] - 1  # until the turn starts (the curvature leaves 0 within a frame)
-                lo, hi = cfg["sequence"]["signal_lead_s"]
+                lo, hi = cfg.sequence.signal_lead_s
                 assert t[on[-1]] - t[on[0]] <= hi + 1e-9
     assert seen >= 4
     # with signal_share 0 no cyclist signals, and every other draw is unchanged
-    cfg0 = validate(dict(cfg, sequence=dict(cfg["sequence"], signal_share=0.0, one_handed_share=0.0)))
+    cfg0 = validate(dict(cfg.model_dump(), sequence=dict(cfg.sequence.model_dump(), signal_share=0.0, one_handed_share=0.0)))
     a, b = draw_sequence(cfg, 1), draw_sequence(cfg0, 1)
     assert all(set(i["signal"]) == {"none"} for i in b["instances"] if "signal" in i)
     assert all(np.array_equal(x["poses"], y["poses"]) for x, y in zip(a["instances"], b["instances"]))

@@ -310,8 +310,8 @@ def test_preset_and_command_line(tmp_path):
     from helpers import ROOT
     from splatting.dataset.config import load_config
     c = load_config(preset="street-sequence")
-    assert c["sequence"]["enabled"] and (c["sequence"]["length"], c["sequence"]["fps"]) == (100, 10)
-    assert c["labels"]["formats"] == ["coco", "kitti", "mot"] and c["camera"]["preset"] == "nuscenes"
+    assert c.sequence.enabled and (c.sequence.length, c.sequence.fps) == (100, 10)
+    assert c.labels.formats == ["coco", "kitti", "mot"] and c.camera.preset == "nuscenes"
     # MOT on a still set: one line naming the field, non-zero, nothing written
     out = tmp_path / "o"
     r = subprocess.run([sys.executable, "-m", "splatting", "dataset", "--preset", "street", "--format", "mot",

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from helpers import RIDER, fixed_scene, street_config, write_test_bike  # noqa: F401
+from splatting.dataset.config_models import Camera
 
 KITTI_K = (721.5377, 609.5593, 172.854)
 
@@ -37,7 +38,7 @@ def test_kitti_projection_matches_a_hand_computation():
     import torch
     from splatting.cyclist.render import project_points
     from splatting.dataset import camera_presets
-    spec = camera_presets.resolve({"preset": "kitti", "pitch_deg": 0.0, "roll_deg": 0.0, "scale": 1.0})
+    spec = camera_presets.resolve(Camera(preset="kitti", pitch_deg=0.0, roll_deg=0.0, scale=1.0))
     assert (spec["width"], spec["height"]) == (1242, 375)
     f, cx, cy = KITTI_K
     X = np.array([[-2.0, 0.5, 10.0]])  # 2 m to the camera's right (world -X), 1.15 m below it, 10 m ahead
@@ -65,17 +66,17 @@ def test_kitti_projection_matches_a_hand_computation():
 def test_presets_pitch_and_custom_camera():
     from splatting.dataset import camera_presets
     base = {"pitch_deg": 0.0, "roll_deg": 0.0, "scale": 1.0}
-    d = camera_presets.resolve(dict(base, preset="dashcam"))
+    d = camera_presets.resolve(Camera(**base, preset="dashcam"))
     assert d["fx"] == pytest.approx(960.0) and (d["cx"], d["cy"]) == (960.0, 540.0)  # 90 deg HFOV
-    n = camera_presets.resolve(dict(base, preset="nuscenes"))
-    w = camera_presets.resolve(dict(base, preset="waymo"))
+    n = camera_presets.resolve(Camera(**base, preset="nuscenes"))
+    w = camera_presets.resolve(Camera(**base, preset="waymo"))
     assert (n["width"], n["height"], w["width"], w["height"]) == (1600, 900, 1920, 1280)
     # pitched down by atan(h / d): the road point d ahead lands on the principal point
-    p = camera_presets.resolve(dict(base, preset="kitti", pitch_deg=float(np.degrees(np.arctan2(1.65, 20.0)))))
+    p = camera_presets.resolve(Camera(**dict(base, preset="kitti", pitch_deg=float(np.degrees(np.arctan2(1.65, 20.0))))))
     uv, _ = camera_presets.project([[0.0, 0.0, 20.0]], p)
     assert np.allclose(uv[0], [p["cx"], p["cy"]], atol=1e-6)
-    c = camera_presets.resolve(dict(base, preset="custom", width=640, height=480, fx=500.0, cx=300.0, cy=200.0,
-                                    height_m=1.2, scale=0.5))
+    c = camera_presets.resolve(Camera(**dict(base, preset="custom", width=640, height=480, fx=500.0, cx=300.0, cy=200.0,
+                                             height_m=1.2, scale=0.5)))
     assert (c["width"], c["height"], c["fx"], c["fy"], c["cx"], c["cy"]) == (320, 240, 250.0, 250.0, 150.0, 100.0)
 
 
@@ -135,7 +136,7 @@ def test_near_cyclist_hides_far_one(bikes, assets_for, monkeypatch):
 def test_truncation_at_the_border(bikes, assets_for, monkeypatch):
     from splatting.dataset import camera_presets
     cfg = street_config(bikes)
-    spec = camera_presets.resolve(dict(cfg["camera"], pitch_deg=0.0, roll_deg=0.0))
+    spec = camera_presets.resolve(Camera(**dict(cfg["camera"], pitch_deg=0.0, roll_deg=0.0)))  # cfg: the raw YAML mapping
     z = 8.0
     x = -(0.0 - spec["cx"]) * z / spec["fx"]  # crank axle on the left image border
     fixed_scene(monkeypatch, [(RIDER, 180.0, x, z)])

@@ -108,17 +108,18 @@ def apply_gain(sh, gain):
     return out
 
 
-def draw_look(cfg, seed, index, instance):
-    """The looks of one instance: {region: target rgb or None (kept)} and the gain (3,)."""
-    a = cfg["appearance"]
+def draw_look(a, seed, index, instance):
+    """The looks of one instance under the dataset config's Appearance block a (its keep_share,
+    saturation, value, regions, brightness, white_balance): {region: target rgb or None (kept)} and
+    the gain (3,)."""
     rng = np.random.default_rng([int(seed), int(index), int(instance), TAG])
     look = {}
     for region in RECOLOUR:  # every region draws the same numbers whether it is kept or not
-        keep = rng.uniform() < a["keep_share"]
-        h, s, v = rng.uniform(), rng.uniform(*a["saturation"]), rng.uniform(*a["value"])
-        look[region] = None if keep or region not in a["regions"] else np.array(colorsys.hsv_to_rgb(h, s, v))
-    b = rng.uniform(*a["brightness"])
-    wb = rng.uniform(-a["white_balance"], a["white_balance"], 3)
+        keep = rng.uniform() < a.keep_share
+        h, s, v = rng.uniform(), rng.uniform(*a.saturation), rng.uniform(*a.value)
+        look[region] = None if keep or region not in a.regions else np.array(colorsys.hsv_to_rgb(h, s, v))
+    b = rng.uniform(*a.brightness)
+    wb = rng.uniform(-a.white_balance, a.white_balance, 3)
     gain = b * (1.0 + wb) / (1.0 + wb).mean()  # white balance tints, brightness sets the level
     return look, gain
 

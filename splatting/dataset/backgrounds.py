@@ -126,12 +126,12 @@ def euler_matrix(rotation_deg):
 
 
 def load_scene(path, transform):
-    """The 3DGS scene .ply in the street world (Gaussians)."""
+    """The 3DGS scene .ply in the street world (Gaussians); transform: the config's SceneTransform."""
     g = read_ply(path)
-    s = float(transform["scale"])
+    s = float(transform.scale)
     H = np.eye(4)
-    H[:3, :3] = euler_matrix(transform["rotation_deg"])
-    H[:3, 3] = transform["translation_m"]
+    H[:3, :3] = euler_matrix(transform.rotation_deg)
+    H[:3, 3] = transform.translation_m
     if s != 1.0:
         g = replace(g, means=g.means * s, log_scales=g.log_scales + math.log(s))
     return transform_gaussians(g, H)

@@ -16,7 +16,7 @@ from cyclist_formats.atomic import write_json
 from cyclist_formats.errors import UserError
 from cyclist_formats.text_files import read_json
 from cyclist_formats.typed_config import add_model_arguments, overrides_of
-from splatting.dataset.config_models import CLI_OVERRIDES, DatasetConfig
+from splatting.dataset.config_models import CLI_OVERRIDES, DatasetConfig, require_config
 from splatting.library.ray_address import check_address
 
 # The stage's modules are imported inside the functions below, not at the top: they load torch
@@ -67,32 +67,35 @@ def _work(index):
 
 
 def _sequences(cfg):
-    return bool((cfg.get("sequence") or {}).get("enabled"))
+    return cfg.sequence.enabled
 
 
 def generate(cfg, out_dir, workers=1, log=print, progress=True, shard=None, engine="local", address=None):
     """Make (or finish) the dataset in out_dir; returns {"annotations", "generated", "skipped", "wall_s"}.
 
-    shard (k, n): only indices = k mod n, and no merge (annotations None).  engine "ray": the
+    cfg: the validated DatasetConfig (config.load_config / validate); a plain dict is refused.  Its
+    record (generate.config_record, made here once) is written as config.json and is the key a
+    resumed run must match.  shard (k, n): only indices = k mod n, and no merge (annotations None).  engine "ray": the
     samples as Ray tasks (splatting.library.dataset_ray), merged here at the end."""
     from splatting.dataset.config import resolve_assets
     from splatting.dataset.generate import config_record, sample_done
     from splatting.dataset.merge import merge_dataset
 
-    cfg = config_record(resolve_assets(cfg))
+    cfg = resolve_assets(require_config(cfg, "dataset generate"))
+    record = config_record(cfg)
     os.makedirs(out_dir, exist_ok=True)
     cpath = os.path.join(out_dir, "config.json")
     if os.path.isfile(cpath):
         old = read_json(cpath, "dataset config record")
         if not isinstance(old, dict):
             raise UserError(f"{cpath} is not a dataset config record; use another --out or delete it")
-        if old != cfg:
-            diff = sorted(k for k in set(old) | set(cfg) if old.get(k) != cfg.get(k))
+        if old != record:
+            diff = sorted(k for k in set(old) | set(record) if old.get(k) != record.get(k))
             raise UserError(f"{out_dir} holds a dataset made with a different config (fields {', '.join(diff)} "
                             f"differ); use another --out or delete it")
     else:
-        write_json(cpath, cfg)
-    total, done = cfg["count"], sample_done
+        write_json(cpath, record)
+    total, done = cfg.count, sample_done
     if _sequences(cfg):  # the work items are frames: sequence s, frame f is index s * length + f
         from splatting.dataset.sequences.output import frame_done as done, total as frames_total
         total = frames_total(cfg)
@@ -163,13 +166,13 @@ def run(args):
     if args.camera:
         nested["camera"] = {"preset": args.camera}
     cfg = load_config(args.config, args.preset, overrides_of(args, CLI_OVERRIDES), nested)
-    if args.frames is not None and cfg["mode"] != "frames":
-        raise UserError(f"--frames goes with mode: frames (e.g. --preset kitti-insert); this config's mode is {cfg['mode']}")
-    if cfg["sequence"]["enabled"] and args.engine == "ray":
+    if args.frames is not None and cfg.mode != "frames":
+        raise UserError(f"--frames goes with mode: frames (e.g. --preset kitti-insert); this config's mode is {cfg.mode}")
+    if cfg.sequence.enabled and args.engine == "ray":
         raise UserError("sequences run with the local engine (--workers) or --shard, not --engine ray")
-    checks.image_size("config field 'image_size'", cfg["image_size"])
-    checks.count("config field 'count'", cfg["count"])
-    out = args.out or checks.inside(os.path.join("out", "datasets"), os.path.join("out", "datasets", cfg["name"]),
+    checks.image_size("config field 'image_size'", cfg.image_size)
+    checks.count("config field 'count'", cfg.count)
+    out = args.out or checks.inside(os.path.join("out", "datasets"), os.path.join("out", "datasets", cfg.name),
                                     "the default output folder")
     checks.output_dir("out", out)
     check_dataset_assets(cfg, allow_low_quality=args.allow_low_quality)  # trained assets only, unless opted out
@@ -180,8 +183,8 @@ def run(args):
         print(f"dataset: shard {shard[0]}/{shard[1]} of {out} done ({r['generated']} generated, {r['skipped']} resumed, "
               f"{r['wall_s']:.1f} s); when every shard is done: python -m splatting dataset merge --out {out}")
         return
-    what = (f"{cfg['count']} sequences of {cfg['sequence']['length']} frames" if cfg["sequence"]["enabled"]
-            else f"{cfg['count']} images")
+    what = (f"{cfg.count} sequences of {cfg.sequence.length} frames" if cfg.sequence.enabled
+            else f"{cfg.count} images")
     print(f"dataset: {what} in {out} ({r['generated']} generated, {r['skipped']} resumed, "
           f"{r['wall_s']:.1f} s); annotations: {r['annotations']}")
 
@@ -217,7 +220,7 @@ class Merge:
 
         path = merge_dataset(args.out)
         cfg = read_config(args.out)
-        print(f"dataset merge: {cfg['count']} samples -> {path}")
+        print(f"dataset merge: {cfg.count} samples -> {path}")
         return 0
 
 

@@ -2,9 +2,11 @@
 
 This is the one place the config's fields, defaults and limits are written (docs/cyclists_and_datasets.md
 lists them).  `splatting.dataset.config.load_config` validates a YAML file against DatasetConfig and
-passes on `model_dump()`: a plain dict with the fields in declaration order, values as written (so
-the config.json stored beside a dataset keeps its bytes).  Checks that span several fields (a street
-camera for street mode, distinct category names...) are in DatasetConfig's model validator.
+the generator receives that DatasetConfig (and reads `cfg.street.distance_m`, never a dict).  Values
+keep the type they were written with, so `generate.config_record(cfg)` -- the one place the model
+becomes a dict again -- stores the config.json beside a dataset with its bytes unchanged.  Checks that
+span several fields (a street camera for street mode, distinct category names...) are in
+DatasetConfig's model validator.
 
 Adding a block: write a `class MyBlock(Block)` with its fields, then one field
 `my_block: MyBlock = Field(default_factory=MyBlock, description=...)` in DatasetConfig; a new block
@@ -65,25 +67,24 @@ CAMERA_NAMES = (RING, *CAMERA_PRESETS, "custom")
 CAMERA_DEFAULTS = defaults_of(Camera)
 
 
-def resolve_camera(spec):
-    """The config's `camera` mapping (its fields checked one by one by Camera) -> a complete
-    driving-camera spec (width, height, fx, fy, cx, cy, height_m, pitch_deg, roll_deg), or None for
-    the ring.  The rules across the camera's fields are here; errors name the field."""
+def resolve_camera(camera):
+    """The config's Camera block -> a complete driving-camera spec (a dict: width, height, fx, fy,
+    cx, cy, height_m, pitch_deg, roll_deg, preset), or None for the ring.  The rules across the
+    camera's fields are here; errors name the field."""
     def err(field, msg):
         return field_error(f"camera.{field}", msg)
     fields = tuple(CAMERA_DEFAULTS)[1:]
-    name = spec.get("preset", RING)
-    if name not in CAMERA_NAMES:
-        raise err("preset", f"expected one of {', '.join(CAMERA_NAMES)}, got {name!r}")
+    name = camera.preset
+    given = {k: getattr(camera, k) for k in fields}
     if name == RING:
-        extra = [k for k in fields if spec.get(k) is not None and spec.get(k) != CAMERA_DEFAULTS[k]]
+        extra = [k for k in fields if given[k] is not None and given[k] != CAMERA_DEFAULTS[k]]
         if extra:
             raise err(extra[0], "the ring camera takes its size from image_size and its view from 'views'; "
                                 "set camera.preset to a driving camera or custom")
         return None
     out = {k: v for k, v in CAMERA_DEFAULTS.items() if v is not None}
     out.update(CAMERA_PRESETS.get(name, {}))
-    out.update({k: spec[k] for k in fields if spec.get(k) is not None})
+    out.update({k: v for k, v in given.items() if v is not None})
     for k in ("width", "height"):
         if out.get(k) is None:
             raise err(k, "expected an integer >= 16, got None (custom cameras need width and height)")
@@ -381,7 +382,7 @@ class DatasetConfig(Block):
     @model_validator(mode="after")
     def _across_fields(self):
         """Checks that span fields; one UserError naming the field (raised as is through pydantic)."""
-        cam = resolve_camera(self.camera.model_dump())
+        cam = resolve_camera(self.camera)
         if self.mode == "street" and cam is None:
             raise field_error("camera.preset", "street mode needs a driving camera (kitti, nuscenes, waymo, dashcam, custom)")
         if self.mode != "street" and cam is not None:
@@ -420,6 +421,15 @@ class DatasetConfig(Block):
                               f"{1.0 / sq.fps:.4g} s), got {sq.exposure_s!r}")
         if sq.blur_subframes % 2 != 1:
             raise field_error("sequence.blur_subframes", f"expected an odd integer within 1..99, got {sq.blur_subframes!r}")
+
+
+def require_config(cfg, who="the dataset generator"):
+    """The generator takes a validated DatasetConfig, not a mapping: a dict here would skip the checks
+    and the defaults (config.validate / load_config make the model, once, where the YAML is read)."""
+    if not isinstance(cfg, DatasetConfig):
+        raise TypeError(f"{who} takes a DatasetConfig (splatting.dataset.config.validate / load_config), "
+                        f"got {type(cfg).__name__}")
+    return cfg
 
 
 # the top-level fields the dataset command overrides with flags of the same name

@@ -21,7 +21,7 @@ from splatting.cyclist.render import keypoint_visibility, orbit_camera, over, pr
 from splatting.cyclist.scene_render import MASK_ALPHA, render_scene, union
 from splatting.dataset import camera_presets, kitti, lighting, png
 from splatting.dataset.backgrounds import contact_shadows, generated, load_scene, photo
-from splatting.dataset.config_models import POSE_KEYS
+from splatting.dataset.config_models import POSE_KEYS, require_config
 from splatting.dataset.frames import contact, output as frames_output
 from splatting.dataset.frames.placement import draw_frame
 from splatting.dataset.frames.sample import FrameSample
@@ -36,7 +36,7 @@ class Assets:
     """Per-process cache of loaded bikes, rider avatars, body keypoint regressors and the 3DGS scene."""
 
     def __init__(self, cfg, log=None):
-        self.cfg, self.log = cfg, log
+        self.cfg, self.log = require_config(cfg, "Assets"), log
         self.bikes, self.avatars, self.cyclists, self.persons = {}, {}, {}, {}
         self._scene = None
         self.lod_orders, self.bodies, self.looks, self.label_prep = {}, {}, {}, {}
@@ -46,20 +46,20 @@ class Assets:
         if key not in self.cyclists:
             c = self.cfg
             if bike not in self.bikes:
-                self.bikes[bike] = load_bike(bike_dir(bike, c["bikes_root"]), c["synthetic_assets"],
-                                             c["synthetic_gaussians_per_part"], log=self.log)
+                self.bikes[bike] = load_bike(bike_dir(bike, c.bikes_root), c.synthetic_assets,
+                                             c.synthetic_gaussians_per_part, log=self.log)
             av = None
             if rider is not None:
                 if rider not in self.avatars:
-                    avatar, body = load_avatar(rider, c["riders_root"], c["synthetic_assets"],
-                                               c["rider_gaussians"], log=self.log)
+                    avatar, body = load_avatar(rider, c.riders_root, c.synthetic_assets,
+                                               c.rider_gaussians, log=self.log)
                     self.bodies[rider] = body
                     # the recorder hands the IK's pose to the COCO-17 mesh keypoints
                     self.avatars[rider] = RecordingAvatar(avatar)
-                    if c["keypoints"]["person"] == "coco17":
+                    if c.keypoints.person == "coco17":
                         self.persons[rider] = PersonKeypoints(body)
                 av = self.avatars[rider]
-            self.cyclists[key] = Cyclist(self.bikes[bike], av, c["ik_iterations"])
+            self.cyclists[key] = Cyclist(self.bikes[bike], av, c.ik_iterations)
         return self.cyclists[key]
 
     def lod_order(self, bike, rider, g, ids):
@@ -107,33 +107,33 @@ class Assets:
 
     def scene(self):
         if self._scene is None:
-            b = self.cfg["backgrounds"]
-            self._scene = load_scene(b["scene_ply"], b["scene_transform"])
+            b = self.cfg.backgrounds
+            self._scene = load_scene(b.scene_ply, b.scene_transform)
         return self._scene
 
 
 def draw(cfg, index):
     """The random choices of sample `index`: instances (asset ids, pose (8,)), camera, background."""
-    rng = np.random.default_rng([cfg["seed"], index])
-    if cfg["mode"] == "street":
-        cam = camera_presets.resolve(cfg["camera"])
+    rng = np.random.default_rng([cfg.seed, index])
+    if cfg.mode == "street":
+        cam = camera_presets.resolve(cfg.camera)
         instances, dropped = draw_street(cfg, rng, cam)
         camera = {"preset": cam["preset"]}
-    elif cfg["mode"] == "frames":  # a KITTI frame: its own camera and image (splatting/dataset/frames)
+    elif cfg.mode == "frames":  # a KITTI frame: its own camera and image (splatting/dataset/frames)
         instances, dropped, camera = draw_frame(cfg, rng, index)
         return {"instances": instances, "dropped": dropped, "camera": camera,
                 "background": {"kind": "frame", "frame": camera["frame"]}}
     else:
-        bike = cfg["bikes"][int(rng.integers(len(cfg["bikes"])))]
-        rider = cfg["riders"][int(rng.integers(len(cfg["riders"])))] if cfg["mode"] == "cyclist" else None
-        pose = [float(rng.uniform(*cfg["pose"][k])) for k in POSE_KEYS]
-        v = cfg["views"]
-        camera = {"preset": "ring", "azimuth_deg": float(rng.uniform(*v["azimuth_deg"])),
-                  "elevation_deg": float(rng.uniform(*v["elevation_deg"])),
-                  "distance_m": float(rng.uniform(*v["distance_m"])),
-                  "jitter": (rng.uniform(-1, 1, 3) * v["centre_jitter_m"]).tolist()}
+        bike = cfg.bikes[int(rng.integers(len(cfg.bikes)))]
+        rider = cfg.riders[int(rng.integers(len(cfg.riders)))] if cfg.mode == "cyclist" else None
+        pose = [float(rng.uniform(*getattr(cfg.pose, k))) for k in POSE_KEYS]
+        v = cfg.views
+        camera = {"preset": "ring", "azimuth_deg": float(rng.uniform(*v.azimuth_deg)),
+                  "elevation_deg": float(rng.uniform(*v.elevation_deg)),
+                  "distance_m": float(rng.uniform(*v.distance_m)),
+                  "jitter": (rng.uniform(-1, 1, 3) * v.centre_jitter_m).tolist()}
         instances, dropped = [{"kind": "cyclist" if rider else "parked", "bike": bike, "rider": rider, "pose": pose}], 0
-    kind = cfg["backgrounds"]["kinds"][int(rng.integers(len(cfg["backgrounds"]["kinds"])))]
+    kind = cfg.backgrounds.kinds[int(rng.integers(len(cfg.backgrounds.kinds)))]
     bg_seed = int(rng.integers(2 ** 31))
     still_signals(cfg, index, instances)
     return {"instances": instances, "dropped": dropped, "camera": camera,
@@ -147,10 +147,10 @@ def still_signals(cfg, index, instances):
     """Arm signals in still sets (sequence.still_signal_share, default 0: nothing drawn, no `signal`
     key, bytes as before): each rider shows one of STILL_SIGNALS, uniformly, with that probability.
     Its own Generator, so the sample's other draws are unchanged."""
-    share = float((cfg.get("sequence") or {}).get("still_signal_share", 0.0))
+    share = float(cfg.sequence.still_signal_share)
     if share <= 0:
         return
-    rng = np.random.default_rng([cfg["seed"], index, 2029, 7])
+    rng = np.random.default_rng([cfg.seed, index, 2029, 7])
     for inst in instances:
         if inst["rider"] is not None:
             u, k = float(rng.uniform()), int(rng.integers(len(STILL_SIGNALS)))
@@ -250,11 +250,12 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
     extras: {"depth": (H, W) float32, "kitti": [objects], "calib": {...}}.
     A sequence frame (splatting/dataset/sequences) passes its own draw, the ego camera of the
     frame and the index its looks are drawn with (the sequence's, so they stay across frames)."""
+    require_config(cfg, "make_sample")
     d = draw(cfg, index) if drawn is None else drawn
-    street = cfg["mode"] == "street"
-    fs = FrameSample(cfg, d, index) if cfg["mode"] == "frames" else None
+    street = cfg.mode == "street"
+    fs = FrameSample(cfg, d, index) if cfg.mode == "frames" else None
     relit = lighting.RelitSample(cfg, index, assets) if lighting.relit(cfg) else None  # None: baked colour
-    kp_cfg, lab = cfg["keypoints"], cfg["labels"]
+    kp_cfg, lab = cfg.keypoints, cfg.labels
     # instances of one (bike, rider) are posed in one batch: the IK's cost is mostly per iteration,
     # not per pose.  The groups follow from the draw, so a sample stays a function of its index.
     groups = {}
@@ -271,7 +272,7 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
                          signals=sig if rider is not None and any(x != "none" for x in sig) else None)
         people = [None] * len(js)
         if rider is not None:
-            if kp_cfg["person"] == "coco17":
+            if kp_cfg.person == "coco17":
                 rot, root = assets.avatars[rider].last
                 people = list(assets.persons[rider].posed(rot, root).numpy())
             else:
@@ -282,7 +283,7 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
             relit.posed(bike, rider, js, [f.pose for f in posed])
 
     if street:
-        spec = camera_presets.resolve(cfg["camera"])
+        spec = camera_presets.resolve(cfg.camera)
         cam = camera_presets.street_camera(spec) if camera is None else camera
     elif fs is not None:
         cam = fs.camera()
@@ -291,12 +292,14 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
         lo, hi = g.means.min(0).values, g.means.max(0).values
         centre = (0.5 * (lo + hi)).double() + torch.tensor(d["camera"]["jitter"], dtype=torch.float64)
         cam = orbit_camera(d["camera"]["azimuth_deg"], d["camera"]["elevation_deg"], d["camera"]["distance_m"],
-                           centre.tolist(), cfg["image_size"], cfg["views"]["focal_px"])
+                           centre.tolist(), cfg.image_size, cfg.views.focal_px)
     H, W = cam.height, cam.width
     bg_kind = d["background"]["kind"]
 
     parts, slots, boxes, keeps, aa, eps = [], [], [], [], [], []
-    lod_cfg = cfg["lod"]
+    lod_cfg = cfg.lod
+    # lod.level_keep (the cyclist layer) takes {below_px, keep} mappings, look_defaults.DEFAULT_LEVELS' shape
+    lod_levels = [lv.model_dump() for lv in lod_cfg.levels]
     looks, scan_parts = [], []
     for k, (inst, frame, _) in enumerate(frames):
         g = frame.gaussians
@@ -304,17 +307,17 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
         prep = assets.label_inputs(inst["bike"], inst["rider"], frame)
         boxes.append(extent_box(g, inst["pose"], prep=prep["extent"]))  # labels come from the full model, LOD or not
         idx = None
-        if cfg["appearance"]["enabled"]:
-            look, gain = appearance.draw_look(cfg, cfg["seed"], index if look_index is None else look_index, k)
+        if cfg.appearance.enabled:
+            look, gain = appearance.draw_look(cfg.appearance, cfg.seed, index if look_index is None else look_index, k)
             g = appearance.apply_look(g, frame.ids, look, gain, **assets.look_inputs(inst["bike"], inst["rider"], frame))
             looks.append({"colours": {r: None if c is None else [round(float(x), 4) for x in c] for r, c in look.items()},
                           "gain": [round(float(x), 4) for x in gain]})
         looked = g
-        if lod_cfg["enabled"]:
-            keeps.append(lod.level_keep(_height_px(boxes[-1], cam), lod_cfg["levels"]))
+        if lod_cfg.enabled:
+            keeps.append(lod.level_keep(_height_px(boxes[-1], cam), lod_levels))
             if keeps[-1] < 1.0:
                 g, idx = lod.reduce(g, assets.lod_order(inst["bike"], inst["rider"], g, frame.ids), keeps[-1],
-                                    lod_cfg["compensate"], frame.ids)
+                                    lod_cfg.compensate, frame.ids)
                 slot = slot.index_select(0, idx)
         # a bike whose parts were trained antialiased is drawn so (its rider and the rest as trained)
         bike_trained_aa = bool(assets.bikes[inst["bike"]].antialiased)
@@ -331,16 +334,16 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
                            aa[-1] if bike_trained_aa else False, eps[-1][1])
         parts.append(g)
         slots.append(slot)
-    b = cfg["backgrounds"]
-    ground_shadows = bool(b["shadow"] and bg_kind in ("images", "scene", "frame") and frames)  # the contact shadow, and relit the sun's
+    b = cfg.backgrounds
+    ground_shadows = bool(b.shadow and bg_kind in ("images", "scene", "frame") and frames)  # the contact shadow, and relit the sun's
     if ground_shadows:
         feet = [(inst["pose"][5], inst["pose"][7], inst["pose"][3], bx["l"], bx["w"]) for (inst, _, _), bx in zip(frames, boxes)]
-        if fs is not None and cfg["insert"]["look"]["cast_shadow"]:  # frames: the sun's shadow in the render, so
+        if fs is not None and cfg.insert.look.cast_shadow:  # frames: the sun's shadow in the render, so
             # the frame's depth hides it too (baked: the config's sun; relit: the sample's)
             sun = fs.sun() if relit is None else relit.light
-            sh = contact_shadows(feet, b["shadow_opacity"], sun=sun, heights=[bx["h"] for bx in boxes])
+            sh = contact_shadows(feet, b.shadow_opacity, sun=sun, heights=[bx["h"] for bx in boxes])
         else:
-            sh = contact_shadows(feet, b["shadow_opacity"])
+            sh = contact_shadows(feet, b.shadow_opacity)
         parts.append(sh)
         slots.append(torch.zeros(len(sh), dtype=torch.long))
     if bg_kind == "scene":
@@ -353,10 +356,10 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
         aa = torch.cat(aa) if any(bool(m.any()) for m in aa) else False
         eps = eps2d_cat(eps + [(len(p), EPS2D) for p in parts[len(eps):]])  # shadows, scene: rasterize's default
         if relit is None:
-            L = render_scene(Gaussians.cat(parts), torch.cat(slots), n_slots, cam, range(1, n_slots), cfg["amodal_max_px"],
+            L = render_scene(Gaussians.cat(parts), torch.cat(slots), n_slots, cam, range(1, n_slots), cfg.amodal_max_px,
                              antialiased=aa, eps2d=eps)
         else:
-            L = relit.render(parts, torch.cat(slots), n_slots, cam, range(1, n_slots), cfg["amodal_max_px"], aa, eps)
+            L = relit.render(parts, torch.cat(slots), n_slots, cam, range(1, n_slots), cfg.amodal_max_px, aa, eps)
     else:
         L = {"rgb": np.zeros((H, W, 3), np.float32), "alpha": np.zeros((H, W), np.float32),
              "depth": np.zeros((H, W), np.float32), "label": np.full((H, W), -1, np.int16), "amodal": {},
@@ -367,7 +370,7 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
         kp_alpha, kp_depth = fs.occlude(L, union(L.get("boxes", [])))
         rgb, bg_rec["look"] = fs.composite(L, union(L.get("boxes", [])), [(i["pose"][5], i["pose"][7]) for i, _, _ in frames])
     elif bg_kind == "images":
-        bg, rec = photo(b["image_files"], d["background"]["seed"], W, H)
+        bg, rec = photo(b.image_files, d["background"]["seed"], W, H)
         bg_rec.update(rec)
     elif bg_kind == "scene":
         bg = np.zeros((H, W, 3), np.float32)
@@ -376,7 +379,7 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
     if fs is None:
         rgb = over_in_box(L, bg, union(L.get("boxes", [])))
     if relit is not None and ground_shadows and fs is None:
-        rgb = relit.cast_shadows(rgb, L, cam, feet, [bx["h"] for bx in boxes], b["shadow_opacity"])
+        rgb = relit.cast_shadows(rgb, L, cam, feet, [bx["h"] for bx in boxes], b.shadow_opacity)
 
     K, R, T = cam.K.double().numpy(), cam.R.double().numpy(), cam.T.double().numpy()
     # the depth test compares with the surface seen through the keypoint's whole pixel, whose
@@ -393,7 +396,7 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
         ext_b = projected_extent(means[prep["bike"]], cam)
         bx = boxes[k]
         loc, ry, alpha = fs.box3d(bx) if fs is not None else kitti.box3d(R, T, bx)
-        vclass = vehicle_class(assets.meta(inst["bike"]), lab["vehicle_of"].get(inst["bike"]))
+        vclass = vehicle_class(assets.meta(inst["bike"]), lab.vehicle_of.get(inst["bike"]))
         extra = {"instance": k + 1, "track_id": index * 1000 + k + 1, "parked": inst["rider"] is None,
                  "bike": inst["bike"], "rider": inst["rider"], "vehicle": vclass,
                  "pose_3d": {"pose": [float(x) for x in inst["pose"]], "pose_fields": list(POSE_KEYS),
@@ -406,18 +409,18 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
         bk = np.array([frame.bike_keypoints.get(n, [np.nan] * 3) for n in BIKE_KEYPOINTS], dtype=np.float64)
         have = np.isfinite(bk).all(1)
         uv, z = project_points(np.nan_to_num(bk), cam)
-        vis = keypoint_visibility(uv, z, kp_alpha, kp_depth, kp_cfg["tolerance_bike_m"] + z * px) * have
+        vis = keypoint_visibility(uv, z, kp_alpha, kp_depth, kp_cfg.tolerance_bike_m + z * px) * have
         a_b = annotation(vclass, vis_b, am_b, ext_b, W, H, np.column_stack([uv, vis]), extra)
         inst_anns = [a_b]
         if inst["rider"] is not None:
             ext_r = projected_extent(means[prep["rider"]], cam)
             uvr, zr = project_points(person, cam)
             # COCO-17: per-point depths under the skin; SMPL joints: one tolerance for joint centres
-            tol = COCO17_TOLERANCE_M if kp_cfg["person"] == "coco17" else kp_cfg["tolerance_rider_m"]
+            tol = COCO17_TOLERANCE_M if kp_cfg.person == "coco17" else kp_cfg.tolerance_rider_m
             visr = keypoint_visibility(uvr, zr, kp_alpha, kp_depth, np.asarray(tol) + zr * px)
             inst_anns.append(annotation("rider", vis_r, am_r, ext_r, W, H, np.column_stack([uvr, visr]), extra))
             ext_c = [min(ext_b[0], ext_r[0]), min(ext_b[1], ext_r[1]), max(ext_b[2], ext_r[2]), max(ext_b[3], ext_r[3])]
-            combined = lab["combined"][vclass]
+            combined = getattr(lab.combined, vclass)
             a_c = annotation(combined, mask_or(vis_b, vis_r), mask_or(am_b, am_r), ext_c, W, H, None, extra)
             inst_anns.append(a_c)
             main, main_am, ktype = a_c, mask_or(am_b, am_r), kitti.KITTI_TYPES[combined]
@@ -456,7 +459,7 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
     if fs is not None:  # the frame's own label rows (occlusion raised), calib, plane and scan
         extras["frame"] = fs.kitti_extras(L)
         image["frame"] = dict(fs.record(), occlusion_raised=[[o, n, round(sh_, 4)] for o, n, sh_ in extras["frame"]["occlusion_raised"]])
-        counts = fs.insert_scan(scan_parts, extras) if "kitti" in lab["formats"] else None
+        counts = fs.insert_scan(scan_parts, extras) if "kitti" in lab.formats else None
         if counts is not None:  # the LiDAR points on each inserted instance
             image["frame"]["scan"] = fs.scan_record
             for a in anns:
@@ -473,16 +476,16 @@ def write_sample(cfg, index, out_dir, assets):
     img_path = os.path.join(out_dir, "images", image["file_name"])
     os.makedirs(os.path.dirname(img_path), exist_ok=True)
     with atomic_path(img_path) as tmp:
-        png.write(tmp, rgb, cfg["png_compress_level"])
-    if cfg["depth_maps"]:
+        png.write(tmp, rgb, cfg.png_compress_level)
+    if cfg.depth_maps:
         dpath = os.path.join(out_dir, "depth", image["file_name"])
         os.makedirs(os.path.dirname(dpath), exist_ok=True)
         mm = np.clip(np.round(extras["depth"] * 1000.0), 0, 65535).astype(np.uint16)
         with atomic_path(dpath) as tmp:
-            png.write(tmp, mm, cfg["png_compress_level"])
-    if "kitti" in cfg["labels"]["formats"] and "frame" in extras:
+            png.write(tmp, mm, cfg.png_compress_level)
+    if "kitti" in cfg.labels.formats and "frame" in extras:
         frames_output.write_sample(out_dir, index, img_path, extras["kitti"], extras["frame"])
-    elif "kitti" in cfg["labels"]["formats"]:
+    elif "kitti" in cfg.labels.formats:
         kitti.write_sample(out_dir, index, img_path, extras["kitti"], extras["calib"])
     os.makedirs(os.path.join(out_dir, "shards"), exist_ok=True)
     write_json(os.path.join(out_dir, "shards", f"{index:06d}.json"), {"image": image, "annotations": anns}, indent=None)
@@ -492,20 +495,24 @@ def write_sample(cfg, index, out_dir, assets):
 def sample_done(out_dir, index, cfg=None):
     done = (os.path.isfile(os.path.join(out_dir, "shards", f"{index:06d}.json"))
             and os.path.isfile(os.path.join(out_dir, "images", f"{index:06d}.png")))
-    if done and cfg is not None and "kitti" in cfg["labels"]["formats"]:
+    if done and cfg is not None and "kitti" in cfg.labels.formats:
         done = kitti.sample_done(out_dir, index)
     return done
 
 
 def config_record(cfg):
-    """The config stored beside a dataset; the frames fields only in frames mode (so the other modes'
-    config.json stays what it was before they existed, and such sets resume)."""
-    cfg = lighting.record_config(cfg)
-    if cfg.get("mode") != "frames":
-        cfg = {k: v for k, v in cfg.items() if k not in ("frames", "insert")}
-    if not (cfg.get("sequence") or {}).get("enabled"):  # (config.json of still sets stays as it was)
-        share = (cfg.get("sequence") or {}).get("still_signal_share", 0.0)
-        cfg = {k: v for k, v in cfg.items() if k != "sequence"}
-        if share:  # ... unless it draws arm signals
-            cfg["sequence"] = {"still_signal_share": share}
-    return json.loads(json.dumps(cfg))
+    """The config stored beside a dataset (config.json, and the key a resumed run must match): the one
+    place a DatasetConfig becomes a dict again.  The frames fields only in frames mode, the lighting
+    section only when relit, the sequence section only when enabled (or drawing still arm signals),
+    so the other sets' config.json stays what it was before those sections existed, and they resume."""
+    require_config(cfg, "config_record")
+    rec = cfg.model_dump()
+    if not lighting.relit(cfg):
+        del rec["lighting"]
+    if cfg.mode != "frames":
+        del rec["frames"], rec["insert"]
+    if not cfg.sequence.enabled:
+        del rec["sequence"]
+        if cfg.sequence.still_signal_share:  # ... unless it draws arm signals
+            rec["sequence"] = {"still_signal_share": cfg.sequence.still_signal_share}
+    return json.loads(json.dumps(rec))

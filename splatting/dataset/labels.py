@@ -64,7 +64,8 @@ def bike_schema():
 
 
 def categories(labels_cfg, person_kind):
-    names = labels_cfg["names"]
+    """The COCO categories under the config's Labels block (its names) and person keypoint kind."""
+    names = labels_cfg.names.model_dump()
     out = []
     for key in CATEGORY_KEYS:
         c = {"id": CATEGORY_IDS[key], "name": names[key], "supercategory": SUPER[key], "key": key}

@@ -40,15 +40,10 @@ def _err(field, msg):
 
 
 def relit(cfg):
-    return (cfg.get("lighting") or {}).get("mode", "baked") == "relit"
-
-
-def record_config(cfg):
-    """The config as stored beside a dataset: without the section in baked mode, so a baked set's
-    config.json is byte for byte what it was before the section existed (and such sets resume)."""
-    if not relit(cfg):
-        cfg = {k: v for k, v in cfg.items() if k != "lighting"}
-    return cfg
+    """Whether the DatasetConfig draws a light per image (its config.json then keeps the section:
+    generate.config_record leaves it out in baked mode, so a baked set's record is what it was
+    before the section existed, and such sets resume)."""
+    return cfg.lighting.mode == "relit"
 
 
 def check_assets(cfg):
@@ -56,11 +51,11 @@ def check_assets(cfg):
     one UserError naming the first asset without them and the command that makes them."""
     if not relit(cfg):
         return
-    if cfg["synthetic_assets"] == "always":
+    if cfg.synthetic_assets == "always":
         raise _err("mode", "relit needs trained assets with relight channels, but synthetic_assets is 'always' "
                            "(stand-ins carry no albedo or normals)")
-    for b in cfg["bikes"]:
-        d = bike_dir(b, cfg["bikes_root"])
+    for b in cfg.bikes:
+        d = bike_dir(b, cfg.bikes_root)
         if not has_trained_gaussians(d):
             raise _err("mode", f"relit: bike {b!r} has no trained Gaussians in {d}/gaussians (stand-ins carry no "
                                f"relight channels); train it with `python -m splatting train`, then relight-fit")
@@ -70,8 +65,8 @@ def check_assets(cfg):
                 raise _err("mode", f"relit: bike {b!r} part {p!r} has no relight channels "
                                    f"({bike_folder.relight_path(ply)}); make them with `python -m splatting relight-fit "
                                    f"--views {os.path.join(d, 'views', p)}`")
-    for r in cfg["riders"]:
-        folder = os.path.join(cfg["riders_root"], r)
+    for r in cfg.riders:
+        folder = os.path.join(cfg.riders_root, r)
         ply = os.path.join(folder, PLY_NAME)
         if not (os.path.isfile(ply) and os.path.isfile(os.path.join(folder, SKINNING_NAME))):
             raise _err("mode", f"relit: rider {r!r} has no trained avatar in {folder} (the mesh stand-in carries no "
@@ -82,18 +77,19 @@ def check_assets(cfg):
 
 
 def draw_light(lc, seed, index):
-    """The sun and sky of sample `index`: (Light, its record without the camera frame)."""
+    """The sun and sky of sample `index` under the config's Lighting block lc: (Light, its record
+    without the camera frame)."""
     rng = np.random.default_rng([int(seed), int(index), TAG])
-    el, az = rng.uniform(*lc["elevation_deg"]), rng.uniform(*lc["azimuth_deg"])
-    strength, s = rng.uniform(*lc["strength"]), rng.uniform(*lc["sky"])
-    tint = rng.uniform(1.0 - lc["sun_tint"], 1.0, 3)
+    el, az = rng.uniform(*lc.elevation_deg), rng.uniform(*lc.azimuth_deg)
+    strength, s = rng.uniform(*lc.strength), rng.uniform(*lc.sky)
+    tint = rng.uniform(1.0 - lc.sun_tint, 1.0, 3)
     tint = tint / tint.max()
     d = sun_direction(el, az)  # world: Y up; azimuth 0 = towards +X (where a bike at heading 0 rides)
     sky = tuple(float(c * s) for c in SKY_TINT)
     light = Light(sun_direction=d, sun_colour=tuple(float(x) for x in tint), sun_strength=float(strength), sky=sky)
     rec = {"mode": "relit", "sun_direction_world": list(d), "elevation_deg": float(el), "azimuth_deg": float(az),
            "sun_strength": float(strength), "sun_colour": list(light.sun_colour), "sky": list(sky),
-           "shadows": bool(lc["shadows"])}
+           "shadows": bool(lc.shadows)}
     return light, rec
 
 
@@ -105,12 +101,12 @@ class _Channels:
 
     def bike(self, assets, bike):
         if bike not in self.bikes:
-            self.bikes[bike] = RelightableBike.of(assets.bikes[bike], bike_dir(bike, assets.cfg["bikes_root"]))
+            self.bikes[bike] = RelightableBike.of(assets.bikes[bike], bike_dir(bike, assets.cfg.bikes_root))
         return self.bikes[bike]
 
     def rider(self, assets, rider):
         if rider not in self.riders:
-            self.riders[rider] = RelightableAvatar.of(assets.avatars[rider], os.path.join(assets.cfg["riders_root"], rider))
+            self.riders[rider] = RelightableAvatar.of(assets.avatars[rider], os.path.join(assets.cfg.riders_root, rider))
         return self.riders[rider]
 
     def static(self, assets, bike, rider):
@@ -133,9 +129,9 @@ class RelitSample:
     shadows on the ground; record() is the image record's "lighting"."""
 
     def __init__(self, cfg, index, assets):
-        lc = cfg["lighting"]
-        self.light, self.rec = draw_light(lc, cfg["seed"], index)
-        self.shadows = lc["shadows"]
+        lc = cfg.lighting
+        self.light, self.rec = draw_light(lc, cfg.seed, index)
+        self.shadows = lc.shadows
         if getattr(assets, "relight_channels", None) is None:
             assets.relight_channels = _Channels()
         self.assets, self.ch = assets, assets.relight_channels

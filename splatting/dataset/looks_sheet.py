@@ -37,7 +37,7 @@ def render_sheet(cfg, bike, rider, n=12, cols=4, log=print):
     cyc = assets.cyclist(bike, rider)
     pose = [60.0, 4.0, 0.0, 180.0, 0.0, 0.0, 0.0, 5.0]  # side-on, riding towards image-right, 5 m ahead
     frame = cyc.pose(torch.tensor(pose, dtype=torch.float64))[0]
-    spec = camera_presets.resolve({"preset": "nuscenes", "pitch_deg": 0.0, "roll_deg": 0.0, "scale": 1.0})
+    spec = camera_presets.resolve(cfg.camera)  # nuscenes, level, full size (write_looks_sheet's config)
     cam = camera_presets.street_camera(spec)
     slots = torch.where(frame.ids == RIDER_ID, 2, 1).long()
     g0 = frame.gaussians
@@ -45,7 +45,7 @@ def render_sheet(cfg, bike, rider, n=12, cols=4, log=print):
     inputs = assets.look_inputs(bike, rider, frame)
     tiles = []
     for i in range(n):
-        look, gain = appearance.draw_look(cfg, cfg["seed"], i, 0)
+        look, gain = appearance.draw_look(cfg.appearance, cfg.seed, i, 0)
         g = appearance.apply_look(g0, frame.ids, look, gain, **inputs)
         L = render_scene(g, slots, 3, cam)
         sl = np.s_[v0:v0 + h, u0:u0 + w]

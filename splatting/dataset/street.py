@@ -45,31 +45,31 @@ def _count(rng, lohi):
 
 def draw_street(cfg, rng, cam):
     """Instances of one street image: list of {"kind": "cyclist"|"parked", "bike", "rider", "pose"}."""
-    s = cfg["street"]
-    n_cyc = _count(rng, s["cyclists"]) if cfg["riders"] else 0
-    n_park = _count(rng, s["parked_bikes"])
+    s = cfg.street
+    n_cyc = _count(rng, s.cyclists) if cfg.riders else 0
+    n_park = _count(rng, s.parked_bikes)
     kinds = ["cyclist"] * n_cyc + ["parked"] * n_park
     placed, out, dropped = [], [], 0
-    r = float(s["footprint_radius_m"])
+    r = float(s.footprint_radius_m)
     for kind in kinds:
-        bike = cfg["bikes"][int(rng.integers(len(cfg["bikes"])))]
-        rider = cfg["riders"][int(rng.integers(len(cfg["riders"])))] if kind == "cyclist" else None
-        pose = {k: float(rng.uniform(*cfg["pose"][k])) for k in POSE_FIELDS if k not in PLACED}
+        bike = cfg.bikes[int(rng.integers(len(cfg.bikes)))]
+        rider = cfg.riders[int(rng.integers(len(cfg.riders)))] if kind == "cyclist" else None
+        pose = {k: float(rng.uniform(*getattr(cfg.pose, k))) for k in POSE_FIELDS if k not in PLACED}
         if kind == "parked":
-            pose["theta_s_deg"] = float(rng.uniform(*s["parked_steer_deg"]))
+            pose["theta_s_deg"] = float(rng.uniform(*s.parked_steer_deg))
         spot = None
-        for _ in range(int(s["max_tries"])):
-            z = float(rng.uniform(*s["distance_m"]))
-            u = float(rng.uniform(-s["border_margin"], 1.0 + s["border_margin"])) * cam["width"]
+        for _ in range(int(s.max_tries)):
+            z = float(rng.uniform(*s.distance_m))
+            u = float(rng.uniform(-s.border_margin, 1.0 + s.border_margin)) * cam["width"]
             x = -(u - cam["cx"]) * z / cam["fx"]  # image-right is world -X
-            if s["heading"] == "uniform":
+            if s.heading == "uniform":
                 yaw = float(rng.uniform(-180.0, 180.0))
             else:
-                yaw = road_heading(s["road_heading_deg"]) + float(rng.uniform(-1, 1)) * s["heading_spread_deg"]
-                if rng.uniform() < s["oncoming_share"]:
+                yaw = road_heading(s.road_heading_deg) + float(rng.uniform(-1, 1)) * s.heading_spread_deg
+                if rng.uniform() < s.oncoming_share:
                     yaw += 180.0
             yaw = (yaw + 180.0) % 360.0 - 180.0
-            if not s["lateral_m"][0] <= x <= s["lateral_m"][1]:
+            if not s.lateral_m[0] <= x <= s.lateral_m[1]:
                 continue
             if all((x - px) ** 2 + (z - pz) ** 2 >= (2 * r) ** 2 for px, pz in placed):
                 spot = (x, z, yaw)

@@ -6,21 +6,19 @@ per-sample image + shard files, so the merged annotations are byte-identical to 
 A task whose worker dies is retried by Ray and skips the samples already written; a killed driver
 is rerun and skips them too.  One declared CPU and one torch thread per task.
 """
-import json
-
 from splatting.dataset.generate import Assets, sample_done, write_sample
 
 from splatting.library.engine import ensure_ray
 
 import torch
 
-_CACHE = {}  # per worker process: (config json, out dir) -> Assets, reused by later tasks
+_CACHE = {}  # per worker process: (the DatasetConfig as JSON, out dir) -> Assets, reused by later tasks
 
 
 def _render_range(cfg, out_dir, indices):
 
     torch.set_num_threads(1)
-    key = (json.dumps(cfg, sort_keys=True), out_dir)
+    key = (cfg.model_dump_json(), out_dir)
     if key not in _CACHE:
         _CACHE.clear()
         _CACHE[key] = Assets(cfg)

@@ -22,25 +22,25 @@ def _manifest_for(bikes_root):
 def check_dataset_assets(cfg, allow_low_quality=False):
     """Raise UserError naming the first unusable asset of a validated config; returns the resolved config."""
     cfg = resolve_assets(cfg)
-    if cfg["synthetic_assets"] == "always":
+    if cfg.synthetic_assets == "always":
         return cfg
-    root = os.path.dirname(os.path.abspath(cfg["bikes_root"])) or "."
-    for b in cfg["bikes"]:
-        d = b if os.path.isdir(b) else os.path.join(cfg["bikes_root"], b)
+    root = os.path.dirname(os.path.abspath(cfg.bikes_root)) or "."
+    for b in cfg.bikes:
+        d = b if os.path.isdir(b) else os.path.join(cfg.bikes_root, b)
         if not has_trained_gaussians(d):
             bid = os.path.basename(os.path.normpath(d))
             raise UserError(f"bike {bid} has no trained part Gaussians ({os.path.join(d, 'gaussians')}); build them with "
                             f"`python -m splatting library build --out {root} --bikes {bid}`, "
                             f"or set synthetic_assets: always for keypoint stand-ins")
-    for r in cfg["riders"]:
-        folder = os.path.join(cfg["riders_root"], r)
+    for r in cfg.riders:
+        folder = os.path.join(cfg.riders_root, r)
         if not all(os.path.isfile(os.path.join(folder, f)) for f in (PLY_NAME, SKINNING_NAME)):
             raise UserError(f"rider {r} has no trained avatar in {folder}; build it with "
-                            f"`python -m splatting library build --out {root} --riders {r} --riders-root {cfg['riders_root']}`"
+                            f"`python -m splatting library build --out {root} --riders {r} --riders-root {cfg.riders_root}`"
                             f", or set synthetic_assets: always for the untrained mesh avatar")
-    doc = _manifest_for(cfg["bikes_root"])
+    doc = _manifest_for(cfg.bikes_root)
     if doc is not None and not allow_low_quality:
-        for kind, ids in (("bikes", cfg["bikes"]), ("riders", cfg["riders"])):
+        for kind, ids in (("bikes", cfg.bikes), ("riders", cfg.riders)):
             for a in ids:
                 rec = doc.get(kind, {}).get(os.path.basename(os.path.normpath(a)))
                 if rec is not None and not rec.get("usable", False):

@@ -78,28 +78,28 @@ def support_ok(fr, poly_world, centre_rect, min_ground):
 
 def draw_frame(cfg, rng, index):
     """-> (instances [{"kind", "bike", "rider", "pose"}], dropped, camera record)."""
-    s, ins = cfg["street"], cfg["insert"]
+    s, ins = cfg.street, cfg.insert
     fid = source.frame_id(cfg, index)
     fr = source.frame(cfg, fid)
     road = fr.road
-    axis, axis_src = road_axis(fr.labels, road, s["road_heading_deg"])
-    boxes = [footprint(b, road, ins["box_margin_m"]) for b in fr.boxes]
-    n_cyc = _count(rng, s["cyclists"]) if cfg["riders"] else 0
-    n_park = _count(rng, s["parked_bikes"])
+    axis, axis_src = road_axis(fr.labels, road, s.road_heading_deg)
+    boxes = [footprint(b, road, ins.box_margin_m) for b in fr.boxes]
+    n_cyc = _count(rng, s.cyclists) if cfg.riders else 0
+    n_park = _count(rng, s.parked_bikes)
     placed, out, dropped, checks = [], [], 0, []
     cars = [b for b in fr.boxes if b[0] in CARS]
     for kind in ["cyclist"] * n_cyc + ["parked"] * n_park:
-        bike = cfg["bikes"][int(rng.integers(len(cfg["bikes"])))]
-        rider = cfg["riders"][int(rng.integers(len(cfg["riders"])))] if kind == "cyclist" else None
-        pose = {k: float(rng.uniform(*cfg["pose"][k])) for k in POSE_FIELDS if k not in PLACED}
+        bike = cfg.bikes[int(rng.integers(len(cfg.bikes)))]
+        rider = cfg.riders[int(rng.integers(len(cfg.riders)))] if kind == "cyclist" else None
+        pose = {k: float(rng.uniform(*getattr(cfg.pose, k))) for k in POSE_FIELDS if k not in PLACED}
         pose["theta_z_deg"] = 0.0  # no pitch: both tyres on the plane
         if kind == "parked":
-            pose["theta_s_deg"] = float(rng.uniform(*s["parked_steer_deg"]))
+            pose["theta_s_deg"] = float(rng.uniform(*s.parked_steer_deg))
         got = None
-        behind = bool(cars) and rng.uniform() < ins["behind_cars_share"]
-        for _ in range(int(s["max_tries"])):
-            z = float(rng.uniform(*s["distance_m"]))
-            u = float(rng.uniform(-s["border_margin"], 1.0 + s["border_margin"])) * fr.width
+        behind = bool(cars) and rng.uniform() < ins.behind_cars_share
+        for _ in range(int(s.max_tries)):
+            z = float(rng.uniform(*s.distance_m))
+            u = float(rng.uniform(-s.border_margin, 1.0 + s.border_margin)) * fr.width
             if behind:  # just beyond a labelled car, seen past or over it (replaces z and u)
                 _, _, cw, cl, cloc, _ = cars[int(rng.integers(len(cars)))]
                 ray = np.array([cloc[0], cloc[2]]) / max(np.hypot(cloc[0], cloc[2]), 1e-6)
@@ -108,18 +108,18 @@ def draw_frame(cfg, rng, index):
                     + side * rng.uniform(-1, 1) * 0.5 * max(cw, cl)
                 z = float(xz[1])
                 u = float(road.project_rect(np.array([[xz[0], 0.0, xz[1]]]))[0][0, 0])
-                if not s["distance_m"][0] <= z <= s["distance_m"][1]:
+                if not s.distance_m[0] <= z <= s.distance_m[1]:
                     continue
-            if s["heading"] == "uniform":
+            if s.heading == "uniform":
                 yaw = float(rng.uniform(-180.0, 180.0))
             else:
-                yaw = axis + float(rng.uniform(-1, 1)) * s["heading_spread_deg"]
-                if rng.uniform() < s["oncoming_share"]:
+                yaw = axis + float(rng.uniform(-1, 1)) * s.heading_spread_deg
+                if rng.uniform() < s.oncoming_share:
                     yaw += 180.0
             yaw = (yaw + 180.0) % 360.0 - 180.0
             p = spot(road, z, u)
             w = road.to_world(p[None])[0]
-            if not s["lateral_m"][0] <= w[0] <= s["lateral_m"][1]:
+            if not s.lateral_m[0] <= w[0] <= s.lateral_m[1]:
                 continue
             top = road.to_rect(np.array([[w[0], HEIGHT, w[2]]]))
             (_, vt), zt = road.project_rect(top)[0][0], road.project_rect(top)[1][0]
@@ -128,7 +128,7 @@ def draw_frame(cfg, rng, index):
             poly = rectangle(w[0], w[2], yaw, FOOT_L, FOOT_W)
             if any(convex_overlap(poly, b) for b in boxes) or any(convex_overlap(poly, q) for q in placed):
                 continue
-            ok, ground, obstacle = support_ok(fr, poly, p, ins["min_ground_points"])
+            ok, ground, obstacle = support_ok(fr, poly, p, ins.min_ground_points)
             if not ok:
                 continue
             got = (float(w[0]), float(w[2]), yaw, ground, obstacle)

@@ -23,7 +23,7 @@ class FrameSample:
         self.cfg, self.index, self.d = cfg, index, d
         self.frame = source.frame(cfg, d["camera"]["frame"])
         self.road = self.frame.road
-        self.ins = cfg["insert"]
+        self.ins = cfg.insert
         self._boxes = None
         self.hidden_px = 0
 
@@ -38,8 +38,8 @@ class FrameSample:
 
     def sun(self):
         """The cast shadows' sun (world frame): the config's elevation and azimuth (0 = world +X)."""
-        lk = self.ins["look"]
-        return Light(sun_direction=sun_direction(lk["sun_elevation_deg"], lk["sun_azimuth_deg"]))
+        lk = self.ins.look
+        return Light(sun_direction=sun_direction(lk.sun_elevation_deg, lk.sun_azimuth_deg))
 
     def boxes(self):
         if self._boxes is None:
@@ -52,7 +52,7 @@ class FrameSample:
         LiDAR's only inside box (u0, v0, w, h) grown by 16 px when given (where cyclists were drawn):
         the image is densified there alone, through P2 shifted to the crop."""
         fr = self.frame
-        D = self.boxes()[0].copy() if self.ins["box_occluders"] else np.zeros((fr.height, fr.width), np.float32)
+        D = self.boxes()[0].copy() if self.ins.box_occluders else np.zeros((fr.height, fr.width), np.float32)
         if fr.scan is not None and box is not None:  # the road's own points never hide what stands on it: left out
             pad = 16
             u0, v0 = max(box[0] - pad, 0), max(box[1] - pad, 0)
@@ -68,31 +68,31 @@ class FrameSample:
 
     def occlude(self, L, box):
         """Hide inserted pixels behind the frame; -> (keypoint alpha, keypoint depth)."""
-        ka, kd, hidden = occlusion.occlude(L, self.depth(box), self.ins["occlusion_margin_m"])
+        ka, kd, hidden = occlusion.occlude(L, self.depth(box), self.ins.occlusion_margin_m)
         self.hidden_px = int(hidden.sum())
         return ka, kd
 
     def composite(self, L, box, feet_world):
         """The output image: the frame with the inserted layers, light, blur and noise matched."""
-        fr, lk = self.frame, self.ins["look"]
+        fr, lk = self.frame, self.ins.look
         img = self.image()
         rec = {"hidden_px": self.hidden_px}
         gain, sigma, noise = np.ones(3), 0.0, 0.0
-        if lk["match"]:
+        if lk.match:
             gain, road_rgb = look.road_gain(img, self.road_mask(feet_world))
             est = self.frame.stat("blur", look.estimate_blur)
             own = None
-            if lk["blur_sigma_px"] == "auto":
+            if lk.blur_sigma_px == "auto":
                 own = look.render_blur(L, box)
                 sigma = 0.0 if est is None else math.sqrt(max(est ** 2 - (own or 0.0) ** 2, 0.0))
             else:
-                sigma = float(lk["blur_sigma_px"])
-            noise = self.frame.stat("noise", look.estimate_noise) if lk["noise_sigma"] == "auto" else float(lk["noise_sigma"])
+                sigma = float(lk.blur_sigma_px)
+            noise = self.frame.stat("noise", look.estimate_noise) if lk.noise_sigma == "auto" else float(lk.noise_sigma)
             rec.update(road_rgb=road_rgb, frame_blur_px=None if est is None else round(est, 4),
                        render_blur_px=None if own is None else round(own, 4))
         rec.update(gain=[round(float(x), 4) for x in gain], blur_sigma_px=round(float(sigma), 4),
                    noise_sigma=round(float(noise), 5))
-        rng = np.random.default_rng([self.cfg["seed"], self.index, 26])
+        rng = np.random.default_rng([self.cfg.seed, self.index, 26])
         out, changed = look.composite(img, L, box, gain, round(float(sigma), 4), round(float(noise), 5), rng)
         self.changed = changed
         return out, rec
@@ -147,7 +147,7 @@ class FrameSample:
         H[:3, :3], H[:3, 3] = self.road.M, self.road.origin  # world -> rect
         Ht = torch.from_numpy(H)
         gs = [transform_gaussians(g, Ht) for g, _, _ in posed]
-        rng = np.random.default_rng([self.cfg["seed"], self.index, 64])
+        rng = np.random.default_rng([self.cfg.seed, self.index, 64])
         new, counts, removed = insert_into_scan(fr.scan, fr.T_velo_to_rect, gs, eps2d=[e for _, e, _ in posed],
                                                 antialiased=[a for _, _, a in posed], rng=rng)
         extras["frame"]["scan"] = new

@@ -83,7 +83,7 @@ class Frame:
         self.boxes = boxes_of(self.labels)
         self.width, self.height = image_size(rec["image"])
         self.T_velo_to_rect = kitti_frame.velo_to_rect(self.calib)
-        use_lidar = cfg["insert"]["lidar"] and rec["velodyne"] is not None
+        use_lidar = cfg.insert.lidar and rec["velodyne"] is not None
         self.scan = kitti_frame.read_velodyne(rec["velodyne"]) if use_lidar else None
         plane, self.plane_source = rec["plane"], "planes"
         if plane is None and self.scan is not None:
@@ -93,7 +93,7 @@ class Frame:
             except ValueError:
                 plane = None
         if plane is None:
-            plane, self.plane_source = (0.0, -1.0, 0.0, float(cfg["insert"]["camera_height_m"])), "camera_height"
+            plane, self.plane_source = (0.0, -1.0, 0.0, float(cfg.insert.camera_height_m)), "camera_height"
         self.road = Road(plane, self.calib["P2"], self.width, self.height)
         self._image, self._stats = None, {}
         if self.scan is not None:  # once per frame: the scan in rect and its points above the road
@@ -120,15 +120,15 @@ _CACHE = {}
 def frame(cfg, fid):
     """The Frame `fid` of the configured folder (a small per-process cache: a frame is reused by
     several samples in a row when count > number of frames... and by the placement and the render)."""
-    key = (cfg["frames"], fid, bool(cfg["insert"]["lidar"]), float(cfg["insert"]["camera_height_m"]))
+    key = (cfg.frames, fid, bool(cfg.insert.lidar), float(cfg.insert.camera_height_m))
     if key not in _CACHE:
         if len(_CACHE) >= 4:
             _CACHE.pop(next(iter(_CACHE)))
-        _CACHE[key] = Frame(cfg["frames"], fid, cfg)
+        _CACHE[key] = Frame(cfg.frames, fid, cfg)
     return _CACHE[key]
 
 
 def frame_id(cfg, index):
     """Frame of sample `index`: the folder's frames in turn (index mod their number)."""
-    ids = list(open_folder(cfg["frames"]))
+    ids = list(open_folder(cfg.frames))
     return ids[index % len(ids)]

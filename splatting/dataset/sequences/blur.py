@@ -52,8 +52,8 @@ def blurred_sample(cfg, index, assets, sd, f, exposure_s, n):
     """(rgb uint8, image, annotations, extras) of frame f of the drawn sequence sd with motion blur:
     the mean of n (odd) renders at the sub-frame instants; labels and extras are those of the
     middle render, the frame's own draw and camera (exactly the unblurred frame's)."""
-    t_f = f / float(cfg["sequence"]["fps"])
-    seq = index // int(cfg["sequence"]["length"])
+    t_f = f / float(cfg.sequence.fps)
+    seq = index // int(cfg.sequence.length)
     acc, mid = None, n // 2
     for k, dt in enumerate(subframe_offsets(exposure_s, n)):
         if k == mid:  # exactly the frame's instant: its draw and camera, hence its labels

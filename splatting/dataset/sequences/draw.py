@@ -31,7 +31,7 @@ def _geometry(bike, root):
 
 
 def geometry(cfg, bike):
-    return _geometry(bike, cfg["bikes_root"])
+    return _geometry(bike, cfg.bikes_root)
 
 
 def _count(rng, lohi):
@@ -43,7 +43,7 @@ def manoeuvre_plan(rng, manoeuvre, sq, duration, v_lo, v_hi, a_max, x0, psi0_deg
     v = float(rng.uniform(v_lo, v_hi))
     speed = {"kind": "cruise", "v": v}
     bumps = []
-    r_lo, r_hi = sq["turn_radius_m"]
+    r_lo, r_hi = sq.turn_radius_m
     if manoeuvre in ("turn_left", "turn_right"):
         radius = max(float(rng.uniform(r_lo, r_hi)), v * v / a_max)
         s0 = v * duration * float(rng.uniform(0.15, 0.4))
@@ -118,15 +118,15 @@ def signal_frames(rng, manoeuvre, traj, speed, bumps, sq, duration):
     does not depend on the manoeuvre."""
     t = traj["t"]
     out = np.full(len(t), "none", dtype=object)
-    u, lead, start = float(rng.uniform()), float(rng.uniform(*sq["signal_lead_s"])), float(rng.uniform())
+    u, lead, start = float(rng.uniform()), float(rng.uniform(*sq.signal_lead_s)), float(rng.uniform())
     span = 1.0 + 3.0 * float(rng.uniform())
-    if manoeuvre in ("turn_left", "turn_right", "cross") and bumps and u < sq["signal_share"]:
+    if manoeuvre in ("turn_left", "turn_right", "cross") and bumps and u < sq.signal_share:
         s0, side = turn_start(bumps)
         t0 = float(np.interp(s0, traj["s"], t)) if s0 < traj["s"][-1] else math.inf
         out[(t >= t0 - lead) & (t < t0)] = side
-    elif manoeuvre == "stop" and u < sq["signal_share"]:
+    elif manoeuvre == "stop" and u < sq.signal_share:
         out[(t >= speed["t0"] - lead) & (t < speed["t0"])] = "stop"
-    elif manoeuvre == "straight" and u < sq["one_handed_share"]:
+    elif manoeuvre == "straight" and u < sq.one_handed_share:
         a = start * max(duration - span, 0.0)
         out[(t >= a) & (t < a + span)] = "one_handed"
     return [str(x) for x in out]
@@ -135,50 +135,50 @@ def signal_frames(rng, manoeuvre, traj, speed, bumps, sq, duration):
 def draw_sequence(cfg, seq):
     """Sequence `seq` -> {"ego_speed", "camera", "background", "instances": [...], "dropped"}; each
     instance {kind, bike, rider, manoeuvre, poses (n, 8), traj, crossing, intention, gear_ratio, geometry}."""
-    sq, st = cfg["sequence"], cfg["street"]
-    rng = np.random.default_rng([cfg["seed"], seq, TAG])
-    n, fps = int(sq["length"]), float(sq["fps"])
+    sq, st = cfg.sequence, cfg.street
+    rng = np.random.default_rng([cfg.seed, seq, TAG])
+    n, fps = int(sq.length), float(sq.fps)
     duration = (n - 1) / fps
     t = np.arange(n) / fps
-    cam = camera_presets.resolve(cfg["camera"])
-    ego = sq["ego"]
-    ego_speed = float(rng.uniform(*ego["speed_mps"])) if ego["motion"] == "moving" else 0.0
+    cam = camera_presets.resolve(cfg.camera)
+    ego = sq.ego
+    ego_speed = float(rng.uniform(*ego.speed_mps)) if ego.motion == "moving" else 0.0
     ego_z = ego_speed * t
-    names = list(sq["manoeuvres"])
-    w = np.array([float(sq["manoeuvres"][m]) for m in names])
-    n_cyc = _count(rng, st["cyclists"]) if cfg["riders"] else 0
-    n_park = _count(rng, st["parked_bikes"])
-    r_fp = float(st["footprint_radius_m"])
-    a_max = float(sq["max_lateral_accel_mps2"])
-    v_lo, v_hi = sq["speed_mps"]
+    names = list(type(sq.manoeuvres).model_fields)  # declaration order (MANOEUVRES)
+    w = np.array([float(getattr(sq.manoeuvres, m)) for m in names])
+    n_cyc = _count(rng, st.cyclists) if cfg.riders else 0
+    n_park = _count(rng, st.parked_bikes)
+    r_fp = float(st.footprint_radius_m)
+    a_max = float(sq.max_lateral_accel_mps2)
+    v_lo, v_hi = sq.speed_mps
     mid = n // 2
     placed, out, dropped = [], [], 0
     for kind in ["cyclist"] * n_cyc + ["parked"] * n_park:
-        bike = cfg["bikes"][int(rng.integers(len(cfg["bikes"])))]
-        rider = cfg["riders"][int(rng.integers(len(cfg["riders"])))] if kind == "cyclist" else None
+        bike = cfg.bikes[int(rng.integers(len(cfg.bikes)))]
+        rider = cfg.riders[int(rng.integers(len(cfg.riders)))] if kind == "cyclist" else None
         geom = geometry(cfg, bike)
         man = names[int(rng.choice(len(names), p=w / w.sum()))] if kind == "cyclist" else "parked"
-        cadence = float(rng.uniform(*sq["cadence_rpm"]))
+        cadence = float(rng.uniform(*sq.cadence_rpm))
         pedal0 = float(rng.uniform(0.0, 360.0))
-        steer = float(rng.uniform(*st["parked_steer_deg"]))
+        steer = float(rng.uniform(*st.parked_steer_deg))
         got = None
-        for _ in range(int(st["max_tries"])):
-            z_rel = float(rng.uniform(*st["distance_m"]))
-            u = float(rng.uniform(-st["border_margin"], 1.0 + st["border_margin"])) * cam["width"]
+        for _ in range(int(st.max_tries)):
+            z_rel = float(rng.uniform(*st.distance_m))
+            u = float(rng.uniform(-st.border_margin, 1.0 + st.border_margin)) * cam["width"]
             x = -(u - cam["cx"]) * z_rel / cam["fx"]  # image-right is world -X
-            oncoming = bool(rng.uniform() < st["oncoming_share"])
-            plan_rng = np.random.default_rng([cfg["seed"], seq, TAG, len(placed), int(rng.integers(2 ** 31))])
-            if not st["lateral_m"][0] <= x <= st["lateral_m"][1]:
+            oncoming = bool(rng.uniform() < st.oncoming_share)
+            plan_rng = np.random.default_rng([cfg.seed, seq, TAG, len(placed), int(rng.integers(2 ** 31))])
+            if not st.lateral_m[0] <= x <= st.lateral_m[1]:
                 continue
             if kind == "parked":
-                yaw = road_heading(st["road_heading_deg"]) + float(rng.uniform(-1, 1)) * st["heading_spread_deg"]
+                yaw = road_heading(st.road_heading_deg) + float(rng.uniform(-1, 1)) * st.heading_spread_deg
                 pose = np.tile([0.0, steer, 0.0, yaw, 0.0, x, 0.0, ego_z[mid] + z_rel], (n, 1))
                 traj = {"t": t, "speed": np.zeros(n), "kappa": np.zeros(n), "accel": np.zeros(n),
                         "velocity_xz": np.zeros((n, 2)), "origin_xz": pose[:, [5, 7]], "wheel_rad": np.zeros(n),
                         "crank_rate": np.zeros(n), "wheel_rate": np.zeros(n), "lateral_accel": np.zeros(n)}
                 gear = None
             else:
-                psi0 = road_heading(st["road_heading_deg"]) + (180.0 if oncoming else 0.0)
+                psi0 = road_heading(st.road_heading_deg) + (180.0 if oncoming else 0.0)
                 x0 = x if man == "cross" else 0.0
                 if man == "cross" and abs(x0) < 2.0:  # a crossing starts beside the ego's lane
                     x0 = math.copysign(float(rng.uniform(2.5, 6.0)), x0 if x0 != 0 else 1.0)
@@ -208,17 +208,17 @@ def draw_sequence(cfg, seq):
         placed.append(pose[:, [5, 7]])
         rec = {}
         if kind == "cyclist":
-            crossing = tj.crossing_frames(traj["origin_xz"][:, 0], traj["theta_y_deg"], sq["lane_half_width_m"])
+            crossing = tj.crossing_frames(traj["origin_xz"][:, 0], traj["theta_y_deg"], sq.lane_half_width_m)
             inten = intention(man, traj, crossing)
             # its own Generator: the signal draws leave every other draw of the sequence as it was
-            sig_rng = np.random.default_rng([cfg["seed"], seq, TAG, SIGNAL_TAG, len(out)])
+            sig_rng = np.random.default_rng([cfg.seed, seq, TAG, SIGNAL_TAG, len(out)])
             rec["signal"] = signal_frames(sig_rng, man, traj, plan[0], plan[1], sq, duration)
         else:
             crossing, inten = np.zeros(n, bool), ["parked"] * n
         out.append({"kind": kind, "bike": bike, "rider": rider, "manoeuvre": man, "poses": pose, "traj": traj,
                     "crossing": crossing, "intention": inten, "gear_ratio": gear, "geometry": geom,
                     "plan": plan, **rec})
-    kinds = cfg["backgrounds"]["kinds"]
+    kinds = cfg.backgrounds.kinds
     bg = {"kind": kinds[int(rng.integers(len(kinds)))], "seed": int(rng.integers(2 ** 31))}
     return {"ego_speed": ego_speed, "ego_z": ego_z, "camera": {"preset": cam["preset"]}, "spec": cam,
             "background": bg, "instances": out, "dropped": dropped}

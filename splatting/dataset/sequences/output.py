@@ -30,7 +30,7 @@ def write_frame(cfg, index, out_dir, assets):
     img, shard = paths(out_dir, index, cfg)
     os.makedirs(os.path.dirname(img), exist_ok=True)
     with atomic_path(img) as tmp:
-        png.write(tmp, rgb, cfg["png_compress_level"])
+        png.write(tmp, rgb, cfg.png_compress_level)
     calib = {k: [float(x) for x in v.ravel()] for k, v in rows["calib"].items()}
     os.makedirs(os.path.dirname(shard), exist_ok=True)
     write_json(shard, {"image": image, "annotations": anns, "kitti": rows["kitti"], "mot": rows["mot"],
@@ -43,7 +43,7 @@ def frame_done(out_dir, index, cfg):
 
 
 def total(cfg):
-    return int(cfg["count"]) * int(cfg["sequence"]["length"])
+    return int(cfg.count) * int(cfg.sequence.length)
 
 
 def _text(path, text):
@@ -55,10 +55,10 @@ def _text(path, text):
 
 def assemble(out_dir, cfg, info, cats):
     """Every sequence's text files and the COCO-video annotations.json (atomic); returns its path."""
-    n, fps = int(cfg["sequence"]["length"]), float(cfg["sequence"]["fps"])
-    fm = cfg["labels"]["formats"]
+    n, fps = int(cfg.sequence.length), float(cfg.sequence.fps)
+    fm = cfg.labels.formats
     images, anns, videos = [], [], []
-    for s in range(int(cfg["count"])):
+    for s in range(int(cfg.count)):
         kit, mot, sig = [], [], []
         for f in range(n):
             img, shard = paths(out_dir, s * n + f, cfg)

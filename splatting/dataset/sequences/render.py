@@ -16,7 +16,7 @@ TRACK_STRIDE = 1000  # COCO track_id = sequence * 1000 + track (the still street
 
 
 def sequence_of(cfg, index):
-    n = int(cfg["sequence"]["length"])
+    n = int(cfg.sequence.length)
     return index // n, index % n
 
 
@@ -49,14 +49,14 @@ def make_frame(cfg, index, assets):
     """Frame `index` (global) -> (rgb, image record, annotations, {"kitti": [(track, obj)], "mot": [(track, row)]})."""
     seq, f = sequence_of(cfg, index)
     sd = drawn(cfg, seq, assets)
-    exposure = float(cfg["sequence"]["exposure_s"])
+    exposure = float(cfg.sequence.exposure_s)
     if exposure > 0:  # motion blur: sub-frame renders averaged, the labels of the frame's instant
-        rgb, image, anns, extras = blurred_sample(cfg, index, assets, sd, f, exposure, int(cfg["sequence"]["blur_subframes"]))
+        rgb, image, anns, extras = blurred_sample(cfg, index, assets, sd, f, exposure, int(cfg.sequence.blur_subframes))
     else:
         rgb, image, anns, extras = make_sample(cfg, index, assets, drawn=frame_draw(sd, f), camera=ego_camera(sd, f),
                                                look_index=seq)
     image.update(file_name=f"{seq:04d}/{f:06d}.png", video_id=seq + 1, frame_id=f,
-                 sequence={"time_s": round(f / float(cfg["sequence"]["fps"]), 6),
+                 sequence={"time_s": round(f / float(cfg.sequence.fps), 6),
                            "ego_speed_mps": round(sd["ego_speed"], 6), "ego_z_m": round(float(sd["ego_z"][f]), 6)})
     for k, rec in enumerate(image["instances"]):
         rec.update(track_id=k + 1, **motion_record(sd["instances"][k], f))
