@@ -4,6 +4,7 @@ refusing untrained or below-floor assets, and (slow) a tiny two-bike build that 
 and the Ray engine finish with the same files, whose tasks never share a file, whose
 --no-posed-train parts are the posed build's rest-trained parts, and where a changed fine-tune
 setting redoes only the posed and ground-truth tasks."""
+from dataclasses import replace
 import json
 import os
 import signal
@@ -55,8 +56,8 @@ def test_graph_without_the_posed_stage_is_the_old_one(tmp_path):
                                  "gt:city_a", "views:scooter_b", "train:scooter_b:frame", "train:scooter_b:steering",
                                  "gt:scooter_b"]
     assert g[4].deps == ["train:city_a:frame", "train:city_a:steering", "train:city_a:crank"]
-    assert part_file("B", "frame", {"posed_train": False}) == os.path.join("B", "gaussians", "frame.ply")
-    assert part_file("B", "frame", {"posed_train": True}) == os.path.join("B", "gaussians", "frame_rest.ply")
+    assert part_file("B", "frame", False) == os.path.join("B", "gaussians", "frame.ply")
+    assert part_file("B", "frame", True) == os.path.join("B", "gaussians", "frame_rest.ply")
 
 
 def _settings(**kw):
@@ -68,6 +69,12 @@ def _settings(**kw):
     return settings_of(p.parse_args([a for k, v in kw.items() for a in (f"--{k.replace('_', '-')}", str(v))]))
 
 
+def _without_posed(s):
+    """The LibrarySettings s with the posed stage off (--no-posed-train)."""
+    from splatting.library.settings import LibrarySettings
+    return LibrarySettings(s.budget.model_copy(update={"posed_train": False}))
+
+
 def test_a_changed_fine_tune_setting_clashes_with_posed_and_gt_only(tmp_path):
     """SETTING_KEYS: a fine-tune setting belongs to the posed and ground-truth tasks, never to the
     views and part trainings (those are kept); a training setting clashes with everything after views."""
@@ -75,7 +82,8 @@ def test_a_changed_fine_tune_setting_clashes_with_posed_and_gt_only(tmp_path):
     from splatting.library.tasks import make_graph, task_settings
     g = make_graph(str(tmp_path), {"city_a": write_test_bike(str(tmp_path / "bikes"), "city_a")}, [])
     built = _settings(size=64, posed_iterations=20)
-    assert built["posed_train"] is True and built["posed_iterations"] == 20 and built["posed_poses"] > 4
+    rec = built.record()
+    assert rec["posed_train"] is True and rec["posed_iterations"] == 20 and rec["posed_poses"] > 4
     for t in g:
         write_record(str(tmp_path), t.id, {"files": {}, "metrics": {}, "settings": task_settings(t.kind, built)})
     check_all_settings(str(tmp_path), [(t.id, task_settings(t.kind, built)) for t in g])  # same: fine
@@ -90,14 +98,14 @@ def test_a_changed_fine_tune_setting_clashes_with_posed_and_gt_only(tmp_path):
         assert "posed:city_a, gt:city_a)" in msg and f"({k} differ)" in msg, msg
         assert "posed__city_a.json gt__city_a.json" in msg and "train" not in msg and "views" not in msg, msg
     # a default changed in splatting/bike/posed_train.py (not an option here) is a settings change too
-    assert built["posed_rest_fraction"] > 0 and built["posed_lr_means"] > 0
-    msg = clash(dict(built, posed_rest_fraction=built["posed_rest_fraction"] / 2))
+    assert rec["posed_rest_fraction"] > 0 and rec["posed_lr_means"] > 0
+    msg = clash(replace(built, posed=replace(built.posed, rest_fraction=rec["posed_rest_fraction"] / 2)))
     assert "(posed:city_a, gt:city_a)" in msg and "(posed_rest_fraction differ)" in msg, msg
     msg = clash(_settings(size=64, posed_iterations=20, iterations=10))
     assert "(train:city_a:frame, train:city_a:steering, train:city_a:crank, posed:city_a ...)" in msg, msg
     assert "views" not in msg
     # switching the stage off changes where the parts go: the trainings clash too
-    msg = clash(dict(_settings(size=64), posed_train=False))
+    msg = clash(_without_posed(_settings(size=64)))
     assert "train:city_a:frame" in msg and msg.endswith("built with the posed fine-tune: drop --no-posed-train"), msg
 
 
@@ -110,9 +118,9 @@ def test_settings_without_the_posed_stage_match_records_from_before_it(tmp_path)
     old = {"views": ("view_size", "samples"),  # SETTING_KEYS before the posed stage
            "train": ("view_size", "samples", "iterations", "max_gaussians", "time_budget_s"),
            "gt": ("view_size", "samples", "iterations", "max_gaussians", "time_budget_s", "gt_poses", "gt_seed")}
-    s = dict(_settings(size=64), posed_train=False)
+    s = _without_posed(_settings(size=64))
     for t in g:
-        write_record(str(tmp_path), t.id, {"files": {}, "metrics": {}, "settings": {k: s[k] for k in old[t.kind]}})
+        write_record(str(tmp_path), t.id, {"files": {}, "metrics": {}, "settings": {k: s.record()[k] for k in old[t.kind]}})
     check_all_settings(str(tmp_path), [(t.id, task_settings(t.kind, s)) for t in g])
     posed = _settings(size=64)  # the posed stage on, over that library: the trainings clash, with the way out
     g = make_graph(str(tmp_path), {"city_a": g[0].bike_dir}, [])
@@ -126,7 +134,7 @@ def test_posed_task_refuses_a_fine_tune_run_with_another_config(tmp_path, monkey
     from splatting.library import tasks
     d = write_test_bike(str(tmp_path / "bikes"), "city_a")
     s = _settings(size=64, posed_poses=6)
-    cfg = {k[len("posed_"):]: v for k, v in s.items() if k.startswith("posed_") and k != "posed_train"}
+    cfg = {k[len("posed_"):]: v for k, v in s.record().items() if k.startswith("posed_") and k != "posed_train"}
     os.makedirs(os.path.join(d, "gaussians"), exist_ok=True)
     os.makedirs(os.path.join(d, "views", "posed"), exist_ok=True)
     for p in PARTS:
@@ -159,10 +167,10 @@ def test_fidelity_recipe_trains_antialiased_and_runs_its_fine_tune(tmp_path, mon
     from splatting.library import tasks
     d = write_test_bike(str(tmp_path / "bikes"), "city_a")
     fid, default = _settings(size=64, recipe="fidelity"), _settings(size=64)
-    assert fid["antialiased"] is True and "antialiased" not in default
+    assert fid.record()["antialiased"] is True and "antialiased" not in default.record()
     assert "antialiased" in tasks.task_settings("train", fid) and "antialiased" not in tasks.task_settings("train", default)
-    assert fid["posed_eps2d"] == 0.173 and fid["posed_densify"] and fid["posed_iterations"] == 10000
-    assert _settings(size=64, recipe="fidelity", posed_iterations=50)["posed_iterations"] == 50  # options override
+    assert fid.record()["posed_eps2d"] == 0.173 and fid.record()["posed_densify"] and fid.record()["posed_iterations"] == 10000
+    assert _settings(size=64, recipe="fidelity", posed_iterations=50).record()["posed_iterations"] == 50  # options override
     ran = []
     monkeypatch.setattr(tasks, "_run", lambda cmd, what: ran.append(cmd) or "")
     g = tasks.make_graph(str(tmp_path), {"city_a": d}, [])
@@ -179,11 +187,12 @@ def test_fidelity_recipe_trains_antialiased_and_runs_its_fine_tune(tmp_path, mon
     PosedTrain.add_arguments(p)
     cmd = ran[-1]
     args = p.parse_args(cmd[cmd.index("bike-posed-train") + 1:])
-    assert PosedTrain.config_from_args(args) == posed_config("fidelity", samples=fid["posed_samples"], progress=False)
+    assert PosedTrain.config_from_args(args) == posed_config("fidelity", samples=fid.posed.samples, progress=False)
 
 
 def _manifest(tmp_path, gt_iou, part_psnr=30.0, complete=True):
-    from splatting.library.manifest import FLOORS, build_manifest
+    from splatting.library.manifest import build_manifest
+    from splatting.library.settings import Floors
     from splatting.library.tasks import make_graph
     d = write_test_bike(str(tmp_path / "bikes"), "city_a")
     g = make_graph(str(tmp_path), {"city_a": d}, [])
@@ -197,7 +206,7 @@ def _manifest(tmp_path, gt_iou, part_psnr=30.0, complete=True):
     if complete:
         _record(tmp_path, "gt:city_a", {"gt_iou": gt_iou, "gt_box_psnr": 25.0, "gt_iou_min": gt_iou,
                                         "gt_box_psnr_min": 24.0, "gt_poses": 3})
-    return build_manifest(str(tmp_path), g, dict(FLOORS), {"view_size": 64}, "local")
+    return build_manifest(str(tmp_path), g, Floors(), _settings(size=64), "local")
 
 
 def test_manifest_marks_assets_below_the_floor(tmp_path):

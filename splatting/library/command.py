@@ -10,7 +10,7 @@ the same files; OUT/library.json lists every asset with its files and hashes, qu
 build time, settings, and whether it clears the quality floor (datasets use only those).
 The bikes themselves come from `make bikes` (blender_scripts/make_bikes.py).
 """
-from dataclasses import asdict, replace
+from dataclasses import replace
 import os
 import time
 
@@ -19,6 +19,7 @@ from cyclist_formats.atomic import remove_stale
 from cyclist_formats.errors import UserError
 from splatting.library.ray_address import check_address
 from splatting.library import manifest
+from splatting.library.settings import FLOORS, LibrarySettings, budget, floors
 
 # The stage's modules are imported inside the functions below, not at the top: they load torch
 # (~2.5 s, python -X importtime), and `--help` and the argument checks answer before that (0.2-0.5 s).
@@ -60,22 +61,17 @@ def add_arguments(p):
     f.add_argument("--posed-sh-degree", type=int, choices=(0, 1, 2), default=None,
                    help="SH degree of the fine-tuned parts (default: bike-posed-train's)")
     q = p.add_argument_group("quality floor (assets below it are marked unusable)")
-    q.add_argument("--min-part-psnr", type=float, default=manifest.FLOORS["min_part_psnr"])
-    q.add_argument("--min-iou", type=float, default=manifest.FLOORS["min_gt_iou"])
-    q.add_argument("--min-box-psnr", type=float, default=manifest.FLOORS["min_gt_box_psnr"])
-    q.add_argument("--min-rider-psnr", type=float, default=manifest.FLOORS["min_rider_psnr"])
+    q.add_argument("--min-part-psnr", type=float, default=FLOORS["min_part_psnr"])
+    q.add_argument("--min-iou", type=float, default=FLOORS["min_gt_iou"])
+    q.add_argument("--min-box-psnr", type=float, default=FLOORS["min_gt_box_psnr"])
+    q.add_argument("--min-rider-psnr", type=float, default=FLOORS["min_rider_psnr"])
     p.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
 def check_args(args):
     checks.output_dir("out", args.out)
-    checks.image_size("size", args.size, lo=32)
-    checks.count("samples", args.samples, hi=1 << 16)
-    checks.count("iterations", args.iterations, hi=10_000_000)
-    checks.positive("time_budget_s", args.time_budget_s)
-    checks.gaussians("max_gaussians", args.max_gaussians, lo=100)
-    checks.count("rider_iterations", args.rider_iterations, hi=10_000_000)
-    checks.count("gt_poses", args.gt_poses, hi=1000)
+    budget_of(args)  # the budget and the floor against their models (settings.py): one line naming the field
+    floors_of(args)
     checks.integer("posed_poses", args.posed_poses, 5, 10_000)  # 4 are held out
     checks.count("posed_iterations", args.posed_iterations, hi=10_000_000)
     checks.count("posed_samples", args.posed_samples, hi=1 << 16)
@@ -84,10 +80,6 @@ def check_args(args):
         raise UserError("--posed-* settings go with the posed fine-tune, not with --no-posed-train")
     checks.integer("workers", args.workers, 1, 1024)
     checks.integer("retries", args.retries, 0, 100)
-    checks.number("min_part_psnr", args.min_part_psnr, 0, 200)
-    checks.number("min_iou", args.min_iou, 0, 1)
-    checks.number("min_box_psnr", args.min_box_psnr, 0, 200)
-    checks.number("min_rider_psnr", args.min_rider_psnr, 0, 200)
     checks.output_dir("riders_root", args.riders_root)
     if args.address and args.engine != "ray":
         raise UserError("--address goes with --engine ray")
@@ -121,37 +113,36 @@ def select(args):
     return {b: os.path.join(root, b) for b in bikes}, riders
 
 
-def settings_of(args):
-    s = {"view_size": args.size, "samples": args.samples, "iterations": args.iterations,
-         "time_budget_s": args.time_budget_s, "max_gaussians": args.max_gaussians,
-         "rider_iterations": args.rider_iterations, "gt_poses": args.gt_poses, "gt_seed": 0,
-         "riders_root": os.path.abspath(args.riders_root), "posed_train": not args.no_posed_train}
+def budget_of(args):
+    """The Budget of the flags (checked field by field; torch-free, so check_args runs it first)."""
     from splatting.bike.recipes import RECIPES
-    if RECIPES[args.recipe]["train"].get("antialiased"):  # absent: not (libraries built before the key)
-        s["antialiased"] = True
-    if s["posed_train"]:
-        s.update(posed_settings(args))
-    return s
+    return budget(view_size=args.size, samples=args.samples, iterations=args.iterations,
+                  time_budget_s=args.time_budget_s, max_gaussians=args.max_gaussians,
+                  rider_iterations=args.rider_iterations, gt_poses=args.gt_poses, gt_seed=0,
+                  riders_root=os.path.abspath(args.riders_root), posed_train=not args.no_posed_train,
+                  antialiased=bool(RECIPES[args.recipe]["train"].get("antialiased")))
+
+
+def settings_of(args):
+    """LibrarySettings of the flags: the budget and, with the posed stage on, its fine-tune."""
+    return LibrarySettings(budget_of(args), posed_settings(args) if not args.no_posed_train else None)
 
 
 def posed_settings(args):
-    """The fine-tune's whole configuration as posed_<field> settings: the options given here plus
-    every other PosedTrainConfig default (rates, rest fraction, denoiser, ...), so that a default
-    changed in splatting/bike/posed_train.py is a settings change too, never a silent one.  Resolved
-    here, not in add_arguments: the module imports torch, --help should not."""
+    """The fine-tune's whole configuration (a PosedTrainConfig): the options given here plus every
+    other PosedTrainConfig default (rates, rest fraction, denoiser, ...), so that a default changed
+    in splatting/bike/posed_train.py is a settings change too (it is recorded as posed_<field>),
+    never a silent one.  Resolved here, not in add_arguments: the module imports torch, --help should not."""
     from splatting.bike.recipes import posed_config
     d = posed_config(args.recipe)
-    cfg = replace(d, poses=args.posed_poses or d.poses, iterations=args.posed_iterations or d.iterations,
-                  samples=args.posed_samples or args.samples or d.samples,
-                  sh_degree=d.sh_degree if args.posed_sh_degree is None else args.posed_sh_degree)
-    out = {"posed_" + k: v for k, v in asdict(cfg).items() if k != "progress"}
-    assert "posed_train" not in out  # the stage's on/off switch
-    return out
+    return replace(d, poses=args.posed_poses or d.poses, iterations=args.posed_iterations or d.iterations,
+                   samples=args.posed_samples or args.samples or d.samples,
+                   sh_degree=d.sh_degree if args.posed_sh_degree is None else args.posed_sh_degree)
 
 
 def floors_of(args):
-    return {"min_part_psnr": args.min_part_psnr, "min_gt_iou": args.min_iou, "min_gt_box_psnr": args.min_box_psnr,
-            "min_rider_psnr": args.min_rider_psnr}
+    return floors(min_part_psnr=args.min_part_psnr, min_gt_iou=args.min_iou, min_gt_box_psnr=args.min_box_psnr,
+                  min_rider_psnr=args.min_rider_psnr)
 
 
 def build(args):
@@ -162,7 +153,7 @@ def build(args):
     bikes, riders = select(args)
     root = args.out
     settings = settings_of(args)
-    graph = make_graph(root, bikes, riders, posed=settings["posed_train"])
+    graph = make_graph(root, bikes, riders, posed=settings.budget.posed_train)
     from splatting.library.tasks import task_settings
     manifest.check_all_settings(root, [(t.id, task_settings(t.kind, settings)) for t in graph])  # before any task runs
     for d in bikes.values():  # a killed run's half-written temporaries; their tasks are not recorded

@@ -22,7 +22,6 @@ from cyclist_formats.atomic import is_temp_name, read_json_or_none, write_json
 from cyclist_formats.errors import UserError
 
 MANIFEST = "library.json"
-FLOORS = {"min_part_psnr": 20.0, "min_gt_iou": 0.85, "min_gt_box_psnr": 18.0, "min_rider_psnr": 20.0}
 
 
 def sha256(path, chunk=1 << 20):
@@ -107,22 +106,23 @@ def check_all_settings(root, task_settings):
 
 
 def usable(asset, floors):
-    """(usable, reasons) of one asset's quality against the floors."""
+    """(usable, reasons) of one asset's quality against the floors (settings.Floors)."""
     q, why = asset.get("quality", {}), []
     for part, psnr in (q.get("part_psnr") or {}).items():
-        if psnr is None or psnr < floors["min_part_psnr"]:
-            why.append(f"{part} held-out PSNR {psnr} < {floors['min_part_psnr']}")
-    if "gt_iou" in q and q["gt_iou"] < floors["min_gt_iou"]:
-        why.append(f"ground-truth IoU {q['gt_iou']:.3f} < {floors['min_gt_iou']}")
-    if "gt_box_psnr" in q and q["gt_box_psnr"] < floors["min_gt_box_psnr"]:
-        why.append(f"ground-truth box PSNR {q['gt_box_psnr']:.2f} < {floors['min_gt_box_psnr']}")
-    if "rider_psnr" in q and (q["rider_psnr"] is None or q["rider_psnr"] < floors["min_rider_psnr"]):
-        why.append(f"avatar held-out PSNR {q['rider_psnr']} < {floors['min_rider_psnr']}")
+        if psnr is None or psnr < floors.min_part_psnr:
+            why.append(f"{part} held-out PSNR {psnr} < {floors.min_part_psnr}")
+    if "gt_iou" in q and q["gt_iou"] < floors.min_gt_iou:
+        why.append(f"ground-truth IoU {q['gt_iou']:.3f} < {floors.min_gt_iou}")
+    if "gt_box_psnr" in q and q["gt_box_psnr"] < floors.min_gt_box_psnr:
+        why.append(f"ground-truth box PSNR {q['gt_box_psnr']:.2f} < {floors.min_gt_box_psnr}")
+    if "rider_psnr" in q and (q["rider_psnr"] is None or q["rider_psnr"] < floors.min_rider_psnr):
+        why.append(f"avatar held-out PSNR {q['rider_psnr']} < {floors.min_rider_psnr}")
     return not why, why
 
 
 def build_manifest(root, graph, floors, settings, engine):
-    """library.json from the task records of a finished graph (driver only, atomic)."""
+    """library.json from the task records of a finished graph (driver only, atomic); floors: a
+    settings.Floors, settings: a settings.LibrarySettings (written as their records)."""
     bikes, riders = {}, {}
     for t in graph:
         rec = read_record(root, t.id)
@@ -164,7 +164,7 @@ def build_manifest(root, graph, floors, settings, engine):
         a["usable"] = bool(ok and a["complete"])
         a["below_floor"] = why
     doc = {"format": "3darticcyclists-library/1", "root": os.path.abspath(root), "engine": engine,
-           "settings": settings, "quality_floor": floors, "bikes": dict(sorted(bikes.items())),
+           "settings": settings.record(), "quality_floor": floors.record(), "bikes": dict(sorted(bikes.items())),
            "riders": dict(sorted(riders.items())),
            "build_s_total": round(sum(a["build_s"] for a in list(bikes.values()) + list(riders.values())), 2)}
     write_json(os.path.join(root, MANIFEST), doc)

@@ -9,9 +9,9 @@
     avatar:<rider>        python -m splatting rider-avatar (subprocess): RIDERS/<rider>/
 
 The posed stage (the asset recipe's fine-tune through the 8-DoF pose, docs/training.md) is on by
-default; settings["posed_train"] False (`--no-posed-train`) leaves the graph and layout without it.
+default; settings.budget.posed_train False (`--no-posed-train`) leaves the graph and layout without it.
 
-Every task is a function of (library root, settings) that does its work in subprocesses, writes
+Every task is a function of (library root, settings: splatting.library.settings.LibrarySettings) that does its work in subprocesses, writes
 only its own outputs (atomically, by the commands it runs) and returns its record; the engine
 writes the record (manifest.write_record) once the task succeeded.  Blender and training run in
 subprocesses so an engine (a local pool, a Ray worker) only supervises: a crash there is a failed
@@ -80,10 +80,11 @@ def _run(cmd, what, env_threads=1):
 
 
 def run_views(task, root, s):
+    b = s.budget
     cmd = [sys.executable, os.path.join(ROOT, "blender_scripts", "render_views.py"), "--bike", task.bike_dir,
-           "--parts", "all", "--size", str(s["view_size"]), "--threads", "1"]
-    if s.get("samples"):
-        cmd += ["--samples", str(s["samples"])]
+           "--parts", "all", "--size", str(b.view_size), "--threads", "1"]
+    if b.samples:
+        cmd += ["--samples", str(b.samples)]
     t = time.time()
     _run(cmd, f"views of {task.asset}")
     wall = time.time() - t
@@ -99,17 +100,18 @@ def run_views(task, root, s):
             "wall_s": round(wall, 2)}
 
 
-def part_file(bike_dir, part, s):
+def part_file(bike_dir, part, posed_train):
     """The train task's part file: <part>_rest.ply when the posed task writes <part>.ply from it."""
-    return os.path.join(bike_dir, "gaussians", part + ("_rest.ply" if s.get("posed_train") else ".ply"))
+    return os.path.join(bike_dir, "gaussians", part + ("_rest.ply" if posed_train else ".ply"))
 
 
 def run_train(task, root, s):
-    out = part_file(task.bike_dir, task.part, s)
+    b = s.budget
+    out = part_file(task.bike_dir, task.part, b.posed_train)
     cmd = [sys.executable, "-m", "splatting", "train", "--views", os.path.join(task.bike_dir, "views", task.part),
-           "--out", out, "--iterations", str(s["iterations"]), "--max-gaussians", str(s["max_gaussians"]),
-           "--time-budget-s", str(s["time_budget_s"]), "--seed", "0", "--threads", "1", "--quiet"]
-    if s.get("antialiased"):  # the fidelity recipe's parts (splatting/bike/recipes.py)
+           "--out", out, "--iterations", str(b.iterations), "--max-gaussians", str(b.max_gaussians),
+           "--time-budget-s", str(b.time_budget_s), "--seed", "0", "--threads", "1", "--quiet"]
+    if b.antialiased:  # the fidelity recipe's parts (splatting/bike/recipes.py)
         cmd.append("--antialiased")
     t = time.time()
     _run(cmd, f"training {task.asset}/{task.part}")
@@ -126,14 +128,14 @@ def run_train(task, root, s):
 def run_posed(task, root, s):
     """The parts fine-tuned together through the pose on posed Blender renders; its metrics are the
     fine-tune's held-out posed renders (the last 4) before and after."""
-    gdir = os.path.join(task.bike_dir, "gaussians")
+    gdir, p = os.path.join(task.bike_dir, "gaussians"), s.posed
     cmd = [sys.executable, "-m", "splatting", "bike-posed-train", "--bike", task.bike_dir, "--from-rest",
-           "--poses", str(s["posed_poses"]), "--iterations", str(s["posed_iterations"]),
-           "--samples", str(s["posed_samples"]), "--sh-degree", str(s["posed_sh_degree"]), "--quiet",
+           "--poses", str(p.poses), "--iterations", str(p.iterations),
+           "--samples", str(p.samples), "--sh-degree", str(p.sh_degree), "--quiet",
            "--render-threads", "1",  # the task declares one CPU
-           "--densify-max", str(s["posed_densify_max"]), "--lr-decay", repr(s["posed_lr_decay"]),
-           "--lr-tail", str(s["posed_lr_tail"]), "--eps2d", repr(s["posed_eps2d"])]
-    if s["posed_densify"]:
+           "--densify-max", str(p.densify_max), "--lr-decay", repr(p.lr_decay),
+           "--lr-tail", str(p.lr_tail), "--eps2d", repr(p.eps2d)]
+    if p.densify:
         cmd.append("--densify")
     t = time.time()
     _run(cmd, f"posed fine-tune of {task.asset}")
@@ -142,7 +144,7 @@ def run_posed(task, root, s):
     with open(meta) as f:
         m = json.load(f)
     # the record says which configuration made these parts: the one the subprocess really ran
-    want = {k[len("posed_"):]: v for k, v in s.items() if k.startswith("posed_") and k != "posed_train"}
+    want = s.posed_record()
     have = m.get("config") or {}
     diff = manifest.differ(have, want)
     if diff:
@@ -158,16 +160,17 @@ def run_posed(task, root, s):
 def run_gt(task, root, s):
     t = time.time()
     out_dir = os.path.join(root, "library", "gt", task.asset)
-    m, files = ground_truth(task.bike_dir, out_dir, s["gt_poses"], s.get("samples"), seed=s["gt_seed"])
+    m, files = ground_truth(task.bike_dir, out_dir, s.budget.gt_poses, s.budget.samples, seed=s.budget.gt_seed)
     return {"files": manifest.files_record(root, files), "metrics": m, "wall_s": round(time.time() - t, 2)}
 
 
 def run_avatar(task, root, s):
-    folder = os.path.join(s["riders_root"], task.asset)
+    b = s.budget
+    folder = os.path.join(b.riders_root, task.asset)
     cmd = [sys.executable, "-m", "splatting", "rider-avatar", "--id", task.asset, "--out", folder,
-           "--iterations", str(s["rider_iterations"]), "--max-gaussians", str(s["max_gaussians"]), "--threads", "1"]
-    if s.get("samples"):
-        cmd += ["--samples", str(s["samples"])]
+           "--iterations", str(b.rider_iterations), "--max-gaussians", str(b.max_gaussians), "--threads", "1"]
+    if b.samples:
+        cmd += ["--samples", str(b.samples)]
     t = time.time()
     _run(cmd, f"avatar of {task.asset}")
     wall = time.time() - t
@@ -191,19 +194,21 @@ SETTING_KEYS = {"views": ("view_size", "samples"),
 
 
 def task_settings(kind, settings):
-    """The settings a task of this kind depends on.  With the posed stage off every posed key is
-    left out, so records written before the stage existed still match; so is "antialiased" unless
-    the recipe trains so (records written before the fidelity recipe)."""
+    """The settings a task of this kind depends on (from the LibrarySettings' record, the flat dict
+    the library writes).  With the posed stage off every posed key is left out, so records written
+    before the stage existed still match; so is "antialiased" unless the recipe trains so (records
+    written before the fidelity recipe)."""
+    rec = settings.record()
     out = {}
     for k in SETTING_KEYS[kind]:
-        if k.startswith("posed_") and not settings.get("posed_train"):
+        if k.startswith("posed_") and not settings.budget.posed_train:
             continue
-        if k == "antialiased" and not settings.get(k):
+        if k == "antialiased" and not settings.budget.antialiased:
             continue
         if k == "posed_*":
-            out.update({n: v for n, v in sorted(settings.items()) if n.startswith("posed_") and n != "posed_train"})
+            out.update({n: v for n, v in sorted(rec.items()) if n.startswith("posed_") and n != "posed_train"})
         else:
-            out[k] = settings.get(k)
+            out[k] = rec.get(k)
     return out
 
 
