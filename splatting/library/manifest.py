@@ -22,6 +22,9 @@ from cyclist_formats.atomic import is_temp_name, read_json_or_none, write_json
 from cyclist_formats.errors import UserError
 
 MANIFEST = "library.json"
+# the quality floor's defaults (settings.Floors declares the fields with these; the command's --help
+# reads them from here without loading pydantic)
+FLOORS = {"min_part_psnr": 20.0, "min_gt_iou": 0.85, "min_gt_box_psnr": 18.0, "min_rider_psnr": 20.0}
 
 
 def sha256(path, chunk=1 << 20):
