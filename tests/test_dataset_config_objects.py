@@ -69,6 +69,16 @@ def test_the_generator_refuses_a_plain_dict(tmp_path):
     assert not os.path.exists(tmp_path / "out")  # refused before any work
 
 
+def test_the_config_cannot_be_changed_on_its_way_through_the_generator(tmp_path):
+    from pydantic import ValidationError
+    from splatting.dataset.config import validate
+    cfg = validate(small_config(str(tmp_path)))
+    for block, field, value in ((cfg, "count", 3), (cfg.street, "distance_m", [1, 2]), (cfg.insert.look, "match", False)):
+        with pytest.raises(ValidationError, match="frozen"):
+            setattr(block, field, value)
+    assert cfg.model_copy(update={"count": 3}).count == 3 and cfg.count == small_config(str(tmp_path))["count"]
+
+
 def test_a_stored_record_reads_back_as_the_same_config(tmp_path):
     """config.json (generate.config_record) -> config.from_record -> the same record: the merge step and
     a resumed run see the config the generator saw."""

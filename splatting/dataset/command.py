@@ -75,8 +75,9 @@ def generate(cfg, out_dir, workers=1, log=print, progress=True, shard=None, engi
 
     cfg: the validated DatasetConfig (config.load_config / validate); a plain dict is refused.  Its
     record (generate.config_record, made here once) is written as config.json and is the key a
-    resumed run must match.  shard (k, n): only indices = k mod n, and no merge (annotations None).  engine "ray": the
-    samples as Ray tasks (splatting.library.dataset_ray), merged here at the end."""
+    resumed run must match.  shard (k, n): only indices = k mod n, and no merge (annotations
+    None).  engine "ray": the samples as Ray tasks (splatting.library.dataset_ray), merged here at
+    the end."""
     from splatting.dataset.config import resolve_assets
     from splatting.dataset.generate import config_record, sample_done
     from splatting.dataset.merge import merge_dataset

@@ -2,8 +2,9 @@
 
 The step after sharded or distributed generation (`dataset --shard K/N`, a Slurm array, a
 Kubernetes Indexed Job, `--engine ray`): it reads the resolved config the generators stored in
-DIR/config.json (back into a DatasetConfig: config.from_record), refuses while any sample is missing (naming how many and the command that
-finishes them), and writes annotations.json atomically.  Idempotent: the shards fully determine
+DIR/config.json (back into a DatasetConfig: config.from_record), refuses while any sample is
+missing (naming how many and the command that finishes them), and writes annotations.json
+atomically.  Idempotent: the shards fully determine
 the output, so running it twice, or after a single-process run, gives the same bytes.
 """
 import json

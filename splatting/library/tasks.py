@@ -11,8 +11,8 @@
 The posed stage (the asset recipe's fine-tune through the 8-DoF pose, docs/training.md) is on by
 default; settings.budget.posed_train False (`--no-posed-train`) leaves the graph and layout without it.
 
-Every task is a function of (library root, settings: splatting.library.settings.LibrarySettings) that does its work in subprocesses, writes
-only its own outputs (atomically, by the commands it runs) and returns its record; the engine
+Every task is a function of (library root, settings: a splatting.library.settings.LibrarySettings)
+that does its work in subprocesses, writes only its own outputs (atomically, by the commands it runs) and returns its record; the engine
 writes the record (manifest.write_record) once the task succeeded.  Blender and training run in
 subprocesses so an engine (a local pool, a Ray worker) only supervises: a crash there is a failed
 task that is retried, never a dead engine.
