@@ -269,7 +269,7 @@ class ARTICCYC_OT_render_views(_Op, bpy.types.Operator):
     samples: bpy.props.IntProperty(name="Samples", default=0, min=0, description="0 = default")
 
     def run(self, context):
-        from .core import render_views
+        from .core.render import render_views
         out = bpy.path.abspath(self.directory or context.scene.articcyc_out_dir).rstrip("/\\")
         res = render_views.render_bike(out, parts=self.parts, views=self.views or None,
                                        samples=self.samples or None)
@@ -284,7 +284,7 @@ class ARTICCYC_OT_import_rider(_Op, bpy.types.Operator):
     overwrite: BoolProperty(name="Overwrite", default=False, description="replace an earlier rider with this id")
 
     def run(self, context):
-        from .core import rider_rig
+        from .core.rider import rider_rig
         sc = context.scene
         if context.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
@@ -317,7 +317,7 @@ def _preview(scene):
     arm = bpy.data.objects.get("armature")
     if arm is None or arm.type != "ARMATURE":
         return
-    from .core.articulation import apply_pose
+    from .core.rig.articulation import apply_pose
     apply_pose(arm, scene.articcyc_theta_p_deg, scene.articcyc_theta_s_deg)
 
 

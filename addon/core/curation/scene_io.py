@@ -17,7 +17,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from .. import armature as arm_mod
+from ..rig import armature as arm_mod
 from .. import bike_asset
 from ..frames import C, to_blender, to_canonical
 from ..procedural.build import PASS_INDEX
@@ -466,7 +466,7 @@ def current_keypoints():
         return kp
     arm = bpy.data.objects.get("armature")
     if arm is not None:
-        from ..articulation import posed_keypoints
+        from ..rig.articulation import posed_keypoints
         return {k: np.asarray(v) for k, v in posed_keypoints(arm).items()}
     return {}
 
@@ -617,7 +617,7 @@ def save(out_dir, allow_problems=False):
         raise UserError(f"keypoints invalid: {probs[0]}" + (f" (+{len(probs) - 1} more)" if len(probs) > 1 else ""))
     arm, kp, parts = build_rig()
     # the rig is built at rest: reset any preview pose before writing
-    from ..articulation import apply_pose
+    from ..rig.articulation import apply_pose
     apply_pose(arm, 0.0, 0.0)
     remove_helpers()
     scene = bpy.context.scene
