@@ -98,6 +98,9 @@ def set_keypoint_empties(kp):
             e.show_name = True
             e.show_in_front = True
         e.location = Vector(to_blender(kp[name]).tolist())
+    # matrix_world follows location only after a view-layer update (Blender runs one between two
+    # operators): without it a script's next read_keypoint_empties() would see the empties at the origin
+    bpy.context.view_layer.update()
 
 
 def read_keypoint_empties():
