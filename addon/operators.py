@@ -1,7 +1,9 @@
-"""Operators of the annotator panel; blender_scripts/curate.py calls the same ones headless.
+"""Operators of the annotator panel.
 
-Each operator is a thin wrapper over addon/core/curation/scene_io.py: a UserError becomes an
-ERROR report and CANCELLED (bpy.ops then raises RuntimeError with the message).
+Each operator is a thin wrapper over the curation functions in addon/core/curation/ (the same
+ones blender_scripts/curate.py calls headless): a UserError becomes an ERROR report and
+CANCELLED (bpy.ops then raises RuntimeError with the message).  The curation modules load
+inside the operators: they need numpy, and the add-on registers without it (requirements.py).
 """
 import math
 import os
@@ -14,11 +16,6 @@ from .core.script import UserError
 PART_ITEMS = [("frame", "Frame", "frame, rear wheel, saddle"), ("steering", "Steering", "fork, front wheel, bar"),
               ("crank", "Crank", "crank arms, chainring, pedals"),
               ("junk", "Junk", "not the bike (a rider, a stand, a ground): left out of every part")]
-
-
-def _io():
-    from .core.curation import scene_io
-    return scene_io
 
 
 class _Op:
@@ -81,13 +78,14 @@ class ARTICCYC_OT_auto_curate(_Op, bpy.types.Operator):
                                    description="canonical keypoints that replace the automatic ones")
 
     def run(self, context):
-        io = _io()
+        from .core.curation.curate_scene import auto_curate
+        from .core.curation.keypoint_empties import read_keypoints_file
         sc = context.scene
         d = None if self.auto_wheel else (self.wheel_diameter or sc.articcyc_wheel_diameter or None)
-        kp = io.read_keypoints_file(bpy.path.abspath(self.keypoints_file)) if self.keypoints_file else None
+        kp = read_keypoints_file(bpy.path.abspath(self.keypoints_file)) if self.keypoints_file else None
         if context.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
-        res = io.auto_curate(d, kp, source_path=sc.articcyc_model_path or None)
+        res = auto_curate(d, kp, source_path=sc.articcyc_model_path or None)
         _store_problems(sc, res.problems)
         return (f"curated: scale {res.scale:.5g} m/unit, {len(res.keypoints)} keypoints, "
                 f"{len(res.problems)} problem(s)")
@@ -100,7 +98,8 @@ class ARTICCYC_OT_place_wheels(_Op, bpy.types.Operator):
     bl_label = "Place wheel centres"
 
     def run(self, context):
-        _io().place_wheel_empties()
+        from .core.curation.keypoint_empties import place_wheel_empties
+        place_wheel_empties()
         return "drag kp.front_axle and kp.rear_axle onto the hubs, then Curate from wheel centres"
 
 
@@ -111,10 +110,11 @@ class ARTICCYC_OT_curate_from_wheels(_Op, bpy.types.Operator):
     bl_label = "Curate from wheel centres"
 
     def run(self, context):
+        from .core.curation.curate_scene import auto_curate
         sc = context.scene
         if context.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
-        res = _io().auto_curate(sc.articcyc_wheel_diameter or None, None, source_path=sc.articcyc_model_path or None,
+        res = auto_curate(sc.articcyc_wheel_diameter or None, None, source_path=sc.articcyc_model_path or None,
                                 from_wheel_empties=True)
         _store_problems(sc, res.problems)
         return f"curated from the wheel centres: {len(res.problems)} problem(s)"
@@ -126,10 +126,10 @@ class ARTICCYC_OT_resume(_Op, bpy.types.Operator):
     bl_label = "Resume partial curation"
 
     def run(self, context):
-        io = _io()
-        if bpy.data.objects.get(io.SOURCE) is None:
+        from .core.curation.scene_state import SOURCE, record_problems
+        if bpy.data.objects.get(SOURCE) is None:
             raise UserError("no curation in this file: import a model and Auto curate")
-        probs = io.record_problems()
+        probs = record_problems()
         _store_problems(context.scene, probs)
         return f"{len(probs)} problem(s) to fix" if probs else "no problems recorded: Save bike folder"
 
@@ -145,9 +145,9 @@ class ARTICCYC_OT_load_keypoints(_Op, bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def run(self, context):
-        io = _io()
-        kp = io.read_keypoints_file(bpy.path.abspath(self.filepath))
-        io.set_keypoint_empties(kp)
+        from .core.curation.keypoint_empties import read_keypoints_file, set_keypoint_empties
+        kp = read_keypoints_file(bpy.path.abspath(self.filepath))
+        set_keypoint_empties(kp)
         return f"{len(kp)} keypoints loaded"
 
 
@@ -157,14 +157,15 @@ class ARTICCYC_OT_snap_keypoints(_Op, bpy.types.Operator):
     bl_label = "Snap to surface"
 
     def run(self, context):
-        io = _io()
+        from .core.curation.keypoint_empties import snap_to_surface
+        from .core.curation.scene_state import PARTS, SOURCE
         kps = [o for o in context.selected_objects if o.name.startswith("kp.")]
         if not kps:
             raise UserError("select keypoint empties (kp.*) to snap")
-        targets = [bpy.data.objects[n] for n in io.PARTS if n in bpy.data.objects]
-        if not targets and io.SOURCE in bpy.data.objects:
-            targets = [bpy.data.objects[io.SOURCE]]
-        return f"snapped {io.snap_to_surface(kps, targets)} keypoint(s)"
+        targets = [bpy.data.objects[n] for n in PARTS if n in bpy.data.objects]
+        if not targets and SOURCE in bpy.data.objects:
+            targets = [bpy.data.objects[SOURCE]]
+        return f"snapped {snap_to_surface(kps, targets)} keypoint(s)"
 
 
 class ARTICCYC_OT_validate(_Op, bpy.types.Operator):
@@ -173,7 +174,8 @@ class ARTICCYC_OT_validate(_Op, bpy.types.Operator):
     bl_label = "Validate"
 
     def run(self, context):
-        probs = _io().validate_scene()
+        from .core.curation.keypoint_empties import validate_scene
+        probs = validate_scene()
         _store_problems(context.scene, probs)
         if probs:
             self.report({"WARNING"}, f"{len(probs)} problem(s): {probs[0]}")
@@ -187,8 +189,8 @@ class ARTICCYC_OT_edit_parts(_Op, bpy.types.Operator):
     bl_label = "Edit part labels"
 
     def run(self, context):
-        io = _io()
-        src = bpy.data.objects.get(io.SOURCE)
+        from .core.curation.scene_state import SOURCE
+        src = bpy.data.objects.get(SOURCE)
         if src is None:
             raise UserError("run Auto curate first")
         if context.mode != "OBJECT":
@@ -210,7 +212,8 @@ class ARTICCYC_OT_paint_part(_Op, bpy.types.Operator):
     part: EnumProperty(name="Part", items=PART_ITEMS)
 
     def run(self, context):
-        return f"{_io().paint_selected(self.part)} face(s) -> {self.part}"
+        from .core.curation.part_objects import paint_selected
+        return f"{paint_selected(self.part)} face(s) -> {self.part}"
 
 
 class ARTICCYC_OT_split_parts(_Op, bpy.types.Operator):
@@ -220,9 +223,10 @@ class ARTICCYC_OT_split_parts(_Op, bpy.types.Operator):
     relabel: BoolProperty(name="Recompute from keypoints", default=True)
 
     def run(self, context):
+        from .core.curation.part_objects import split_parts
         if context.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
-        parts = _io().split_parts(self.relabel)
+        parts = split_parts(self.relabel)
         return "parts: " + ", ".join(f"{n} {len(o.data.polygons)} faces" for n, o in parts.items())
 
 
@@ -232,9 +236,10 @@ class ARTICCYC_OT_build_rig(_Op, bpy.types.Operator):
     bl_label = "Build rig"
 
     def run(self, context):
+        from .core.curation.rigging import build_rig
         if context.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
-        _io().build_rig()
+        build_rig()
         _preview(context.scene)
         return "rig built"
 
@@ -247,13 +252,14 @@ class ARTICCYC_OT_save_bike(_Op, bpy.types.Operator):
     allow_problems: BoolProperty(name="Save despite problems", default=False)
 
     def run(self, context):
+        from .core.curation.saving import save
         sc = context.scene
         out = bpy.path.abspath(self.directory or sc.articcyc_out_dir)
         if not out:
             raise UserError("no output folder given")
         if context.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
-        meta = _io().save(out.rstrip("/\\"), self.allow_problems)
+        meta = save(out.rstrip("/\\"), self.allow_problems)
         sc.articcyc_out_dir = out
         _store_problems(sc, meta["curation"]["problems"])
         return f"saved {out}"
@@ -269,7 +275,7 @@ class ARTICCYC_OT_render_views(_Op, bpy.types.Operator):
     samples: bpy.props.IntProperty(name="Samples", default=0, min=0, description="0 = default")
 
     def run(self, context):
-        from .core import render_views
+        from .core.render import render_views
         out = bpy.path.abspath(self.directory or context.scene.articcyc_out_dir).rstrip("/\\")
         res = render_views.render_bike(out, parts=self.parts, views=self.views or None,
                                        samples=self.samples or None)
@@ -284,7 +290,7 @@ class ARTICCYC_OT_import_rider(_Op, bpy.types.Operator):
     overwrite: BoolProperty(name="Overwrite", default=False, description="replace an earlier rider with this id")
 
     def run(self, context):
-        from .core import rider_rig
+        from .core.rider import rider_rig
         sc = context.scene
         if context.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
@@ -317,7 +323,7 @@ def _preview(scene):
     arm = bpy.data.objects.get("armature")
     if arm is None or arm.type != "ARMATURE":
         return
-    from .core.articulation import apply_pose
+    from .core.rig.articulation import apply_pose
     apply_pose(arm, scene.articcyc_theta_p_deg, scene.articcyc_theta_s_deg)
 
 

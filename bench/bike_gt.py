@@ -31,8 +31,8 @@ def blender_worker(bike_dir, poses_json, out_dir, samples):
     sys.path.insert(0, ROOT)
     from dataclasses import replace
 
-    from addon.core import render
-    from addon.core.render_pose import render_pose
+    from addon.core.render import render
+    from addon.core.render.render_pose import render_pose
 
     with open(poses_json) as f:
         job = json.load(f)

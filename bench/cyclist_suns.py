@@ -33,11 +33,11 @@ def blender_worker(job_path):
 
     import bpy
 
-    from addon.core import render
-    from addon.core.articulation import apply_pose
+    from addon.core.render import render
+    from addon.core.rig.articulation import apply_pose
     from addon.core.bike_asset import open_bike
-    from addon.core.render_pose import load_camera
-    from addon.core.rider_import import import_rider
+    from addon.core.render.render_pose import load_camera
+    from addon.core.rider.rider_import import import_rider
     from bench.relight import sun_and_sky
 
     with open(job_path) as f:

@@ -85,7 +85,8 @@ def sun_and_sky(light):
     uniform sky as `light` (light_json) says, fixed in the world."""
     import bpy
 
-    from addon.core import frames, render
+    from addon.core import frames
+    from addon.core.render import render
 
     def setup(scene):
         for o in list(scene.objects):
@@ -138,8 +139,8 @@ def blender_worker(job_path):
     sys.path.insert(0, ROOT)
     from dataclasses import replace
 
-    from addon.core import render
-    from addon.core.render_pose import render_pose
+    from addon.core.render import render
+    from addon.core.render.render_pose import render_pose
 
     with open(job_path) as f:
         job = json.load(f)

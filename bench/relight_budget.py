@@ -37,8 +37,8 @@ def worker(job_path):
 
     import bpy
 
-    from addon.core import passes, render
-    from addon.core.render_pose import render_pose
+    from addon.core.render import passes, render
+    from addon.core.render.render_pose import render_pose
 
     from bench.relight import sun_and_sky
 
@@ -97,7 +97,8 @@ def analyse(exr_path, light, camera, grid=(), sun_exr=None, gauss_vis=None):
     and sky occlusion."""
     import torch
 
-    from addon.core import frames, passes
+    from addon.core import frames
+    from addon.core.render import passes
 
     from bench.compare import psnr
     from splatting.raster.camera import from_numpy

@@ -36,7 +36,7 @@ def worker(bike_dir, work_dir):
     import numpy as np
     from PIL import Image
 
-    from addon.core import render
+    from addon.core.render import render
     from addon.core.bike_asset import open_bike
 
     bike = open_bike(bike_dir)

@@ -30,7 +30,7 @@ class BlenderScene:
     def __init__(self, bike_dir):
         import bpy
 
-        from addon.core import render
+        from addon.core.render import render
         from addon.core.bike_asset import open_bike
 
         self.bpy, self.render = bpy, render
@@ -69,7 +69,7 @@ class BlenderScene:
         import mathutils
 
         from addon.core import frames
-        from addon.core.articulation import apply_pose, global_matrix
+        from addon.core.rig.articulation import apply_pose, global_matrix
 
         bpy, r, sc = self.bpy, self.render, self.scene
         size = sc.render.resolution_x

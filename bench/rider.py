@@ -58,7 +58,7 @@ def camera_json(cam):
     return {"K": cam.K.tolist(), "R": cam.R.tolist(), "T": cam.T.tolist()}
 
 
-# Stills rendered before setup_lighting placed its suns at once (addon/core/render.py) were lit from
+# Stills rendered before setup_lighting placed its suns at once (addon/core/render/render.py) were lit from
 # straight above whenever the light was yawed; render_rider.py keeps any still it finds, so a folder
 # without this stamp has its stills removed and rendered again.
 STILLS_LIGHTING = "suns placed by setup_lighting, turned with the yaw"

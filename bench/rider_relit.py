@@ -31,7 +31,8 @@ def blender_worker(job_path):
     sys.path.insert(0, ROOT)
     from dataclasses import replace
 
-    from addon.core import render, rider_import
+    from addon.core.render import render
+    from addon.core.rider import rider_import
 
     from bench.relight import sun_and_sky
 

@@ -76,9 +76,9 @@ def blender_worker(ply, cameras_json, cams, mode, out_dir, eps2d, antialiased):
     sys.path.insert(0, ROOT)
     import importlib.util
 
-    from addon.core import render
+    from addon.core.render import render
     from addon.core.scene import reset_scene
-    from addon.core.splat_import import import_splats
+    from addon.core.splats.splat_import import import_splats
 
     spec = importlib.util.spec_from_file_location("import_splats_script",
                                                   os.path.join(ROOT, "blender_scripts", "import_splats.py"))

@@ -9,7 +9,7 @@ whose keypoints or split fail is saved as OUT.partial.blend for the annotator pa
 MODEL: .glb .gltf .obj .fbx .ply .stl .blend.  Removes what is not the bike, finds the wheels, puts
 the bike in the canonical pose at real scale (tyre diameter --wheel-diameter, else from every size cue),
 estimates and validates the keypoints (or reads them, canonical frame, from FILE.json), splits
-frame / steering / crank, rigs and saves.  Runs the annotator panel's operators, headless.
+frame / steering / crank, rigs and saves: the functions the annotator panel's operators wrap.
 """
 import argparse
 import os
@@ -33,18 +33,6 @@ def parse(argv):
     return p.parse_args(argv)
 
 
-def _op(call, **kw):
-    """Run an add-on operator; its ERROR report becomes a UserError (one stderr line)."""
-    try:
-        res = call(**kw)
-    except RuntimeError as e:
-        msg = " ".join(str(e).split())
-        raise UserError(msg[len("Error: "):] if msg.startswith("Error: ") else msg) from None
-    if "FINISHED" not in res:
-        raise UserError(f"{call.idname_py()} was cancelled")
-    return res
-
-
 def main(argv):
     args = parse(argv)
     from cyclist_formats import checks
@@ -63,34 +51,30 @@ def main(argv):
             raise UserError(f"--wheel-diameter must be 'auto' or in (0, 10) metres, got {args.wheel_diameter}")
     if args.keypoints != "auto" and not os.path.isfile(args.keypoints):
         raise UserError(f"keypoints file not found: {args.keypoints}")
+    from addon.core.curation import importers
+    from addon.core.curation.curate_scene import auto_curate
+    from addon.core.curation.keypoint_empties import read_keypoints_file
+    from addon.core.curation.saving import save, save_partial
+    from addon.core.procedural.layout import KEYPOINT_NAMES
+    from addon.core.scene import reset_scene
     import bpy
 
-    import addon
-    from addon.core.scene import reset_scene
-
     reset_scene()
-    try:
-        addon.register()
-    except ValueError:  # already registered in this process
-        pass
-    _op(bpy.ops.articcyc.import_model, filepath=os.path.abspath(args.input))
-    _op(bpy.ops.articcyc.auto_curate, wheel_diameter=wheel, auto_wheel=wheel == 0.0,
-        keypoints_file="" if args.keypoints == "auto" else os.path.abspath(args.keypoints))
-    sc = bpy.context.scene
-    probs = [p.name for p in sc.articcyc_problems]
+    model = os.path.abspath(args.input)
+    importers.import_model(model)
+    kp = None if args.keypoints == "auto" else read_keypoints_file(os.path.abspath(args.keypoints))
+    probs = list(auto_curate(None if wheel == 0.0 else wheel, kp, source_path=model).problems)
     for p in probs:
         print(f"curate.py: warning: {p}", file=sys.stderr)
-    from addon.core.curation import scene_io
-    from addon.core.procedural.layout import KEYPOINT_NAMES
     missing = [k for k in KEYPOINT_NAMES if bpy.data.objects.get(f"kp.{k}") is None]
     split_failed = any(p.startswith("split:") for p in probs)
     if probs and (not args.allow_problems or missing or split_failed):
         # the annotator finishes it: open the partial curation, the panel lists the problems
-        partial = scene_io.save_partial(os.path.abspath(args.out).rstrip("/") + ".partial.blend")
+        partial = save_partial(os.path.abspath(args.out).rstrip("/") + ".partial.blend")
         raise UserError(f"{probs[0]}" + (f" (+{len(probs) - 1} more)" if len(probs) > 1 else "")
                         + f"; partial curation saved to {partial}: open it in Blender, ArticCyclists panel "
                           f"> Resume partial curation")
-    _op(bpy.ops.articcyc.save_bike, directory=os.path.abspath(args.out), allow_problems=args.allow_problems)
+    save(os.path.abspath(args.out).rstrip("/\\"), args.allow_problems)
     print(f"curate.py: wrote {args.out}", flush=True)
     return 0
 

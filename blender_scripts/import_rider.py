@@ -3,7 +3,7 @@
     python blender_scripts/import_rider.py --model PERSON.glb --id NAME --out DIR/rider.npz [--height-m 1.8]
     blender -b -P blender_scripts/import_rider.py -- --model PERSON.fbx --id NAME --out DIR/rider.npz
 
-The Blender half of `python -m splatting rider import` (addon/core/rider_rig.py does the work): bones
+The Blender half of `python -m splatting rider import` (addon/core/rider/rider_rig.py does the work): bones
 mapped to the 24 SMPL joints, rest pose turned into the T-pose, skinning weights and texture colours
 carried over.  Unrigged meshes, non-humanoid rigs and missing textures end in one error line, exit 2,
 and nothing written.  Prints one JSON line {"rider": OUT, ...} on success.
@@ -61,7 +61,7 @@ def main(argv):
     gltf_extensions.check_readable(args.model)
     rider_file.check_rider_id(args.id)
 
-    from addon.core import rider_rig
+    from addon.core.rider import rider_rig
     from addon.core.curation.importers import import_model
     from addon.core.scene import reset_scene
 

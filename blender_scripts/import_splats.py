@@ -66,8 +66,8 @@ def main(argv):
     if args.size < 8:
         raise UserError(f"--size must be at least 8, got {args.size}")
 
-    from addon.core import splat_import
-    from addon.core.splat_import import RADIUS_SCALE
+    from addon.core.splats import splat_import
+    from addon.core.splats.splat_import import RADIUS_SCALE
 
     paths = splat_import.expand_inputs(args.ply)
     if args.frame is not None and not 1 <= args.frame <= len(paths):
@@ -111,8 +111,8 @@ def main(argv):
 def render_camera(args, paths):
     """(K, R, T, width, height) of the render: --camera, or ring view --view around the centre of
     the Gaussians' bounding box at --size with the ring's field of view."""
-    from addon.core.render_pose import load_camera
-    from addon.core.splat_import import data_bbox
+    from addon.core.render.render_pose import load_camera
+    from addon.core.splats.splat_import import data_bbox
     from cyclist_formats import ring
 
     if args.camera:
@@ -128,8 +128,8 @@ def render_camera(args, paths):
 def setup_render(scene, camera, args):
     from dataclasses import replace
 
-    from addon.core import render
-    from addon.core import splat_billboard, splat_gaussian
+    from addon.core.render import render
+    from addon.core.splats import splat_billboard, splat_gaussian
 
     K, R, T, size, _ = camera
     s = replace(render.RenderSettings(), size=size)
@@ -174,7 +174,7 @@ def setup_render(scene, camera, args):
 
 
 def render(scene, paths, args):
-    from addon.core import render as R
+    from addon.core.render import render as R
 
     if len(paths) == 1:
         jobs = [(scene.frame_current, args.render)]

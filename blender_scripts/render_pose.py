@@ -53,7 +53,7 @@ def main(argv):
         checks.output_file("keypoints_out", args.keypoints_out, (".json",))
     from dataclasses import replace
 
-    from addon.core import render, render_pose
+    from addon.core.render import render, render_pose
 
     if not os.path.isdir(args.bike):
         raise UserError(f"no bike folder: {args.bike}")

@@ -66,7 +66,8 @@ def main(argv):
             checks.output_dir("out", args.out)
     from dataclasses import replace
 
-    from addon.core import render, rider_import
+    from addon.core.render import render
+    from addon.core.rider import rider_import
 
     s = replace(render.RenderSettings(), threads=args.threads)
     if args.samples:

@@ -34,9 +34,10 @@ def main(argv):
     import bpy
     from mathutils import Vector
 
-    from addon.core import frames, render
+    from addon.core import frames
+    from addon.core.render import render
     from addon.core.curation.importers import import_model
-    from addon.core.rider_import import import_rider
+    from addon.core.rider.rider_import import import_rider
     from addon.core.scene import reset_scene
     for k, job in enumerate(jobs):
         if os.path.isfile(job["out"]):

@@ -36,7 +36,7 @@ def main(argv):
     checks.image_size("size", args.size)
     checks.number("adaptive_threshold", args.adaptive_threshold, lo=0, hi=1)
     checks.threads("threads", args.threads)
-    from addon.core import render_views
+    from addon.core.render import render_views
 
     render_views.render_bike(args.bike, parts=args.parts, views=args.views, samples=args.samples,
                              denoise=args.denoise, size=args.size, threads=args.threads,

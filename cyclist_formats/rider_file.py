@@ -1,6 +1,6 @@
 """The imported-rider file (`rider.npz`): a user's rigged human reduced to the 24 SMPL joints, numpy only.
 
-Written by the Blender side (`blender_scripts/import_rider.py`, `addon/core/rider_rig.py`), read by
+Written by the Blender side (`blender_scripts/import_rider.py`, `addon/core/rider/rider_rig.py`), read by
 torch (`splatting/rider/imported.py`), so neither side needs the other's libraries.  Arrays, all in the
 canonical frame (docs/contract.md: X forward, Y up, Z to the rider's right, metres), T-pose, soles on
 Y = 0, pelvis joint at X = Z = 0, exactly like the body-model riders:

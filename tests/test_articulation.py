@@ -59,7 +59,7 @@ POSES = [(90, 30, (0, 0, 0), (0, 0, 0)), (-120, -40, (0, 0, 0), (0, 0, 0)),
 
 @pytest.mark.parametrize("style", ["road", "mountain", "motorcycle"])
 def test_pose_matches_design_formula(fresh_scene, style):
-    from addon.core.articulation import apply_pose, posed_keypoints
+    from addon.core.rig.articulation import apply_pose, posed_keypoints
     from addon.core.procedural.build import build_bike
 
     s = specs.sample_spec(style, 0, 0)
@@ -86,7 +86,7 @@ def test_pose_matches_design_formula(fresh_scene, style):
 
 
 def test_sign_conventions(fresh_scene):
-    from addon.core.articulation import apply_pose, posed_keypoints
+    from addon.core.rig.articulation import apply_pose, posed_keypoints
     from addon.core.procedural.build import build_bike
 
     s = specs.sample_spec("city", 0, 0)
@@ -114,7 +114,7 @@ def test_sign_conventions(fresh_scene):
 def test_pose_after_save_and_reopen(fresh_scene, tmp_path):
     """Bone parenting survives bike.blend: a reopened bike poses like the freshly built one."""
     import bpy
-    from addon.core.articulation import apply_pose, posed_keypoints
+    from addon.core.rig.articulation import apply_pose, posed_keypoints
     from addon.core.bike_asset import open_bike, save_bike
     from addon.core.procedural.build import build_bike
 

@@ -234,7 +234,7 @@ def test_cli_unknown_rider_fails_cleanly(tmp_path):
 
 def test_blender_import_of_a_rider_mesh(rider, tmp_path, fresh_scene):
     from addon.core import frames
-    from addon.core.rider_import import import_rider, read_colored_ply, srgb_to_linear
+    from addon.core.rider.rider_import import import_rider, read_colored_ply, srgb_to_linear
     from splatting.rider.body import export_rider
 
     path = export_rider(rider, str(tmp_path / "rider.ply"))
@@ -256,7 +256,7 @@ def test_blender_import_of_a_rider_mesh(rider, tmp_path, fresh_scene):
 
 def test_corrupt_rider_mesh_is_refused(tmp_path):
     pytest.importorskip("bpy")
-    from addon.core.rider_import import read_colored_ply
+    from addon.core.rider.rider_import import read_colored_ply
     from addon.core.script import UserError as BUserError
     p = tmp_path / "bad.ply"
     p.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 10\nproperty float x\n"

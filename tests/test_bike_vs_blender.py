@@ -30,7 +30,7 @@ def bike_dir(tmp_path_factory):
 
 def _part_points(bike_dir, n=400):
     """Surface samples of each part mesh at the rest pose (canonical), via Blender."""
-    from addon.core import render
+    from addon.core.render import render
     from addon.core.bike_asset import open_bike
 
     bike = open_bike(str(bike_dir))
@@ -44,7 +44,7 @@ def _part_points(bike_dir, n=400):
 def _blender_posed(bike_dir, pose, rest_points):
     """Posed keypoints and posed part sample points from Blender's armature."""
     from addon.core import frames
-    from addon.core.articulation import apply_pose, posed_keypoints
+    from addon.core.rig.articulation import apply_pose, posed_keypoints
     from addon.core.bike_asset import open_bike
 
     bike = open_bike(str(bike_dir))
@@ -98,7 +98,7 @@ def test_keypoints_and_parts_match_blender_armature(bike_dir):
 
 def test_signs_by_geometry(bike_dir):
     """θs = +30° moves the front axle to the rider's left (−Z); θp = +90° takes the front pedal down."""
-    from addon.core.articulation import apply_pose, posed_keypoints
+    from addon.core.rig.articulation import apply_pose, posed_keypoints
     from addon.core.bike_asset import open_bike
 
     kp0 = json.loads((bike_dir / "keypoints.json").read_text())["keypoints"]

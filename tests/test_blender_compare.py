@@ -62,7 +62,7 @@ def trained_bike(tmp_path_factory):
     bike = out / "bikes" / sorted(os.listdir(out / "bikes"))[0]
     code = (
         "import sys, numpy as np; sys.path.insert(0, %r)\n"
-        "from addon.core import render\nfrom addon.core.bike_asset import open_bike\n"
+        "from addon.core.render import render\nfrom addon.core.bike_asset import open_bike\n"
         "b = open_bike(%r)\n"
         "np.savez(%r, **{k: render.sample_surface(render.mesh_world_triangles(o), 3000, seed=1)[0]"
         " for k, o in b['parts'].items()})\n" % (ROOT, str(bike), str(out / "pts.npz")))

@@ -137,7 +137,7 @@ def _register(bpy):
 
 def test_operators_headless_edit_resplit_save(messy, tmp_path):
     import bpy
-    from addon.core.curation import scene_io
+    from addon.core.curation import scene_state
     path, sp = messy
     _register(bpy)
     assert bpy.ops.articcyc.import_model(filepath=str(path)) == {"FINISHED"}
@@ -152,12 +152,12 @@ def test_operators_headless_edit_resplit_save(messy, tmp_path):
     assert any(p.name.startswith("handle_left") for p in bpy.context.scene.articcyc_problems)
     e.location.z += 0.3
     # annotator: paint every face of the source as frame, re-split -> no steering -> error
-    src = bpy.data.objects[scene_io.SOURCE]
+    src = bpy.data.objects[scene_state.SOURCE]
     src.data.polygons.foreach_set("select", [True] * len(src.data.polygons))
     assert bpy.ops.articcyc.paint_part(part="frame") == {"FINISHED"}
     with pytest.raises(RuntimeError, match="no steering"):
         bpy.ops.articcyc.split_parts()
-    scene_io._face_attr(src.data, scene_io.PAINT_ATTR, np.full(len(src.data.polygons), -1))
+    scene_state.face_attr(src.data, scene_state.PAINT_ATTR, np.full(len(src.data.polygons), -1))
     assert bpy.ops.articcyc.split_parts() == {"FINISHED"}  # recomputed from the keypoints
     assert len(bpy.data.objects["steering"].data.polygons) == n_steer
     assert bpy.ops.articcyc.build_rig() == {"FINISHED"}

@@ -65,8 +65,8 @@ def run_case(sp, seed, tmp_path, fmt, wheel_claim=1.0):
     RM = M[:3, :3] / sM
     rot_err = math.degrees(math.acos(np.clip((np.trace(RM @ RA.T) - 1) / 2, -1, 1)))
     scale_err = abs(sM / sA - 1) * 100
-    from addon.core.curation import scene_io
-    kp = scene_io.read_keypoint_empties()
+    from addon.core.curation.keypoint_empties import read_keypoint_empties
+    kp = read_keypoint_empties()
     kt = layout.keypoints(sp)
     kp_err = {k: float(np.linalg.norm(np.asarray(kp[k]) - kt[k]) * 100) if k in kp else float("inf") for k in kt}
     good = 0.0

@@ -15,7 +15,8 @@ from curation_synth import fuse_with_slivers, synth_bike, transform  # noqa: E40
 
 def test_fused_bike_is_cut_into_clean_parts(fresh_scene):
     import addon
-    from addon.core.curation import mesh, scene_io, split
+    from addon.core.curation import mesh, scene_state, split
+    from addon.core.curation.keypoint_empties import read_keypoint_empties
     from addon.core.frames import to_canonical
     if not hasattr(bpy.types.Scene, "articcyc_wheel_diameter"):
         addon.register()
@@ -28,14 +29,14 @@ def test_fused_bike_is_cut_into_clean_parts(fresh_scene):
     obj = bpy.data.objects.new("model", me)
     bpy.context.scene.collection.objects.link(obj)
     assert bpy.ops.articcyc.auto_curate(wheel_diameter=0.7) == {"FINISHED"}
-    rec = json.loads(bpy.context.scene[scene_io.RECORD])
+    rec = json.loads(bpy.context.scene[scene_state.RECORD])
     assert rec["faces_cut"] > 0 and rec["faces_added_by_cuts"] > 0
-    src = bpy.data.objects[scene_io.SOURCE]
+    src = bpy.data.objects[scene_state.SOURCE]
     sa = rec["split_args"]
     args = (sa["head_radius"], sa["wheel_radius"], sa["head_span"])
-    kp = scene_io.read_keypoint_empties()
+    kp = read_keypoint_empties()
     bad, total = {}, {}
-    for k, name in enumerate(scene_io.PARTS):
+    for k, name in enumerate(scene_state.PARTS):
         o = bpy.data.objects[name]
         Vp = np.array([v.co[:] for v in o.data.vertices])
         for p in o.data.polygons:
@@ -45,6 +46,6 @@ def test_fused_bike_is_cut_into_clean_parts(fresh_scene):
             total[name] = total.get(name, 0) + p.area
             if not np.all(r == k):
                 bad[name] = bad.get(name, 0) + p.area
-    assert src is not None and all(total.get(n, 0) > 0 for n in scene_io.PARTS), total
+    assert src is not None and all(total.get(n, 0) > 0 for n in scene_state.PARTS), total
     # the regions' cylinders are the same regular polygons the cuts follow: no face is left across
     assert not bad, {n: bad[n] / total[n] for n in bad}

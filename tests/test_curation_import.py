@@ -41,9 +41,9 @@ def _bike_scene():
 
 
 def _check_curated():
-    from addon.core.curation import scene_io
+    from addon.core.curation.keypoint_empties import current_keypoints
     assert [p.name for p in bpy.context.scene.articcyc_problems] == []
-    kp = scene_io.current_keypoints()
+    kp = current_keypoints()
     truth = layout.keypoints(SP)
     err = {k: float(np.linalg.norm(kp[k] - np.array(truth[k]))) for k in truth if not k.startswith("steer")}
     # steering: the truth head-tube ends on the estimated axis (shape-based keypoints put
@@ -106,7 +106,7 @@ def test_partial_curation_resumed_from_placed_wheel_centres(tmp_path, fresh_scen
     """Auto curate with a wrong wheel pick is fixed by dragging the wheel centre empties and
     re-deriving; the partial .blend written on the way carries the problems."""
     _register()
-    from addon.core.curation import scene_io
+    from addon.core.curation.saving import save_partial
     _bike_scene()
     assert bpy.ops.articcyc.auto_curate(wheel_diameter=SP["wheel_diameter_m"]) == {"FINISHED"}
     # the annotator's hand: wheel centres dragged a few cm off the true hubs
@@ -117,7 +117,7 @@ def test_partial_curation_resumed_from_placed_wheel_centres(tmp_path, fresh_scen
     bpy.data.objects["kp.seat"].location = (0.0, 0.0, -1.0)   # and a broken keypoint
     assert bpy.ops.articcyc.validate() == {"FINISHED"}
     assert any(p.name.startswith("seat") for p in bpy.context.scene.articcyc_problems)
-    partial = scene_io.save_partial(tmp_path / "bike.partial.blend")
+    partial = save_partial(tmp_path / "bike.partial.blend")
     bpy.ops.wm.open_mainfile(filepath=partial)
     _register()
     assert bpy.ops.articcyc.resume() == {"FINISHED"}

@@ -1,4 +1,4 @@
-"""3DGS .ply -> Blender point clouds (addon/core/splat_import.py, blender_scripts/import_splats.py).
+"""3DGS .ply -> Blender point clouds (addon/core/splats/splat_import.py, blender_scripts/import_splats.py).
 
 Expected values are written out here from docs/contract.md (Blender (x, y, z) = canonical (X, -Z, Y);
 view 0 looks along +Z at the rider's left side with the front on the image's left) and from the
@@ -71,7 +71,7 @@ def pixel(img, K, R, T, point):
 
 
 def test_reader_matches_plyfile_writer(tmp_path):
-    from addon.core.splat_import import read_splat_ply
+    from addon.core.splats.splat_import import read_splat_ply
 
     g = random_gaussians(300)
     write_ply(g, tmp_path / "g.ply")
@@ -84,7 +84,7 @@ def test_reader_matches_plyfile_writer(tmp_path):
 
 
 def test_preview_attributes_and_positions(tmp_path, fresh_scene):
-    from addon.core.splat_import import import_splats
+    from addon.core.splats.splat_import import import_splats
 
     g = random_gaussians(257, seed=1)
     write_ply(g, tmp_path / "g.ply")
@@ -125,7 +125,7 @@ def test_gaussian_attributes(tmp_path, fresh_scene):
     """Gaussian mode: rotation (as the instance Euler), extents, low-pass and every SH coefficient."""
     from mathutils import Euler
 
-    from addon.core.splat_import import import_splats
+    from addon.core.splats.splat_import import import_splats
 
     g = random_gaussians(120, seed=2)
     write_ply(g, tmp_path / "g.ply")
@@ -410,7 +410,7 @@ def _bad_files(d):
 
 def test_bad_inputs_are_user_errors(tmp_path, fresh_scene):
     from addon.core.script import UserError
-    from addon.core.splat_import import expand_inputs, import_splats
+    from addon.core.splats.splat_import import expand_inputs, import_splats
 
     bad = _bad_files(tmp_path)
     for kind, path in bad.items():

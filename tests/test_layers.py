@@ -1,6 +1,8 @@
 """Dependencies point one way (docs/architecture.md): the import-linter contracts in .importlinter
-hold, a wrong-way import breaks them, and the import graph of splatting, cyclist_formats and the
-add-on has no circle (checked on the graph, and by importing every module alone)."""
+hold, a wrong-way import breaks them, the import graph of splatting, cyclist_formats and the
+add-on has no circle (checked on the graph, and by importing every module alone), and no module of
+the add-on's core takes a private name of another."""
+import ast
 import json
 import os
 import shutil
@@ -26,7 +28,7 @@ def lint_imports(root):
 def test_the_layer_contracts_hold():
     rc, out = lint_imports(ROOT)
     assert rc == 0, out[-4000:]
-    assert "5 kept, 0 broken" in out, out[-2000:]
+    assert "6 kept, 0 broken" in out, out[-2000:]
 
 
 def _copy_packages(dst):
@@ -49,6 +51,14 @@ def _copy_packages(dst):
     # a caller going round the rasterizer's entry (splatting.raster.api) to its dispatch
     ("splatting/cyclist/render.py", "from splatting.raster.sparse import rasterize as _r",
      "splatting.cyclist is not allowed to import splatting.raster.sparse"),
+    # the add-on's stages: the renderer reaching up to the rider import, inside a function
+    ("addon/core/render/render.py", "def _f():\n    from ..rider import rider_import",
+     "addon.core.render is not allowed to import addon.core.rider"),
+    # two stages of one layer: the splat import taking the rider's colours
+    ("addon/core/splats/splat_import.py", "from ..rider.rider_colours import object_colors",
+     "addon.core.splats is not allowed to import addon.core.rider"),
+    # a shared basic reaching up to a stage
+    ("addon/core/frames.py", "from .rig import articulation", "addon.core.frames is not allowed to import addon.core.rig"),
 ])
 def test_a_wrong_way_import_breaks_the_contract(tmp_path, module, line, broken):
     _copy_packages(str(tmp_path))
@@ -56,6 +66,60 @@ def test_a_wrong_way_import_breaks_the_contract(tmp_path, module, line, broken):
         f.write("\n" + line + "\n")
     rc, out = lint_imports(str(tmp_path))
     assert rc != 0 and broken in out, out[-3000:]
+
+
+def private_names_taken(root, package="addon.core"):
+    """'module: name' for each private name (one leading underscore) a module of `package` takes from
+    another project module: `from .x import _f`, or `x._f` on a module `x` it imported."""
+    found = []
+    top = os.path.join(root, *package.split("."))
+    for d, _, files in os.walk(top):
+        for f in sorted(files):
+            if not f.endswith(".py"):
+                continue
+            rel = os.path.relpath(os.path.join(d, f), root)[:-3].split(os.sep)
+            mod = ".".join(rel[:-1] if rel[-1] == "__init__" else rel)
+            here = rel[:-1]  # the package a relative import starts from
+            with open(os.path.join(d, f)) as fh:
+                tree = ast.parse(fh.read())
+            modules = set()  # names bound to project modules
+            for n in ast.walk(tree):
+                if isinstance(n, ast.ImportFrom):
+                    base = here[:len(here) - n.level + 1] if n.level else []
+                    src = ".".join(base + (n.module.split(".") if n.module else []))
+                    if src.split(".")[0] not in PACKAGES:
+                        continue
+                    for a in n.names:
+                        if a.name.startswith("_") and not a.name.startswith("__"):
+                            found.append(f"{mod}: {src}.{a.name}")
+                        path = os.path.join(root, *src.split("."), a.name)
+                        if os.path.isdir(path) or os.path.isfile(path + ".py"):
+                            modules.add(a.asname or a.name)
+                elif isinstance(n, ast.Import):
+                    modules.update(a.asname for a in n.names if a.asname and a.name.split(".")[0] in PACKAGES)
+            for n in ast.walk(tree):
+                if (isinstance(n, ast.Attribute) and isinstance(n.value, ast.Name) and n.value.id in modules
+                        and n.attr.startswith("_") and not n.attr.startswith("__")):
+                    found.append(f"{mod}: {n.value.id}.{n.attr}")
+    return sorted(set(found))
+
+
+def test_no_addon_module_takes_a_private_name_of_another():
+    found = private_names_taken(ROOT)
+    assert not found, "private names taken across modules:\n" + "\n".join(found)
+
+
+@pytest.mark.parametrize("module, line, taken", [
+    ("addon/core/splats/splat_gaussian.py", "from .splat_import import _keyframe_visibility",
+     "addon.core.splats.splat_gaussian: addon.core.splats.splat_import._keyframe_visibility"),
+    ("addon/core/curation/saving.py", "from . import rigging\nX = rigging._y",
+     "addon.core.curation.saving: rigging._y"),
+])
+def test_a_private_name_taken_is_found(tmp_path, module, line, taken):
+    _copy_packages(str(tmp_path))
+    with open(tmp_path / module, "a") as f:
+        f.write("\n" + line + "\n")
+    assert private_names_taken(str(tmp_path)) == [taken]
 
 
 def cycles(graph):

@@ -20,7 +20,7 @@ BASE = (0.5, 0.25, 0.1)
 def plane_views(fresh_scene, tmp_path):
     import bpy
 
-    from addon.core import render
+    from addon.core.render import render
 
     scene = fresh_scene
     bpy.ops.mesh.primitive_plane_add(size=2.0, location=(0.0, 0.0, 1.0))
@@ -72,7 +72,7 @@ def test_rerun_skips_complete_views_and_redoes_missing_passes(plane_views, fresh
     os.remove(p)
     import bpy
 
-    from addon.core import render
+    from addon.core.render import render
 
     bpy.ops.mesh.primitive_plane_add(size=2.0, location=(0.0, 0.0, 1.0))
     s = render.RenderSettings(samples=1, denoise="NONE", size=32, threads=1)

@@ -11,7 +11,7 @@ import numpy as np
 def test_suns_are_placed_before_any_update(fresh_scene):
     import bpy
 
-    from addon.core import render
+    from addon.core.render import render
 
     render.setup_lighting(fresh_scene)
     suns = {o.name: o for o in fresh_scene.objects if o.type == "LIGHT"}

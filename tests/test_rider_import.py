@@ -4,7 +4,7 @@ The rigged humans are made here: a roster (anny) rider's T-posed mesh with an ar
 joints under Mixamo (`mixamorig:`) or Rigify (`DEF-`) names, plus unmapped bones that carry part of the
 weights (a thumb, a neck segment), its weights as vertex groups and an image texture on a UV map; exported
 to .glb and .fbx with Blender's own exporters.  Ground truth for the skinning is Blender itself: the
-re-imported file's armature posed with the same joint rotations (addon.core.rider_rig.pose_rig) and its
+re-imported file's armature posed with the same joint rotations (addon.core.rider.rider_rig.pose_rig) and its
 evaluated mesh compared vertex by vertex with the imported rider's LBS."""
 import math
 import os
@@ -368,7 +368,7 @@ def with_required_extension(src, dst, ext):
 
 def import_here(path, rider_id="here"):
     """The Blender half in this process (the bpy module): (arrays, meta)."""
-    from addon.core import rider_rig
+    from addon.core.rider import rider_rig
     from addon.core.curation.importers import import_model
     from addon.core.scene import reset_scene
     reset_scene()
@@ -440,7 +440,7 @@ def test_fbx_and_rigify_carry_the_body_over(models, source, name):
 def blender_posed(model, meta, world_transforms):
     """The model re-imported in Blender, its armature posed with the rider's joint transforms
     (canonical, (24,4,4)), its evaluated mesh in the canonical frame."""
-    from addon.core import rider_rig
+    from addon.core.rider import rider_rig
     from addon.core.curation.importers import import_model
     from addon.core.scene import reset_scene
     reset_scene()
@@ -448,7 +448,7 @@ def blender_posed(model, meta, world_transforms):
 
 
 def posed_in_scene(rig, meta, world_transforms):
-    from addon.core import rider_rig
+    from addon.core.rider import rider_rig
     arm, skinned, _ = rig
     rider_rig.pose_rig(arm, meta["bone_map"], meta, world_transforms)
     dg = bpy.context.evaluated_depsgraph_get()
@@ -516,7 +516,7 @@ def test_turned_and_scaled_rig_gives_the_same_rider(source, tmp_path):
     with it, and LBS still equal to Blender's posing."""
     from mathutils import Matrix
 
-    from addon.core import rider_rig
+    from addon.core.rider import rider_rig
     from addon.core.scene import reset_scene
     from splatting.rider.body import pose_vertices
     from splatting.rider.imported import load_imported_rider
@@ -961,7 +961,7 @@ def test_vrm_file_is_read_as_the_glb_it_is(family_models, source, tmp_path):
 def test_helper_geometry_pieces_are_found_by_their_texel_density(source):
     """MakeHuman's helper shells (a separate piece whose UVs sit in a tiny corner of the texture) are
     dropped; a palette-textured body (every face a few texels) keeps everything."""
-    from addon.core.rider_helpers import helper_faces
+    from addon.core.rider.rider_helpers import helper_faces
     V = source.vertices.double().numpy()
     F = source.faces.numpy()
     W = source.weights.double().numpy()
@@ -1008,7 +1008,7 @@ def test_development_riders_import_and_ride(model):
     if model.startswith("mh_"):  # MakeHuman's skirt, tights and joint cubes are gone
         assert meta["helper_faces_dropped"] > 5000
     # the same rig with every bone renamed to nothing meaningful: the skeleton's shape finds the same joints
-    from addon.core import rider_rig
+    from addon.core.rider import rider_rig
     from addon.core.curation.importers import import_model
     from addon.core.scene import reset_scene
     reset_scene()
@@ -1033,7 +1033,7 @@ def test_development_riders_import_and_ride(model):
     (68.0, 32.0, 0.0254, "inches"), (4.5, 2.05, 0.82 / 2.05, "no unit fits a person"),
     (0.3, 0.13, 0.82 / 0.13, "no unit fits a person")])
 def test_sizes_are_read_in_a_plausible_unit(height, leg, scale, words):
-    from addon.core import rider_rig
+    from addon.core.rider import rider_rig
     s, said = rider_rig.plausible_scale(height, leg, None, "m")
     assert abs(s - scale) < 1e-12 and words in said
     assert rider_rig.plausible_scale(height, leg, 1.6, "m")[0] == 1.6 / height  # --height-m wins

@@ -16,7 +16,7 @@ from splatting.relight.render import relit_static
 from splatting.relight.shading import ROUGHNESS
 from splatting.rider.avatar import PLY_NAME, RiderAvatar
 
-# the roster riders' material (addon/core/rider_import.py): a fully rough dielectric
+# the roster riders' material (addon/core/rider/rider_import.py): a fully rough dielectric
 RIDER_ROUGHNESS = 1.0
 
 

@@ -1,7 +1,7 @@
 """Read a bike folder's part meshes out of bike.blend at the rest pose (bpy side).
 
 The curated/generated bike.blend holds mesh objects `frame`, `steering` and `crank`,
-bone-parented to `armature` (addon/core/armature.py).  The armature is switched to its rest
+bone-parented to `armature` (addon/core/rig/armature.py).  The armature is switched to its rest
 position before the meshes are evaluated, so a pose left in the file does not leak into the export.
 """
 import os

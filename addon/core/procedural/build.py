@@ -7,7 +7,7 @@ frames.to_blender; each part is ONE mesh object (frame / steering / crank) with 
 import bpy
 import numpy as np
 
-from .. import armature as arm_mod
+from ..rig import armature as arm_mod
 from ..contract import instances
 from ..frames import to_blender
 from . import cockpit, drivetrain, extras, layout, tubes

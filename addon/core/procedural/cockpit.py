@@ -15,7 +15,7 @@ def bar_curve(L):
     return np.vstack([left[:-1], right])
 
 
-def _end_segment(curve, length):
+def end_segment(curve, length):
     """The last `length` metres of a polyline (from the end backwards), as a polyline."""
     seg = np.linalg.norm(np.diff(curve, axis=0), axis=1)
     acc = np.concatenate([[0], np.cumsum(seg[::-1])])  # distance from the end
@@ -30,7 +30,7 @@ def _end_segment(curve, length):
 
 
 def point_from_end(curve, dist):
-    return _end_segment(curve, dist)[0]
+    return end_segment(curve, dist)[0]
 
 
 def build_steering(s, L):
@@ -69,7 +69,7 @@ def build_steering(s, L):
             lever = [hand + np.array([0.04, 0.0, 0]), hand + np.array([0.05, -0.06, 0]), hand + np.array([0.03, -0.09, 0])]
             mb.add(*tube(lever, 0.005, sides=6), "metal")
     else:
-        grip = _end_segment(curve, 0.13)
+        grip = end_segment(curve, 0.13)
         for m in (MIRROR, np.ones(3)):
             g = grip * m
             mb.add(*tube(g, 0.0165, sides=14), "grip")

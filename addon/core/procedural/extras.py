@@ -7,7 +7,7 @@ import numpy as np
 
 from .meshkit import MeshBuilder, bezier, box, cylinder, ellipsoid, frame_from_x, tube
 from .tubes import saddle
-from .cockpit import bar_curve, _end_segment
+from .cockpit import bar_curve, end_segment
 from .wheels import fender, wheel
 
 Z = np.array([0.0, 0.0, 1.0])
@@ -50,7 +50,7 @@ def scooter_steering(s, L):
     wheel(mb, fa, R, tw, 0.01, tw / 2 + 0.012, kind="solid")
     curve = bar_curve(L)
     mb.add(*tube(curve, 0.0115, sides=12), "metal")
-    grip = _end_segment(curve, 0.12)
+    grip = end_segment(curve, 0.12)
     for m in (MIRROR, np.ones(3)):
         mb.add(*tube(grip * m, 0.0165, sides=12), "grip")
     return mb
@@ -136,7 +136,7 @@ def motorcycle_steering(s, L):
         mb.add(*cylinder(ht + 0.03 * u + sg * 0.04 * Z, bc + sg * 0.04 * Z, 0.014, sides=10), "metal")
     curve = bar_curve(L)
     mb.add(*tube(curve, 0.0115, sides=12), "metal")
-    grip = _end_segment(curve, 0.13)
+    grip = end_segment(curve, 0.13)
     for m in (MIRROR, np.ones(3)):
         mb.add(*tube(grip * m, 0.018, sides=12), "grip")
     # headlight and instrument

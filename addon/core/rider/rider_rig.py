@@ -32,7 +32,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from .contract import UserError, bone_map
+from ..contract import UserError, bone_map
 from .rider_colours import object_colors
 from .rider_helpers import helper_faces
 
@@ -516,7 +516,7 @@ def save_rider(objects, rider_id, folder, what, height_m=None, overwrite=False, 
     Returns (path, meta)."""
     import os
 
-    from .contract import rider_file
+    from ..contract import rider_file
     rider_file.check_rider_id(rider_id, "rider id")
     if not folder:
         raise UserError("no riders folder given (the project's data/imported_riders)")

@@ -12,8 +12,8 @@ import struct
 
 import numpy as np
 
-from . import frames
-from .contract import bike_folder, temp_name
+from .. import frames
+from ..contract import bike_folder, temp_name
 
 ALBEDO_NAMES = ("DiffCol", "Diffuse Color")
 GLOSS_NAMES = ("GlossCol", "Glossy Color")

@@ -6,9 +6,10 @@ import os
 
 import numpy as np
 
-from . import frames, render
-from .contract import UserError, bike_folder, ring
-from .contract import pose as pose_format
+from .. import frames
+from . import render
+from ..contract import UserError, bike_folder, ring
+from ..contract import pose as pose_format
 
 POSE_FIELDS = pose_format.POSE_FIELDS
 
@@ -43,9 +44,9 @@ def load_camera(spec, bike_dir):
 def render_pose(bike_dir, pose, camera, out, keypoints_out=None, settings=None, lights_follow=True):
     import bpy
 
-    from .articulation import apply_pose, global_matrix, posed_keypoints
-    from .contract import write_json
-    from .bike_asset import open_bike
+    from ..rig.articulation import apply_pose, global_matrix, posed_keypoints
+    from ..contract import write_json
+    from ..bike_asset import open_bike
 
     K, R, T = load_camera(camera, bike_dir)
     bike = open_bike(bike_dir)

@@ -25,8 +25,8 @@ attribute `sh_k` (RGB as a vector); degrees 0-3 follow the file's f_rest count.
 """
 import numpy as np
 
-from . import frames
-from .contract import sh_basis
+from .. import frames
+from ..contract import sh_basis
 from .splat_nodes import emission_over_clear, finish_material, instance_node_group, link_with_nodes, new_material
 
 K_SIGMA = 3.0  # largest proxy extent in standard deviations (3DGS's screen-space cut-off is 3 sigma too)

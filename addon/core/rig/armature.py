@@ -14,8 +14,8 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from .frames import to_blender
-from .procedural.layout import KEYPOINT_NAMES, bone_parent
+from ..frames import to_blender
+from ..procedural.layout import KEYPOINT_NAMES, bone_parent
 
 KP_BONE_LEN = 0.03
 

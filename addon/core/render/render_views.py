@@ -3,7 +3,7 @@ import os
 from dataclasses import replace
 
 from . import render
-from .contract import UserError, bike_folder
+from ..contract import UserError, bike_folder
 
 ALL_PARTS = ("frame", "steering", "crank", render.WHOLE)
 # Training views get more samples than a one-off render (RenderSettings' 16): on the city bike's
@@ -41,7 +41,7 @@ def parse_views(spec, n=36):
 
 def render_bike(bike_dir, parts="all", views=None, samples=None, denoise=None, size=None, threads=2,
                 progress=print, adaptive_threshold=None):
-    from .bike_asset import open_bike  # opens bike.blend; UserError if missing/unreadable
+    from ..bike_asset import open_bike  # opens bike.blend; UserError if missing/unreadable
 
     if not os.path.isdir(bike_dir):
         raise UserError(f"bike folder not found: {bike_dir}")

@@ -13,9 +13,9 @@ import bpy
 import mathutils
 import numpy as np
 
-from . import frames
-from .contract import bike_folder, instances, ply, ring
-from .contract import atomic, temp_name
+from .. import frames
+from ..contract import bike_folder, instances, ply, ring
+from ..contract import atomic, temp_name
 
 PART_IDS = instances.PART_IDS
 WHOLE = bike_folder.WHOLE
@@ -242,7 +242,7 @@ def render_part(scene, part_objs, views_dir, keypoints, views=None, settings=Ren
 
     part_objs: the mesh objects to show; keypoints: {name: canonical xyz} of this part.
     views: indices of the ring to render (default all 36).
-    passes: also write the albedo and normal passes of each render (addon/core/passes.py).
+    passes: also write the albedo and normal passes of each render (addon/core/render/passes.py).
     """
     from . import passes as render_passes
 

@@ -10,8 +10,8 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from .frames import matrix_to_blender, to_canonical
-from .procedural.layout import KEYPOINT_NAMES
+from ..frames import matrix_to_blender, to_canonical
+from ..procedural.layout import KEYPOINT_NAMES
 
 
 def global_matrix(rot_xyz_deg=(0, 0, 0), t=(0, 0, 0)):

@@ -12,8 +12,9 @@ import os
 import bpy
 import numpy as np
 
-from . import frames, render
-from .contract import UserError, instances, ply, rider_file
+from .. import frames
+from ..render import render
+from ..contract import UserError, instances, ply, rider_file
 
 RIDER_PASS_INDEX = instances.RIDER_ID  # docs/contract.md: rider 4 when rendered together with a bike
 COLOR_ATTRIBUTE = "Col"
@@ -117,7 +118,7 @@ def _colored_points_ply(path, v, f, c, n, seed):
 
 def render_rider_views(mesh_path, views_dir, views=None, settings=None, n_points=20000, progress=print):
     """The rest-pose rider from the 36-view ring into views_dir (SHERF layout, resumable)."""
-    from .scene import reset_scene
+    from ..scene import reset_scene
 
     scene = reset_scene()
     s = settings or render.RenderSettings()
@@ -144,8 +145,8 @@ def render_rider_still(mesh_path, camera, out, settings=None, light_yaw_deg=0.0)
 
     import mathutils
 
-    from .render_pose import load_camera
-    from .scene import reset_scene
+    from ..render.render_pose import load_camera
+    from ..scene import reset_scene
 
     K, R, T = load_camera(camera, os.path.dirname(os.path.abspath(camera.partition(":")[0])))
     size = int(round(2 * K[0, 2]))

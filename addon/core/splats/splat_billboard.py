@@ -34,7 +34,7 @@ quads face it, and their alpha and colour were computed for it.  Move the camera
 """
 import numpy as np
 
-from . import frames
+from .. import frames
 from .splat_gaussian import ALPHA_MAX, ALPHA_MIN, C0, quat_to_matrix, matrix_to_euler_xyz, sh_degree_of, sh_terms
 from .splat_nodes import emission_over_clear, finish_material, instance_node_group, link_with_nodes, new_material
 

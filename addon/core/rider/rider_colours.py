@@ -10,7 +10,7 @@ import os
 import bpy
 import numpy as np
 
-from .contract import UserError
+from ..contract import UserError
 
 DEFAULT_LINEAR = (0.8, 0.8, 0.8)
 

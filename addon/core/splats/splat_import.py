@@ -22,8 +22,9 @@ import os
 
 import numpy as np
 
-from . import frames, splat_billboard as sb, splat_gaussian as sg
-from .contract import UserError, ply
+from .. import frames
+from . import splat_billboard as sb, splat_gaussian as sg
+from ..contract import UserError, ply
 from .splat_nodes import enabled_output, link_with_nodes, new_socket
 
 SH_C0 = 0.28209479177387814  # Y_0^0: 3DGS's colour = 0.5 + C0 * f_dc
