@@ -27,7 +27,7 @@ from splatting.library.ray_address import check_address
 def add_arguments(p):
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--config", help="YAML config (see docs/cyclists_and_datasets.md)")
-    src.add_argument("--preset", help="built-in config from blend_assets/datasets/ (bike-only, cyclist, street, street-sequence, kitti-insert)")
+    src.add_argument("--preset", help="built-in config from blend_assets/datasets/ (bike-only, cyclist, street, street-sequence, kitti-insert, kitti-sequence)")
     p.add_argument("--out", help="output folder (default: out/datasets/<name>)")
     # the top-level fields a run may override: flags typed and described by the config's models
     add_model_arguments(p, DatasetConfig, CLI_OVERRIDES)
