@@ -165,8 +165,6 @@ def run(args):
     cfg = load_config(args.config, args.preset, overrides_of(args, CLI_OVERRIDES), nested)
     if args.frames is not None and cfg["mode"] != "frames":
         raise UserError(f"--frames goes with mode: frames (e.g. --preset kitti-insert); this config's mode is {cfg['mode']}")
-    if cfg["sequence"]["enabled"] and args.engine == "ray":
-        raise UserError("sequences run with the local engine (--workers) or --shard, not --engine ray")
     checks.image_size("config field 'image_size'", cfg["image_size"])
     checks.count("config field 'count'", cfg["count"])
     out = args.out or checks.inside(os.path.join("out", "datasets"), os.path.join("out", "datasets", cfg["name"]),
