@@ -1,6 +1,5 @@
-"""Motion-blur benchmark (issue 29): sub-frame averaging (method A, splatting/dataset/sequences/blur.py)
-with N sub-frames and smearing each Gaussian along its motion (method B, sequences/velocity_blur.py)
-against a many-sub-frame reference.
+"""Motion-blur benchmark (issue 29): sub-frame averaging (splatting/dataset/sequences/blur.py)
+with N sub-frames against a many-sub-frame reference.
 
 Keys:
 - `motion_blur_box_psnr_db`: {exposure: {N: box PSNR (dB) of the N-sub-frame image against the
@@ -9,9 +8,6 @@ Keys:
   each grown by BOX_GROW of its size on every side (the smear reaches beyond the instant's box).
 - `motion_blur_s_per_frame`: {N: median wall seconds per frame} (one thread; every sub-frame is a
   full make_sample, labels included, so the cost is about N times the still frame's).
-- `motion_blur_velocity_box_psnr_db`: {exposure: box PSNR (dB) of method B against the same reference};
-  `motion_blur_velocity_s_per_frame`: its median wall seconds per frame (the two extra posings and
-  one smeared render; its labels would need the unblurred render besides: + the N = 1 cost).
 
 Scene: one street sequence on the nuScenes camera at half size (800x450), 3 cyclists riding
 straight or crossing at 6-8 m/s 6-15 m from an ego camera driving at 8 m/s; frames spread over it.
@@ -81,14 +77,12 @@ def run(results, out_dir=None, bikes_root=None, riders_root=None, frames=2, expo
     from splatting.dataset.generate import Assets
     from splatting.dataset.sequences.blur import blurred_sample
     from splatting.dataset.sequences.render import drawn
-    from splatting.dataset.sequences.velocity_blur import velocity_blurred_sample
     bikes_root = bikes_root or os.path.join(ROOT, "out", "bikes")
     riders_root = riders_root or os.path.join(ROOT, "data", "riders")
     if not os.path.isdir(bikes_root):
         print(f"motion blur bench: no bikes in {bikes_root}: skipped")
         return results
     out_psnr, cost = {}, {n: [] for n in SUBFRAMES + (REF_SUBFRAMES,)}
-    vel_psnr, vel_cost = {}, []
     load0 = os.getloadavg()[0]
     for e in exposures:
         cfg, bike = bench_config(bikes_root, riders_root, e)
@@ -97,7 +91,6 @@ def run(results, out_dir=None, bikes_root=None, riders_root=None, frames=2, expo
         sd = drawn(cfg, 0, assets)
         n_len = cfg["sequence"]["length"]
         rows = {n: [] for n in SUBFRAMES}
-        vel_rows = []
         blurred_sample(cfg, 1, assets, sd, 1, e, 1)  # assets loaded outside the timing
         for f in [int(x) for x in np.linspace(3, n_len - 4, frames)]:
             t = time.perf_counter()
@@ -111,21 +104,12 @@ def run(results, out_dir=None, bikes_root=None, riders_root=None, frames=2, expo
                 img = blurred_sample(cfg, f, assets, sd, f, e, n)[0]
                 cost[n].append(time.perf_counter() - t)
                 rows[n].append(psnr(img, ref, mask))
-            t = time.perf_counter()
-            img = velocity_blurred_sample(cfg, f, assets, sd, f, e)[0]
-            vel_cost.append(time.perf_counter() - t)
-            vel_rows.append(psnr(img, ref, mask))
         out_psnr[f"{e:g}"] = {str(n): round(statistics.median(v), 2) for n, v in rows.items() if v}
-        vel_psnr[f"{e:g}"] = round(statistics.median(vel_rows), 2) if vel_rows else None
-        print(f"motion blur bench: exposure {e:g} s, box PSNR vs {REF_SUBFRAMES} sub-frames: {out_psnr[f'{e:g}']}, "
-              f"velocity smear (B): {vel_psnr[f'{e:g}']}")
+        print(f"motion blur bench: exposure {e:g} s, box PSNR vs {REF_SUBFRAMES} sub-frames: {out_psnr[f'{e:g}']}")
     sec = {str(n): round(statistics.median(v), 3) for n, v in cost.items() if v}
     print(f"motion blur bench: seconds per frame (median, 1 thread): {sec}")
     results["motion_blur_box_psnr_db"] = out_psnr
     results["motion_blur_s_per_frame"] = sec
-    results["motion_blur_velocity_box_psnr_db"] = vel_psnr
-    results["motion_blur_velocity_s_per_frame"] = round(statistics.median(vel_cost), 3) if vel_cost else None
-    print(f"motion blur bench: velocity smear (B) seconds per frame: {results['motion_blur_velocity_s_per_frame']}")
     results["motion_blur_bench"] = {"reference_subframes": REF_SUBFRAMES, "camera": "nuscenes 800x450", "cyclists": 3,
                                     "bike": bike, "frames": frames, "box_grow": BOX_GROW,
                                     "load_avg_1m_before_after": [round(load0, 2), round(os.getloadavg()[0], 2)]}

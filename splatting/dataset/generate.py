@@ -245,13 +245,11 @@ def over_in_box(layers, background, box):
     return out
 
 
-def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None, smear=None):
+def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
     """Render sample `index` -> (rgb uint8 (H, W, 3), image record, annotations, extras)
     extras: {"depth": (H, W) float32, "kitti": [objects], "calib": {...}}.
     A sequence frame (splatting/dataset/sequences) passes its own draw, the ego camera of the
-    frame and the index its looks are drawn with (the sequence's, so they stay across frames).
-    smear(k, gaussians, lod indices or None, camera, eps2d, antialiased) -> gaussians: applied to
-    instance k's rendered Gaussians (motion blur, sequences/velocity_blur.py)."""
+    frame and the index its looks are drawn with (the sequence's, so they stay across frames)."""
     d = draw(cfg, index) if drawn is None else drawn
     street = cfg["mode"] == "street"
     fs = FrameSample(cfg, d, index) if cfg["mode"] == "frames" else None
@@ -331,8 +329,6 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None, sm
         if relit is not None:  # its sun's shadow map draws the instance as the view does
             relit.instance(k, inst["bike"], inst["rider"], frame.gaussians, looked, g, idx, cam,
                            aa[-1] if bike_trained_aa else False, eps[-1][1])
-        if smear is not None:  # motion blur along each Gaussian's own motion (sequences/velocity_blur.py)
-            g = smear(k, g, idx, cam, eps[-1][1], aa[-1])
         parts.append(g)
         slots.append(slot)
     b = cfg["backgrounds"]
