@@ -224,3 +224,28 @@ def test_a_sequence_in_a_development_frame(bikes, tmp_path):
     assert all(im["frame"]["frame"] == "000000" and im["frame"]["lidar"] for im in doc["images"])
     assert RIDER in {i["rider"] for im in doc["images"] for i in im["instances"]} or \
         all(im["dropped_placements"] >= 1 for im in doc["images"])
+
+
+def test_motion_blur_in_a_frame_changes_only_the_cyclists_pixels(bikes, tmp_path):
+    from pycocotools import mask as mu
+    from splatting.dataset.frames.source import read_image
+    from splatting.dataset.generate import Assets
+    from splatting.dataset.sequences.render import make_frame
+    root = ks.write_frames(str(tmp_path / "f"), {"000000": []})
+    man = dict({m: 0.0 for m in ONLY}, straight=1.0)
+    common = dict(length=3, manoeuvres=man, backgrounds={"shadow": False},
+                  insert={"look": {"blur_sigma_px": 0.0, "noise_sigma": 0.0}},
+                  street={"cyclists": [2, 2], "parked_bikes": [0, 0], "distance_m": [5, 12]})
+    still = resolved(seq_config(bikes, root, **common))
+    blur = resolved(seq_config(bikes, root, sequence={"exposure_s": 0.08, "blur_subframes": 3}, **common))
+    rgb0, im0, anns0, _ = make_frame(still, 1, Assets(still))
+    rgb1, im1, anns1, _ = make_frame(blur, 1, Assets(blur))
+    assert anns0 == anns1 and len(im0["instances"]) == 2  # the labels of the mid-exposure instant
+    diff = (rgb0 != rgb1).any(-1)
+    frame = read_image(os.path.join(root, "image_2", "000000.png"))
+    inside = np.zeros(diff.shape, bool)
+    for a in anns0:
+        x, y, w, h = (int(v) for v in a["bbox_amodal"])
+        inside[max(y - 6, 0):y + h + 6, max(x - 12, 0):x + w + 12] = True  # the smear reaches past the instant's box
+    assert diff.sum() > 50 and not (diff & ~inside).any()
+    assert np.array_equal(rgb1[~inside], frame[~inside])  # the frame's own pixels stay its bytes
