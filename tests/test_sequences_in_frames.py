@@ -249,3 +249,18 @@ def test_motion_blur_in_a_frame_changes_only_the_cyclists_pixels(bikes, tmp_path
         inside[max(y - 6, 0):y + h + 6, max(x - 12, 0):x + w + 12] = True  # the smear reaches past the instant's box
     assert diff.sum() > 50 and not (diff & ~inside).any()
     assert np.array_equal(rgb1[~inside], frame[~inside])  # the frame's own pixels stay its bytes
+
+
+def test_only_the_frames_instant_ray_casts_the_scan(bikes, tmp_path):
+    from splatting.dataset.generate import Assets, make_sample
+    from splatting.dataset.sequences.blur import subframe_draw
+    from splatting.dataset.sequences.draw import frame_draw
+    from splatting.dataset.sequences.render import drawn
+    root = ks.write_frames(str(tmp_path / "f"), {"000000": []}, with_velodyne=True)
+    cfg = resolved(seq_config(bikes, root, sequence={"exposure_s": 0.05, "blur_subframes": 3}))
+    assets = Assets(cfg)
+    sd = drawn(cfg, 0, assets)
+    assert sd["instances"]
+    mid = make_sample(cfg, 1, assets, drawn=frame_draw(sd, 1), look_index=0)[3]["frame"]["scan"]
+    sub = make_sample(cfg, 1, assets, drawn=subframe_draw(sd, 1, 0.1 + 0.0167), look_index=0)[3]["frame"]["scan"]
+    assert mid is not None and len(mid) > 0 and sub is None

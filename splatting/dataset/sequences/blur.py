@@ -46,7 +46,7 @@ def subframe_draw(sd, f, t):
     inst = [{"kind": i["kind"], "bike": i["bike"], "rider": i["rider"], "pose": pose_at(i, t),
              **({"signal": i["signal"][f]} if "signal" in i else {})} for i in sd["instances"]]
     return with_look({"instances": inst, "dropped": sd["dropped"], "camera": dict(sd["camera"]),
-                      "background": dict(sd["background"])}, sd)
+                      "background": dict(sd["background"]), "subframe": True}, sd)
 
 
 def blurred_sample(cfg, index, assets, sd, f, exposure_s, n):
