@@ -227,7 +227,6 @@ def test_a_sequence_in_a_development_frame(bikes, tmp_path):
 
 
 def test_motion_blur_in_a_frame_changes_only_the_cyclists_pixels(bikes, tmp_path):
-    from pycocotools import mask as mu
     from splatting.dataset.frames.source import read_image
     from splatting.dataset.generate import Assets
     from splatting.dataset.sequences.render import make_frame

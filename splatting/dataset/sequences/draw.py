@@ -7,7 +7,8 @@ Every frame of the sequence calls this again (it costs milliseconds), so frames 
 in any order, by any worker, and resumed.
 
 World as in street mode (docs/street_scenes.md): road plane Y = 0, the road along world +Z; the
-ego camera starts at (0, height, 0) and moves along +Z at the drawn ego speed (or stands).
+ego camera starts at (0, height, 0) and moves along +Z at the drawn ego speed (or stands).  Where
+instances may stand is the world's: StreetWorld here, a KITTI frame's in in_frames.FrameWorld.
 """
 import functools
 import math
