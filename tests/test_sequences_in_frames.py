@@ -141,6 +141,9 @@ def test_formats_static_tracks_and_resume_byte_identical(bikes, tmp_path):
     assert [v["name"] for v in doc["videos"]] == ["0000", "0001"]
     assert [im["frame"]["frame"] for im in doc["images"]] == ["000000"] * 3 + ["000001"] * 3
     assert all(im["sequence"]["ego_speed_mps"] == 0 for im in doc["images"])
+    # one light gain per sequence (measured around all its tracks): no flicker as the cyclists move
+    gains = [[im["background"]["look"]["gain"] for im in doc["images"] if im["video_id"] == v] for v in (1, 2)]
+    assert all(len({tuple(g) for g in gs}) == 1 for gs in gains) and gains[0][0] != [1.0, 1.0, 1.0]
     kt = os.path.join(a, "kitti_tracking", "training")
     for s, fid, own in ((0, "000000", [car, ped, DONTCARE]), (1, "000001", [car])):
         n_ins = len(doc["images"][3 * s]["instances"])
