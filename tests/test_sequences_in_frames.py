@@ -126,6 +126,25 @@ def test_a_car_in_front_hides_the_cyclist_in_every_frame(bikes, tmp_path):
         assert kit[2]["type"] == "Car" and kit[2]["occluded"] == 0  # the car in front is not covered
 
 
+def test_a_pedestrian_behind_the_cyclist_is_raised_to_occluded_in_every_frame(bikes, tmp_path):
+    from splatting.dataset.generate import Assets
+    from splatting.dataset.sequences.render import make_frame
+    ped = ks.box_row("Pedestrian", 1.75, 0.6, 0.8, 0.2, 1.65, 16.0, 1.57)  # 16 m ahead, just right of the axis
+    root = ks.write_frames(str(tmp_path / "f"), {"000000": [ped]})
+    man = dict({m: 0.0 for m in ONLY}, straight=1.0)
+    cfg = resolved(seq_config(bikes, root, length=4, manoeuvres=man, backgrounds={"shadow": False},
+                              street={"cyclists": [1, 1], "parked_bikes": [0, 0], "distance_m": [7, 8],
+                                      "lateral_m": [-0.4, 0.0], "oncoming_share": 0.0, "max_tries": 400},
+                              sequence={"speed_mps": [2.0, 2.5]}))
+    assets = Assets(cfg)
+    for f in range(4):
+        _, image, _, rows = make_frame(cfg, f, assets)
+        assert len(image["instances"]) == 1
+        kit = dict((t, o) for t, o in rows["kitti"])
+        assert kit[2]["type"] == "Pedestrian" and kit[2]["occluded"] >= 1  # was 0 in the frame's label
+        assert image["frame"]["occlusion_raised"][0][:2] == [0, kit[2]["occluded"]]
+
+
 def test_formats_static_tracks_and_resume_byte_identical(bikes, tmp_path):
     from cyclist_formats.kitti_frame import read_velodyne
     from splatting.dataset.command import generate
