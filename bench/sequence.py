@@ -8,6 +8,10 @@ Keys:
   short on a shared machine) sets the length measured, and the result says which.
 - `sequence_frames_per_hour_cpu_time`: 2 x 3600 / the median CPU seconds per frame of one
   in-process worker (the rate of two unshared cores).
+- `sequence_kitti_cpu_s_per_frame`: median CPU seconds per frame of one in-process worker for a
+  sequence in a real KITTI frame (preset kitti-sequence, development frame KITTI_FRAME of
+  ../shared/realism/kitti_dev, 4 cyclists, the three formats with the scan ray-cast per frame; the
+  draw and its placement checks outside the timing, reported as `draw_s`); skipped without the frames.
 - `sequence_plausibility`: over `--plaus-sequences` drawn sequences (4 cyclists each, every
   manoeuvre, 10 s sampled at 100 Hz so that finite differences measure the motion, not the frame
   rate), all from the trajectories' poses and positions:
@@ -34,6 +38,7 @@ if ROOT not in sys.path:
 from bench import bench_parser  # noqa: E402
 
 RIDER = "m_adult_average_185"
+KITTI_FRAME = "000001"  # a development frame with room for four tracks (a road; 000000 is a courtyard)
 
 
 def bench_config(scratch, out_dir, frames, bikes_root=None, riders_root=None):
@@ -79,6 +84,34 @@ def cpu_per_frame(cfg, n):
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
     return statistics.median(rows), len(rows)
+
+
+def kitti_cpu_per_frame(cfg, n, scratch):
+    """(median CPU s per frame, frames, draw s, tracks placed) of a kitti-sequence set in the development
+    frame KITTI_FRAME with cfg's assets, or None without the development frames."""
+    from splatting.dataset.config import load_yaml, preset_path
+    from splatting.dataset.frames.source import development_frames
+    from splatting.dataset.sequences.draw import draw_sequence
+    dev = development_frames()
+    if dev is None:
+        return None
+    one = os.path.join(scratch, "kitti_one")  # a folder of that one frame: sequence 0 falls on it
+    for d in ("image_2", "calib", "label_2", "planes", "velodyne"):
+        src = [f for f in os.listdir(os.path.join(dev, d)) if f.startswith(KITTI_FRAME + ".")]
+        if src:
+            os.makedirs(os.path.join(one, d), exist_ok=True)
+            os.symlink(os.path.join(dev, d, src[0]), os.path.join(one, d, src[0]))
+    k = load_yaml(preset_path("kitti-sequence"))
+    k.update({f: cfg[f] for f in ("bikes", "bikes_root", "synthetic_assets", "riders", "riders_root")},
+             name="bench_kitti_sequence", count=1, frames=one)
+    k["street"] = dict(k["street"], cyclists=[4, 4], parked_bikes=[0, 0])
+    k["sequence"] = dict(k["sequence"], length=cfg["sequence"]["length"])
+    from splatting.dataset.config import resolve_assets, validate
+    t = time.process_time()
+    placed = len(draw_sequence(resolve_assets(validate(k)), 0)["instances"])
+    draw_s = time.process_time() - t
+    cpu, frames = cpu_per_frame(k, n)
+    return cpu, frames, draw_s, placed
 
 
 def plausibility(bikes_root, bikes, n_seq=25):
@@ -156,6 +189,15 @@ def run(results, out_dir, frames=20, bikes_root=None, riders_root=None, plaus_se
         cpu, n_cpu = cpu_per_frame(cfg, cpu_frames)
         cpu_fph = 2 * 3600.0 / cpu
         print(f"sequence bench: {cpu:.2f} CPU s per frame (median of {n_cpu}) -> {cpu_fph:.0f} frames/hour on 2 unshared cores")
+        kit = kitti_cpu_per_frame(cfg, cpu_frames, scratch)
+        if kit is not None:
+            print(f"sequence bench: in KITTI frame {KITTI_FRAME}: {kit[0]:.2f} CPU s per frame (median of {kit[1]}), "
+                  f"draw {kit[2]:.2f} CPU s, {kit[3]} tracks placed")
+            results["sequence_kitti_cpu_s_per_frame"] = round(kit[0], 3)
+            results["sequence_kitti_bench"] = {"frame": KITTI_FRAME, "frames": kit[1], "draw_s": round(kit[2], 3),
+                                               "tracks": kit[3], "size": "1242x375"}
+        else:
+            print("sequence bench: no development KITTI frames (../shared/realism/kitti_dev): KITTI sequence skipped")
         plaus = plausibility(cfg["bikes_root"], cfg["bikes"], plaus_sequences)
         print(f"sequence bench: plausibility {plaus}")
         results["sequence_frames_per_hour"] = round(fph, 1)

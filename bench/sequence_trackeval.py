@@ -8,7 +8,8 @@ TrackEval is not a dependency of the project; run this with an environment that 
 
 MOT: the cyclists are MOT's class 1 (the class its evaluator scores, `pedestrian` in its code).
 KITTI: TrackEval's KITTI evaluator scores car and pedestrian only, so for `Cyclist` rows it is the
-reader that is checked (every row parsed, integer truncation and occlusion, track ids per frame).
+reader that is checked (every row parsed, integer truncation and occlusion, track ids per frame);
+the car and pedestrian rows (a KITTI frame's own objects in sequences in KITTI frames) are scored.
 """
 import json
 import os
@@ -73,6 +74,13 @@ def check(dataset):
             loaded += sum(len(ids) for ids in raw["gt_ids"])
             assert all(np.issubdtype(np.asarray(e["truncation"]).dtype, np.integer) for e in raw["gt_extras"] if len(e["truncation"]))
         out["kitti"] = {"rows": rows, "rows_loaded_by_trackeval": loaded}
+        # the classes its KITTI evaluator scores (car, pedestrian: a KITTI frame's own objects, static
+        # tracks in sequences in KITTI frames), the ground truth as a tracker against itself
+        kres, _ = ev.evaluate([kd], [trackeval.metrics.HOTA(), trackeval.metrics.CLEAR()])
+        kr = kres["Kitti2DBox"]["gt_self"]["COMBINED_SEQ"]
+        out["kitti"]["scored"] = {c: {"HOTA": float(np.mean(kr[c]["HOTA"]["HOTA"])), "MOTA": float(kr[c]["CLEAR"]["MOTA"]),
+                                      "gt_dets": int(kr[c]["CLEAR"]["CLR_TP"] + kr[c]["CLEAR"]["CLR_FN"])}
+                                  for c in ("car", "pedestrian") if c in kr}
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
     return out

@@ -173,3 +173,25 @@ def test_killed_driver_then_rerun(reference_long, ray_cluster, tmp_path):
     assert r.returncode == 0, r.stderr
     assert "already done" in r.stdout
     same_dataset(ref, out)
+
+
+def test_ray_engine_runs_sequences_by_sequence(ray_cluster, tmp_path):
+    """Sequences on Ray: one task per sequence, the same bytes as one process (parked bikes only:
+    no rider body to build in every worker)."""
+    from helpers import street_config
+    from splatting.dataset.command import generate
+    from splatting.dataset.config import validate
+    from splatting.library.dataset_ray import by_sequence
+    assert by_sequence([0, 1, 2, 4, 5, 7], 3) == [[0, 1, 2], [4, 5], [7]]
+    write_test_bike(str(tmp_path))
+    cfg = validate(street_config(str(tmp_path), count=2, labels={"formats": ["coco", "kitti", "mot"]},
+                                 street={"cyclists": [0, 0], "parked_bikes": [2, 2]},
+                                 sequence={"enabled": True, "length": 3}))
+    a, b = str(tmp_path / "one"), str(tmp_path / "ray")
+    generate(cfg, a, log=lambda m: None, progress=False)
+    r = generate(cfg, b, log=lambda m: None, progress=False, engine="ray")
+    assert r["generated"] == 6
+    for rel in ["annotations.json", "kitti_tracking/training/label_02/0001.txt", "mot/0000/gt/gt.txt"] + \
+            [f"images/{s:04d}/{f:06d}.png" for s in range(2) for f in range(3)]:
+        with open(os.path.join(a, rel), "rb") as fa, open(os.path.join(b, rel), "rb") as fb:
+            assert fa.read() == fb.read(), rel

@@ -141,6 +141,13 @@ def test_crossing_label_known_answer():
     assert not crossing_frames([4.0, 4.5, 5.0], [-60, -60, -60], 1.5).any()
     # from the other side (X < 0) towards +X
     assert crossing_frames([-3.0, -2.0, 0.0, 2.0], [-45, -45, -45, -45], 1.5).tolist() == [True, True, True, False]
+    # an overtake's lane change towards the path and back, never reaching the lane: no crossing
+    x = [5.0, 4.8, 4.2, 3.6, 3.3, 3.4, 3.9, 4.5]
+    heading = [-90, -105, -115, -110, -95, -75, -70, -85]
+    assert not crossing_frames(x, heading, 1.5).any()
+    # ... but one that reaches the lane is, from its turn on
+    assert crossing_frames([5.0, 4.0, 2.5, 1.2, 0.0, -2.0], [-90, -120, -130, -130, -100, -90], 1.5).tolist() == \
+        [False, True, True, True, True, False]
 
 
 def test_a_drawn_crossing_is_labelled_from_the_turn_until_past_the_lane(bikes):

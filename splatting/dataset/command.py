@@ -27,7 +27,7 @@ from splatting.library.ray_address import check_address
 def add_arguments(p):
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--config", help="YAML config (see docs/cyclists_and_datasets.md)")
-    src.add_argument("--preset", help="built-in config from blend_assets/datasets/ (bike-only, cyclist, street, street-sequence, kitti-insert)")
+    src.add_argument("--preset", help="built-in config from blend_assets/datasets/ (bike-only, cyclist, street, street-sequence, kitti-insert, kitti-sequence)")
     p.add_argument("--out", help="output folder (default: out/datasets/<name>)")
     # the top-level fields a run may override: flags typed and described by the config's models
     add_model_arguments(p, DatasetConfig, CLI_OVERRIDES)
@@ -169,8 +169,6 @@ def run(args):
     cfg = load_config(args.config, args.preset, overrides_of(args, CLI_OVERRIDES), nested)
     if args.frames is not None and cfg.mode != "frames":
         raise UserError(f"--frames goes with mode: frames (e.g. --preset kitti-insert); this config's mode is {cfg.mode}")
-    if cfg.sequence.enabled and args.engine == "ray":
-        raise UserError("sequences run with the local engine (--workers) or --shard, not --engine ray")
     checks.image_size("config field 'image_size'", cfg.image_size)
     checks.count("config field 'count'", cfg.count)
     out = args.out or checks.inside(os.path.join("out", "datasets"), os.path.join("out", "datasets", cfg.name),

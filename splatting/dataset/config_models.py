@@ -409,8 +409,12 @@ class DatasetConfig(Block):
             if "mot" in self.labels.formats:
                 raise field_error("labels.formats", "mot (MOTChallenge) is a tracking format: it needs sequence.enabled: true")
             return
-        if self.mode != "street":
-            raise field_error("sequence.enabled", f"sequences are street scenes (mode: street), got mode {self.mode!r}")
+        if self.mode not in ("street", "frames"):
+            raise field_error("sequence.enabled", f"sequences are street scenes or KITTI frames (mode: street or "
+                                                  f"frames), got mode {self.mode!r}")
+        if self.mode == "frames" and sq.ego.motion != "static":
+            raise field_error("sequence.ego.motion", "a KITTI frame is one instant: its camera stands still "
+                                                     "(set sequence.ego.motion: static)")
         if self.lighting.mode != "baked":
             raise field_error("lighting.mode", "sequences use the baked light (a relit sun per frame would flicker)")
         w = sq.manoeuvres.model_dump()

@@ -459,7 +459,8 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
     if fs is not None:  # the frame's own label rows (occlusion raised), calib, plane and scan
         extras["frame"] = fs.kitti_extras(L)
         image["frame"] = dict(fs.record(), occlusion_raised=[[o, n, round(sh_, 4)] for o, n, sh_ in extras["frame"]["occlusion_raised"]])
-        counts = fs.insert_scan(scan_parts, extras) if "kitti" in lab.formats else None
+        # (a motion-blur sub-frame's draw says so: only the frame's own instant writes a scan)
+        counts = fs.insert_scan(scan_parts, extras) if "kitti" in lab.formats and not d.get("subframe") else None
         if counts is not None:  # the LiDAR points on each inserted instance
             image["frame"]["scan"] = fs.scan_record
             for a in anns:

@@ -4,9 +4,12 @@ Each task renders a contiguous slice of the not-yet-done indices with the same p
 (config, index) the local engine uses (splatting.dataset.generate.write_sample), writing the same
 per-sample image + shard files, so the merged annotations are byte-identical to a one-process run.
 A task whose worker dies is retried by Ray and skips the samples already written; a killed driver
-is rerun and skips them too.  One declared CPU and one torch thread per task.
+is rerun and skips them too.  One declared CPU and one torch thread per task.  Sequences shard by
+sequence: one task renders one sequence's frames (in order, its draw made once), so the parallelism is
+the number of sequences.
 """
 from splatting.dataset.generate import Assets, sample_done, write_sample
+from splatting.dataset.sequences.output import frame_done, write_frame
 
 from splatting.library.engine import ensure_ray
 
@@ -22,12 +25,26 @@ def _render_range(cfg, out_dir, indices):
     if key not in _CACHE:
         _CACHE.clear()
         _CACHE[key] = Assets(cfg)
-    n = 0
     for i in indices:
-        if not sample_done(out_dir, i):
+        if sequences(cfg):  # a sequence's frames (splatting/dataset/sequences): one task per sequence
+            if not frame_done(out_dir, i, cfg):
+                write_frame(cfg, i, out_dir, _CACHE[key])
+        elif not sample_done(out_dir, i):
             write_sample(cfg, i, out_dir, _CACHE[key])
-            n += 1
     return len(indices)
+
+
+def sequences(cfg):
+    return bool(cfg.sequence.enabled)
+
+
+def by_sequence(todo, length):
+    """todo frame indices (sequence s, frame f is s * length + f) grouped by sequence, in order: a task
+    draws its sequence once (trajectories, placement checks) and renders its frames."""
+    out = {}
+    for i in todo:
+        out.setdefault(i // length, []).append(i)
+    return [out[s] for s in sorted(out)]
 
 
 def chunks(todo, parts):
@@ -47,7 +64,9 @@ def generate_ray(cfg, out_dir, todo, address=None, tick=None, tasks_per_cpu=4, r
     ray = ensure_ray(address)
     cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
     remote = ray.remote(num_cpus=1, max_retries=retries, retry_exceptions=True)(_render_range)
-    refs = [remote.remote(cfg, out_dir, c) for c in chunks(list(todo), cpus * tasks_per_cpu)]
+    parts = by_sequence(list(todo), int(cfg.sequence.length)) if sequences(cfg) else \
+        chunks(list(todo), cpus * tasks_per_cpu)
+    refs = [remote.remote(cfg, out_dir, c) for c in parts]
     done = 0
     while refs:
         ready, refs = ray.wait(refs, num_returns=1)

@@ -52,12 +52,24 @@ def behind_label(fr, centre_rect):
     return any(segment_hits_box(a, b, box) for box in fr.boxes)
 
 
+def unlabelled_high(fr):
+    """The scan's points more than 0.3 m above the road outside every labelled box (grown by 0.2 m:
+    the points on its faces), once per frame: what may shadow a spot besides the labelled objects."""
+    if getattr(fr, "_unlabelled_high", None) is None:
+        high = fr.scan_height > 0.3
+        for _, h, w, l, loc, ry in fr.boxes:
+            high &= ~lidar.in_box(fr.scan_rect, (h + 0.2, w + 0.4, l + 0.4, *loc, ry))
+        fr._unlabelled_high = fr.scan[high, :3]
+    return fr._unlabelled_high
+
+
 def support_ok(fr, poly_world, centre_rect, min_ground):
     """LiDAR check of a footprint: (ok, ground count, obstacle count); ok without a scan.  The spot
     must also be in the sensor's view (lidar.visible_ground: no nearer object above the road in its
     direction), so nothing is placed inside another object's LiDAR shadow -- unless the shadow is a
     labelled box's: then the cyclist is hidden behind it in the image too, and labelled occluded (the
-    box occludes it), and only the obstacle test applies (the road there is the plane's, unseen)."""
+    box occludes it), and only the obstacle test applies (the road there is the plane's, unseen), with
+    the view test on the unlabelled points alone (nothing unlabelled, a wall, stands in front either)."""
     if fr.scan is None:
         return True, None, None
     shadowed_by_label = behind_label(fr, centre_rect)
@@ -67,8 +79,10 @@ def support_ok(fr, poly_world, centre_rect, min_ground):
     xz = fr.scan_rect[:, [0, 2]]
     near = ((xz >= lo) & (xz <= hi)).all(1)
     s = lidar.ground_support(fr.scan[near, :3], fr.T_velo_to_rect, fr.road.plane, rect[:, [0, 2]])
-    if shadowed_by_label:
-        return s["obstacle"] == 0, int(s["ground"]), int(s["obstacle"])
+    if shadowed_by_label:  # the labelled box may hide the spot, nothing unlabelled may (a wall behind a pedestrian)
+        ok = s["obstacle"] == 0 and bool(lidar.visible_ground(unlabelled_high(fr), fr.T_velo_to_rect, fr.road.plane,
+                                                                  centre_rect[None])[0])
+        return ok, int(s["ground"]), int(s["obstacle"])
     ok = s["ground"] >= min_ground and s["obstacle"] == 0
     if ok:  # only points above the road can block the view (visible_ground's own rule, min_height_m 0.3)
         high = fr.scan[fr.scan_height > 0.3, :3]

@@ -78,8 +78,8 @@ class FrameSample:
         img = self.image()
         rec = {"hidden_px": self.hidden_px}
         gain, sigma, noise = np.ones(3), 0.0, 0.0
-        if lk.match:
-            gain, road_rgb = look.road_gain(img, self.road_mask(feet_world))
+        if lk.match:  # (a sequence measures its one gain around all its tracks: no flicker as they move)
+            gain, road_rgb = look.road_gain(img, self.road_mask(self.d.get("look_feet_world", feet_world)))
             est = self.frame.stat("blur", look.estimate_blur)
             own = None
             if lk.blur_sigma_px == "auto":

@@ -15,7 +15,7 @@ linearly (the path's velocity at its end).  The arm signal of the frame holds th
 import numpy as np
 
 from splatting.dataset.generate import make_sample
-from splatting.dataset.sequences.draw import ego_camera, ego_camera_at, frame_draw
+from splatting.dataset.sequences.draw import ego_camera, ego_camera_at, frame_draw, with_look
 
 
 def subframe_offsets(exposure_s, n):
@@ -45,7 +45,8 @@ def subframe_draw(sd, f, t):
     """make_sample's draw at time t (s) of a sequence drawn by draw_sequence, frame f's signals."""
     inst = [{"kind": i["kind"], "bike": i["bike"], "rider": i["rider"], "pose": pose_at(i, t),
              **({"signal": i["signal"][f]} if "signal" in i else {})} for i in sd["instances"]]
-    return {"instances": inst, "dropped": sd["dropped"], "camera": dict(sd["camera"]), "background": dict(sd["background"])}
+    return with_look({"instances": inst, "dropped": sd["dropped"], "camera": dict(sd["camera"]),
+                      "background": dict(sd["background"]), "subframe": True}, sd)
 
 
 def blurred_sample(cfg, index, assets, sd, f, exposure_s, n):

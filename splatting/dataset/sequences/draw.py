@@ -7,7 +7,8 @@ Every frame of the sequence calls this again (it costs milliseconds), so frames 
 in any order, by any worker, and resumed.
 
 World as in street mode (docs/street_scenes.md): road plane Y = 0, the road along world +Z; the
-ego camera starts at (0, height, 0) and moves along +Z at the drawn ego speed (or stands).
+ego camera starts at (0, height, 0) and moves along +Z at the drawn ego speed (or stands).  Where
+instances may stand is the world's: StreetWorld here, a KITTI frame's in in_frames.FrameWorld.
 """
 import functools
 import math
@@ -132,18 +133,56 @@ def signal_frames(rng, manoeuvre, traj, speed, bumps, sq, duration):
     return [str(x) for x in out]
 
 
+class StreetWorld:
+    """Where a street sequence's instances may stand: the generated street (docs/street_scenes.md),
+    the driving camera of the preset; any spot within `street.lateral_m`, only the footprint discs
+    kept apart.  (Sequences in a KITTI frame have their own world: sequences/in_frames.py.)"""
+
+    def __init__(self, cfg, rng, t):
+        self.cfg, st = cfg, cfg.street
+        self.spec = camera_presets.resolve(cfg.camera)
+        ego = cfg.sequence.ego
+        self.ego_speed = float(rng.uniform(*ego.speed_mps)) if ego.motion == "moving" else 0.0
+        self.ego_z = self.ego_speed * t
+        self.axis_deg = road_heading(st.road_heading_deg)
+
+    def spot(self, rng):
+        """(world X, distance ahead of the camera) of a drawn spot: its distance and image column."""
+        st, cam = self.cfg.street, self.spec
+        z_rel = float(rng.uniform(*st.distance_m))
+        u = float(rng.uniform(-st.border_margin, 1.0 + st.border_margin)) * cam["width"]
+        return -(u - cam["cx"]) * z_rel / cam["fx"], z_rel  # image-right is world -X
+
+    def usable(self, x, z_ahead):
+        lo, hi = self.cfg.street.lateral_m
+        return lo <= x <= hi
+
+    def track_ok(self, kind, pose):
+        return True, {}
+
+    def camera(self, checks):
+        return {"preset": self.spec["preset"]}
+
+    def background(self, rng):
+        kinds = self.cfg.backgrounds.kinds
+        return {"kind": kinds[int(rng.integers(len(kinds)))], "seed": int(rng.integers(2 ** 31))}
+
+
 def draw_sequence(cfg, seq):
     """Sequence `seq` -> {"ego_speed", "camera", "background", "instances": [...], "dropped"}; each
-    instance {kind, bike, rider, manoeuvre, poses (n, 8), traj, crossing, intention, gear_ratio, geometry}."""
+    instance {kind, bike, rider, manoeuvre, poses (n, 8), traj, crossing, intention, gear_ratio, geometry}.
+    The world is the generated street (mode street) or a KITTI frame (mode frames: in_frames.FrameWorld)."""
     sq, st = cfg.sequence, cfg.street
     rng = np.random.default_rng([cfg.seed, seq, TAG])
     n, fps = int(sq.length), float(sq.fps)
     duration = (n - 1) / fps
     t = np.arange(n) / fps
-    cam = camera_presets.resolve(cfg.camera)
-    ego = sq.ego
-    ego_speed = float(rng.uniform(*ego.speed_mps)) if ego.motion == "moving" else 0.0
-    ego_z = ego_speed * t
+    if cfg.mode == "frames":
+        from splatting.dataset.sequences.in_frames import FrameWorld
+        world = FrameWorld(cfg, seq, t)
+    else:
+        world = StreetWorld(cfg, rng, t)
+    ego_z = world.ego_z
     names = list(type(sq.manoeuvres).model_fields)  # declaration order (MANOEUVRES)
     w = np.array([float(getattr(sq.manoeuvres, m)) for m in names])
     n_cyc = _count(rng, st.cyclists) if cfg.riders else 0
@@ -152,7 +191,7 @@ def draw_sequence(cfg, seq):
     a_max = float(sq.max_lateral_accel_mps2)
     v_lo, v_hi = sq.speed_mps
     mid = n // 2
-    placed, out, dropped = [], [], 0
+    placed, out, dropped, checks = [], [], 0, []
     for kind in ["cyclist"] * n_cyc + ["parked"] * n_park:
         bike = cfg.bikes[int(rng.integers(len(cfg.bikes)))]
         rider = cfg.riders[int(rng.integers(len(cfg.riders)))] if kind == "cyclist" else None
@@ -163,22 +202,20 @@ def draw_sequence(cfg, seq):
         steer = float(rng.uniform(*st.parked_steer_deg))
         got = None
         for _ in range(int(st.max_tries)):
-            z_rel = float(rng.uniform(*st.distance_m))
-            u = float(rng.uniform(-st.border_margin, 1.0 + st.border_margin)) * cam["width"]
-            x = -(u - cam["cx"]) * z_rel / cam["fx"]  # image-right is world -X
+            x, z_rel = world.spot(rng)
             oncoming = bool(rng.uniform() < st.oncoming_share)
             plan_rng = np.random.default_rng([cfg.seed, seq, TAG, len(placed), int(rng.integers(2 ** 31))])
-            if not st.lateral_m[0] <= x <= st.lateral_m[1]:
+            if not world.usable(x, z_rel):
                 continue
             if kind == "parked":
-                yaw = road_heading(st.road_heading_deg) + float(rng.uniform(-1, 1)) * st.heading_spread_deg
+                yaw = world.axis_deg + float(rng.uniform(-1, 1)) * st.heading_spread_deg
                 pose = np.tile([0.0, steer, 0.0, yaw, 0.0, x, 0.0, ego_z[mid] + z_rel], (n, 1))
                 traj = {"t": t, "speed": np.zeros(n), "kappa": np.zeros(n), "accel": np.zeros(n),
                         "velocity_xz": np.zeros((n, 2)), "origin_xz": pose[:, [5, 7]], "wheel_rad": np.zeros(n),
                         "crank_rate": np.zeros(n), "wheel_rate": np.zeros(n), "lateral_accel": np.zeros(n)}
                 gear = None
             else:
-                psi0 = road_heading(st.road_heading_deg) + (180.0 if oncoming else 0.0)
+                psi0 = world.axis_deg + (180.0 if oncoming else 0.0)
                 x0 = x if man == "cross" else 0.0
                 if man == "cross" and abs(x0) < 2.0:  # a crossing starts beside the ego's lane
                     x0 = math.copysign(float(rng.uniform(2.5, 6.0)), x0 if x0 != 0 else 1.0)
@@ -199,11 +236,14 @@ def draw_sequence(cfg, seq):
                 pose = tj.poses(traj)
             track = pose[:, [5, 7]]
             if all(np.min(np.sum((track - p) ** 2, 1)) >= (2 * r_fp) ** 2 for p in placed):
-                got = (pose, traj, gear, (speed, bumps) if kind == "cyclist" else None)
-                break
+                ok, info = world.track_ok(kind, pose)
+                if ok:
+                    got = (pose, traj, gear, (speed, bumps) if kind == "cyclist" else None)
+                    break
         if got is None:
             dropped += 1
             continue
+        checks.append(info)
         pose, traj, gear, plan = got
         placed.append(pose[:, [5, 7]])
         rec = {}
@@ -218,17 +258,27 @@ def draw_sequence(cfg, seq):
         out.append({"kind": kind, "bike": bike, "rider": rider, "manoeuvre": man, "poses": pose, "traj": traj,
                     "crossing": crossing, "intention": inten, "gear_ratio": gear, "geometry": geom,
                     "plan": plan, **rec})
-    kinds = cfg.backgrounds.kinds
-    bg = {"kind": kinds[int(rng.integers(len(kinds)))], "seed": int(rng.integers(2 ** 31))}
-    return {"ego_speed": ego_speed, "ego_z": ego_z, "camera": {"preset": cam["preset"]}, "spec": cam,
-            "background": bg, "instances": out, "dropped": dropped}
+    sd = {"ego_speed": world.ego_speed, "ego_z": ego_z, "camera": world.camera(checks), "spec": world.spec,
+          "background": world.background(rng), "instances": out, "dropped": dropped}
+    if cfg.mode == "frames":  # one light gain for the whole sequence: the road around every track
+        sd["look_feet_world"] = world.look_feet([i["poses"] for i in out])
+    return sd
 
 
 def frame_draw(sd, f):
     """make_sample's draw dict for frame f of a drawn sequence."""
     inst = [{"kind": i["kind"], "bike": i["bike"], "rider": i["rider"], "pose": [float(x) for x in i["poses"][f]],
              **({"signal": i["signal"][f]} if "signal" in i else {})} for i in sd["instances"]]
-    return {"instances": inst, "dropped": sd["dropped"], "camera": dict(sd["camera"]), "background": dict(sd["background"])}
+    return with_look({"instances": inst, "dropped": sd["dropped"], "camera": dict(sd["camera"]),
+                      "background": dict(sd["background"])}, sd)
+
+
+def with_look(d, sd):
+    """A frame's draw with the sequence's look footing (KITTI frames: the road the light gain is
+    measured on, the same in every frame so the gain does not flicker)."""
+    if "look_feet_world" in sd:
+        d["look_feet_world"] = sd["look_feet_world"]
+    return d
 
 
 def ego_camera(sd, f):
@@ -237,9 +287,12 @@ def ego_camera(sd, f):
 
 
 def ego_camera_at(sd, z):
-    """The driving camera after z metres of travel along +Z (a sub-frame instant: z = speed x t)."""
+    """The driving camera after z metres of travel along +Z (a sub-frame instant: z = speed x t);
+    None in a KITTI frame (its own camera, standing: make_sample takes the frame's)."""
     from splatting.raster.camera import from_numpy
     spec = sd["spec"]
+    if spec is None:
+        return None
     R, T = camera_presets.pose(spec)
     T = T - R @ np.array([0.0, 0.0, z])
     return from_numpy(camera_presets.intrinsics(spec), R, T, spec["width"], spec["height"])

@@ -3,7 +3,8 @@ the frames' shards once all are done (so a killed and resumed run gives the same
 
 DIR/images/SEQ/FFFFFF.png, DIR/shards/SEQ/FFFFFF.json (the frame's image record, annotations and
 tracking rows; written last: it marks the frame done), DIR/annotations.json (COCO-video);
-`kitti`: DIR/kitti_tracking/training/{image_02/SEQ/FFFFFF.png, label_02/SEQ.txt, calib/SEQ.txt};
+`kitti`: DIR/kitti_tracking/training/{image_02/SEQ/FFFFFF.png, label_02/SEQ.txt, calib/SEQ.txt} (in a KITTI
+frame: its calib file byte for byte, and velodyne/SEQ/FFFFFF.bin, its scan with the cyclists in it);
 `mot`: DIR/mot/SEQ/{img1/%06d.png (1-based), gt/gt.txt, seqinfo.ini}.  SEQ = %04d.
 The arm signal per cyclist and frame, which neither text format has a column for, goes beside
 them: kitti_tracking/training/signal_02/SEQ.txt and mot/SEQ/gt/signals.txt (writers.signal_text).
@@ -32,9 +33,18 @@ def write_frame(cfg, index, out_dir, assets):
     with atomic_path(img) as tmp:
         png.write(tmp, rgb, cfg.png_compress_level)
     calib = {k: [float(x) for x in v.ravel()] for k, v in rows["calib"].items()}
+    doc = {"image": image, "annotations": anns, "kitti": rows["kitti"], "mot": rows["mot"], "calib": calib,
+           "signal": rows["signal"]}
+    if "calib_text" in rows:  # a KITTI frame's own calib file, copied byte for byte at assembly
+        doc["calib_text"] = rows["calib_text"]
+    if rows.get("scan") is not None:  # its scan with the cyclists ray-cast in (KITTI tracking's velodyne/SEQ/)
+        s, f = sequence_of(cfg, index)
+        vel = os.path.join(out_dir, "kitti_tracking", "training", "velodyne", f"{s:04d}", f"{f:06d}.bin")
+        os.makedirs(os.path.dirname(vel), exist_ok=True)
+        with atomic_path(vel) as tmp:
+            rows["scan"].astype("<f4").tofile(tmp)
     os.makedirs(os.path.dirname(shard), exist_ok=True)
-    write_json(shard, {"image": image, "annotations": anns, "kitti": rows["kitti"], "mot": rows["mot"],
-                       "calib": calib, "signal": rows["signal"]}, indent=None)
+    write_json(shard, doc, indent=None)
     return index
 
 
@@ -76,12 +86,12 @@ def assemble(out_dir, cfg, info, cats):
             if "mot" in fm:
                 link_or_copy(img, os.path.join(out_dir, "mot", f"{s:04d}", "img1", f"{f + 1:06d}.png"))
             if f == 0:
-                calib, W, H = doc["calib"], im["width"], im["height"]
+                calib, W, H = doc.get("calib_text") or calib_text(doc["calib"]), im["width"], im["height"]
         videos.append({"id": s + 1, "name": f"{s:04d}", "width": W, "height": H, "length": n, "fps": fps})
         if "kitti" in fm:
             base = os.path.join(out_dir, "kitti_tracking", "training")
             _text(os.path.join(base, "label_02", f"{s:04d}.txt"), writers.kitti_tracking_text(kit))
-            _text(os.path.join(base, "calib", f"{s:04d}.txt"), calib_text(calib))
+            _text(os.path.join(base, "calib", f"{s:04d}.txt"), calib)
             _text(os.path.join(base, "signal_02", f"{s:04d}.txt"), writers.signal_text(sig, " ", 0))
         if "mot" in fm:
             d = os.path.join(out_dir, "mot", f"{s:04d}")

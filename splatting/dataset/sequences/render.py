@@ -6,10 +6,12 @@ Frame f of sequence s is dataset sample index s * length + f (its image id is th
 """
 import math
 
+from cyclist_formats import kitti_frame
 from splatting.dataset.generate import make_sample
 from splatting.dataset.labels import CATEGORY_IDS
 from splatting.dataset.sequences.blur import blurred_sample
 from splatting.dataset.sequences.draw import draw_sequence, ego_camera, frame_draw
+from splatting.dataset.sequences.in_frames import frame_rows
 
 COMBINED_IDS = (CATEGORY_IDS["cyclist"], CATEGORY_IDS["motorcyclist"])
 TRACK_STRIDE = 1000  # COCO track_id = sequence * 1000 + track (the still street sets use index * 1000 + k)
@@ -73,5 +75,12 @@ def make_frame(cfg, index, assets):
     kit = [[o["instance"], {key: (float(v) if isinstance(v, float) else v) for key, v in o.items()}]
            for o in extras["kitti"]]
     signals = [[k + 1, inst["signal"][f]] for k, inst in enumerate(sd["instances"]) if "signal" in inst]
-    return rgb, image, anns, {"kitti": kit, "mot": sorted(([k, r] for k, r in mot.items())), "calib": extras["calib"],
-                              "signal": signals}
+    rows = {"kitti": kit, "mot": sorted(([k, r] for k, r in mot.items())), "calib": extras["calib"], "signal": signals}
+    if "frame" in extras:  # a KITTI frame: its own objects as static tracks after the inserted ones, its calib, scan
+        fk, fm = frame_rows(extras["frame"]["frame_lines"], len(sd["instances"]) + 1)
+        rows["kitti"] += fk
+        rows["mot"] += fm
+        with open(kitti_frame.frame_paths(extras["frame"]["folder"], extras["frame"]["frame_id"])["calib"]) as fh:
+            rows["calib_text"] = fh.read()
+        rows["scan"] = extras["frame"]["scan"]
+    return rgb, image, anns, rows

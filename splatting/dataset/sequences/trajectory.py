@@ -140,21 +140,27 @@ def crossing_frames(x, heading_deg, lane_half_width, min_angle_deg=10.0):
     """Per frame: True while the cyclist crosses the camera's path (the line X = 0, the ego's lane
     |X| <= lane_half_width): from the first frame its heading turns towards the path (the lateral
     component of its direction points at X = 0 with at least min_angle_deg off the road) until it
-    is past the far edge of the lane.  x: lateral positions (world X), heading_deg: theta_Y."""
+    is past the far edge of the lane.  A turn towards the path that turns away again before reaching
+    the lane (an overtake's or a swerve's) is no crossing: its frames are cleared.  x: lateral
+    positions (world X), heading_deg: theta_Y."""
     x = np.asarray(x, float)
     lateral = np.cos(np.radians(heading_deg))  # forward_x = cos(theta_Y)
     out = np.zeros(len(x), bool)
-    side = 0.0
+    side, start, reached = 0.0, 0, False
     state = "before"
     thr = math.sin(math.radians(min_angle_deg))
     for i in range(len(x)):
         if state == "before":
             s = math.copysign(1.0, x[i]) if x[i] != 0 else 0.0
             if s != 0 and -s * lateral[i] >= thr and abs(x[i]) > 0:
-                state, side = "crossing", s
+                state, side, start, reached = "crossing", s, i, False
         if state == "crossing":
+            reached = reached or x[i] * side <= lane_half_width
             if x[i] * side < -lane_half_width:
                 state = "after"
+            elif not reached and -side * lateral[i] < 0:  # turned away before the lane: not a crossing
+                out[start:i] = False
+                state = "before"
             else:
                 out[i] = True
     return out

@@ -23,9 +23,17 @@ sequence's frames are all done; output.py writes them atomically.
 """
 TRUNCATION_LEVELS = (0.05, 0.5)  # share outside the image below the first: 0, below the second: 1, else 2
 MOT_CLASS = {"cyclist": 1, "parked": 4}
+# a KITTI frame's own objects in MOT (sequences in KITTI frames): their MOT17 classes as TrackEval names
+# them (1 pedestrian = the target class, here cyclists; 3 car; 7 static person and 8 distractor are
+# distractors: a tracker's box on them is not counted against it); any other type 8
+KITTI_TYPES_MOT = {"Cyclist": 1, "Car": 3, "Van": 3, "Truck": 3, "Tram": 3, "Pedestrian": 7, "Person_sitting": 7,
+                   "Misc": 8}
 
 
 def truncation_level(share):
+    """The integer level of a truncated share; a negative share (KITTI's DontCare rows: -1) stays -1."""
+    if share < 0:
+        return -1
     return 0 if share < TRUNCATION_LEVELS[0] else 1 if share < TRUNCATION_LEVELS[1] else 2
 
 
@@ -42,9 +50,11 @@ def kitti_tracking_text(frames):
 
 
 def mot_line(frame, track_id, row):
-    """row: {"box": [x, y, w, h], "kind": cyclist|parked, "visibility"}; frame 0-based here."""
+    """row: {"box": [x, y, w, h], "kind": cyclist|parked, "visibility"} (or with its own "class": a
+    KITTI frame's objects, visibility -1 = unknown); frame 0-based here."""
     x, y, w, h = row["box"]
-    return f"{frame + 1},{track_id},{x:.2f},{y:.2f},{w:.2f},{h:.2f},1,{MOT_CLASS[row['kind']]},{row['visibility']:.4f}\n"
+    cls = row["class"] if "class" in row else MOT_CLASS[row["kind"]]
+    return f"{frame + 1},{track_id},{x:.2f},{y:.2f},{w:.2f},{h:.2f},1,{cls},{row['visibility']:.4f}\n"
 
 
 def mot_gt_text(frames):
