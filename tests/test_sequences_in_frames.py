@@ -59,8 +59,8 @@ def test_config_frames_sequence_needs_a_standing_camera_and_the_preset_loads(bik
     with pytest.raises(UserError, match="'sequence.ego.motion'.*stands still"):
         validate(seq_config(bikes, root, sequence={"ego": {"motion": "moving"}}))
     c = load_config(preset="kitti-sequence")
-    assert c["mode"] == "frames" and c["sequence"]["enabled"] and c["sequence"]["ego"]["motion"] == "static"
-    assert c["labels"]["formats"] == ["coco", "kitti", "mot"]
+    assert c.mode == "frames" and c.sequence.enabled and c.sequence.ego.motion == "static"
+    assert list(c.labels.formats) == ["coco", "kitti", "mot"]
 
 
 def test_tracks_stay_off_labelled_boxes_at_every_frame(bikes, tmp_path):
