@@ -9,6 +9,7 @@ from splatting import paths
 from splatting.rider.body import build_rider
 from splatting.rider import smpl_body
 from splatting.rider.imported import imported_entries, rider_from_spec
+from splatting.rider.looks import validate_look
 
 ROSTER_PATH = paths.BLEND_ASSETS / "riders.yaml"
 PHENOTYPE_KEYS = ("gender", "age", "muscle", "weight", "height", "proportions")
@@ -50,6 +51,10 @@ def load_roster(path=ROSTER_PATH):
                 raise UserError(f"{path}: rider {rid}: colors.{k} must be '#rrggbb'")
         if not isinstance(r.get("height_m"), (int, float)):
             raise UserError(f"{path}: rider {rid}: height_m must be a number")
+        if "look" in r:  # optional: fields that override the look drawn from the id (looks.py)
+            problem = validate_look(r["look"])
+            if problem:
+                raise UserError(f"{path}: rider {rid}: {problem}")
     return riders
 
 
