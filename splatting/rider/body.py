@@ -206,7 +206,8 @@ def region_ids(verts, weights, joints, eye_y):
 
 def _region_colors(verts, weights, joints, eye_y, colors):
     """Per-vertex colours of the regions (region_ids) from the rider's '#rrggbb' colours."""
-    palette = np.stack([_hex_rgb(colors[r]) for r in REGIONS])
+    # region_ids paints no hair or bag (only looks.py adds those), so they may have no colour here
+    palette = np.stack([_hex_rgb(colors.get(r, colors["skin"])) for r in REGIONS])
     return palette[region_ids(verts, weights, joints, eye_y)]
 
 
