@@ -302,10 +302,10 @@ def dress(verts, faces, weights, joints, eye_y, eyes, colors, regions, look, reg
             v, f = ellipsoid(c0, np.array([0.04, 0.035, 0.04]))
             add("bun", v, f, _one_hot(len(v), "head"), hair_rgb * 0.9, "hair")
         if look["hair"] == "long":  # a ponytail hanging down the back of the head
-            top = np.array([x[hv].min() - 0.005, eye_y - 0.01, hc[2]])
+            top = np.array([x[hv].min() + 0.005, eye_y - 0.02, hc[2]])
             segs = []
             for k, t in enumerate(np.linspace(0, 1, 6)):
-                segs.append(top + [-0.04 * t, -0.16 * t, 0.0])
+                segs.append(top + [-0.025 * np.sin(np.pi * t / 2), -0.17 * t, 0.0])  # hangs close to the neck
             v, f = [], []
             n_az = 10
             for k, cen in enumerate(segs):
