@@ -200,3 +200,42 @@ def test_exported_mesh_carries_the_accessories(tmp_path):
     want = np.round(looks._hex(r.spec["colors"]["helmet"]) * 255)
     got = np.asarray(m.visual.vertex_colors)[helmet, :3].astype(float)
     assert (np.abs(got - want).max(1) <= 1).mean() > 0.8  # the shell in the helmet colour (vents darker)
+
+
+def test_dataset_looks_recolour_hair_and_bag_per_instance_without_changing_earlier_draws():
+    from splatting.cyclist import appearance
+    a = {"regions": ["top", "bottom", "shoes", "helmet", "paint", "hair", "bag"], "keep_share": 0.0,
+         "saturation": [0.15, 0.9], "value": [0.12, 0.95], "brightness": [0.75, 1.25], "white_balance": 0.08}
+    old = dict(a, regions=["top", "bottom", "shoes", "helmet", "paint"])
+    look, gain = appearance.draw_look({"appearance": a}, 3, 7, 0)
+    look0, gain0 = appearance.draw_look({"appearance": old}, 3, 7, 0)
+    # the regions drawn before hair and bags existed get the same colours and gain
+    assert all(np.array_equal(look[k], look0[k]) for k in ("top", "bottom", "shoes", "helmet", "paint"))
+    assert np.array_equal(gain, gain0) and "hair" not in look0 and "bag" not in look0
+    hairs = [appearance.draw_look({"appearance": a}, 3, i, 0)[0]["hair"] for i in range(20)]
+    assert len({tuple(np.round(h, 4)) for h in hairs}) >= 5
+    palette = np.stack([looks._hex(c) for c in looks.HAIR_COLOURS + looks.GREY_HAIR])
+    for h in hairs:  # natural hair: a palette colour made 20 % darker or lighter at most
+        ratio = h / palette
+        assert (np.ptp(ratio, axis=1) < 1e-6).any() or np.any(h >= 1.0)
+        k = int(np.argmin(np.ptp(ratio, axis=1)))
+        assert 0.8 - 1e-6 <= ratio[k].mean() <= 1.2 + 1e-6
+
+
+def test_hair_and_bag_recolour_only_their_gaussians():
+    from splatting.cyclist import appearance
+    from splatting.cyclist.assets import mesh_avatar
+    from cyclist_formats.instances import RIDER_ID
+    r = _with_look(RIDER, helmet=False, hair="short", bag="backpack")
+    g = mesh_avatar(r).gaussians
+    reg = appearance.rider_regions(g.means, r)
+    refs = appearance.reference_colours(r)
+    assert refs["hair"] == looks.look_of(r.spec)["hair_colour"] and "bag" in refs
+    ids = torch.full((len(g),), RIDER_ID)
+    for region in ("hair", "bag"):
+        out = appearance.apply_look(g, ids, {region: np.array([0.9, 0.1, 0.1])}, np.ones(3), reg, refs)
+        changed = ((out.sh - g.sh).abs() > 1e-5).flatten(1).any(1)
+        want = reg == REGIONS.index(region)
+        assert bool(want.any()) and torch.equal(changed, want), region
+    bald = _with_look(RIDER, helmet=True, hair="bald", bag="none")
+    assert "hair" not in appearance.reference_colours(bald) and "bag" not in appearance.reference_colours(bald)
