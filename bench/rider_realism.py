@@ -5,7 +5,7 @@ bike, rendered the dataset's way, at 64, 128 and 256 px person (rider box) heigh
 Renders (the project's venv, torch): each anny roster rider as the dataset draws it (splatting.dataset's
 Assets: its trained avatar under --riders-root when one exists, else the mesh avatar, on the stand-in
 city bike, IK-posed by the cyclist), at VIEWS (two crank angles x side-on both ways and two
-three-quarter views), through the nuScenes camera 5 m away with its intrinsics scaled so that the rider's
+three-quarter views; --views N adds more crank angles and yaws), through the nuScenes camera 5 m away with its intrinsics scaled so that the rider's
 visible box is H px high, over a flat grey; COCO-17 labels from the rider's own mesh keypoints
 (splatting.dataset.person_keypoints), visibility by the dataset's depth test.  Then BlazePose
 (bench/frames_realism.py's crop: the rider box + 25 %, scaled to 256 px high; static-image mode) in
@@ -41,6 +41,12 @@ from bench.frames_realism import COCO_FROM_BLAZE, crop, pose_points  # noqa: E40
 HEIGHTS = (64, 128, 256)
 # (theta_p_deg, yaw_deg): side-on riding image-right and image-left, then three-quarter front and back
 VIEWS = ((60.0, 180.0), (240.0, 0.0), (150.0, 135.0), (330.0, 315.0))
+
+
+def views(n=len(VIEWS)):
+    """The first n views: VIEWS, then crank angles in 97-degree steps and yaws in golden-angle steps."""
+    extra = [(float(97 * k % 360), round(137.508 * k % 360, 3)) for k in range(len(VIEWS), n)]
+    return (tuple(VIEWS) + tuple(extra))[:n]
 DISTANCE_M = 5.0
 BACKGROUND = 0.5
 PCK_THR = 0.2
@@ -83,7 +89,7 @@ def _render(assets, bike, rider, theta_p, yaw, scale):
     return rgb, box, np.column_stack([uv, vis])
 
 
-def render_crops(out_dir, riders, riders_root, log=print):
+def render_crops(out_dir, riders, riders_root, n_views=len(VIEWS), log=print):
     """Write the crops (PNG) and labels.json for every rider x view x height into out_dir."""
     import torch
 
@@ -103,7 +109,7 @@ def render_crops(out_dir, riders, riders_root, log=print):
         assets = Assets(cfg)
         rows = []
         for ri, rider in enumerate(riders):
-            for vi, (tp, yaw) in enumerate(VIEWS):
+            for vi, (tp, yaw) in enumerate(views(n_views)):
                 _, box0, _ = _render(assets, STAND_IN_BIKE, rider, tp, yaw, 1.0)
                 for h in HEIGHTS:
                     s = h / box0[3]
@@ -185,49 +191,49 @@ def blazepose_python(explicit=None):
     return explicit or os.environ.get("BLAZEPOSE_PYTHON")
 
 
-def cache_key(riders, riders_root):
+def cache_key(riders, riders_root, n_views=len(VIEWS)):
     from bench.provenance import code_version, tree_hash
     avatars = {r: tree_hash(os.path.join(riders_root, r), (".ply", ".npz")) for r in riders}
-    return {"riders": list(riders), "avatars": avatars, "heights": list(HEIGHTS), "views": [list(v) for v in VIEWS],
+    return {"riders": list(riders), "avatars": avatars, "heights": list(HEIGHTS), "views": [list(v) for v in views(n_views)],
             "distance_m": DISTANCE_M, "code": code_version(*CODE)}
 
 
-def measure(out_dir, python, riders=None, riders_root=None, log=print):
+def measure(out_dir, python, riders=None, riders_root=None, n_views=len(VIEWS), log=print):
     """The realism numbers (cached under out_dir/rider_realism); returns (result, reused)."""
     from bench.provenance import key_matches, write_key
     from splatting.rider.roster import load_roster
     riders = riders or [r["id"] for r in load_roster() if r.get("body", "anny") == "anny"]
     riders_root = riders_root or os.path.join(out_dir, "rider_realism", "no_avatars")
     folder = os.path.join(out_dir, "rider_realism")
-    key, key_path, res_path = cache_key(riders, riders_root), os.path.join(folder, "key.json"), os.path.join(folder, "result.json")
+    key, key_path, res_path = cache_key(riders, riders_root, n_views), os.path.join(folder, "key.json"), os.path.join(folder, "result.json")
     if key_matches(key_path, key) and os.path.isfile(res_path):
         with open(res_path) as f:
             return json.load(f), True
     crops = os.path.join(folder, "crops")
     shutil.rmtree(crops, ignore_errors=True)
     os.makedirs(crops)
-    rows = render_crops(crops, riders, riders_root, log=log)
+    rows = render_crops(crops, riders, riders_root, n_views, log=log)
     r = subprocess.run([python, os.path.abspath(__file__), "--pose-worker", crops], capture_output=True, text=True)
     if r.returncode != 0 or not os.path.isfile(os.path.join(crops, "poses.json")):
         tail = (r.stderr or r.stdout).strip().splitlines()[-1:] or ["no output"]
         raise RuntimeError(f"BlazePose worker failed (exit {r.returncode}): {tail[0]}")
     with open(os.path.join(crops, "poses.json")) as f:
         pj = json.load(f)
-    result = {"mediapipe": pj["mediapipe"], "riders": len(riders), "views": len(VIEWS), **score(rows, pj["poses"])}
+    result = {"mediapipe": pj["mediapipe"], "riders": len(riders), "views": n_views, **score(rows, pj["poses"])}
     from cyclist_formats.atomic import write_json
     write_json(res_path, result)
     write_key(key_path, key)
     return result, False
 
 
-def run(results, out_dir, python=None, riders=None, riders_root=None):
+def run(results, out_dir, python=None, riders=None, riders_root=None, n_views=len(VIEWS)):
     from bench.provenance import not_measured, record
     py = blazepose_python(python)
     if not py or not os.path.isfile(py):
         not_measured(results, "rider_realism", "needs mediapipe==0.10.21 in its own venv: set BLAZEPOSE_PYTHON "
                                                "(bench/rider_realism.py's docstring)")
         return
-    res, reused = measure(out_dir, py, riders, riders_root)
+    res, reused = measure(out_dir, py, riders, riders_root, n_views)
     results["rider_realism"] = res
     record(results, "rider_realism", "reused" if reused else "fresh", blazepose=py,
            avatars=riders_root or "mesh avatars (no trained ones)")
@@ -238,6 +244,7 @@ def main(argv=None):
     ap.add_argument("--pose-python", help="the python of mediapipe's venv (default: $BLAZEPOSE_PYTHON)")
     ap.add_argument("--riders", help="comma list of rider ids (default: the anny roster)")
     ap.add_argument("--riders-root", help="trained avatars (ID/rider.ply, skinning.npz); default: mesh avatars")
+    ap.add_argument("--views", type=int, default=len(VIEWS), help=f"views per rider (default {len(VIEWS)}; more: views())")
     ap.add_argument("--pose-worker", help=argparse_hidden())
     a = ap.parse_args(argv)
     if a.pose_worker:
@@ -248,6 +255,8 @@ def main(argv=None):
     py = blazepose_python(a.pose_python)
     if not py or not os.path.isfile(py):
         ap.error("needs the python of a venv with mediapipe==0.10.21: --pose-python or BLAZEPOSE_PYTHON")
+    if not 1 <= a.views <= 360:
+        ap.error(f"--views must be 1..360, got {a.views}")
     if a.riders_root and not os.path.isdir(a.riders_root):
         ap.error(f"no folder {a.riders_root}")
     riders = [x.strip() for x in a.riders.split(",") if x.strip()] if a.riders else None
@@ -260,7 +269,7 @@ def main(argv=None):
         except UserError as e:
             ap.error(str(e))
     results = {}
-    run(results, a.out, py, riders, a.riders_root)
+    run(results, a.out, py, riders, a.riders_root, a.views)
     print(json.dumps(results, indent=1))
     return 0
 
