@@ -252,13 +252,11 @@ def dress(verts, faces, weights, joints, eye_y, eyes, colors, regions, look, reg
     skin = base["skin"]
     fwd = x > eyes[:, 0].mean() - 0.01
     for e in eyes:
-        d = np.linalg.norm(verts - e * [1, 1, 1], axis=1)
         white = head & fwd & (np.abs(y - e[1]) < 0.008) & (np.abs(z - e[2]) < 0.016)
         col[white] = [0.93, 0.92, 0.9]
         col[head & fwd & (np.abs(y - e[1]) < 0.008) & (np.abs(z - e[2]) < 0.007)] = [0.12, 0.08, 0.06]
         brow = head & fwd & (np.abs(y - (e[1] + 0.02)) < 0.005) & (np.abs(z - e[2]) < 0.022)
         col[brow] = _hex(look["hair_colour"]) * 0.8
-        del d
     nose_y = eyes[:, 1].mean() - 0.045
     lips = head & fwd & (np.abs(y - (nose_y - 0.025)) < 0.006) & (np.abs(z) < 0.022)
     col[lips] = skin * np.array([0.8, 0.5, 0.5])
@@ -304,7 +302,7 @@ def dress(verts, faces, weights, joints, eye_y, eyes, colors, regions, look, reg
         if look["hair"] == "long":  # a ponytail hanging down the back of the head
             top = np.array([x[hv].min() + 0.005, eye_y - 0.02, hc[2]])
             segs = []
-            for k, t in enumerate(np.linspace(0, 1, 6)):
+            for t in np.linspace(0, 1, 6):
                 segs.append(top + [-0.025 * np.sin(np.pi * t / 2), -0.17 * t, 0.0])  # hangs close to the neck
             v, f = [], []
             n_az = 10
