@@ -43,6 +43,8 @@ STAGES = {
     "lod": ("bench.lod", lambda m, r, out: m.run(r, out, chart_png=os.path.join(out, "lod_chart.png"))),
     "bike_relit": ("bench.relight", lambda m, r, out: m.run_bench(r, out)),
     "rider_relit": ("bench.rider_relit", lambda m, r, out: m.run(r, out)),
+    # BlazePose on the roster riders at 64/128/256 px (mediapipe in its own venv: BLAZEPOSE_PYTHON; issue 28)
+    "rider_realism": ("bench.rider_realism", lambda m, r, out: m.run(r, out)),
     "library": ("bench.library", lambda m, r, out: m.run(r, out)),  # library_build_s, dataset_ray_overhead
     # gaussian_vs_blender_equal_fidelity: the trained bike vs Cycles/Workbench, interleaved (issue 14)
     "blender_compare": ("bench.blender_compare", lambda m, r, out: m.run(r, out)),

@@ -48,7 +48,8 @@ def test_recolouring_changes_only_its_regions_gaussians(setup, region):
     inputs = assets.look_inputs("city_t", RIDER, frame)
     g = frame.gaussians
     out = appearance.apply_look(g, frame.ids, {region: np.array([0.1, 0.8, 0.3])}, np.ones(3), **inputs)
-    changed = (out.sh != g.sh).flatten(1).any(1)
+    # the unit gain's round trip through the DC offset may move a colour by one float32 ulp
+    changed = ((out.sh - g.sh).abs() > 1e-5).flatten(1).any(1)
     if region == "paint":
         want = inputs["paint"]
         assert bool(want.any()) and not bool((want & (frame.ids == RIDER_ID)).any())

@@ -24,9 +24,10 @@ import numpy as np
 import torch
 
 from cyclist_formats.instances import RIDER_ID
-from splatting.cyclist.look_defaults import RECOLOUR
+from splatting.cyclist.look_defaults import RECOLOUR, RECOLOUR_EXTRA
 from splatting.gaussians.sh import C0
 from splatting.rider.body import REGIONS
+from splatting.rider.looks import GREY_HAIR, HAIR_COLOURS, look_of
 
 PAINT_MIN_SAT = 0.2
 PAINT_HUE_DEG = 30.0
@@ -41,6 +42,18 @@ def _hex_rgb(h):
 def _lum(rgb):
     rgb = torch.as_tensor(rgb, dtype=torch.float32)
     return rgb @ torch.tensor([0.2126, 0.7152, 0.0722])
+
+
+def reference_colours(rider):
+    """{region: '#rrggbb'} the rider was painted with: the roster's colours, plus the hair and bag colours
+    of its look where it has hair or a bag (splatting/rider/looks.py)."""
+    out = dict(rider.spec.get("colors") or {})
+    if rider.regions is not None and rider.spec.get("body", "anny") == "anny":
+        look = look_of(rider.spec)
+        for region, key in (("hair", "hair_colour"), ("bag", "bag_colour")):
+            if bool((rider.regions == REGIONS.index(region)).any()):
+                out[region] = look[key]
+    return out
 
 
 def rider_regions(avatar_means, rider, chunk=2048):
@@ -121,12 +134,23 @@ def draw_look(a, seed, index, instance):
     b = rng.uniform(*a.brightness)
     wb = rng.uniform(-a.white_balance, a.white_balance, 3)
     gain = b * (1.0 + wb) / (1.0 + wb).mean()  # white balance tints, brightness sets the level
+    # hair (a natural colour, its value varied +-20 %) and bags: a Generator of their own (look_defaults)
+    rng2 = np.random.default_rng([int(seed), int(index), int(instance), TAG, 28])
+    palette = HAIR_COLOURS + GREY_HAIR
+    for region in RECOLOUR_EXTRA:
+        keep = rng2.uniform() < a["keep_share"]
+        if region == "hair":
+            c = _hex_rgb(palette[int(rng2.integers(len(palette)))]) * rng2.uniform(0.8, 1.2)
+        else:
+            c = np.array(colorsys.hsv_to_rgb(rng2.uniform(), rng2.uniform(*a["saturation"]), rng2.uniform(*a["value"])))
+        if region in a["regions"]:  # absent otherwise: a dataset's record of its looks stays as before
+            look[region] = None if keep else np.clip(c, 0, 1)
     return look, gain
 
 
 def apply_look(g, ids, look, gain, rider_reg=None, rider_colors=None, paint=None, paint_rgb=None):
     """Gaussians g of a posed instance (bike parts then rider, ids per Gaussian) in the look:
-    rider_reg (N_rider,) regions of its rider Gaussians, rider_colors {region: '#rrggbb'};
+    rider_reg (N_rider,) regions of its rider Gaussians, rider_colors {region: '#rrggbb'} (reference_colours);
     paint (N,) bool and paint_rgb (its reference colour) for the bike."""
 
     sh = g.sh * 1.0  # one copy, recoloured in place (regions do not overlap)
@@ -134,8 +158,9 @@ def apply_look(g, ids, look, gain, rider_reg=None, rider_colors=None, paint=None
         is_r = torch.as_tensor(ids).long() == RIDER_ID
         full_reg = torch.full((len(g),), -1, dtype=torch.int64)
         full_reg[is_r] = rider_reg
-        for region in ("top", "bottom", "shoes", "helmet"):
-            if look.get(region) is not None:
+        for region in ("top", "bottom", "shoes", "helmet", "hair", "bag"):
+            # a rider without the region's colour (no hair, no bag, an imported body) has nothing to turn
+            if look.get(region) is not None and region in rider_colors:
                 recolour(g.sh, full_reg == REGIONS.index(region), _hex_rgb(rider_colors[region]), look[region], sh)
     if paint is not None and look.get("paint") is not None:
         recolour(g.sh, paint, paint_rgb, look["paint"], sh)

@@ -6,3 +6,6 @@ DEFAULT_LEVELS = [{"below_px": 55, "keep": 0.7}, {"below_px": 45, "keep": 0.5}]
 DEFAULT_COMPENSATE = 1.0
 
 RECOLOUR = ("top", "bottom", "shoes", "helmet", "paint")  # regions appearance variety can recolour
+# the roster's looks added hair and bags (splatting/rider/looks.py): drawn from their own Generator, so the
+# draws above (and every dataset made before) stay as they were
+RECOLOUR_EXTRA = ("hair", "bag")

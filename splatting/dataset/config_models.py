@@ -23,7 +23,7 @@ from pydantic_core import PydanticCustomError
 from cyclist_formats import checks
 from cyclist_formats.typed_config import (AutoOr, Block, Bool, Field, Int, IntRange, Number, Range, Str, Vec3,
                                           defaults_of, field_error)
-from splatting.cyclist.look_defaults import DEFAULT_COMPENSATE, DEFAULT_LEVELS, RECOLOUR
+from splatting.cyclist.look_defaults import DEFAULT_COMPENSATE, DEFAULT_LEVELS, RECOLOUR, RECOLOUR_EXTRA
 from splatting.dataset.sequences.trajectory import MANOEUVRES
 
 # ------------------------------------------------------------------ camera
@@ -231,7 +231,8 @@ class Appearance(Block):
     regions (HSV: any hue, saturation and value in the ranges; each region kept as trained with
     keep_share) and a gain: brightness x white balance (+-white_balance per channel)."""
     enabled: Bool = False
-    regions: list[Literal[RECOLOUR]] = list(RECOLOUR)
+    # hair and bag (the roster's looks) are opt-in: the default keeps every earlier config.json as it was
+    regions: list[Literal[RECOLOUR + RECOLOUR_EXTRA]] = list(RECOLOUR)
     keep_share: Annotated[Number, Field(ge=0, le=1)] = 0.25
     saturation: Range(0, 1) = [0.15, 0.9]
     value: Range(0, 1) = [0.12, 0.95]

@@ -79,7 +79,7 @@ class Assets:
             if rider is not None:
                 body = self.bodies[rider]
                 out.update(rider_reg=appearance.rider_regions(self.avatars[rider].gaussians.means, body),
-                           rider_colors=body.spec["colors"])
+                           rider_colors=appearance.reference_colours(body))
             paint = (self.meta(bike).get("spec") or {}).get("frame_colour")
             if paint is not None:
                 m = appearance.paint_mask(frame.gaussians.sh, frame.ids, paint)

@@ -54,9 +54,10 @@ def _ring(v, joint, axis, half_width, radius, extra=None):
 
 def regressor(rider):
     """{COCO point: vertex index array} for a body.Rider (rest T-pose), by the module's rules."""
-    v = rider.vertices.double().numpy()
+    n = rider.body_vertex_count or len(rider.vertices)  # the body's own vertices, not a helmet's or hair's
+    v = rider.vertices[:n].double().numpy()
     J = rider.joints.double().numpy()
-    dom = rider.weights.argmax(1).numpy()
+    dom = rider.weights[:n].argmax(1).numpy()
     head = np.nonzero(dom == JOINT_INDEX["head"])[0]
     hv = v[head]
     mid = np.abs(hv[:, 2]) < 0.01

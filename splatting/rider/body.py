@@ -28,6 +28,7 @@ from cyclist_formats.atomic import atomic_path
 from cyclist_formats.errors import UserError
 from splatting import paths
 from splatting.rider.kinematics import JOINT_INDEX, JOINT_NAMES, forward_kinematics
+from splatting.rider.looks import dress, look_of
 
 CACHE_DIR = paths.DATA / "anny_cache"
 ROOT = paths.ROOT
@@ -84,6 +85,9 @@ class Rider:
     height_m: float
     spec: dict
     regions: torch.Tensor = None  # (V,) int64 clothing region per vertex (REGIONS), None if unknown
+    # vertices [0, body_vertex_count) are the body's own (keypoint regressors pick among them); the
+    # rest are accessories (helmet, hair, backpack: looks.py).  None: all are the body's.
+    body_vertex_count: int = None
 
 
 def _cache_dir():
@@ -172,7 +176,7 @@ def _hex_rgb(h):
 
 
 # clothing regions of a rider (index = the region id each vertex and avatar Gaussian carries)
-REGIONS = ("skin", "top", "bottom", "shoes", "helmet")
+REGIONS = ("skin", "top", "bottom", "shoes", "helmet", "hair", "bag")
 
 
 def region_ids(verts, weights, joints, eye_y):
@@ -202,7 +206,8 @@ def region_ids(verts, weights, joints, eye_y):
 
 def _region_colors(verts, weights, joints, eye_y, colors):
     """Per-vertex colours of the regions (region_ids) from the rider's '#rrggbb' colours."""
-    palette = np.stack([_hex_rgb(colors[r]) for r in REGIONS])
+    # region_ids paints no hair or bag (only looks.py adds those), so they may have no colour here
+    palette = np.stack([_hex_rgb(colors.get(r, colors["skin"])) for r in REGIONS])
     return palette[region_ids(verts, weights, joints, eye_y)]
 
 
@@ -224,13 +229,17 @@ def build_rider(spec):
     np.add.at(weights, (np.repeat(np.arange(len(verts)), bi.shape[1]), b2j[bi].ravel()), w.ravel())
     weights /= weights.sum(1, keepdims=True)
 
-    eye_y = heads[[idx["eye.L"], idx["eye.R"]], 1].mean()
-    colors = _region_colors(verts, weights, joints, eye_y, spec["colors"])
+    eyes = heads[[idx["eye.L"], idx["eye.R"]]]
+    eye_y = eyes[:, 1].mean()
+    height = float(verts[:, 1].max() - verts[:, 1].min())  # the body's, before any helmet or hair
+    n_body = len(verts)
+    verts, faces, weights, colors, regions, _ = dress(
+        verts, model.faces.long().numpy(), weights, joints, eye_y, eyes, spec["colors"],
+        region_ids(verts, weights, joints, eye_y), look_of(spec), REGIONS)
     f32 = lambda a: torch.from_numpy(np.ascontiguousarray(a)).float()
-    return Rider(id=spec["id"], vertices=f32(verts), faces=model.faces.long().clone(),
-                 joints=f32(joints), weights=f32(weights), colors=f32(colors),
-                 height_m=float(verts[:, 1].max() - verts[:, 1].min()), spec=dict(spec),
-                 regions=torch.from_numpy(region_ids(verts, weights, joints, eye_y)))
+    return Rider(id=spec["id"], vertices=f32(verts), faces=torch.from_numpy(np.ascontiguousarray(faces)).long(),
+                 joints=f32(joints), weights=f32(weights), colors=f32(colors), height_m=height, spec=dict(spec),
+                 regions=torch.from_numpy(np.ascontiguousarray(regions)), body_vertex_count=n_body)
 
 
 def pose_vertices(rider, local_rotmats, root_trans=None):

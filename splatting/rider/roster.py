@@ -9,6 +9,7 @@ from splatting import paths
 from splatting.rider.body import build_rider
 from splatting.rider import smpl_body
 from splatting.rider.imported import imported_entries, rider_from_spec
+from splatting.rider.looks import look_of, validate_look
 
 ROSTER_PATH = paths.BLEND_ASSETS / "riders.yaml"
 PHENOTYPE_KEYS = ("gender", "age", "muscle", "weight", "height", "proportions")
@@ -50,6 +51,10 @@ def load_roster(path=ROSTER_PATH):
                 raise UserError(f"{path}: rider {rid}: colors.{k} must be '#rrggbb'")
         if not isinstance(r.get("height_m"), (int, float)):
             raise UserError(f"{path}: rider {rid}: height_m must be a number")
+        if "look" in r:  # optional: fields that override the look drawn from the id (looks.py)
+            problem = validate_look(r["look"])
+            if problem:
+                raise UserError(f"{path}: rider {rid}: {problem}")
     return riders
 
 
@@ -81,9 +86,11 @@ def describe(r):
     if r.get("body") == "imported":
         h = f"{r['height_m']:.2f} m  " if isinstance(r.get("height_m"), (int, float)) else ""
         return f"{r['id']}  imported {h}from {r.get('source', r['rider_file'])} ({r.get('scheme', '?')} rig)"
+    lk = look_of(r)
+    helmet = f"helmet {r['colors']['helmet']}" if lk["helmet"] else "no helmet"
     return (f"{r['id']}  {r['sex']:<6} {r['age_years']:>2} y  {r['height_m']:.2f} m  "
-            f"{r['build']:<8} top {r['colors']['top']} bottom {r['colors']['bottom']} "
-            f"helmet {r['colors']['helmet']}")
+            f"{r['build']:<8} top {r['colors']['top']} ({lk['top_pattern']}) bottom {r['colors']['bottom']} "
+            f"({lk['legs']})  hair {lk['hair']}  {helmet}{'  backpack' if lk['bag'] == 'backpack' else ''}")
 
 
 @functools.lru_cache(maxsize=16)
