@@ -138,12 +138,12 @@ def draw_look(a, seed, index, instance):
     rng2 = np.random.default_rng([int(seed), int(index), int(instance), TAG, 28])
     palette = HAIR_COLOURS + GREY_HAIR
     for region in RECOLOUR_EXTRA:
-        keep = rng2.uniform() < a["keep_share"]
+        keep = rng2.uniform() < a.keep_share
         if region == "hair":
             c = _hex_rgb(palette[int(rng2.integers(len(palette)))]) * rng2.uniform(0.8, 1.2)
         else:
-            c = np.array(colorsys.hsv_to_rgb(rng2.uniform(), rng2.uniform(*a["saturation"]), rng2.uniform(*a["value"])))
-        if region in a["regions"]:  # absent otherwise: a dataset's record of its looks stays as before
+            c = np.array(colorsys.hsv_to_rgb(rng2.uniform(), rng2.uniform(*a.saturation), rng2.uniform(*a.value)))
+        if region in a.regions:  # absent otherwise: a dataset's record of its looks stays as before
             look[region] = None if keep else np.clip(c, 0, 1)
     return look, gain
 
