@@ -207,12 +207,14 @@ def test_dataset_looks_recolour_hair_and_bag_per_instance_without_changing_earli
     a = {"regions": ["top", "bottom", "shoes", "helmet", "paint", "hair", "bag"], "keep_share": 0.0,
          "saturation": [0.15, 0.9], "value": [0.12, 0.95], "brightness": [0.75, 1.25], "white_balance": 0.08}
     old = dict(a, regions=["top", "bottom", "shoes", "helmet", "paint"])
-    look, gain = appearance.draw_look({"appearance": a}, 3, 7, 0)
-    look0, gain0 = appearance.draw_look({"appearance": old}, 3, 7, 0)
+    from splatting.dataset.config_models import Appearance
+    a, old = Appearance(**a), Appearance(**old)
+    look, gain = appearance.draw_look(a, 3, 7, 0)
+    look0, gain0 = appearance.draw_look(old, 3, 7, 0)
     # the regions drawn before hair and bags existed get the same colours and gain
     assert all(np.array_equal(look[k], look0[k]) for k in ("top", "bottom", "shoes", "helmet", "paint"))
     assert np.array_equal(gain, gain0) and "hair" not in look0 and "bag" not in look0
-    hairs = [appearance.draw_look({"appearance": a}, 3, i, 0)[0]["hair"] for i in range(20)]
+    hairs = [appearance.draw_look(a, 3, i, 0)[0]["hair"] for i in range(20)]
     assert len({tuple(np.round(h, 4)) for h in hairs}) >= 5
     palette = np.stack([looks._hex(c) for c in looks.HAIR_COLOURS + looks.GREY_HAIR])
     for h in hairs:  # natural hair: a palette colour made 20 % darker or lighter at most
