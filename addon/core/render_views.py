@@ -1,11 +1,15 @@
-"""The render_views stage: a bike folder -> views/<part>/ for each part and the whole bike."""
+"""The render_views stage: a bike folder -> views/<part>/ for each part (and each sub-part the bike
+has: front_wheel, rear_wheel, pedal_left, pedal_right; docs/contract.md) and the whole bike."""
 import os
 from dataclasses import replace
 
 from . import render
 from .contract import UserError, bike_folder
 
-ALL_PARTS = ("frame", "steering", "crank", render.WHOLE)
+ALL_PARTS = bike_folder.PARTS + bike_folder.SUB_PARTS + (render.WHOLE,)
+# the keypoint a sub-part's views carry: its axle or its pedal centre (on the part it is cut from)
+SUB_PART_KEYPOINTS = {"front_wheel": ["front_axle"], "rear_wheel": ["rear_axle"],
+                      "pedal_left": ["pedal_left"], "pedal_right": ["pedal_right"]}
 # Training views get more samples than a one-off render (RenderSettings' 16): on the city bike's
 # frame (256², 800 iterations, scored against 1024-spp renders of the held-out cameras) 16 spp +
 # denoising gave 32.45 dB box PSNR, 128 spp + denoising 32.95 dB, 64 / 128 spp without denoising
@@ -78,7 +82,7 @@ def render_bike(bike_dir, parts="all", views=None, samples=None, denoise=None, s
         if part == render.WHOLE:
             objs, names = list(part_objs.values()), list(kp)
         else:
-            objs, names = [part_objs[part]], kp_parts.get(part, [])
+            objs, names = [part_objs[part]], kp_parts.get(part, SUB_PART_KEYPOINTS.get(part, []))
         part_kp = {k: kp[k] for k in names if k in kp}
         out = os.path.join(bike_dir, "views", part)
         results[part] = render.render_part(scene, objs, out, part_kp, views=view_list, settings=settings,
