@@ -102,14 +102,15 @@ class Cyclist:
                         saddle_fit=self.saddle_fit, saddle_shared=saddle_shared and self.saddle_fit,
                         pairs=self.pairs)
 
-    def pose(self, poses, saddle_shared=False, init_local_aa=None, fit=None, signals=None):
+    def pose(self, poses, saddle_shared=False, init_local_aa=None, fit=None, signals=None, wheel_deg=None):
         """poses (B, 8) or (8,) -> list of B CyclistFrame.  fit: a fit_rider() result for exactly
         these poses (a sequence fits all its frames at once, then poses them chunk by chunk).
         signals: None or per pose an arm signal (fit_rider); the released hand's pair is left out
-        of the frame's `ik` record, which then names the signal."""
+        of the frame's `ik` record, which then names the signal.  wheel_deg: per pose the wheel
+        sub-parts' rolling angle (BikeModel.pose_tensors; default theta_p x gear ratio)."""
         p = check_poses(poses)
         B = p.shape[0]
-        bt = self.bike.pose_tensors(p)
+        bt = self.bike.pose_tensors(p, wheel_deg=wheel_deg)
         names = bt["keypoint_names"]
         frames = []
         rider_out = slide = None

@@ -227,7 +227,9 @@ def draw_sequence(cfg, seq):
 def frame_draw(sd, f):
     """make_sample's draw dict for frame f of a drawn sequence."""
     inst = [{"kind": i["kind"], "bike": i["bike"], "rider": i["rider"], "pose": [float(x) for x in i["poses"][f]],
-             **({"signal": i["signal"][f]} if "signal" in i else {})} for i in sd["instances"]]
+             **({"signal": i["signal"][f]} if "signal" in i else {}),
+             **({"wheel_deg": float(i["traj"]["wheel_deg"][f])} if "wheel_deg" in i.get("traj", {}) else {})}
+            for i in sd["instances"]]
     return {"instances": inst, "dropped": sd["dropped"], "camera": dict(sd["camera"]), "background": dict(sd["background"])}
 
 
