@@ -13,7 +13,7 @@ import bpy
 import numpy as np
 
 from .. import armature as arm_mod
-from ..contract import instances
+from ..contract import bike_folder, instances
 from ..frames import to_blender
 from . import cockpit, drivetrain, extras, layout, tubes
 from .materials import make_materials
@@ -47,7 +47,7 @@ def part_builders(spec, sub_parts=False):
         for name, mb in main.items():
             out[name], tagged = mb.split_tags()
             subs.update(tagged)
-        return L, {**out, **{k: subs[k] for k in instances.SUB_PART_IDS if k in subs}}
+        return L, {**out, **{k: subs[k] for k in bike_folder.SUB_PARTS if k in subs}}
     if kind == "kick_scooter":
         return L, {"frame": extras.scooter_frame(spec, L), "steering": extras.scooter_steering(spec, L)}
     return L, {"frame": extras.motorcycle_frame(spec, L), "steering": extras.motorcycle_steering(spec, L)}
