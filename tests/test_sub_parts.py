@@ -264,3 +264,60 @@ def test_sequence_wheels_roll_without_slip(bikes):
         spin = math.atan2(R_rel[1, 0], R_rel[0, 0])
         want = -math.radians(tr["wheel_deg"][f])
         assert abs((spin - want + math.pi) % (2 * math.pi) - math.pi) < 1e-6
+
+
+# ---------------------------------------------------------------- sub-parts for curated bikes
+
+def test_add_sub_parts_finds_the_generators_pieces(bikes, tmp_path):
+    """add_sub_parts.py (what curate.py runs after saving) on the bike made without sub-parts cuts
+    exactly the pieces the generator tags: the same triangles per part as the bike made with
+    them; the rebuilt rig poses them as the model does; a second run is refused."""
+    import shutil
+
+    d = tmp_path / "bike"
+    shutil.copytree(bikes["plain"], d)
+    script = os.path.join(ROOT, "blender_scripts", "add_sub_parts.py")
+    r = subprocess.run([sys.executable, script, "--bike", str(d)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr[-2000:]
+    meta = json.loads((d / "meta.json").read_text())
+    want = json.loads((bikes["sub"] / "meta.json").read_text())
+    assert meta["sub_parts"] == list(bike_folder.SUB_PARTS)
+    assert meta["triangles"] == want["triangles"]
+    assert meta["gear_ratio"] == want["gear_ratio"]  # meta.json's own (a curated bike's default: 2.6)
+    rest, ids = _rest_vertices(d)
+    assert ids == {**instances.PART_IDS, **instances.SUB_PART_IDS}
+    model = _model_from_vertices(d, rest)
+    pose = [75, -20, 6, 210, 0, 0.3, 0, -0.4]
+    blender, rot, _ = _blender_posed_vertices(d, pose)
+    means = model.pose(torch.tensor(pose, dtype=torch.float64)).gaussians.means.numpy()
+    for name, (a, e) in zip(model.part_names, model.ranges):
+        assert np.abs(means[a:e] - blender[name]).max() <= 1e-3, name
+    assert np.allclose(rot["pedal_left"], rot["frame"], atol=1e-6)  # level: the frame's orientation
+    r = subprocess.run([sys.executable, script, "--bike", str(d)], capture_output=True, text=True)
+    assert r.returncode != 0 and "already has sub-parts" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    r = subprocess.run([sys.executable, script, "--bike", str(tmp_path / "nope")], capture_output=True, text=True)
+    assert r.returncode != 0 and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_sub_part_finder_matches_the_generator_on_every_style():
+    """curation.sub_parts on each style's unsplit part meshes labels exactly the faces the
+    generator tags (area agreement 1.0): wheels with cassettes, disc rotors, suspension forks;
+    platform and cage pedals."""
+    from addon.core.curation import sub_parts as sp
+
+    for s in specs.library_specs(8, 0, extras=False):
+        L, parts = build.part_builders(s)
+        kp = {k: np.array(v) for k, v in layout.keypoints(s, L).items()}
+        found = set()
+        for name, mb in parts.items():
+            V = mb.vertices
+            tris, tags = [], []
+            for f, t in zip(mb.faces, mb._tags):
+                for k in range(1, len(f) - 1):
+                    tris.append((f[0], f[k], f[k + 1]))
+                    tags.append(t)
+            T, tags = np.array(tris), np.array(tags, dtype=object)
+            for sub, sel in sp.sub_part_triangles(name, V, T, kp).items():
+                assert np.array_equal(sel, tags == sub), f"{s['bike_id']} {sub}"
+                found.add(sub)
+        assert found == set(bike_folder.SUB_PARTS), s["bike_id"]
