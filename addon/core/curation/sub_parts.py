@@ -6,7 +6,7 @@ Rigid pieces are whole connected components (vertices welded by position, mesh.w
 - a wheel piece lies inside the wheel's disc about its axle (radius: the axle height, the tyre
   touching the ground, + 4 mm; within 12 cm of the wheel plane) and either goes round the axle
   (a tyre, rim, hub, axle, rotor ring or cog: no gap wider than 40 degrees between the angles of
-  its vertices about the axle, a 10-sided axle rod has 36; centred on it within 1 cm)
+  its vertices about the axle, a 10-sided axle rod has 36; centred on it within R / 10)
   or is a thin rod from the hub to the rim (a spoke) or to a disc rotor (its spider arm; less
   than 10 cm from the axle);
 - a pedal piece lies within 8 cm of its pedal keypoint, around it (its centre within 5 cm across
@@ -47,7 +47,9 @@ def wheel_triangles(V, T, axle):
         if r[vi].max() > R + DISC_MARGIN_M or np.abs(d[vi, 2]).max() > HALF_WIDTH_M:
             continue
         a = np.sort(ang[vi][r[vi] > 0.002])
-        centred = np.hypot(*d[vi, :2].mean(0)) < 0.01  # a suspension fork's lower leg goes round it too
+        # centred (a real model's tyre sits 1-2 cm off the fitted axle); a suspension fork's
+        # lower leg, which also goes round the axle, is centred 10+ cm away along the fork
+        centred = np.hypot(*d[vi, :2].mean(0)) < 0.1 * R
         ring = centred and len(a) > 2 and np.diff(np.r_[a, a[0] + 360.0]).max() <= MAX_GAP_DEG
         # a spoke (hub to rim) or a disc rotor's spider arm (hub to rotor): a thin rod from the hub
         sd = np.sqrt(np.maximum(np.linalg.eigvalsh(np.cov(V[vi].T)), 0.0)) if len(vi) > 3 else np.zeros(3)
