@@ -66,3 +66,55 @@ def test_no_foot_down_is_the_ordinary_ik():
     with pytest.raises(ValueError):
         from splatting.rider.ik.foot_down import solve_with_feet
         solve_with_feet(rest, tg, ["both"], ik.DEFAULT_PAIRS, [0, 0.3, 0], [0.0])
+
+
+@pytest.fixture(scope="module")
+def bikes(tmp_path_factory):
+    from helpers import write_test_bike
+
+    root = tmp_path_factory.mktemp("feet")
+    write_test_bike(str(root))
+    return str(root)
+
+
+def test_a_stop_puts_a_foot_down_once_still_and_leans_onto_it(bikes):
+    """The `stop` manoeuvre: foot_down is "left" / "right" exactly from the first frame below
+    0.05 m/s, the bike leans onto that side (8 deg after the ramp), and a rendered frame's rider
+    stands with that ankle on the road while the other foot stays on its pedal."""
+    from helpers import street_config
+    from splatting.dataset.config import resolve_assets, validate
+    from splatting.dataset.generate import Assets
+    from splatting.dataset.sequences.draw import FOOT_LEAN_RAMP_S, STOPPED_MPS, draw_sequence, frame_draw
+    from splatting.rider.kinematics import JOINT_INDEX as J
+
+    only = {m: 0.0 for m in ("straight", "turn_left", "turn_right", "cross", "overtake", "start", "swerve")}
+    cfg = resolve_assets(validate(street_config(bikes, count=1, sequence={
+        "enabled": True, "length": 60, "fps": 10.0, "manoeuvres": dict(only, stop=1.0)},
+        street={"cyclists": [2, 2], "parked_bikes": [0, 0]})))
+    sides = set()
+    for seq in range(4):
+        for inst in draw_sequence(cfg, seq)["instances"]:
+            tr, feet = inst["traj"], np.array(inst["foot_down"])
+            still = tr["speed"] < STOPPED_MPS
+            assert still.any()
+            first = int(np.flatnonzero(still)[0])
+            assert (feet[:first] == "none").all() and (feet[first:] != "none").all() and len(set(feet[first:])) == 1
+            side = feet[-1]
+            sides.add(side)
+            full = tr["t"] >= tr["t"][first] + FOOT_LEAN_RAMP_S
+            want = -8.0 if side == "left" else 8.0
+            assert np.allclose(inst["poses"][full, 2], want) and np.allclose(tr["theta_x_deg"][full], want)
+            assert np.all(np.abs(inst["poses"][:first, 2]) < 1e-9)  # a straight ride upright before
+    assert sides == {"left", "right"}
+    # one stopped frame rendered through the street machinery's cyclist posing
+    sd = draw_sequence(cfg, 0)
+    inst = sd["instances"][0]
+    f = len(inst["poses"]) - 1
+    d = frame_draw(sd, f)["instances"][0]
+    assert d["foot_down"] == inst["foot_down"][f] != "none"
+    cyc = Assets(cfg).cyclist(d["bike"], d["rider"])
+    fr = cyc.pose(torch.tensor([d["pose"]], dtype=torch.float64), feet=[d["foot_down"]])[0]
+    side, other = d["foot_down"], "right" if d["foot_down"] == "left" else "left"
+    ankle = np.asarray(fr.rider_joints[J[f"{side}_ankle"]])
+    assert 0.02 < ankle[1] < 0.14, f"grounded ankle {ankle[1]:.3f} m above the road"
+    assert np.linalg.norm(np.asarray(fr.rider_joints[J[f"{other}_ankle"]]) - np.asarray(fr.bike_keypoints[f"pedal_{other}"])) < 0.03

@@ -53,7 +53,9 @@ def wheel_at(inst, t):
 def subframe_draw(sd, f, t):
     """make_sample's draw at time t (s) of a sequence drawn by draw_sequence, frame f's signals."""
     inst = [{"kind": i["kind"], "bike": i["bike"], "rider": i["rider"], "pose": pose_at(i, t),
-             **({"signal": i["signal"][f]} if "signal" in i else {}), **wheel_at(i, t)} for i in sd["instances"]]
+             **({"signal": i["signal"][f]} if "signal" in i else {}),
+             **({"foot_down": i["foot_down"][f]} if i.get("foot_down", ["none"] * (f + 1))[f] != "none" else {}),
+             **wheel_at(i, t)} for i in sd["instances"]]
     return {"instances": inst, "dropped": sd["dropped"], "camera": dict(sd["camera"]), "background": dict(sd["background"])}
 
 

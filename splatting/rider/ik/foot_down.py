@@ -109,3 +109,40 @@ def solve_with_feet(rest_joints, targets, feet, pairs, crank_axle, theta_x_deg, 
     out = _merge(parts, B, pairs)
     out.ground_gap_m = gap
     return out
+
+
+def combine(B, parts):
+    """IKResults of disjoint frame subsets [(frame indices, IKResult), ...] -> one IKResult over B
+    frames in order (a batch where some frames have a foot down and others an arm signal)."""
+    first = parts[0][1]
+
+    def empty(t):
+        return None if t is None else torch.zeros((B,) + tuple(t.shape[1:]), dtype=t.dtype)
+
+    out = {k: empty(getattr(first, k)) for k in ("local_aa", "root_trans", "joints", "loss", "seat_offset", "seat")}
+    names = list(first.residuals)
+    resid = {n: torch.zeros(B, dtype=torch.float32) for n in names}
+    flagged = {n: torch.zeros(B, dtype=torch.bool) for n in names}
+    free = {n: torch.zeros(B, dtype=torch.bool) for n in names}
+    gap = torch.zeros(B, dtype=torch.float32)
+    iters = max(r.history.shape[0] for _, r in parts)
+    history = torch.zeros(iters, B, dtype=first.history.dtype)
+    for idx, r in parts:
+        ix = torch.as_tensor(idx)
+        for k, v in out.items():
+            if v is not None:
+                v[ix] = getattr(r, k).to(v.dtype)
+        for n in names:
+            resid[n][ix] = r.residuals[n].to(torch.float32)
+            flagged[n][ix] = r.flagged[n]
+            if r.free is not None:
+                free[n][ix] = r.free[n]
+        if getattr(r, "ground_gap_m", None) is not None:
+            gap[ix] = r.ground_gap_m
+        h = r.history
+        history[:, ix] = torch.cat([h, h[-1:].expand(iters - h.shape[0], -1)]) if h.shape[0] < iters else h
+    res = type(first)(local_aa=out["local_aa"], root_trans=out["root_trans"], joints=out["joints"], loss=out["loss"],
+                      residuals=resid, flagged=flagged, seat_offset=out["seat_offset"], history=history,
+                      threshold_m=first.threshold_m, seat=out["seat"], free=free)
+    res.ground_gap_m = gap
+    return res
