@@ -118,3 +118,10 @@ def test_a_stop_puts_a_foot_down_once_still_and_leans_onto_it(bikes):
     ankle = np.asarray(fr.rider_joints[J[f"{side}_ankle"]])
     assert 0.02 < ankle[1] < 0.14, f"grounded ankle {ankle[1]:.3f} m above the road"
     assert np.linalg.norm(np.asarray(fr.rider_joints[J[f"{other}_ankle"]]) - np.asarray(fr.bike_keypoints[f"pedal_{other}"])) < 0.03
+    # a batch mixing an arm signal (frame 0) and a foot down (frame 1): each frame gets its own
+    up = list(d["pose"])
+    up[2] = 0.0
+    both = cyc.pose(torch.tensor([up, d["pose"]], dtype=torch.float64), signals=["left", "none"], feet=["none", side])
+    w = np.asarray(both[0].rider_joints[J["left_wrist"]])
+    assert np.linalg.norm(w - np.asarray(both[0].bike_keypoints["handle_left"])) > 0.2  # the signalling arm is out
+    assert np.allclose(np.asarray(both[1].rider_joints), np.asarray(fr.rider_joints), atol=1e-4)
