@@ -101,9 +101,8 @@ def sequence_row(cfg, exposure, subframes):
     return [still[0][y0:y1, x0:x1], blurred[0][y0:y1, x0:x1]], ann["signal"], ann["intention"]
 
 
-def compose(rows, pad=6):
+def compose(rows, pad=6, height=260):
     """Rows of tiles scaled to a common height, stacked; -> uint8 image."""
-    height = 260
     lines = []
     for tiles in rows:
         scaled = [np.asarray(Image.fromarray(t).resize((max(1, round(t.shape[1] * height / t.shape[0])), height),

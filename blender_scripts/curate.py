@@ -29,6 +29,8 @@ def parse(argv):
     p.add_argument("--wheel-diameter", default="auto",
                    help="tyre outer diameter in metres, or 'auto' (default: from the vehicle's class, the file's "
                         "units, its wheelbase, bar and seat heights; refused with the figures when they disagree)")
+    p.add_argument("--no-sub-parts", action="store_true",
+                   help="keep the wheels and pedals inside frame / steering / crank (no spinning wheels)")
     p.add_argument("--allow-problems", action="store_true", help="save even if keypoint validation fails")
     return p.parse_args(argv)
 
@@ -57,6 +59,7 @@ def main(argv):
     from addon.core.curation.saving import save, save_partial
     from addon.core.procedural.layout import KEYPOINT_NAMES
     from addon.core.scene import reset_scene
+    from addon.core.curation.sub_part_split import add_sub_parts
     import bpy
 
     reset_scene()
@@ -75,6 +78,8 @@ def main(argv):
                         + f"; partial curation saved to {partial}: open it in Blender, ArticCyclists panel "
                           f"> Resume partial curation")
     save(os.path.abspath(args.out).rstrip("/\\"), args.allow_problems)
+    if not args.no_sub_parts:  # wheels and pedal bodies as their own pieces (docs/contract.md "Sub-parts")
+        add_sub_parts(os.path.abspath(args.out))
     print(f"curate.py: wrote {args.out}", flush=True)
     return 0
 

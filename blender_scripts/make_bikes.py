@@ -5,7 +5,9 @@
 
 Bicycles cycle through the styles of blend_assets/bike_styles.yaml (road, mountain, city, bmx,
 kids, gravel, cruiser), plus one kick scooter and one motorcycle unless --no-extras.  The same
-seed gives the same bikes; a bike folder that is already complete is skipped.
+seed gives the same bikes; a bike folder that is already complete is skipped.  Bicycles get wheel
+and pedal sub-parts (docs/contract.md "Sub-parts": wheels that spin, pedals that stay level) unless
+--no-sub-parts.
 """
 import argparse
 import os
@@ -24,13 +26,15 @@ def parse(argv):
     p.add_argument("--count", type=int, default=23, help="number of bicycles (default 23)")
     p.add_argument("--seed", type=int, default=0, help="library seed (default 0)")
     p.add_argument("--no-extras", action="store_true", help="skip the kick scooter and the motorcycle")
+    p.add_argument("--no-sub-parts", action="store_true",
+                   help="keep the wheels and pedals inside frame / steering / crank (no spinning wheels)")
     p.add_argument("--styles", default=None, help="YAML of style ranges (default blend_assets/bike_styles.yaml)")
     return p.parse_args(argv)
 
 
 def main(argv):
     args = parse(argv)
-    from cyclist_formats import checks
+    from cyclist_formats import bike_folder, checks
     checks.output_dir("out", args.out)
     checks.integer("count", args.count, 0, 10_000)
     checks.integer("seed", args.seed, 0)
@@ -63,16 +67,19 @@ def main(argv):
         t0 = time.time()
         spec = specs.sample_spec(style, number, args.seed, styles)
         reset_scene()
-        res = build.build_bike(spec)
+        res = build.build_bike(spec, sub_parts=not args.no_sub_parts)
         meta = {
             "bike_id": bike_id, "generator": "procedural", "style": style, "seed": args.seed,
             "rideable": spec["rideable"], "has_crank": "crank" in res["parts"],
             "dimensions": build.dimensions(spec, res["layout"]),
             "blender_version": bpy.app.version_string,
             "triangles": res["triangles"],
+            "sub_parts": [p for p in bike_folder.SUB_PARTS if p in res["parts"]],
             "keypoint_notes": KEYPOINT_NOTES.get(spec["rideable"], ""),
             "spec": spec,
         }
+        if res["gear_ratio"] is not None:
+            meta["gear_ratio"] = res["gear_ratio"]  # wheel turns per crank turn (chainring / middle cog)
         bike_asset.save_bike(out_dir, spec, res["keypoints"], layout.part_keypoints(spec), meta)
         tri = sum(res["triangles"].values())
         print(f"{tag}: {tri} triangles, wheelbase {meta['dimensions']['wheelbase_m']:.3f} m, "

@@ -17,7 +17,7 @@ from addon.core.script import run_main  # noqa: E402
 def parse(argv):
     p = argparse.ArgumentParser(prog="render_views.py", description=__doc__.splitlines()[0])
     p.add_argument("--bike", required=True, help="bike folder (holds bike.blend, keypoints.json)")
-    p.add_argument("--parts", default="all", help="comma list of frame,steering,crank,whole or 'all'")
+    p.add_argument("--parts", default="all", help="comma list of frame,steering,crank,front_wheel,rear_wheel,pedal_left,pedal_right,whole or 'all'")
     p.add_argument("--views", default=None, help="comma list of ring view indices (default: all 36)")
     p.add_argument("--samples", type=int, default=None, help="Cycles samples (default 128: measured in docs/training.md)")
     p.add_argument("--denoise", choices=["NONE", "FAST", "BALANCED", "HIGH"], default=None)

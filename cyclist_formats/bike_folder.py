@@ -20,6 +20,11 @@ from .errors import UserError
 
 FILES = ("bike.blend", "keypoints.json", "meta.json")
 PARTS = ("frame", "steering", "crank")
+# optional sub-parts (docs/contract.md "Sub-parts"): cut out of the part named here, moving with it
+# plus their own motion (wheels spin about their axle, pedals stay level); meta.json "sub_parts"
+# lists the ones a bike has, "gear_ratio" couples the wheels to theta_p
+SUB_PARTS = ("front_wheel", "rear_wheel", "pedal_left", "pedal_right")
+SUB_PART_OF = {"front_wheel": "steering", "rear_wheel": "frame", "pedal_left": "crank", "pedal_right": "crank"}
 KEYPOINTS = ("seat", "steer_top", "steer_bottom", "handle_left", "handle_right", "crank_axle",
              "pedal_left", "pedal_right", "front_axle", "rear_axle", "ground")
 CRANK_KEYPOINTS = ("crank_axle", "pedal_left", "pedal_right")
@@ -70,6 +75,19 @@ def read_keypoints(bike_dir_or_file):
             raise UserError(f"{path}: keypoint '{k}' is not finite")
         out[k] = a
     return out
+
+
+def sub_parts(meta):
+    """The sub-parts a bike's meta.json lists (SUB_PARTS order); UserError for an unknown name
+    or wheels without a positive gear_ratio."""
+    names = meta.get("sub_parts", [])
+    if not isinstance(names, list) or any(n not in SUB_PARTS for n in names):
+        raise UserError(f"meta.json sub_parts must be a list of {', '.join(SUB_PARTS)}, got {names!r}")
+    if any(n.endswith("_wheel") for n in names) and meta.get("has_crank", True):
+        g = meta.get("gear_ratio")
+        if isinstance(g, bool) or not isinstance(g, (int, float)) or not np.isfinite(g) or g <= 0:
+            raise UserError(f"meta.json: wheel sub-parts need a positive gear_ratio, got {g!r}")
+    return [n for n in SUB_PARTS if n in names]
 
 
 def has_crank(bike_dir):

@@ -189,6 +189,10 @@ SCRIPT_CASES = [
     ["curate.py", "--input", "mesh.ply", "--out", "a_file.txt"],
     ["curate.py", "--input", "no_model.glb", "--out", "cur"],
     ["build_addon.py", "--out", "a_file.txt"],
+    ["add_sub_parts.py", "--bike", "a_file.txt"],
+    ["add_sub_parts.py", "--bike", "a_folder", "--gear-ratio", "nan"],
+    ["add_sub_parts.py", "--bike", "a_folder", "--gear-ratio", "0"],
+    ["add_sub_parts.py", "--bike", "a_folder"],  # not a bike folder: no bike.blend
     ["render_views.py"],
 ]
 

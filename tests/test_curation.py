@@ -212,5 +212,7 @@ def test_curated_bike_renders_and_keypoints_land_on_masks(messy, tmp_path):
                         capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert rv.returncode == 0, rv.stderr[-2000:]
     from blender_helpers import check_keypoints_on_masks
-    for part in ("frame", "steering", "crank", "whole"):
+    subs = json.loads((out / "meta.json").read_text())["sub_parts"]  # curate.py cuts out the wheels and pedals
+    assert {"front_wheel", "rear_wheel"} <= set(subs), subs
+    for part in ("frame", "steering", "crank", *subs, "whole"):
         check_keypoints_on_masks(out / "views" / part, [0, 9, 22])

@@ -107,7 +107,8 @@ def test_real_model_curates_without_help(rel, tmp_path, fresh_scene):
     assert rec["size"]["class"] == CLASS.get(rel, "bicycle"), rec["size"]
     assert max(rec["keypoint_distance_cm"].values()) < 3.0, rec["keypoint_distance_cm"]
     assert len(rec["keypoint_distance_cm"]) == 8
-    assert set(meta["triangles"]) == ({"frame", "steering", "crank"} if meta["has_crank"] else {"frame", "steering"})
+    main = {"frame", "steering", "crank"} if meta["has_crank"] else {"frame", "steering"}
+    assert set(meta["triangles"]) == main | set(meta.get("sub_parts", []))  # wheels / pedals found as pieces
     assert all(n > 0 for n in meta["triangles"].values())
 
 

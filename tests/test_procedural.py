@@ -229,7 +229,8 @@ def test_make_bikes_writes_resumable_folders(tmp_path):
         meta = json.loads((d / "meta.json").read_text())
         assert meta["bike_id"] == bid and meta["generator"] == "procedural" and meta["has_crank"] is True
         assert meta["rideable"] == "bicycle" and meta["seed"] == 0
-        assert set(meta["triangles"]) == {"frame", "steering", "crank"}
+        assert set(meta["triangles"]) == {"frame", "steering", "crank", *meta["sub_parts"]}
+        assert meta["sub_parts"] == ["front_wheel", "rear_wheel", "pedal_left", "pedal_right"]
         assert 0.85 <= meta["dimensions"]["wheelbase_m"] <= 1.25
     mtime = os.path.getmtime(out / "bikes" / "road_00" / "bike.blend")
     os.remove(out / "bikes" / "mountain_00" / "meta.json")   # an interrupted bike

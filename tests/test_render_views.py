@@ -50,12 +50,12 @@ def _rgba(views, i):
     return np.asarray(Image.open(views / "rgba" / f"camera{i:04d}" / "0000.png").convert("RGBA"))
 
 
-@pytest.mark.parametrize("part", ["frame", "steering", "crank", "whole"])
+@pytest.mark.parametrize("part", ["frame", "steering", "crank", "front_wheel", "rear_wheel", "pedal_left", "pedal_right", "whole"])
 def test_keypoints_project_onto_part_masks(rendered, part):
     check_keypoints_on_masks(rendered / "views" / part, [0, 9, 13, 22, 31])
 
 
-@pytest.mark.parametrize("part", ["frame", "steering", "crank", "whole"])
+@pytest.mark.parametrize("part", ["frame", "steering", "crank", "front_wheel", "rear_wheel", "pedal_left", "pedal_right", "whole"])
 def test_layout_and_mask_is_alpha(rendered, part):
     views = rendered / "views" / part
     cams = json.loads((views / "cameras.json").read_text())

@@ -84,7 +84,7 @@ def open_bike(bike_dir):
     kp_doc = _read_json(os.path.join(bike_dir, "keypoints.json"))
     meta = _read_json(os.path.join(bike_dir, "meta.json"))
     objs = bpy.data.objects
-    parts = {n: objs[n] for n in ("frame", "steering", "crank") if n in objs and objs[n].type == "MESH"}
+    parts = {n: objs[n] for n in bike_folder.PARTS + bike_folder.SUB_PARTS if n in objs and objs[n].type == "MESH"}
     arm = objs.get("armature")
     if "frame" not in parts or "steering" not in parts or arm is None or arm.type != "ARMATURE":
         raise UserError(f"{blend}: expected mesh objects 'frame', 'steering' and an 'armature'")

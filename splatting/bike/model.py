@@ -6,8 +6,11 @@ has_crank false, no crank.ply) accept theta_p and ignore it.
 
 Optional sub-parts, used only when the asset provides them (nothing is modelled that the asset
 lacks): gaussians/front_wheel.ply and rear_wheel.ply spin about their axles (parallel to Z) by
-theta_p * meta.json "gear_ratio" in the rolling direction (front wheel also steers);
+theta_p * meta.json "gear_ratio" in the rolling direction (front wheel also steers), or by an
+explicit rolling angle per pose (pose_tensors(wheel_deg=...): a coasting bike's wheels turn while
+its crank stands still; rolling without slip is wheel angle = distance / wheel radius);
 gaussians/pedal_left.ply and pedal_right.ply follow their crank keypoint but stay level.
+The 8-DoF pose itself is unchanged: the wheel angle is an extra input, never a ninth field.
 
 Speed: everything pose-independent is prepared at load time.  Gaussians are stored feature-major
 (means (3, N), quats (4, N), SH (K, N, 3)) because a small matrix times a wide matrix is several
@@ -127,28 +130,41 @@ class BikeModel:
 
     # ------------------------------------------------------------ transforms
 
-    def _part_rigids(self, p):
+    @property
+    def has_wheels(self):
+        return "front_wheel" in self.part_names or "rear_wheel" in self.part_names
+
+    def wheel_angles(self, poses, wheel_deg=None):
+        """The wheels' rolling angle (degrees, + = forward) per pose: wheel_deg (B,) when given,
+        else theta_p x gear_ratio (0 without a gear ratio: crankless rideables)."""
+        p = check_poses(poses)
+        if wheel_deg is None:
+            return p[:, 0] * (self.gear_ratio or 0.0)
+        w = torch.as_tensor(wheel_deg, dtype=torch.float64).reshape(-1)
+        if w.shape[0] != p.shape[0] or not torch.isfinite(w).all():
+            raise UserError(f"wheel_deg needs one finite angle per pose ({p.shape[0]}), got {tuple(w.shape)}")
+        return w
+
+    def _part_rigids(self, p, wheel_deg=None):
         """(B, 8) checked poses -> {part: (R (B,3,3), t (B,3), L (B,4,4))} float64.  'crank' is
-        H_g H_p, or just H_g for crankless rideables (theta_p ignored)."""
+        H_g H_p, or just H_g for crankless rideables (theta_p ignored).  wheel_deg: see
+        wheel_angles."""
         kp = self.keypoints
         extra = []
-        if self.gear_ratio is not None:  # wheel spin: forward pedalling rolls the wheels forward
-            extra = [(Z, -p[:, 0] * (math.pi / 180.0) * self.gear_ratio)]
+        if self.has_wheels:  # wheel spin: forward rolling is a negative rotation about +Z
+            extra = [(Z, -self.wheel_angles(p, wheel_deg) * (math.pi / 180.0))]
         R, L = pose_rotations(p, self.steer_axis, extra)
         g = global_rigid(R, L, p)
         out = {"frame": g, "steering": compose(g, about_point(R[:, 3], L[:, 3], kp["steer_bottom"]))}
-        if not self.has_crank:
-            out["crank"] = g
-            for sub in ("front_wheel", "rear_wheel"):
-                if sub in self.part_names:
-                    out[sub] = out["steering" if sub == "front_wheel" else "frame"]
-            return out
-        pedal = about_point(R[:, 4], L[:, 4], kp["crank_axle"])
-        out["crank"] = compose(g, pedal)
         if "front_wheel" in self.part_names:
             out["front_wheel"] = compose(out["steering"], about_point(R[:, 5], L[:, 5], kp["front_axle"]))
         if "rear_wheel" in self.part_names:
             out["rear_wheel"] = compose(g, about_point(R[:, 5], L[:, 5], kp["rear_axle"]))
+        if not self.has_crank:
+            out["crank"] = g
+            return out
+        pedal = about_point(R[:, 4], L[:, 4], kp["crank_axle"])
+        out["crank"] = compose(g, pedal)
         eye3, eye4 = torch.eye(3, dtype=torch.float64), torch.eye(4, dtype=torch.float64)
         for side in ("pedal_left", "pedal_right"):
             if side in self.part_names:  # translate with the crank, never rotate: pedals stay level
@@ -156,13 +172,13 @@ class BikeModel:
                 out[side] = compose(g, (eye3.expand(len(p), 3, 3), shift, eye4.expand(len(p), 4, 4)))
         return out
 
-    def part_transforms(self, poses):
+    def part_transforms(self, poses, wheel_deg=None):
         """(B, 8) or (8,) degrees/metres -> {part: (B, 4, 4) float64 homogeneous world-from-canonical}."""
-        return {k: rigid(R, t) for k, (R, t, _) in self._part_rigids(check_poses(poses)).items()}
+        return {k: rigid(R, t) for k, (R, t, _) in self._part_rigids(check_poses(poses), wheel_deg).items()}
 
     # ------------------------------------------------------------ posing
 
-    def pose_tensors(self, poses, reuse=None):
+    def pose_tensors(self, poses, reuse=None, wheel_deg=None):
         """Batched re-pose + compose.  poses (B, 8) or (8,) degrees/metres ->
         dict means (B, N, 3), quats (B, N, 4), sh (B, N, K, 3) [strided views],
         log_scales (N, 3), opacity_logits (N,) [shared, pose-independent],
@@ -171,10 +187,11 @@ class BikeModel:
         reuse: a dict this method returned before for the same batch size; its tensors are
         overwritten instead of allocating new ones (fresh multi-MB allocations cost page faults
         that can exceed the arithmetic; a render loop that consumes each batch before posing
-        the next one should pass its previous result)."""
+        the next one should pass its previous result).
+        wheel_deg: (B,) rolling angles of the wheel sub-parts (default theta_p x gear_ratio)."""
         p = check_poses(poses)
         B, N = p.shape[0], len(self)
-        rig = self._part_rigids(p)
+        rig = self._part_rigids(p, wheel_deg)
         dt = self._means.dtype
         R64 = torch.stack([rig[name][0] for name in self.part_names])  # (P, B, 3, 3)
         R = R64.to(dt)
@@ -217,7 +234,7 @@ class BikeModel:
             "_buffers": (means, quats, sh),
         }
 
-    def pose(self, poses):
+    def pose(self, poses, wheel_deg=None):
         """One pose (8,) -> PosedBike; a batch (B, 8) -> list of B PosedBike (views into one
         fresh batched allocation).  For long pose sequences, pose_tensors(chunk, reuse=previous)
         + posed_from_tensors avoids re-allocating (and page-faulting) tens of MB per pose."""
@@ -225,7 +242,9 @@ class BikeModel:
             single = torch.as_tensor(poses, dtype=torch.float64).dim() == 1
         except (TypeError, ValueError, RuntimeError):
             single = False  # pose_tensors raises the UserError
-        out = self.pose_tensors(poses)
+        if single and wheel_deg is not None:
+            wheel_deg = torch.as_tensor(wheel_deg, dtype=torch.float64).reshape(1)
+        out = self.pose_tensors(poses, wheel_deg=wheel_deg)
         res = [posed_from_tensors(out, b) for b in range(out["poses"].shape[0])]
         return res[0] if single else res
 

@@ -61,6 +61,7 @@ class Stage:
 STAGES = {s.name: s for s in (
     Stage("make_bikes.py", "the procedural bike library: OUT/bikes/<bike_id>/ (bike.blend, keypoints.json, meta.json)"),
     Stage("curate.py", "an imported bicycle model (.glb .obj .fbx ...) curated into a bike folder"),
+    Stage("add_sub_parts.py", "a bike folder's wheels and pedals cut out as sub-parts that spin and stay level"),
     Stage("render_views.py", "a bike's parts (and the whole bike) rendered from the 36-view ring"),
     Stage("render_pose.py", "the ground-truth oracle: a bike's mesh posed with the 8-DoF pose and rendered"),
     Stage("export_bike.py", "a bike folder as an articulated URDF or glTF 2.0 model"),

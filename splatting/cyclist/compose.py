@@ -15,6 +15,7 @@ from splatting.bike.pose import check_poses, posed_bike_keypoints
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians
 from splatting.rider import ik
+from splatting.rider.ik.foot_down import FEET, combine, solve_with_feet
 from splatting.rider.ik.signals import solve_with_signals
 from splatting.rider.kinematics import JOINT_NAMES
 from cyclist_formats.instances import IDS
@@ -88,10 +89,14 @@ class Cyclist:
             self.saddle_mask, self.saddle_axis = saddle_slide(bike) if self.saddle_fit else (None, None)
         self.ids = ids
 
-    def fit_rider(self, poses, saddle_shared=False, init_local_aa=None, signals=None):
+    def fit_rider(self, poses, saddle_shared=False, init_local_aa=None, signals=None, feet=None):
         """IK of the rider onto the bike at poses (B, 8) (bike frame; H_g is applied later).
-        signals: None or per pose one of ik.signals.SIGNALS (an arm signal: that hand off the bar)."""
+        signals: None or per pose one of ik.signals.SIGNALS (an arm signal: that hand off the bar).
+        feet: None or per pose one of ik.foot_down.FEET (a foot on the road at a stop, beside the
+        bike leaning by the pose's theta_X; that frame's arm signal, if any, is not shown)."""
         p = check_poses(poses).clone()
+        if feet is not None and any(f != "none" for f in feet):
+            return self._fit_with_feet(p, saddle_shared, init_local_aa, signals, list(feet))
         p[:, 2:] = 0.0
         targets = posed_bike_keypoints(self.bike.keypoints, p)
         if signals is not None and any(s != "none" for s in signals):
@@ -102,19 +107,44 @@ class Cyclist:
                         saddle_fit=self.saddle_fit, saddle_shared=saddle_shared and self.saddle_fit,
                         pairs=self.pairs)
 
-    def pose(self, poses, saddle_shared=False, init_local_aa=None, fit=None, signals=None):
+    def _fit_with_feet(self, p, saddle_shared, init_local_aa, signals, feet):
+        bad = [f for f in feet if f not in FEET]
+        if bad or len(feet) != len(p):
+            raise UserError(f"feet: one of {', '.join(FEET)} per pose, got {feet!r}")
+        if "crank_axle" not in self.bike.keypoints or not self.bike.has_crank:
+            raise UserError(f"{self.bike.source}: a foot down needs a bike with a crank")
+        down = [b for b, f in enumerate(feet) if f != "none"]
+        rest_idx = [b for b, f in enumerate(feet) if f == "none"]
+        lean = [float(x) for x in p[:, 2]]
+        q = p.clone()
+        q[:, 2:] = 0.0
+        sub = lambda t, idx: t if t is None or t.shape[0] != len(p) else t[idx]  # noqa: E731
+        targets = posed_bike_keypoints(self.bike.keypoints, q[down])
+        parts = [(down, solve_with_feet(self.avatar.rest_joints, targets, [feet[b] for b in down], self.pairs,
+                                        self.bike.keypoints["crank_axle"].numpy(), [lean[b] for b in down],
+                                        init_local_aa=sub(init_local_aa, down), iterations=self.ik_iterations,
+                                        saddle_fit=self.saddle_fit, saddle_shared=saddle_shared and self.saddle_fit))]
+        if rest_idx:
+            parts.append((rest_idx, self.fit_rider(q[rest_idx], saddle_shared, sub(init_local_aa, rest_idx),
+                                                   None if signals is None else [signals[b] for b in rest_idx])))
+        return combine(len(p), parts)
+
+    def pose(self, poses, saddle_shared=False, init_local_aa=None, fit=None, signals=None, wheel_deg=None, feet=None):
         """poses (B, 8) or (8,) -> list of B CyclistFrame.  fit: a fit_rider() result for exactly
         these poses (a sequence fits all its frames at once, then poses them chunk by chunk).
         signals: None or per pose an arm signal (fit_rider); the released hand's pair is left out
-        of the frame's `ik` record, which then names the signal."""
+        of the frame's `ik` record, which then names the signal.  wheel_deg: per pose the wheel
+        sub-parts' rolling angle (BikeModel.pose_tensors; default theta_p x gear ratio).  feet: per
+        pose a foot on the road or "none" (fit_rider); the grounded foot's pedal pair is left out of
+        the `ik` record as a released hand's is."""
         p = check_poses(poses)
         B = p.shape[0]
-        bt = self.bike.pose_tensors(p)
+        bt = self.bike.pose_tensors(p, wheel_deg=wheel_deg)
         names = bt["keypoint_names"]
         frames = []
         rider_out = slide = None
         if self.avatar is not None:
-            res = fit if fit is not None else self.fit_rider(p, saddle_shared, init_local_aa, signals)
+            res = fit if fit is not None else self.fit_rider(p, saddle_shared, init_local_aa, signals, feet)
             Hg = self.bike.part_transforms(p)["frame"].float()  # H_g: the frame part is H_g alone
             Rg, tg = Hg[:, :3, :3], Hg[:, :3, 3]
             rot = roma.rotvec_to_rotmat(res.local_aa.float())

@@ -268,8 +268,12 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
             for j in js:
                 d["instances"][j]["pose"] = contact.seat(cyc.bike.keypoints, d["instances"][j]["pose"])
         sig = [d["instances"][j].get("signal", "none") for j in js]  # arm signals (sequences; stills optional)
+        wheel = [d["instances"][j].get("wheel_deg") for j in js]  # sequences: the wheels' rolling angle
+        feet = [d["instances"][j].get("foot_down", "none") for j in js]  # sequences: a foot on the road at a stop
         posed = cyc.pose(torch.tensor([d["instances"][j]["pose"] for j in js], dtype=torch.float64),
-                         signals=sig if rider is not None and any(x != "none" for x in sig) else None)
+                         signals=sig if rider is not None and any(x != "none" for x in sig) else None,
+                         wheel_deg=wheel if all(w is not None for w in wheel) else None,
+                         feet=feet if rider is not None and any(x != "none" for x in feet) else None)
         people = [None] * len(js)
         if rider is not None:
             if kp_cfg.person == "coco17":

@@ -1,6 +1,7 @@
 """The library's task kinds and the graph over them.
 
-    views:<bike>          blender_scripts/render_views.py (subprocess): views/{frame,steering,crank,whole}
+    views:<bike>          blender_scripts/render_views.py (subprocess): views/{frame,steering,crank,whole} and
+                          the sub-parts' views/{front_wheel,rear_wheel,pedal_left,pedal_right} (meta.json sub_parts)
     train:<bike>:<part>   python -m splatting train (subprocess): gaussians/<part>_rest.{ply,json} (the
                           rest-trained part; gaussians/<part>.{ply,json} with the posed stage off); after views
     posed:<bike>          python -m splatting bike-posed-train --from-rest (subprocess): gaussians/<part>.ply,
@@ -46,12 +47,18 @@ class Task:
 
 
 def bike_parts(bike_dir):
-    """The trainable parts of a bike (crankless rideables have no crank)."""
+    """The trainable parts of a bike (crankless rideables have no crank), then the sub-parts its
+    meta.json lists (wheels, pedals: each rendered and trained as its own Gaussians)."""
     try:
-        has_crank = bool(bike_folder.read_meta(bike_dir).get("has_crank", True))
+        meta = bike_folder.read_meta(bike_dir)
     except UserError:
         raise UserError(f"{bike_dir}: no readable meta.json (not a generated bike folder)") from None
-    return [p for p in PARTS if p != "crank" or has_crank]
+    has_crank = bool(meta.get("has_crank", True))
+    try:
+        subs = bike_folder.sub_parts(meta)
+    except UserError as e:
+        raise UserError(f"{bike_dir}/{e}") from None
+    return [p for p in PARTS if p != "crank" or has_crank] + subs
 
 
 def make_graph(root, bikes, riders, posed=True):

@@ -3,26 +3,51 @@
 Meshes are built in the canonical frame by the numpy builders and converted once here with
 frames.to_blender; each part is ONE mesh object (frame / steering / crank) with pass_index
 1 / 2 / 3, rigidly parented to its bone of the object named `armature`.
+
+With sub-parts (bicycles; docs/contract.md "Sub-parts") the wheels and the pedal bodies are
+their own mesh objects (front_wheel, rear_wheel, pedal_left, pedal_right) cut from the same
+geometry (the builders tag those faces), with their main part's pass_index; the armature then
+spins the wheels about their axles and keeps the pedals level (armature.py, articulation.py).
 """
 import bpy
 import numpy as np
 
 from ..rig import armature as arm_mod
-from ..contract import instances
+from ..contract import bike_folder, instances
 from ..frames import to_blender
 from . import cockpit, drivetrain, extras, layout, tubes
 from .materials import make_materials
 
-PASS_INDEX = instances.PART_IDS  # docs/contract.md instance ids
+PASS_INDEX = {**instances.PART_IDS, **instances.SUB_PART_IDS}  # docs/contract.md instance ids
+CHAIN_PITCH_M = 0.0127  # 1/2-inch chain (wheels.chainring's tooth spacing)
 
 
-def part_builders(spec):
-    """{part: MeshBuilder} in the canonical frame (pure numpy; usable without Blender)."""
+def gear_ratio(spec):
+    """Wheel turns per crank turn: chainring teeth / the middle rear cog's teeth (a cog of radius
+    r has 2 pi r / pitch teeth); None for rideables without pedals."""
+    if spec["rideable"] != "bicycle":
+        return None
+    cogs = tubes.cog_radii(spec)
+    teeth = max(9, round(2 * np.pi * cogs[len(cogs) // 2] / CHAIN_PITCH_M))
+    return round(float(spec["chainring_teeth"]) / teeth, 5)
+
+
+def part_builders(spec, sub_parts=False):
+    """{part: MeshBuilder} in the canonical frame (pure numpy; usable without Blender).
+    sub_parts: bicycles' wheels and pedal bodies as their own builders (front_wheel, rear_wheel,
+    pedal_left, pedal_right), cut out of frame / steering / crank; otherwise inside them."""
     L = layout.layout_for(spec)
     kind = spec["rideable"]
     if kind == "bicycle":
-        return L, {"frame": tubes.build_frame(spec, L), "steering": cockpit.build_steering(spec, L),
-                   "crank": drivetrain.build_crank(spec, L)}
+        main = {"frame": tubes.build_frame(spec, L), "steering": cockpit.build_steering(spec, L),
+                "crank": drivetrain.build_crank(spec, L)}
+        if not sub_parts:
+            return L, main
+        out, subs = {}, {}
+        for name, mb in main.items():
+            out[name], tagged = mb.split_tags()
+            subs.update(tagged)
+        return L, {**out, **{k: subs[k] for k in bike_folder.SUB_PARTS if k in subs}}
     if kind == "kick_scooter":
         return L, {"frame": extras.scooter_frame(spec, L), "steering": extras.scooter_steering(spec, L)}
     return L, {"frame": extras.motorcycle_frame(spec, L), "steering": extras.motorcycle_steering(spec, L)}
@@ -49,18 +74,20 @@ def mesh_object(name, mb, materials, collection=None):
     return obj
 
 
-def build_bike(spec):
+def build_bike(spec, sub_parts=False):
     """Build the bike in the current scene. Returns dict(parts={name: obj}, armature=obj,
-    keypoints={name: [x, y, z] canonical}, layout=..., triangles={part: n})."""
-    L, builders = part_builders(spec)
+    keypoints={name: [x, y, z] canonical}, layout=..., triangles={part: n}, gear_ratio=float or
+    None).  sub_parts: see part_builders (only bicycles have them)."""
+    L, builders = part_builders(spec, sub_parts)
     kp = layout.keypoints(spec, L)
     mats = make_materials(spec)
     parts = {name: mesh_object(name, mb, mats) for name, mb in builders.items()}
-    arm = arm_mod.build_armature(kp, spec, list(parts))
+    g = gear_ratio(spec)
+    arm = arm_mod.build_armature(kp, spec, list(parts), gear_ratio=g)
     for name, obj in parts.items():
         arm_mod.attach(obj, arm, name)
     bpy.context.view_layer.update()
-    return {"parts": parts, "armature": arm, "keypoints": kp, "layout": L,
+    return {"parts": parts, "armature": arm, "keypoints": kp, "layout": L, "gear_ratio": g,
             "triangles": {n: int(mb.triangle_count()) for n, mb in builders.items()}}
 
 

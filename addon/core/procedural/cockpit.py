@@ -91,7 +91,8 @@ def build_steering(s, L):
             blade = bezier(start, ctrl, end, n=12)
             mb.add(*tube(blade, np.linspace(0.0135, 0.0075, 12), sides=12), paint)
             mb.add(*box(fa + sg * (fhs - 0.002) * Z + 0.006 * u, (0.03, 0.03, 0.006)), paint, smooth=False)
-    wheel(mb, fa, R, tw, s["rim_depth_m"], fhs, spokes=s["spokes"], disc_side=-1 if s["disc_brakes"] else 0)
+    with mb.tagged("front_wheel"):  # its own mesh when the bike has wheel sub-parts (build.py)
+        wheel(mb, fa, R, tw, s["rim_depth_m"], fhs, spokes=s["spokes"], disc_side=-1 if s["disc_brakes"] else 0)
     if s["fenders"]:
         fender(mb, fa, R, tw + 0.02, 20, 190)
     return mb

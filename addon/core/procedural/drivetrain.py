@@ -26,12 +26,13 @@ def build_crank(s, L):
         # pedal spindle and platform body (the pedal keypoint is the body's centre)
         pc = L["pedal_right"] if sg > 0 else L["pedal_left"]
         mb.add(*cylinder(tip, pc + sg * 0.045 * Z, 0.0065, sides=8), "metal")
-        if s["style"] in ("road", "gravel"):
-            mb.add(*box(pc, (0.085, 0.02, 0.07)), "dark", smooth=False)
-        else:
-            mb.add(*box(pc, (0.10, 0.022, 0.095)), "dark" if s["style"] != "city" else "metal", smooth=False)
-            for dx in (-0.045, 0.045):  # platform cage rails
-                mb.add(*box(pc + np.array([dx, 0, 0]), (0.008, 0.03, 0.095)), "metal", smooth=False)
+        with mb.tagged("pedal_right" if sg > 0 else "pedal_left"):  # the level pedal sub-part (build.py)
+            if s["style"] in ("road", "gravel"):
+                mb.add(*box(pc, (0.085, 0.02, 0.07)), "dark", smooth=False)
+            else:
+                mb.add(*box(pc, (0.10, 0.022, 0.095)), "dark" if s["style"] != "city" else "metal", smooth=False)
+                for dx in (-0.045, 0.045):  # platform cage rails
+                    mb.add(*box(pc + np.array([dx, 0, 0]), (0.008, 0.03, 0.095)), "metal", smooth=False)
     z = L["chainline"]
     r = chainring(mb, bb, int(s["chainring_teeth"]), z)
     if s["style"] == "road":  # double: a 34-39T inner ring

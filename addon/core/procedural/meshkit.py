@@ -14,7 +14,25 @@ class MeshBuilder:
         self._faces = []  # lists of index tuples (tris, quads, n-gons)
         self._mats = []
         self._smooth = []
+        self._tags = []  # per face: the sub-part it belongs to (None: the part itself)
+        self._tag = None
         self._n = 0
+
+    class _Tagged:
+        def __init__(self, mb, tag):
+            self.mb, self.tag = mb, tag
+
+        def __enter__(self):
+            self.prev, self.mb._tag = self.mb._tag, self.tag
+            return self.mb
+
+        def __exit__(self, *exc):
+            self.mb._tag = self.prev
+
+    def tagged(self, tag):
+        """`with mb.tagged("rear_wheel"): ...`: the faces added inside belong to that sub-part
+        (split off by split_tags), so a wheel can be its own mesh without changing its geometry."""
+        return MeshBuilder._Tagged(self, tag)
 
     def add(self, verts, faces, material, smooth=True):
         verts = np.asarray(verts, dtype=float).reshape(-1, 3)
@@ -23,8 +41,29 @@ class MeshBuilder:
         self._faces.extend(tuple(int(i) + off for i in f) for f in faces)
         self._mats.extend([material] * len(faces))
         self._smooth.extend([bool(smooth)] * len(faces))
+        self._tags.extend([self._tag] * len(faces))
         self._n += len(verts)
         return self
+
+    def split_tags(self):
+        """-> (the untagged faces as a MeshBuilder, {tag: MeshBuilder}); vertices are kept only
+        where a face of that builder uses them."""
+        V = self.vertices
+        groups = {}
+        for f, m, sm, t in zip(self._faces, self._mats, self._smooth, self._tags):
+            groups.setdefault(t, []).append((f, m, sm))
+        out = {}
+        for t, faces in groups.items():
+            used = sorted({i for f, _, _ in faces for i in f})
+            remap = {v: k for k, v in enumerate(used)}
+            mb = MeshBuilder()
+            mb._verts, mb._n = [V[used]], len(used)
+            mb._faces = [tuple(remap[i] for i in f) for f, _, _ in faces]
+            mb._mats = [m for _, m, _ in faces]
+            mb._smooth = [sm for _, _, sm in faces]
+            mb._tags = [None] * len(faces)
+            out[t] = mb
+        return out.pop(None, MeshBuilder()), out
 
     @property
     def vertices(self):

@@ -30,6 +30,14 @@ def saddle(mb, top_centre, length, width, nose_width=0.035, thick=0.05, material
     mb.add(*loft(rings), material)
 
 
+def cog_radii(s):
+    """Radii (m) of the rear cogs, smallest outboard: a cassette or one single-speed cog."""
+    if s["derailleur"]:
+        n = int(s["cogs"])
+        return list(np.linspace(0.025 + 0.012 * (n >= 12), 0.05 if s["style"] != "mountain" else 0.085, n))
+    return [0.036]
+
+
 def build_frame(s, L):
     """MeshBuilder of the frame part (canonical)."""
     mb = MeshBuilder()
@@ -93,14 +101,10 @@ def build_frame(s, L):
             mb.add(*cylinder(base, base + np.array([0, 0.06, 0]), 0.012, sides=10), "metal")
     saddle(mb, L["saddle_top"], sl, sw, thick=0.05 if s["style"] != "cruiser" else 0.07)
     # rear wheel with cassette or single cog
-    if s["derailleur"]:
-        n = int(s["cogs"])
-        cogs = list(np.linspace(0.025 + 0.012 * (n >= 12), 0.05 if s["style"] != "mountain" else 0.085, n))[::-1]
-        cogs = cogs[::-1]  # smallest outboard
-    else:
-        cogs = [0.036]
-    wheel(mb, rear, R, tw, s["rim_depth_m"], hs, spokes=s["spokes"], disc_side=-1 if s["disc_brakes"] else 0,
-          cassette=cogs)
+    cogs = cog_radii(s)
+    with mb.tagged("rear_wheel"):  # its own mesh when the bike has wheel sub-parts (build.py)
+        wheel(mb, rear, R, tw, s["rim_depth_m"], hs, spokes=s["spokes"], disc_side=-1 if s["disc_brakes"] else 0,
+              cassette=cogs)
     if s["fenders"]:
         fender(mb, rear, R, tw + 0.02, 60, 215)
     _chain(mb, s, L, cogs)

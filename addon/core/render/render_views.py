@@ -1,11 +1,19 @@
-"""The render_views stage: a bike folder -> views/<part>/ for each part and the whole bike."""
+"""The render_views stage: a bike folder -> views/<part>/ for each part (and each sub-part the bike
+has: front_wheel, rear_wheel, pedal_left, pedal_right; docs/contract.md) and the whole bike."""
 import os
 from dataclasses import replace
 
 from . import render
 from ..contract import UserError, bike_folder
 
-ALL_PARTS = ("frame", "steering", "crank", render.WHOLE)
+ALL_PARTS = bike_folder.PARTS + bike_folder.SUB_PARTS + (render.WHOLE,)
+# the keypoints a sub-part's views carry: its axle or its pedal centre, and the rear contact
+# point.  The axles (in the hub, between the dropouts) and the contact point (on the tyre) lie on
+# the wheel only: with wheel sub-parts the frame's and steering's views leave them out (they fell
+# off those masks, measured); a pedal keypoint stays on the crank's too (its spindle runs through it)
+SUB_PART_KEYPOINTS = {"front_wheel": ["front_axle"], "rear_wheel": ["rear_axle", "ground"],
+                      "pedal_left": ["pedal_left"], "pedal_right": ["pedal_right"]}
+ON_SUB_PART_ONLY = {"ground": "rear_wheel", "rear_axle": "rear_wheel", "front_axle": "front_wheel"}
 # Training views get more samples than a one-off render (RenderSettings' 16): on the city bike's
 # frame (256², 800 iterations, scored against 1024-spp renders of the held-out cameras) 16 spp +
 # denoising gave 32.45 dB box PSNR, 128 spp + denoising 32.95 dB, 64 / 128 spp without denoising
@@ -78,7 +86,8 @@ def render_bike(bike_dir, parts="all", views=None, samples=None, denoise=None, s
         if part == render.WHOLE:
             objs, names = list(part_objs.values()), list(kp)
         else:
-            objs, names = [part_objs[part]], kp_parts.get(part, [])
+            objs, names = [part_objs[part]], kp_parts.get(part, SUB_PART_KEYPOINTS.get(part, []))
+            names = [k for k in names if part in bike_folder.SUB_PARTS or ON_SUB_PART_ONLY.get(k) not in part_objs]
         part_kp = {k: kp[k] for k in names if k in kp}
         out = os.path.join(bike_dir, "views", part)
         results[part] = render.render_part(scene, objs, out, part_kp, views=view_list, settings=settings,

@@ -8,6 +8,13 @@ Bones (Blender frame, armature object at identity):
   -theta_p about local Y is H_p(theta_p).
 - keypoint bones: head at the keypoint, 3 cm long (canonical +Y), parented (unconnected) to the
   part bone that carries the keypoint (layout.bone_parent).
+- sub-parts (docs/contract.md "Sub-parts"), only when their mesh exists: `front_wheel` (parent
+  steering) and `rear_wheel` (parent frame), head at the axle, tail 0.1 m along canonical +Z
+  like the crank's, so a rotation by -angle about local Y rolls the wheel forward by angle; the
+  pedal bodies hang on the keypoint bones `pedal_left` / `pedal_right`, which then do not inherit
+  the crank's rotation (their head follows the crank, their orientation stays the frame's): the
+  pedals stay level.  The armature object's custom property "gear_ratio" (wheel turns per crank
+  turn) couples the wheels to theta_p (articulation.apply_pose).
 Part meshes are bone-parented (rigid), which behaves the same in Blender 3.4 and 5.0.
 """
 import bpy
@@ -20,8 +27,13 @@ from ..procedural.layout import KEYPOINT_NAMES, bone_parent
 KP_BONE_LEN = 0.03
 
 
-def build_armature(keypoints, spec, parts):
-    """Create the object `armature` (identity transform) in the scene; returns it."""
+WHEEL_BONES = {"front_wheel": ("front_axle", "steering"), "rear_wheel": ("rear_axle", "frame")}
+PEDAL_BONES = ("pedal_left", "pedal_right")
+
+
+def build_armature(keypoints, spec, parts, gear_ratio=None):
+    """Create the object `armature` (identity transform) in the scene; returns it.  parts: the
+    part (and sub-part) object names; gear_ratio: stored on the armature when it has wheels."""
     data = bpy.data.armatures.new("armature")
     arm = bpy.data.objects.new("armature", data)
     bpy.context.scene.collection.objects.link(arm)
@@ -54,9 +66,17 @@ def build_armature(keypoints, spec, parts):
         parent = bone_parent(name, spec)
         if parent not in ("frame", "steering", "crank") or (parent == "crank" and "crank" not in parts):
             parent = "frame"
-        bone(name, p, p + [0, KP_BONE_LEN, 0], parent)
+        b = bone(name, p, p + [0, KP_BONE_LEN, 0], parent)
+        if name in PEDAL_BONES and name in parts and parent == "crank":
+            b.use_inherit_rotation = False  # the pedal body keeps the frame's orientation: level
+    for name, (axle, parent) in WHEEL_BONES.items():
+        if name in parts:
+            a = np.asarray(keypoints[axle])
+            bone(name, a, a + [0, 0, 0.1], parent)
     bpy.ops.object.mode_set(mode="OBJECT")
     arm.select_set(False)
+    if gear_ratio is not None:
+        arm["gear_ratio"] = float(gear_ratio)
     return arm
 
 

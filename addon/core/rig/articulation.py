@@ -3,6 +3,9 @@
 H_s: +theta_s about the steering bone's local Y (= steer_bottom -> steer_top, right-hand rule).
 H_p: -theta_p about the crank bone's local Y (= canonical +Z), so +theta_p pedals forward.
 H_g = T(t) Rz Ry Rx in the canonical frame, set as the armature object's world matrix.
+Wheel sub-parts: -wheel angle about their bones' local Y (= canonical +Z), the wheel angle being
+theta_p times the armature's "gear_ratio" unless given (a coasting wheel turns with the crank
+still); the pedal bodies need nothing (their bones do not inherit the crank's rotation).
 """
 import math
 
@@ -27,9 +30,18 @@ def global_matrix(rot_xyz_deg=(0, 0, 0), t=(0, 0, 0)):
     return m
 
 
-def apply_pose(arm_obj, theta_p_deg, theta_s_deg, rot_xyz_deg=(0, 0, 0), t=(0, 0, 0)):
-    """Pose the armature (and the parts bone-parented to it); updates the view layer."""
-    vals = [theta_p_deg, theta_s_deg, *rot_xyz_deg, *t]
+def wheel_angle_deg(arm_obj, theta_p_deg, wheel_deg=None):
+    """The wheels' rolling angle (degrees, + = rolling forward): wheel_deg when given, else
+    theta_p x the armature's gear ratio (0 without one)."""
+    if wheel_deg is not None:
+        return float(wheel_deg)
+    return float(theta_p_deg) * float(arm_obj.get("gear_ratio", 0.0))
+
+
+def apply_pose(arm_obj, theta_p_deg, theta_s_deg, rot_xyz_deg=(0, 0, 0), t=(0, 0, 0), wheel_deg=None):
+    """Pose the armature (and the parts bone-parented to it); updates the view layer.
+    wheel_deg: the wheel sub-parts' rolling angle (default: theta_p x gear ratio)."""
+    vals = [theta_p_deg, theta_s_deg, *rot_xyz_deg, *t] + ([wheel_deg] if wheel_deg is not None else [])
     if not all(math.isfinite(float(v)) for v in vals):
         raise ValueError(f"pose has a non-finite value: {vals}")
     pbs = arm_obj.pose.bones
@@ -40,6 +52,11 @@ def apply_pose(arm_obj, theta_p_deg, theta_s_deg, rot_xyz_deg=(0, 0, 0), t=(0, 0
         cr = pbs["crank"]
         cr.rotation_mode = "XYZ"
         cr.rotation_euler = (0.0, -math.radians(float(theta_p_deg)), 0.0)
+    w = wheel_angle_deg(arm_obj, theta_p_deg, wheel_deg)
+    for name in ("front_wheel", "rear_wheel"):
+        if name in pbs:
+            pbs[name].rotation_mode = "XYZ"
+            pbs[name].rotation_euler = (0.0, -math.radians(w), 0.0)
     arm_obj.matrix_world = Matrix(matrix_to_blender(global_matrix(rot_xyz_deg, t)).tolist())
     bpy.context.view_layer.update()
 

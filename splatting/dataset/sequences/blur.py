@@ -41,10 +41,21 @@ def pose_at(inst, t):
     return [float(x) for x in p]
 
 
+def wheel_at(inst, t):
+    """{"wheel_deg": the wheels' rolling angle at time t} (spinning wheel sub-parts blur), or {}
+    for an instance without a trajectory's wheel angle (a parked bike)."""
+    tr = inst.get("traj", {})
+    if "fine_wheel_deg" not in tr:
+        return {}
+    return {"wheel_deg": float(_lerp(tr["fine_t"], np.asarray(tr["fine_wheel_deg"])[:, None], t)[0])}
+
+
 def subframe_draw(sd, f, t):
     """make_sample's draw at time t (s) of a sequence drawn by draw_sequence, frame f's signals."""
     inst = [{"kind": i["kind"], "bike": i["bike"], "rider": i["rider"], "pose": pose_at(i, t),
-             **({"signal": i["signal"][f]} if "signal" in i else {})} for i in sd["instances"]]
+             **({"signal": i["signal"][f]} if "signal" in i else {}),
+             **({"foot_down": i["foot_down"][f]} if i.get("foot_down", ["none"] * (f + 1))[f] != "none" else {}),
+             **wheel_at(i, t)} for i in sd["instances"]]
     return with_look({"instances": inst, "dropped": sd["dropped"], "camera": dict(sd["camera"]),
                       "background": dict(sd["background"]), "subframe": True}, sd)
 

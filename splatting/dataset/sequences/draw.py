@@ -20,9 +20,13 @@ from splatting.cyclist.assets import bike_dir
 from splatting.dataset import camera_presets
 from splatting.dataset.sequences import trajectory as tj
 from splatting.dataset.street import road_heading
+from splatting.rider.ik.foot_down import lean_deg
 
 TAG = 2029
 SIGNAL_TAG = 7  # the arm signals' own Generator: [seed, sequence, TAG, SIGNAL_TAG, track index]
+FOOT_TAG = 11  # the foot-down side's own Generator: [seed, sequence, TAG, FOOT_TAG, track index]
+STOPPED_MPS = 0.05  # below this a stopping rider has a foot on the road (the `stopped` intention's bound)
+FOOT_LEAN_RAMP_S = 0.5  # the bike tilts onto the grounded foot over this time after stopping
 MAX_RAMP_ACCEL = 3.5  # m/s^2: the hardest stop or start a short sequence may ask for  # keeps the sequence draws apart from the single-image draws of the same seed
 
 
@@ -168,6 +172,28 @@ class StreetWorld:
         return {"kind": kinds[int(rng.integers(len(kinds)))], "seed": int(rng.integers(2 ** 31))}
 
 
+def foot_down(rng, manoeuvre, traj, pose):
+    """Per frame "left" / "right" / "none": a `stop` rider puts a foot (side drawn by rng) on the
+    road from the frame it stands still, and the bike leans onto it over FOOT_LEAN_RAMP_S (pose's
+    and traj's theta_X, and the blur's fine poses, are updated in place)."""
+    n = len(traj["t"])
+    if manoeuvre != "stop":
+        return ["none"] * n
+    side = "left" if rng.uniform() < 0.5 else "right"
+    still = np.flatnonzero(traj["speed"] < STOPPED_MPS)
+    if not len(still):
+        return ["none"] * n
+    t0 = float(traj["t"][still[0]])
+
+    def lean(t):
+        u = np.clip((np.asarray(t) - t0) / FOOT_LEAN_RAMP_S, 0.0, 1.0)
+        return lean_deg(side) * 0.5 * (1.0 - np.cos(math.pi * u)) * (np.asarray(t) >= t0)
+
+    pose[:, 2] = traj["theta_x_deg"] = traj["theta_x_deg"] + lean(traj["t"])
+    traj["fine_pose"][:, 2] = traj["fine_pose"][:, 2] + lean(traj["fine_t"])
+    return [side if traj["t"][f] >= t0 else "none" for f in range(n)]
+
+
 def draw_sequence(cfg, seq):
     """Sequence `seq` -> {"ego_speed", "camera", "background", "instances": [...], "dropped"}; each
     instance {kind, bike, rider, manoeuvre, poses (n, 8), traj, crossing, intention, gear_ratio, geometry}.
@@ -253,6 +279,8 @@ def draw_sequence(cfg, seq):
             # its own Generator: the signal draws leave every other draw of the sequence as it was
             sig_rng = np.random.default_rng([cfg.seed, seq, TAG, SIGNAL_TAG, len(out)])
             rec["signal"] = signal_frames(sig_rng, man, traj, plan[0], plan[1], sq, duration)
+            foot_rng = np.random.default_rng([cfg.seed, seq, TAG, FOOT_TAG, len(out)])
+            rec["foot_down"] = foot_down(foot_rng, man, traj, pose)
         else:
             crossing, inten = np.zeros(n, bool), ["parked"] * n
         out.append({"kind": kind, "bike": bike, "rider": rider, "manoeuvre": man, "poses": pose, "traj": traj,
@@ -268,7 +296,10 @@ def draw_sequence(cfg, seq):
 def frame_draw(sd, f):
     """make_sample's draw dict for frame f of a drawn sequence."""
     inst = [{"kind": i["kind"], "bike": i["bike"], "rider": i["rider"], "pose": [float(x) for x in i["poses"][f]],
-             **({"signal": i["signal"][f]} if "signal" in i else {})} for i in sd["instances"]]
+             **({"signal": i["signal"][f]} if "signal" in i else {}),
+             **({"foot_down": i["foot_down"][f]} if i.get("foot_down", ["none"] * (f + 1))[f] != "none" else {}),
+             **({"wheel_deg": float(i["traj"]["wheel_deg"][f])} if "wheel_deg" in i.get("traj", {}) else {})}
+            for i in sd["instances"]]
     return with_look({"instances": inst, "dropped": sd["dropped"], "camera": dict(sd["camera"]),
                       "background": dict(sd["background"])}, sd)
 

@@ -43,7 +43,7 @@ def motion_record(inst, f):
                    wheel_angle_deg=round(math.degrees(float(tr["wheel_rad"][f])) % 360.0, 4),
                    wheel_rate_rad_s=round(float(tr["wheel_rate"][f]), 5),
                    crank_rate_rad_s=round(float(tr["crank_rate"][f]), 5), gear_ratio=round(inst["gear_ratio"], 5),
-                   pedalling=bool(tr["pedalling"][f]), signal=inst["signal"][f])
+                   pedalling=bool(tr["pedalling"][f]), signal=inst["signal"][f], foot_down=inst["foot_down"][f])
     return rec
 
 

@@ -121,6 +121,9 @@ def integrate(n_frames, fps, speed, curvature, geom, start_xz, start_heading_deg
         "steer_ground_deg": np.degrees(delta[f]),
         "theta_p_deg": np.degrees(crank[f]) % 360.0, "crank_rad": crank[f], "crank_rate": crank_rate[f],
         "pedalling": pedalling[f], "wheel_rad": s[f] / geom["r"], "wheel_rate": v[f] / geom["r"],
+        # the wheels' rolling angle (deg, unwrapped) for the model's wheel sub-parts: rolling
+        # without slip, angle = distance / radius, whether pedalling or coasting
+        "wheel_deg": np.degrees(s[f] / geom["r"]), "fine_wheel_deg": np.degrees(s / geom["r"]),
         "rear_xz": rear[f], "origin_xz": origin[f], "velocity_xz": vel[f],
         "lateral_accel": v[f] ** 2 * kap[f],
         # the fine grid's poses (crank and heading unwrapped): sub-frame poses for motion blur (blur.py)
