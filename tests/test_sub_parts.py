@@ -107,7 +107,7 @@ def _rest_vertices(bike_dir):
 
 def _blender_posed_vertices(bike_dir, pose, wheel_deg=None):
     from addon.core import frames
-    from addon.core.articulation import apply_pose, posed_keypoints
+    from addon.core.rig.articulation import apply_pose, posed_keypoints
     from addon.core.bike_asset import open_bike
 
     bike = open_bike(str(bike_dir))
