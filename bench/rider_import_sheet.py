@@ -64,7 +64,7 @@ def look_at(eye, at, size, focal):
 
 def avatar_tile(bike_dir, folder, out, size):
     """The trained avatar in `folder` on the bike's trained Gaussians at crank angle 0, rasterized from the
-    Blender tiles' camera (render_rider_on_bike.py) over the same light grey; returns the IK residuals."""
+    Blender tiles' camera (render_rider_on_bike.py) over the same grey; returns the IK residuals."""
     from PIL import Image
     from splatting.bike.model import BikeModel
     from splatting.cyclist.compose import Cyclist
@@ -76,7 +76,8 @@ def avatar_tile(bike_dir, folder, out, size):
         torch.zeros(1, 8, dtype=torch.float64), saddle_shared=True)[0]
     cam = look_at(CAMERA_CANONICAL, TARGET_CANONICAL, size, 0.9 * size)
     layers = render_layers(frame.gaussians, frame.ids, cam)
-    Image.fromarray(over(layers, np.full((size, size, 3), 0.9))).save(out)
+    grey = np.array([184, 186, 189]) / 255.0  # the Blender tiles' world colour as it comes out of Cycles
+    Image.fromarray(over(layers, np.broadcast_to(grey, (size, size, 3)))).save(out)
     return frame.ik["residual_m"]
 
 

@@ -337,7 +337,9 @@ def nearest(a, b):
 
 def cli(*args, **kw):
     return subprocess.run([sys.executable, "-m", "splatting", *map(str, args)], capture_output=True, text=True,
-                          cwd=ROOT, env=dict(os.environ, PYTHONPATH=ROOT, OMP_WAIT_POLICY="PASSIVE"), **kw)
+                          cwd=ROOT, env=dict(os.environ, PYTHONPATH=os.pathsep.join(
+                              [ROOT] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]),
+                              OMP_WAIT_POLICY="PASSIVE"), **kw)
 
 
 def meshopt_compressed(src, dst, mo):
@@ -401,4 +403,48 @@ def meshopt_compressed(src, dst, mo):
     out = (b"glTF" + struct.pack("<II", 2, 12 + 8 + len(js) + 8 + len(body)) + struct.pack("<II", len(js), 0x4E4F534A)
            + js + struct.pack("<II", len(body), 0x004E4942) + body)
     open(dst, "wb").write(out)
+    return dst
+
+
+def quantized(src, dst):
+    """A copy of a Blender-exported .glb under KHR_mesh_quantization (required): texture coordinates as
+    normalized unsigned shorts and normals as normalized bytes (padded to 4), positions kept as floats."""
+    data = open(src, "rb").read()
+    n = struct.unpack_from("<I", data, 12)[0]
+    g = json.loads(data[20:20 + n])
+    blob = bytearray(data[20 + n + 8:])
+    done = set()
+    for m in g["meshes"]:
+        for p in m["primitives"]:
+            for key, acc_i in p["attributes"].items():
+                if acc_i in done or not (key.startswith("TEXCOORD") or key == "NORMAL"):
+                    continue
+                done.add(acc_i)
+                a = g["accessors"][acc_i]
+                bv = g["bufferViews"][a["bufferView"]]
+                k = 2 if key.startswith("TEXCOORD") else 3
+                x = np.frombuffer(bytes(blob[bv.get("byteOffset", 0):bv.get("byteOffset", 0) + bv["byteLength"]]),
+                                  np.float32).reshape(-1, k)
+                if k == 2:
+                    q = np.round(np.clip(x, 0, 1) * 65535).astype("<u2")
+                    raw, stride, ct = q.tobytes(), 4, 5123
+                else:
+                    q = np.zeros((len(x), 4), np.int8)
+                    q[:, :3] = np.round(np.clip(x, -1, 1) * 127)
+                    raw, stride, ct = q.tobytes(), 4, 5120
+                blob.extend(b"\0" * (-len(blob) % 4))
+                g["bufferViews"].append({"buffer": 0, "byteOffset": len(blob), "byteLength": len(raw), "byteStride": stride,
+                                         "target": 34962})
+                blob.extend(raw)
+                a.update(bufferView=len(g["bufferViews"]) - 1, componentType=ct, normalized=True)
+                a.pop("min", None), a.pop("max", None)
+    blob.extend(b"\0" * (-len(blob) % 4))
+    g["buffers"] = [{"byteLength": len(blob)}]
+    g["extensionsUsed"] = sorted(set(g.get("extensionsUsed", [])) | {"KHR_mesh_quantization"})
+    g["extensionsRequired"] = sorted(set(g.get("extensionsRequired", [])) | {"KHR_mesh_quantization"})
+    js = json.dumps(g).encode()
+    js += b" " * (-len(js) % 4)
+    open(dst, "wb").write(b"glTF" + struct.pack("<II", 2, 12 + 8 + len(js) + 8 + len(blob))
+                          + struct.pack("<II", len(js), 0x4E4F534A) + js + struct.pack("<II", len(blob), 0x004E4942)
+                          + bytes(blob))
     return dst

@@ -24,7 +24,7 @@ from ci_needs import missing
 bpy = pytest.importorskip("bpy")
 from rigged_humans import (FAMILIES, MIXAMO, RIGIFY, ROOT, SOURCE_RIDER, TEX, cli, build_rigged_human,  # noqa: E402
                            expected_colors, expected_uv, export, export_chain, export_mesh_only, import_here,
-                           meshopt_compressed, nearest, with_required_extension, write_texture)
+                           meshopt_compressed, nearest, quantized, with_required_extension, write_texture)
 
 
 @pytest.fixture(scope="module")
@@ -712,7 +712,7 @@ def test_development_riders_import_and_ride(model):
 
 @pytest.mark.parametrize("height,leg,scale,words", [
     (1.70, 0.80, 1.0, "as in the file"), (172.0, 80.0, 0.01, "centimetres"), (1750.0, 820.0, 0.001, "millimetres"),
-    (68.0, 32.0, 0.0254, "inches"), (4.5, 2.05, 0.82 / 2.05, "no unit fits a person"),
+    (68.0, 32.0, 0.0254, "inches"), (0.0172, 0.008, 100.0, "applied twice"), (4.5, 2.05, 0.82 / 2.05, "no unit fits a person"),
     (0.3, 0.13, 0.82 / 0.13, "no unit fits a person")])
 def test_sizes_are_read_in_a_plausible_unit(height, leg, scale, words):
     from addon.core import rider_rig
@@ -738,7 +738,14 @@ def test_meshopt_glb_is_decoded(models, source, tmp_path):
     assert "decoding EXT_meshopt_compression" in r.stdout
     a, meta = rider_file.read_rider_file(out)
     b, _ = import_here(models["mixamo.glb"])
-    for k in rider_file.ARRAYS:
+
+    def triangles(f):  # meshopt's index codec may start a triangle at another corner (same winding)
+        f = np.asarray(f)
+        r = f.argmin(1)
+        f = np.stack([f[np.arange(len(f)), (r + k) % 3] for k in range(3)], 1)
+        return f[np.lexsort(f.T[::-1])]
+    assert np.array_equal(triangles(a["faces"]), triangles(b["faces"]))
+    for k in set(rider_file.ARRAYS) - {"faces"}:
         assert a[k].shape == b[k].shape and np.abs(a[k].astype(np.float64) - b[k]).max() < 1e-6, k
     dec = gltf_meshopt.decompress(glb, tmp_path / "plain.glb")
     g2, _ = gltf_meshopt.read_glb_or_gltf(dec)
@@ -751,3 +758,23 @@ def test_meshopt_without_the_decoder_is_one_clear_line(models, tmp_path, monkeyp
     with pytest.raises(UserError, match="pip install meshoptimizer"):
         gltf_meshopt.decompress(glb, tmp_path / "o.glb")
     assert not (tmp_path / "o.glb").exists()
+
+
+def test_quantized_meshes_and_webp_textures_import(models, source, tmp_path):
+    """KHR_mesh_quantization (normalized short UVs, byte normals) and EXT_texture_webp (the texture as
+    WebP): Blender's importer reads both; the same body, its colours from the texture."""
+    from addon.core.scene import reset_scene
+    V = source.vertices.double().numpy()
+    a, meta = import_here(quantized(models["mixamo.glb"], tmp_path / "quantized.glb"))
+    d, i = nearest(a["vertices"], V)
+    assert d.max() < 2e-5 and np.abs(a["joints"] - source.joints.numpy()).max() < 2e-5
+    assert np.abs(a["colors"] - expected_colors(V)[i]).max() < 0.005  # UVs to 1/65535
+    reset_scene()
+    build_rigged_human(source, "mixamo", write_texture(tmp_path / "ramp.png"))
+    bpy.ops.export_scene.gltf(filepath=str(tmp_path / "webp.glb"), export_format="GLB", export_image_format="WEBP")
+    g, _ = gltf_meshopt.read_glb_or_gltf(tmp_path / "webp.glb")
+    assert "EXT_texture_webp" in g["extensionsUsed"] and g["images"][0]["mimeType"] == "image/webp"
+    a, meta = import_here(tmp_path / "webp.glb")
+    d, i = nearest(a["vertices"], V)
+    assert len(meta["textures"]) == 1 and d.max() < 2e-5
+    assert np.abs(a["colors"] - expected_colors(V)[i]).max() < 0.03  # WebP is lossy

@@ -57,7 +57,7 @@ def path(tmp_path_factory):
     run(env, "rider", "import", "--model", d / "person.glb", "--id", RIDER_ID)
     riders = d / "riders"
     av = riders / RIDER_ID
-    run(env, "rider-avatar", "--id", RIDER_ID, "--out", av, "--samples", "1", "--iterations", "60",
+    run(env, "rider-avatar", "--id", RIDER_ID, "--out", av, "--samples", "1", "--size", "128", "--iterations", "60",
         "--max-gaussians", "4000")
     run(env, "relight-fit", "--views", av / "views", "--ply", av / "rider.ply", "--iterations", "30", "--max-size", "96",
         "--quiet")
@@ -73,6 +73,7 @@ def test_avatar_is_trained_from_the_riders_own_texture(path):
     and its relight albedo is the texture's colour where each Gaussian sits."""
     from PIL import Image
     from splatting.gaussians.container import read_ply
+    from splatting.gaussians.sh import C0
     from splatting.relight.avatar import RelightableAvatar
     from splatting.rider.avatar import RiderAvatar
     av = path["avatar"]
@@ -94,20 +95,22 @@ def test_avatar_is_trained_from_the_riders_own_texture(path):
     want = expected_colors(V)[near]  # the ramp texture's colour at each Gaussian, sRGB
     albedo = np.asarray(relit.albedo, np.float64)
     albedo = np.where(albedo <= 0.0031308, 12.92 * albedo, 1.055 * np.clip(albedo, 0, None) ** (1 / 2.4) - 0.055)
-    dense = g.opacities.numpy() > 0.5
-    r = np.corrcoef(albedo[dense, 1], want[dense, 1])[0, 1]
-    assert r > 0.8, r
+    seen = g.opacities.numpy() > 0.05  # after 60 steps most Gaussians are still faint
+    assert seen.sum() > 1000
+    for colour in (C0 * g.sh[:, 0].numpy() + 0.5, albedo):  # the trained colour and the fitted albedo
+        r = np.corrcoef(colour[seen, 1], want[seen, 1])[0, 1]
+        assert r > 0.9, r
 
 
 def test_cyclist_rides_the_bike(path):
     out = path["root"] / "cyclist"
     run(path["env"], "cyclist", "--rider", RIDER_ID, "--bike", "city_rl", "--bikes-root", path["bikes"],
         "--riders-root", path["riders"], "--frames", "2", "--views=0,90", "--size", "64", "--synthetic", "never",
-        "--ik-iterations", "30", "--out", out)
+        "--out", out)
     for i in range(2):
         rec = json.load(open(out / f"frame_{i:05d}.json"))
         assert set(rec["ik"]["residual_m"]) == set(PAIRS)
-        assert max(rec["ik"]["residual_m"].values()) < 0.02, rec["ik"]["residual_m"]
+        assert max(rec["ik"]["residual_m"].values()) < 0.03, rec["ik"]["residual_m"]  # steering and leaning too
         j, kp = rec["rider_joints"], rec["bike_keypoints"]
         for joint, target in (("left_wrist", "handle_left"), ("right_ankle", "pedal_right")):
             assert np.linalg.norm(np.subtract(j[joint], kp[target])) < 0.03, (joint, target)

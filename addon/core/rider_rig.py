@@ -48,7 +48,8 @@ UP_TOLERANCE_DEG = 30.0
 MIN_HEIGHT_M, MAX_HEIGHT_M = 0.5, 2.6
 # a size outside MIN..MAX read in another unit when that makes it PLAUSIBLE_M tall (most likely first)
 # (feet are not guessed: a stylised figure 3-5 units tall would become a child that cannot reach the pedals)
-UNIT_GUESSES = ((0.01, "centimetres"), (0.001, "millimetres"), (0.0254, "inches"), (0.1, "decimetres"))
+UNIT_GUESSES = ((0.01, "centimetres"), (0.001, "millimetres"), (0.0254, "inches"), (0.1, "decimetres"),
+                (100.0, "metres shrunk 100 times (a centimetre conversion applied twice)"))
 PLAUSIBLE_M = (1.0, 2.2)
 PELVIS_LOW, PELVIS_ABOVE_HIPS = 0.015, 0.008  # of the ankle-to-head height (SMPL: pelvis 1 cm above hips)
 END_HAND_FRACTION = 0.47  # SMPL's hand joint (knuckles) along wrist -> fingertips
@@ -332,7 +333,10 @@ def _fill_unweighted(W, V):
     s = W.sum(1)
     empty = np.flatnonzero(s <= 0)
     have = np.flatnonzero(s > 0)
-    for chunk in np.array_split(empty, max(1, len(empty) // 512 + 1)):
+    if len(empty) == 0:
+        return 0
+    step = max(1, 4_000_000 // max(1, len(have)))  # ~100 MB of distances at a time
+    for chunk in np.array_split(empty, len(empty) // step + 1):
         if len(chunk):
             d = ((V[chunk, None, :] - V[None, have, :]) ** 2).sum(-1)
             W[chunk] = W[have[d.argmin(1)]]
@@ -387,14 +391,11 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, mod
             rest_deform[j] = _m2np(A @ pb.matrix @ pb.bone.matrix_local.inverted() @ A_inv).tolist()
         heads_t = _posed_heads(arm, bone_of, placed)
         V, F, W, C, UV, FT, n_filled = [], [], [], [], [], [], 0
-        images, base, missing, keep_parts = {}, 0, [], []
+        images, base, missing, keep_parts, weighted = {}, 0, [], [], []
         for obj in skinned:
             v = _evaluated_world_vertices(obj)
             w = _object_weights(obj, arm, bone_joint)
-            if (w.sum(1) > 0).sum() * 2 < len(w):
-                raise UserError(f"{what}: unrigged mesh: object '{obj.name}' has bone weights on only "
-                                f"{int((w.sum(1) > 0).sum())} of {len(w)} vertices")
-            n_filled += _fill_unweighted(w, v)
+            weighted.append((int((w.sum(1) > 0).sum()), len(w), obj.name))
             tri, tri_loops = _triangles(obj.data)
             col, loop_uv, loop_tex, loop_alpha = object_colors(obj, what, images, [model_dir] if model_dir else [],
                                                                missing)
@@ -413,6 +414,13 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, mod
             arm.data.pose_position = saved_position
             bpy.context.view_layer.update()
     V, F, W, C = np.concatenate(V), np.concatenate(F), np.concatenate(W), np.concatenate(C)
+    # the body (the largest skinned mesh) and the whole must be mostly weighted; a piece weighted sparsely
+    # or not at all (a cape pinned at its collar, a strap) takes its vertices' nearest weighted ones
+    wc, n, name = max(weighted, key=lambda t: t[1])
+    if wc * 2 < n or sum(t[0] for t in weighted) * 2 < len(W):
+        wc, n, name = min(weighted, key=lambda t: t[0] / t[1])
+        raise UserError(f"{what}: unrigged mesh: object '{name}' has bone weights on only {wc} of {n} vertices")
+    n_filled = _fill_unweighted(W, V)
     UV, FT, keep = np.concatenate(UV), np.concatenate(FT), np.concatenate(keep_parts)
     n_cut = int((~keep).sum())
     if n_cut == len(keep):
