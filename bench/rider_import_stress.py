@@ -1,5 +1,6 @@
 """Robustness of `rider import` on variants of the development riders: each rigged human of ../shared/riders
-changed as files from elsewhere differ (bones renamed, lower-cased or namespaced; the whole figure scaled
+changed as files from elsewhere differ (bones renamed, lower-cased, namespaced or
+written as a COLLADA converter writes them; the whole figure scaled
 x100 or x0.01; turned Z-up -> Y-up or facing backwards; saved standing idle over its bind pose; written
 again by Blender's glTF and FBX exporters), imported as the command does, and seated by the IK on a bike.
 
@@ -32,7 +33,7 @@ MODELS = {"mh_woman": "mh_woman/human.glb", "mh_man": "mh_man/man.glb",
           "quaternius_ual_rigify": "quaternius_ual_rigify/AnimationLibrary_Godot_Standard.gltf",
           "kenney_large_male_fbx": "kenney_large_male_fbx/characterLargeMale.fbx",
           "rocketbox_male_adult_17_fbx": "rocketbox_male_adult_17_fbx/Male_Adult_17.fbx"}
-VARIANTS = ("as_is", "anonymous", "lower_case", "namespaced", "scaled_x100_fbx", "scaled_x0.01", "y_up_lying",
+VARIANTS = ("as_is", "anonymous", "lower_case", "namespaced", "collada", "scaled_x100_fbx", "scaled_x0.01", "y_up_lying",
             "facing_back", "idle_over_bind", "fbx_roundtrip")
 CRANK_DEG = (0.0, 90.0, 180.0, 270.0)
 
@@ -97,6 +98,8 @@ def make_variant(objects, variant):
         _rename(arm, lambda k, n: n.lower())
     elif variant == "namespaced":
         _rename(arm, lambda k, n: "Character1:" + n)
+    elif variant == "collada":  # a COLLADA converter's names: the node path in them
+        _rename(arm, lambda k, n: "Skeleton_" + n.replace(" ", "_").replace(".", "_") + "_joint")
     elif variant == "scaled_x100_fbx":
         _wrap(objects, Matrix.Scale(100.0, 4))
         return "fbx"

@@ -574,6 +574,17 @@ def test_placed_spine_and_rigid_attachment_skin_as_blender_does(family_models, s
     assert err.max() < 2e-5, err.max()
 
 
+@pytest.mark.parametrize("name", list(FAMILIES) + ["centimetres", "scaled", "idle_over_t"])
+def test_every_family_and_unit_skins_as_blender_poses_it(family_models, tmp_path, name):
+    """Every naming family (placed joints and helper bones included), the centimetre FBX, the 0.01 object
+    scales and the idle file over a T bind pose: LBS of the imported rider at a cycling pose equals Blender
+    posing the file's own armature with the same joint rotations (its evaluated mesh, vertex by vertex)."""
+    npz = write_here(family_models[name], tmp_path)
+    err, moved = lbs_and_blender(family_models[name], npz, 110.0, 12.0)
+    assert moved.max() > 0.5
+    assert err.max() < (1e-4 if name in ("centimetres", "scaled") else 2e-5), err.max()
+
+
 @pytest.mark.parametrize("name", ["centimetres", "scaled", "draco"])
 def test_units_object_scales_and_draco_give_the_same_rider(family_models, source, name):
     """A centimetre FBX, 0.01 object scales under a 0.1 root, and Draco-compressed meshes: the same

@@ -204,14 +204,20 @@ def body_frame(heads):
 
     Up is Blender's +Z (both importers bring glTF's Y-up and FBX's axes to Z-up) when the spine
     (pelvis -> neck) is within UP_TOLERANCE_DEG of it, so a spine leaning a little is kept as it is
-    modelled; otherwise (a file lying down) the spine itself.  Right comes from the hips and shoulders."""
+    modelled; a file lying down (turned by a right angle) takes the world axis the spine is as near,
+    else the spine itself.  Right comes from the hips and shoulders."""
     J = {n: i for i, n in enumerate(_joints())}
     spine = heads[J["neck"]] - heads[J["pelvis"]]
     lr = (heads[J["right_hip"]] - heads[J["left_hip"]]) + (heads[J["right_shoulder"]] - heads[J["left_shoulder"]])
     if np.linalg.norm(spine) < 1e-9 or np.linalg.norm(lr) < 1e-9:
         raise UserError("the skeleton is degenerate: pelvis and neck (or left and right hips) coincide")
     spine = spine / np.linalg.norm(spine)
-    up = np.array([0.0, 0.0, 1.0]) if spine[2] > math.cos(math.radians(UP_TOLERANCE_DEG)) else spine
+    # a file lying down is nearly always one turned by a right angle (Y-up read as Z-up, an exporter's
+    # axis setting): up is the world axis the spine is within UP_TOLERANCE_DEG of, the spine itself otherwise
+    k = int(np.argmax(np.abs(spine)))
+    axis = np.zeros(3)
+    axis[k] = np.sign(spine[k])
+    up = axis if spine @ axis > math.cos(math.radians(UP_TOLERANCE_DEG)) else spine
     right = lr - up * (lr @ up)
     if np.linalg.norm(right) < 1e-6 * np.linalg.norm(lr):
         raise UserError("the skeleton's left-right axis (hips, shoulders) is parallel to its spine")
