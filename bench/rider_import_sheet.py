@@ -153,7 +153,7 @@ def main(argv=None):
         tiles = [Image.open(j["out"]).convert("RGB") for j in jobs]
         cols = 3
         rows_n = math.ceil(len(tiles) / cols)
-        sheet = Image.new("RGB", (cols * args.size, rows_n * args.size), "white")
+        sheet = Image.new("RGB", (cols * args.size, rows_n * args.size), (184, 186, 189))
         for k, (t, j) in enumerate(zip(tiles, jobs)):
             x, y = (k % cols) * args.size, (k // cols) * args.size
             sheet.paste(t, (x, y))

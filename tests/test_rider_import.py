@@ -789,3 +789,33 @@ def test_quantized_meshes_and_webp_textures_import(models, source, tmp_path):
     d, i = nearest(a["vertices"], V)
     assert len(meta["textures"]) == 1 and d.max() < 2e-5
     assert np.abs(a["colors"] - expected_colors(V)[i]).max() < 0.03  # WebP is lossy
+
+
+def test_a_lone_texture_beside_an_untextured_model_is_its_colour(source, tmp_path):
+    """Kenney's characters ship their skin beside a model whose material references none: with UVs, no
+    texture in any material and one image in the folder, that image is the colour (said in a note and the
+    meta); with a second image there (which one?) the flat material colour stays."""
+    from addon.core.scene import reset_scene
+    reset_scene()
+    d = tmp_path / "kit"
+    d.mkdir()
+    img = write_texture(d / "skin.png")
+    _, body = build_rigged_human(source, "mixamo", img)
+    nt = body.data.materials[0].node_tree
+    nt.nodes.remove(next(n for n in nt.nodes if n.type == "TEX_IMAGE"))  # the material: a flat colour, UVs kept
+    export(d / "person.fbx")
+    reset_scene()
+    out = tmp_path / "a" / "rider.npz"
+    r = cli("rider", "import", "--model", d / "person.fbx", "--id", "kit", "--out", out)
+    assert r.returncode == 0, r.stderr[-1500:]
+    assert "skin.png, the one image beside it" in r.stdout
+    a, meta = rider_file.read_rider_file(out)
+    d_, i = nearest(a["vertices"], source.vertices.double().numpy())
+    assert meta["assumed_texture"] == "skin.png" and len(meta["textures"]) == 1
+    assert np.abs(a["colors"] - expected_colors(source.vertices.double().numpy())[i]).max() < 0.004
+    (d / "other.png").write_bytes((d / "skin.png").read_bytes())
+    out2 = tmp_path / "b" / "rider.npz"
+    r = cli("rider", "import", "--model", d / "person.fbx", "--id", "kit", "--out", out2)
+    assert r.returncode == 0, r.stderr[-1500:]
+    a, meta = rider_file.read_rider_file(out2)
+    assert meta["assumed_texture"] is None and meta["textures"] == [] and np.ptp(a["colors"], axis=0).max() < 1e-6

@@ -27,13 +27,14 @@ weights over those joints and per-vertex colours.  Steps:
    and the texture itself (the rider file's texture layer), which the avatar's training renders draw.
 """
 import math
+import os
 
 import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
 from .contract import UserError, bone_map
-from .rider_colours import object_colors
+from .rider_colours import lone_texture, object_colors
 from .rider_helpers import helper_faces
 
 SWING_MIN_DEG = 1.0
@@ -398,6 +399,7 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, mod
         heads_t = _posed_heads(arm, bone_of, placed)
         V, F, W, C, UV, FT, n_filled = [], [], [], [], [], [], 0
         images, base, missing, keep_parts, weighted = {}, 0, [], [], []
+        assumed_texture = lone_texture([o for o in skinned if o.type == "MESH"], model_dir)
         for obj in skinned:
             v = _evaluated_world_vertices(obj)
             w = _object_weights(obj, arm, bone_joint)
@@ -465,7 +467,8 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, mod
         "swings_deg": swings, "height_m": round(float(Vc[:, 1].max()), 4), "scale": scale, "size": size,
         "canonical_from_world": canon.tolist(), "t_pose_deform_world": rest_deform,
         "unweighted_vertices_filled": int(n_filled), "textures": sorted(images),
-        "missing_textures": missing, "transparent_faces_dropped": n_cut, "helper_faces_dropped": n_helper,
+        "missing_textures": missing, "assumed_texture": assumed_texture and os.path.basename(assumed_texture),
+        "transparent_faces_dropped": n_cut, "helper_faces_dropped": n_helper,
         "blender": bpy.app.version_string,
     }
     arrays = {"vertices": Vc, "faces": F, "joints": Jc, "weights": W, "colors": C}

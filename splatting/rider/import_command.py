@@ -105,6 +105,9 @@ def run(args):
     print(f"  size: {res.get('size', '?')}")
     if res.get("placed_joints"):
         print(f"  joints placed from their neighbours (no bone): {', '.join(res['placed_joints'])}")
+    if res.get("assumed_texture"):
+        print(f"note: the model's materials reference no texture; {res['assumed_texture']}, the one image beside it, "
+              f"is taken as its colour")
     for m in res.get("missing_textures") or []:
         print(f"warning: texture not found, flat base colour used: {m}", file=sys.stderr)
     return 0
