@@ -819,3 +819,18 @@ def test_a_lone_texture_beside_an_untextured_model_is_its_colour(source, tmp_pat
     assert r.returncode == 0, r.stderr[-1500:]
     a, meta = rider_file.read_rider_file(out2)
     assert meta["assumed_texture"] is None and meta["textures"] == [] and np.ptp(a["colors"], axis=0).max() < 1e-6
+
+
+@pytest.mark.parametrize("axis,deg", [("x", 90.0), ("x", -90.0), ("y", 90.0), ("x", 180.0)])
+def test_a_file_lying_down_gets_the_frame_of_the_file_upright(source, axis, deg):
+    """A file turned by a right angle (Y-up read as Z-up, lying on its side, upside down) gets exactly the
+    upright file's body frame, although its spine leans (up is the world axis nearest the spine, not the
+    spine): the same joints in the canonical frame."""
+    from addon.core import rider_rig
+    from addon.core.frames import to_blender
+    J = to_blender(source.joints.double().numpy())  # Blender world, Z up
+    J[JOINT_NAMES.index("neck")] += (0.0, -0.06, 0.0)  # the neck 6 cm ahead of the pelvis: a leaning spine
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
+    R = {"x": np.array([[1, 0, 0], [0, c, -s], [0, s, c]]), "y": np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])}[axis]
+    M0, M1 = rider_rig.body_frame(J), rider_rig.body_frame(J @ R.T)
+    assert np.abs(M1 @ R - M0).max() < 1e-12  # M1 (R j) == M0 j for every point j
