@@ -782,13 +782,15 @@ def test_quantized_meshes_and_webp_textures_import(models, source, tmp_path):
     assert np.abs(a["colors"] - expected_colors(V)[i]).max() < 0.005  # UVs to 1/65535
     reset_scene()
     build_rigged_human(source, "mixamo", write_texture(tmp_path / "ramp.png"))
-    bpy.ops.export_scene.gltf(filepath=str(tmp_path / "webp.glb"), export_format="GLB", export_image_format="WEBP")
+    bpy.ops.export_scene.gltf(filepath=str(tmp_path / "webp.glb"), export_format="GLB", export_image_format="WEBP",
+                              export_image_quality=100)
     g, _ = gltf_meshopt.read_glb_or_gltf(tmp_path / "webp.glb")
     assert "EXT_texture_webp" in g["extensionsUsed"] and g["images"][0]["mimeType"] == "image/webp"
     a, meta = import_here(tmp_path / "webp.glb")
     d, i = nearest(a["vertices"], V)
     assert len(meta["textures"]) == 1 and d.max() < 2e-5
-    assert np.abs(a["colors"] - expected_colors(V)[i]).max() < 0.03  # WebP is lossy
+    err = np.abs(a["colors"] - expected_colors(V)[i])
+    assert err.max() < 0.05 and np.median(err) < 0.01, (err.max(), np.median(err))  # WebP: lossy
 
 
 def test_a_lone_texture_beside_an_untextured_model_is_its_colour(source, tmp_path):
