@@ -138,6 +138,9 @@ def ride(joints, keypoints):
     from splatting.bike.pose import posed_bike_keypoints
     from splatting.rider import ik
     poses = torch.tensor([[p, 0, 0, 0, 0, 0, 0, 0] for p in CRANK_DEG], dtype=torch.float64)
+    # the joints as the rider file stores them (float32) and the roster reads them: the IK, not converged
+    # in its 50 steps for a rider at the saddle's lowest, can land elsewhere from the float64 ones
+    joints = np.asarray(joints, np.float32)
     res = ik.solve(torch.as_tensor(joints, dtype=torch.float64), posed_bike_keypoints(keypoints, poses),
                    saddle_fit=True, saddle_shared=True)
     worst = {}
@@ -177,7 +180,10 @@ def main(argv=None):
         alt = os.path.join(ROOT, "..", "..", "shared", "riders")
         args.riders = alt if os.path.isdir(alt) else args.riders
     if args.bike:
-        keypoints = json.load(open(os.path.join(args.bike, "keypoints.json")))["keypoints"]
+        kp_path = os.path.join(args.bike, "keypoints.json")
+        if not os.path.isfile(kp_path):
+            raise UserError(f"--bike {args.bike}: no keypoints.json")
+        keypoints = json.load(open(kp_path))["keypoints"]
     else:
         from addon.core.procedural import layout, spec as bike_spec
         keypoints = layout.keypoints(bike_spec.sample_spec("city", 0, 0))
@@ -212,9 +218,15 @@ def main(argv=None):
         lines = ["| rider | variant | hands / feet / pelvis (cm) | joints vs unchanged (cm) | scheme | rest | height (m) |",
                  "| --- | --- | --- | --- | --- | --- | --- |"] + ["| " + " | ".join(r) + " |" for r in rows]
         open(args.table, "w").write("\n".join(lines) + "\n")
+    if not rows:
+        raise UserError(f"no development rider found under {args.riders}")
     print(f"{len(rows) - bad} of {len(rows)} variants ride within 2 cm")
     return 1 if bad else 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except UserError as e:
+        print(f"rider_import_stress: error: {e}", file=sys.stderr)
+        sys.exit(2)
