@@ -1,13 +1,15 @@
 """Imported riders on a bike: the IK's residuals and posed textured meshes for a contact sheet.
 
     python -m bench.rider_import_sheet --bike out/demo/bikes/city_00 --rider NAME=rider.npz ... \
-        --work DIR [--out docs/img/riders_import.png] [--table FILE.md]
+        [--avatar NAME=AVATAR_FOLDER ...] --work DIR [--out docs/img/riders_import.png] [--table FILE.md]
 
 For each rider file: the IK (saddle fitted, one seat post) at four crank angles on the bike's keypoints,
 the worst residual of the hands (wrists -> handles), feet (ankles -> pedals) and pelvis (-> seat) over
 them, and the rider posed at crank angle 0 written as a rider file (the same faces, UVs and textures),
 which blender_scripts/render_rider_on_bike.py draws on the bike at its rest pose (crank angle 0) into
-one picture per rider; the pictures are tiled into the contact sheet with a label each.
+one picture per rider; the pictures are tiled into the contact sheet with a label each.  With --avatar,
+a rider's trained Gaussian avatar (`rider-avatar`) rides the bike's trained Gaussians (splatting.cyclist,
+the same IK, crank angle 0) and is drawn by the rasterizer from the same camera: one more tile each.
 """
 import argparse
 import json
@@ -48,10 +50,43 @@ def ride(npz, keypoints):
     return worst, verts
 
 
+def look_at(eye, at, size, focal):
+    """A pinhole camera (x right, y down, z ahead) at eye looking at at, world up +Y (canonical frame)."""
+    from splatting.raster.camera import from_numpy
+    eye, at = np.asarray(eye, float), np.asarray(at, float)
+    z = (at - eye) / np.linalg.norm(at - eye)
+    x = np.cross(np.array([0.0, -1.0, 0.0]), z)
+    x /= np.linalg.norm(x)
+    R = np.stack([x, np.cross(z, x), z])
+    K = np.array([[focal, 0, size / 2], [0, focal, size / 2], [0, 0, 1.0]])
+    return from_numpy(K, R, -R @ eye, size, size)
+
+
+def avatar_tile(bike_dir, folder, out, size):
+    """The trained avatar in `folder` on the bike's trained Gaussians at crank angle 0, rasterized from the
+    Blender tiles' camera (render_rider_on_bike.py) over the same grey; returns the IK residuals."""
+    from PIL import Image
+    from splatting.bike.model import BikeModel
+    from splatting.cyclist.compose import Cyclist
+    from splatting.cyclist.render import over, render_layers
+    from splatting.rider.avatar import RiderAvatar
+    sys.path.insert(0, os.path.dirname(SCRIPT))
+    from render_rider_on_bike import CAMERA_CANONICAL, TARGET_CANONICAL  # the Blender tiles' camera
+    frame = Cyclist(BikeModel.load(bike_dir), RiderAvatar.load(folder)).pose(
+        torch.zeros(1, 8, dtype=torch.float64), saddle_shared=True)[0]
+    cam = look_at(CAMERA_CANONICAL, TARGET_CANONICAL, size, 0.9 * size)
+    layers = render_layers(frame.gaussians, frame.ids, cam)
+    grey = np.array([184, 186, 189]) / 255.0  # the Blender tiles' world colour as it comes out of Cycles
+    Image.fromarray(over(layers, np.broadcast_to(grey, (size, size, 3)))).save(out)
+    return frame.ik["residual_m"]
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m bench.rider_import_sheet", description=__doc__.splitlines()[0])
     p.add_argument("--bike", required=True, help="a bike folder with keypoints.json and bike.blend")
     p.add_argument("--rider", action="append", required=True, help="NAME=rider.npz (repeatable)")
+    p.add_argument("--avatar", action="append", default=[],
+                   help="NAME=a trained avatar folder (rider.ply, skinning.npz) to draw on the bike's Gaussians (repeatable)")
     p.add_argument("--work", required=True, help="folder for the posed rider files and the pictures")
     p.add_argument("--out", help="the contact sheet .png")
     p.add_argument("--table", help="write the residual table (markdown) here")
@@ -68,6 +103,12 @@ def main(argv=None):
         if not path or not os.path.isfile(path):
             raise UserError(f"--rider {r}: give NAME=an existing rider.npz")
         riders.append((name, path))
+    avatars = []
+    for r in args.avatar:
+        name, _, folder = r.partition("=")
+        if not folder or not os.path.isfile(os.path.join(folder, "skinning.npz")):
+            raise UserError(f"--avatar {r}: give NAME=a trained avatar folder (with skinning.npz)")
+        avatars.append((name, folder))
     os.makedirs(args.work, exist_ok=True)
     rows, jobs = [], []
     for name, path in riders:
@@ -104,10 +145,15 @@ def main(argv=None):
         if r.returncode != 0:
             raise UserError("render_rider_on_bike.py failed")
         from PIL import Image, ImageDraw
+        for name, folder in avatars:
+            png = os.path.join(args.work, f"{name}_avatar.png")
+            res = avatar_tile(args.bike, folder, png, args.size)
+            print(f"{name} (avatar): worst IK residual {max(res.values()) * 100:.2f} cm", flush=True)
+            jobs.append({"out": png, "label": f"{name} (trained Gaussians)"})
         tiles = [Image.open(j["out"]).convert("RGB") for j in jobs]
         cols = 3
         rows_n = math.ceil(len(tiles) / cols)
-        sheet = Image.new("RGB", (cols * args.size, rows_n * args.size), "white")
+        sheet = Image.new("RGB", (cols * args.size, rows_n * args.size), (184, 186, 189))
         for k, (t, j) in enumerate(zip(tiles, jobs)):
             x, y = (k % cols) * args.size, (k // cols) * args.size
             sheet.paste(t, (x, y))

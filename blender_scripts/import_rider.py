@@ -75,7 +75,8 @@ def main(argv):
     print(json.dumps({"rider": args.out, "vertices": len(arrays["vertices"]), "scheme": meta["scheme"],
                       "rest_pose": meta["rest_pose"], "height_m": meta["height_m"],
                       "textures": len(meta["textures"]), "missing_textures": meta["missing_textures"],
-                      "size": meta["size"], "placed_joints": sorted(meta["placed_joints"])}), flush=True)
+                      "size": meta["size"], "placed_joints": sorted(meta["placed_joints"]),
+                      "assumed_texture": meta["assumed_texture"]}), flush=True)
     return 0
 
 

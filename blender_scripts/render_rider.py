@@ -31,6 +31,8 @@ def parse(argv):
     p.add_argument("--samples", type=int, default=None, help="Cycles samples (default: benchmarked setting)")
     p.add_argument("--denoise", choices=["NONE", "FAST", "BALANCED", "HIGH"], default=None)
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--size", type=int, default=None, help="ring views: pixels a side (default 512; the cameras keep "
+                                                          "their field of view)")
     args = p.parse_args(argv)
     if not args.batch and not (args.mesh and args.out):
         p.error("give --mesh and --out, or --batch")
@@ -55,6 +57,7 @@ def main(argv):
     from cyclist_formats import checks
     checks.count("samples", args.samples, hi=1 << 16)
     checks.threads("threads", args.threads)
+    checks.image_size("size", args.size)
     checks.finite("light_yaw_deg", args.light_yaw_deg)
     if args.batch:
         checks.input_file("batch", args.batch)
@@ -74,6 +77,8 @@ def main(argv):
         s = replace(s, samples=args.samples)
     if args.denoise:
         s = replace(s, denoise=args.denoise)
+    if args.size:
+        s = replace(s, size=args.size)
     if args.batch:
         try:
             with open(args.batch) as f:

@@ -4,7 +4,8 @@ Blender's importer (3.4 .. 5.0) decodes Draco (KHR_draco_mesh_compression, its b
 KHR_mesh_quantization and EXT_texture_webp itself; meshopt-compressed buffers and Basis Universal (KTX2)
 textures it refuses deep inside with a traceback.  `unreadable_extensions(path)` reads the file's JSON
 (the .gltf, or a .glb's first chunk) and names them, so `rider import` can refuse in one line before
-Blender starts, saying how to get a file it reads.
+Blender starts, saying how to get a file it reads.  `rider import` decodes meshopt itself when the
+meshoptimizer package is installed (gltf_meshopt.py).
 """
 import json
 import os
@@ -13,10 +14,11 @@ import struct
 from .errors import UserError
 
 # extension -> how to get a file without it
+MESHOPT_ADVICE = ("`pip install meshoptimizer` and `rider import` decodes it, or export the model again without "
+                  "meshopt compression (or decompress it: npm @gltf-transform/cli `gltf-transform copy`)")
 NOT_READ = {
-    "EXT_meshopt_compression": "export the model again without meshopt compression, or decompress it with a "
-                               "tool that decodes meshopt (meshoptimizer's gltfpack, npm @gltf-transform/cli)",
-    "KHR_meshopt_compression": "export the model again without meshopt compression, or decompress it with a tool that decodes meshopt (npm @gltf-transform/cli)",
+    "EXT_meshopt_compression": MESHOPT_ADVICE,
+    "KHR_meshopt_compression": MESHOPT_ADVICE,
     "KHR_texture_basisu": "convert its KTX2 textures to PNG (e.g. KTX-Software's `ktx extract`) or export again "
                           "with PNG/JPEG textures",
 }
@@ -56,9 +58,10 @@ def unreadable_extensions(path):
     return [(e, NOT_READ[e]) for e in sorted(need) if e in NOT_READ]
 
 
-def check_readable(path):
-    """UserError naming the first extension Blender cannot read, and what to do."""
-    bad = unreadable_extensions(path)
+def check_readable(path, decoded=()):
+    """UserError naming the first extension Blender cannot read (other than those in `decoded`, which the
+    caller decodes before Blender reads the file), and what to do."""
+    bad = [(e, a) for e, a in unreadable_extensions(path) if e not in decoded]
     if bad:
         ext, advice = bad[0]
         raise UserError(f"{path}: uses the glTF extension {ext}, which Blender's glTF importer cannot read: "

@@ -76,8 +76,9 @@ class Assets:
         key = (bike, rider)
         if key not in self.looks:
             out = {}
-            if rider is not None:
-                body = self.bodies[rider]
+            body = self.bodies.get(rider)
+            # an imported rider has no clothing regions (its clothes are its own textures): the gain alone applies
+            if body is not None and body.regions is not None:
                 out.update(rider_reg=appearance.rider_regions(self.avatars[rider].gaussians.means, body),
                            rider_colors=appearance.reference_colours(body))
             paint = (self.meta(bike).get("spec") or {}).get("frame_colour")

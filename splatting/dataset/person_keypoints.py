@@ -43,13 +43,15 @@ COCO17_TOLERANCE_M = [0.03, 0.03, 0.03, 0.03, 0.03, 0.07, 0.07, 0.05, 0.05, 0.05
 
 
 def _ring(v, joint, axis, half_width, radius, extra=None):
-    sel = (np.abs(v[:, axis] - joint[axis]) < half_width) & (np.linalg.norm(v - joint, axis=1) < radius)
-    if extra is not None:
-        sel &= extra
-    idx = np.nonzero(sel)[0]
-    if len(idx) == 0:
-        raise ValueError("empty vertex ring")
-    return idx
+    # a coarse mesh (an imported low-poly rider) may have no vertex within the band: widen it, up to 4x
+    for grow in (1.0, 2.0, 4.0):
+        sel = (np.abs(v[:, axis] - joint[axis]) < grow * half_width) & (np.linalg.norm(v - joint, axis=1) < grow * radius)
+        if extra is not None:
+            sel &= extra
+        idx = np.nonzero(sel)[0]
+        if len(idx):
+            return idx
+    raise ValueError("empty vertex ring")
 
 
 def regressor(rider):

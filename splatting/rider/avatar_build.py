@@ -30,11 +30,13 @@ def views_complete(views_dir, n=N_VIEWS):
     return all(os.path.isfile(os.path.join(views_dir, "rgba", f"camera{i:04d}", "0000.png")) for i in range(n))
 
 
-def render_views(mesh, views_dir, samples=None, python=None, log=print):
+def render_views(mesh, views_dir, samples=None, python=None, log=print, size=None):
     """Run the Blender side (bpy module in this venv by default) on the rest mesh."""
     cmd = [python or sys.executable, RENDER_SCRIPT, "--mesh", mesh, "--out", views_dir]
     if samples:
         cmd += ["--samples", str(samples)]
+    if size:
+        cmd += ["--size", str(size)]
     log(f"rider-avatar: rendering 36 views ({' '.join(cmd[1:])})")
     r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     if r.returncode != 0 or not views_complete(views_dir):
@@ -43,7 +45,7 @@ def render_views(mesh, views_dir, samples=None, python=None, log=print):
 
 
 def build_avatar(rider_id, out_dir, iterations=None, time_budget_s=None, max_gaussians=None, samples=None,
-                 threads=1, log=print):
+                 threads=1, log=print, size=None):
     """Run the four steps; returns {"avatar": out_dir, "steps": {step: seconds or "skipped"}, "train": metrics}."""
 
 
@@ -67,7 +69,7 @@ def build_avatar(rider_id, out_dir, iterations=None, time_budget_s=None, max_gau
     step("mesh", os.path.isfile(mesh), lambda: export_rider(rider, mesh))
     # an imported rider's own file carries its textures: the training views draw them (docs/rider_import.md)
     views_mesh = rider.spec["rider_file"] if rider.spec.get("body") == "imported" else mesh
-    step("views", views_complete(views), lambda: render_views(views_mesh, views, samples, log=log))
+    step("views", views_complete(views), lambda: render_views(views_mesh, views, samples, log=log, size=size))
 
     def do_train():
         cfg = TrainConfig(threads=threads)

@@ -81,11 +81,13 @@ class Avatar:
         p.add_argument("--time-budget-s", type=float, default=None, help="training wall-time cap")
         p.add_argument("--max-gaussians", type=int, default=None)
         p.add_argument("--samples", type=int, default=None, help="Cycles samples for the 36 views")
+        p.add_argument("--size", type=int, default=None, help="pixels a side of the 36 views (default 512)")
         p.add_argument("--threads", type=int, default=1, help="torch threads for training")
 
     @staticmethod
     def check_args(args):
         checks.count("iterations", args.iterations)
+        checks.image_size("size", args.size)
         checks.positive("time_budget_s", args.time_budget_s)
         checks.gaussians("max_gaussians", args.max_gaussians)
         checks.count("samples", args.samples, hi=1 << 16)
@@ -103,7 +105,7 @@ class Avatar:
                 raise UserError(f"--{name.replace('_', '-')} must be >= 1")
         out = args.out or os.path.join(paths.DATA, "riders", args.id)
         res = build_avatar(args.id, out, args.iterations, args.time_budget_s, args.max_gaussians, args.samples,
-                           args.threads)
+                           args.threads, size=args.size)
         print(f"{out}: avatar ready ({', '.join(f'{k} {v}' for k, v in res['steps'].items())})")
         return 0
 

@@ -8,6 +8,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 
 from cyclist_formats import checks
 from cyclist_formats.errors import UserError
@@ -42,8 +43,9 @@ def check_args(args):
     check_rider_id(args.id)
     checks.number("height_m", args.height_m, 0.5, 2.6)
     checks.output_file("out", args.out, (".npz",))
+    from cyclist_formats import gltf_meshopt
     from cyclist_formats.gltf_extensions import check_readable
-    check_readable(args.model)
+    check_readable(args.model, gltf_meshopt.MESHOPT if gltf_meshopt.decoder() is not None else ())
     if args.blender is not None:
         checks.input_file("blender", args.blender)
 
@@ -57,6 +59,18 @@ def blender_command(model, rider_id, out, height_m=None, blender=None):
     return [sys.executable, SCRIPT] + tail
 
 
+def without_meshopt(model, tmp, log=print):
+    """The model itself, or where it needs meshopt decoding (which Blender's importer cannot do), a
+    self-contained .glb of the same name in `tmp` written without it (cyclist_formats/gltf_meshopt.py)."""
+    from cyclist_formats import gltf_extensions, gltf_meshopt
+    used = {e for e, _ in gltf_extensions.unreadable_extensions(model)} & set(gltf_meshopt.MESHOPT)
+    if not used:
+        return model
+    out = os.path.join(tmp, os.path.splitext(os.path.basename(model))[0] + ".glb")
+    log(f"rider import: decoding {', '.join(sorted(used))} (meshoptimizer)", flush=True)
+    return gltf_meshopt.decompress(model, out)
+
+
 def import_rider(model, rider_id, out=None, height_m=None, blender=None, force=False, log=print):
     """Run the Blender side; returns its summary dict. UserError (its one line) when it refuses."""
     from splatting.rider.imported import rider_path
@@ -66,9 +80,11 @@ def import_rider(model, rider_id, out=None, height_m=None, blender=None, force=F
     out = os.fspath(out or rider_path(rider_id))
     if os.path.exists(out) and not force:
         raise UserError(f"{out} exists (rider {rider_id!r} was imported before): give --force to replace it")
-    cmd = blender_command(model, rider_id, out, height_m, blender)
-    log(f"rider import: reading {model} in Blender ({os.path.basename(cmd[0])})", flush=True)
-    r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        readable = without_meshopt(model, tmp, log)
+        cmd = blender_command(readable, rider_id, out, height_m, blender)
+        log(f"rider import: reading {model} in Blender ({os.path.basename(cmd[0])})", flush=True)
+        r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     if r.returncode != 0 or not os.path.isfile(out):
         lines = [ln for ln in r.stderr.strip().splitlines() if ln.strip()]
         why = next((ln.split("error: ", 1)[1] for ln in reversed(lines) if "import_rider.py: error: " in ln),
@@ -89,6 +105,9 @@ def run(args):
     print(f"  size: {res.get('size', '?')}")
     if res.get("placed_joints"):
         print(f"  joints placed from their neighbours (no bone): {', '.join(res['placed_joints'])}")
+    if res.get("assumed_texture"):
+        print(f"note: the model's materials reference no texture; {res['assumed_texture']}, the one image beside it, "
+              f"is taken as its colour")
     for m in res.get("missing_textures") or []:
         print(f"warning: texture not found, flat base colour used: {m}", file=sys.stderr)
     return 0

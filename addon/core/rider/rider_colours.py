@@ -221,3 +221,51 @@ def _attribute_colors(me, name, loop_vert):
     a.data.foreach_get("color", c)  # scene linear for both FLOAT_COLOR and BYTE_COLOR
     c = srgb_from_linear(c.reshape(-1, 4)[:, :3])
     return c[loop_vert] if a.domain == "POINT" else c
+
+
+NOT_A_SKIN = ("preview", "thumb", "screenshot", "icon", "render", "normal", "rough", "metal", "spec", "gloss",
+              "_ao", "occlusion", "emiss", "height", "bump", "disp", "opacity", "alpha", "mask")
+
+
+def lone_texture(meshes, model_dir):
+    """A skin shipped beside a model that references none (Kenney's characters: material 'skin' with a flat
+    colour, `casualMaleA.png` next to the .fbx).  When no material of the meshes draws an image or a colour
+    attribute, every mesh has UVs, and exactly one image that is not a preview or a normal, roughness, ...
+    map lies in the model's folder or its texture folders, it becomes the colour of every material (an
+    Image Texture node on its Base Color / Color).  Returns that image's path, or None (nothing changed)."""
+    if not model_dir or not meshes or any(o.data.uv_layers.active is None for o in meshes):
+        return None
+    mats = {m for o in meshes for m in o.data.materials if m is not None and getattr(m, "node_tree", None)}
+    missing = []
+    if not mats or any(colour_source(m, "", (), missing)[0] != "flat" for m in mats) or missing:
+        return None
+    found = set()
+    for sub in TEXTURE_FOLDERS:
+        folder = os.path.normpath(os.path.join(model_dir, sub))
+        if sub.startswith("..") or not os.path.isdir(folder):
+            continue
+        for f in os.listdir(folder):
+            if f.lower().endswith(IMAGE_EXTENSIONS) and not any(w in f.lower() for w in NOT_A_SKIN):
+                found.add(os.path.realpath(os.path.join(folder, f)))
+    if len(found) != 1:
+        return None
+    path = found.pop()
+    try:
+        img = bpy.data.images.load(path, check_existing=True)
+    except RuntimeError:
+        return None
+    if img.size[0] == 0 or img.size[1] == 0:  # (reading the size loads the file)
+        return None
+    for m in mats:
+        nt = m.node_tree
+        outs = [n for n in nt.nodes if n.type == "OUTPUT_MATERIAL"]
+        out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
+        if out is None or not out.inputs["Surface"].links:
+            continue
+        shader = out.inputs["Surface"].links[0].from_node
+        sock = next((shader.inputs[k] for k in ("Base Color", "Color") if k in shader.inputs), None)
+        if sock is not None:
+            tex = nt.nodes.new("ShaderNodeTexImage")
+            tex.image = img
+            nt.links.new(tex.outputs["Color"], sock)
+    return path

@@ -27,13 +27,14 @@ weights over those joints and per-vertex colours.  Steps:
    and the texture itself (the rider file's texture layer), which the avatar's training renders draw.
 """
 import math
+import os
 
 import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
 from ..contract import UserError, bone_map
-from .rider_colours import object_colors
+from .rider_colours import lone_texture, object_colors
 from .rider_helpers import helper_faces
 
 SWING_MIN_DEG = 1.0
@@ -48,7 +49,8 @@ UP_TOLERANCE_DEG = 30.0
 MIN_HEIGHT_M, MAX_HEIGHT_M = 0.5, 2.6
 # a size outside MIN..MAX read in another unit when that makes it PLAUSIBLE_M tall (most likely first)
 # (feet are not guessed: a stylised figure 3-5 units tall would become a child that cannot reach the pedals)
-UNIT_GUESSES = ((0.01, "centimetres"), (0.001, "millimetres"), (0.0254, "inches"), (0.1, "decimetres"))
+UNIT_GUESSES = ((0.01, "centimetres"), (0.001, "millimetres"), (0.0254, "inches"), (0.1, "decimetres"),
+                (100.0, "metres shrunk 100 times (a centimetre conversion applied twice)"))
 PLAUSIBLE_M = (1.0, 2.2)
 PELVIS_LOW, PELVIS_ABOVE_HIPS = 0.015, 0.008  # of the ankle-to-head height (SMPL: pelvis 1 cm above hips)
 END_HAND_FRACTION = 0.47  # SMPL's hand joint (knuckles) along wrist -> fingertips
@@ -203,14 +205,20 @@ def body_frame(heads):
 
     Up is Blender's +Z (both importers bring glTF's Y-up and FBX's axes to Z-up) when the spine
     (pelvis -> neck) is within UP_TOLERANCE_DEG of it, so a spine leaning a little is kept as it is
-    modelled; otherwise (a file lying down) the spine itself.  Right comes from the hips and shoulders."""
+    modelled; a file lying down (turned by a right angle) takes the world axis the spine is as near,
+    else the spine itself.  Right comes from the hips and shoulders."""
     J = {n: i for i, n in enumerate(_joints())}
     spine = heads[J["neck"]] - heads[J["pelvis"]]
     lr = (heads[J["right_hip"]] - heads[J["left_hip"]]) + (heads[J["right_shoulder"]] - heads[J["left_shoulder"]])
     if np.linalg.norm(spine) < 1e-9 or np.linalg.norm(lr) < 1e-9:
         raise UserError("the skeleton is degenerate: pelvis and neck (or left and right hips) coincide")
     spine = spine / np.linalg.norm(spine)
-    up = np.array([0.0, 0.0, 1.0]) if spine[2] > math.cos(math.radians(UP_TOLERANCE_DEG)) else spine
+    # a file lying down is nearly always one turned by a right angle (Y-up read as Z-up, an exporter's
+    # axis setting): up is the world axis the spine is within UP_TOLERANCE_DEG of, the spine itself otherwise
+    k = int(np.argmax(np.abs(spine)))
+    axis = np.zeros(3)
+    axis[k] = np.sign(spine[k])
+    up = axis if spine @ axis > math.cos(math.radians(UP_TOLERANCE_DEG)) else spine
     right = lr - up * (lr @ up)
     if np.linalg.norm(right) < 1e-6 * np.linalg.norm(lr):
         raise UserError("the skeleton's left-right axis (hips, shoulders) is parallel to its spine")
@@ -332,7 +340,10 @@ def _fill_unweighted(W, V):
     s = W.sum(1)
     empty = np.flatnonzero(s <= 0)
     have = np.flatnonzero(s > 0)
-    for chunk in np.array_split(empty, max(1, len(empty) // 512 + 1)):
+    if len(empty) == 0:
+        return 0
+    step = max(1, 4_000_000 // max(1, len(have)))  # ~100 MB of distances at a time
+    for chunk in np.array_split(empty, len(empty) // step + 1):
         if len(chunk):
             d = ((V[chunk, None, :] - V[None, have, :]) ** 2).sum(-1)
             W[chunk] = W[have[d.argmin(1)]]
@@ -387,14 +398,12 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, mod
             rest_deform[j] = _m2np(A @ pb.matrix @ pb.bone.matrix_local.inverted() @ A_inv).tolist()
         heads_t = _posed_heads(arm, bone_of, placed)
         V, F, W, C, UV, FT, n_filled = [], [], [], [], [], [], 0
-        images, base, missing, keep_parts = {}, 0, [], []
+        images, base, missing, keep_parts, weighted = {}, 0, [], [], []
+        assumed_texture = lone_texture([o for o in skinned if o.type == "MESH"], model_dir)
         for obj in skinned:
             v = _evaluated_world_vertices(obj)
             w = _object_weights(obj, arm, bone_joint)
-            if (w.sum(1) > 0).sum() * 2 < len(w):
-                raise UserError(f"{what}: unrigged mesh: object '{obj.name}' has bone weights on only "
-                                f"{int((w.sum(1) > 0).sum())} of {len(w)} vertices")
-            n_filled += _fill_unweighted(w, v)
+            weighted.append((int((w.sum(1) > 0).sum()), len(w), obj.name))
             tri, tri_loops = _triangles(obj.data)
             col, loop_uv, loop_tex, loop_alpha = object_colors(obj, what, images, [model_dir] if model_dir else [],
                                                                missing)
@@ -413,6 +422,13 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, mod
             arm.data.pose_position = saved_position
             bpy.context.view_layer.update()
     V, F, W, C = np.concatenate(V), np.concatenate(F), np.concatenate(W), np.concatenate(C)
+    # the body (the largest skinned mesh) and the whole must be mostly weighted; a piece weighted sparsely
+    # or not at all (a cape pinned at its collar, a strap) takes its vertices' nearest weighted ones
+    wc, n, name = max(weighted, key=lambda t: t[1])
+    if wc * 2 < n or sum(t[0] for t in weighted) * 2 < len(W):
+        wc, n, name = min(weighted, key=lambda t: t[0] / t[1])
+        raise UserError(f"{what}: unrigged mesh: object '{name}' has bone weights on only {wc} of {n} vertices")
+    n_filled = _fill_unweighted(W, V)
     UV, FT, keep = np.concatenate(UV), np.concatenate(FT), np.concatenate(keep_parts)
     n_cut = int((~keep).sum())
     if n_cut == len(keep):
@@ -451,7 +467,8 @@ def rider_from_objects(objects, rider_id, what, height_m=None, restore=True, mod
         "swings_deg": swings, "height_m": round(float(Vc[:, 1].max()), 4), "scale": scale, "size": size,
         "canonical_from_world": canon.tolist(), "t_pose_deform_world": rest_deform,
         "unweighted_vertices_filled": int(n_filled), "textures": sorted(images),
-        "missing_textures": missing, "transparent_faces_dropped": n_cut, "helper_faces_dropped": n_helper,
+        "missing_textures": missing, "assumed_texture": assumed_texture and os.path.basename(assumed_texture),
+        "transparent_faces_dropped": n_cut, "helper_faces_dropped": n_helper,
         "blender": bpy.app.version_string,
     }
     arrays = {"vertices": Vc, "faces": F, "joints": Jc, "weights": W, "colors": C}
