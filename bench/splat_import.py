@@ -69,6 +69,7 @@ def gaussians_ply(bike_dir, work):
 
 
 MODES = ("gaussian", "camera", "preview")
+EXACT = ("gaussian", "camera")  # deterministic: the pixel-centre ray, no Russian roulette, 1 sample
 
 
 def blender_worker(ply, cameras_json, cams, mode, out_dir, eps2d, antialiased):
@@ -87,7 +88,7 @@ def blender_worker(ply, cameras_json, cams, mode, out_dir, eps2d, antialiased):
     timing = {"import_s": [], "render_s": []}
     scene = None
     for c in cams:
-        args = argparse.Namespace(camera=f"{cameras_json}:camera{c:04d}", samples=1 if mode == "camera" else SAMPLES,
+        args = argparse.Namespace(camera=f"{cameras_json}:camera{c:04d}", samples=1 if mode in EXACT else SAMPLES,
                                   denoise="NONE", mode=mode, size=512, view=3)
         camera = script.render_camera(args, [ply])
         if scene is None or mode == "camera":
@@ -154,7 +155,7 @@ def run(results, out_dir, bike_dir=None, cams=CAMERAS, picture=None, modes=MODES
                 ims[mode] = bl
             pics.append((ras, ims, mesh))
     summary = {"cameras": list(cams), "gaussians": len(g), "bike": os.path.basename(bike_dir.rstrip("/")),
-               "samples": {m: 1 if m == "camera" else SAMPLES for m in modes}, "eps2d": eps2d,
+               "samples": {m: 1 if m in EXACT else SAMPLES for m in modes}, "eps2d": eps2d,
                "antialiased": antialiased}
     for k, rs in rows.items():
         summary[k] = {m: float(np.mean([r[m] for r in rs])) for m in rs[0]}

@@ -135,11 +135,11 @@ def setup_render(scene, camera, args):
     s = replace(render.RenderSettings(), size=size)
     if args.samples:
         s = replace(s, samples=args.samples)
-    elif args.mode == "camera":
+    elif args.mode != "preview":
         s = replace(s, samples=1)  # deterministic: every sample is the same pixel-centre ray
     if args.denoise:
         s = replace(s, denoise=args.denoise)
-    elif args.mode == "camera":
+    elif args.mode != "preview":
         s = replace(s, denoise="NONE")
     try:
         render.configure_cycles(scene, s)
@@ -151,18 +151,7 @@ def setup_render(scene, camera, args):
         # Each translucent sphere costs one transparent bounce (back faces are skipped in the
         # material); configure_cycles' 2 would turn a stack of splats opaque black.
         cy.transparent_max_bounces = 64
-    elif args.mode == "gaussian":
-        cy.transparent_max_bounces = splat_gaussian.TRANSPARENT_BOUNCES
-        # The rasterizer evaluates each pixel at its centre: a 0.01 px wide filter makes every
-        # sample the centre ray (splat_billboard.POINT_FILTER); Cycles' default 1.5 px
-        # Blackman-Harris widens sub-pixel Gaussians by about a pixel.  Samples then only
-        # average the Russian roulette below
-        cy.pixel_filter_type, cy.filter_width = splat_billboard.POINT_FILTER
-        # Russian roulette only after MIN_TRANSPARENT hits: from the first hit it kills paths
-        # behind a few faint Gaussians at random (unbiased, but noise where 3DGS blends
-        # deterministically); never would walk every ray through all of them (12x slower)
-        cy.min_transparent_bounces = splat_gaussian.MIN_TRANSPARENT
-    else:  # camera: the pixel-centre ray, through every quad (no Russian roulette)
+    else:  # gaussian and camera: the pixel-centre ray, through every square (no Russian roulette)
         cy.pixel_filter_type, cy.filter_width = splat_billboard.POINT_FILTER
         cy.transparent_max_bounces = cy.min_transparent_bounces = splat_billboard.TRANSPARENT_BOUNCES
     if args.mode != "preview":
@@ -171,6 +160,8 @@ def setup_render(scene, camera, args):
     render.setup_lighting(scene)
     cam = render.ensure_camera(scene, size, float(K[0, 0]))
     render.place_camera(cam, R, T)
+    for obj in scene.objects:  # Blender 3.x: the Gaussian squares face this camera
+        splat_gaussian.set_camera(obj, cam)
 
 
 def render(scene, paths, args):

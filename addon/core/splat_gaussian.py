@@ -27,7 +27,7 @@ import numpy as np
 
 from . import frames
 from .contract import sh_basis
-from .splat_nodes import emission_over_clear, finish_material, instance_node_group, link_with_nodes, new_material
+from .splat_nodes import emission_over_clear, enabled_output, finish_material, link_with_nodes, new_material, new_socket
 
 K_SIGMA = 3.0  # largest proxy extent in standard deviations (3DGS's screen-space cut-off is 3 sigma too)
 # The rasterizer adds 0.3 px^2 to every projected covariance (eps2d, 3DGS's low-pass), so the
@@ -48,7 +48,10 @@ MIN_TRANSPARENT = 32  # Cycles min_transparent_bounces: hits before Russian roul
 # Gaussians overlap the encoding's concave curve brightens the mix (50 % black over white:
 # 0.735 instead of 0.5), the speckles on dark tyres and tubes of the trained bike.
 DISPLAY_VIEW_TRANSFORM = "Raw"
-ICO_INRADIUS = 0.7946544722917661  # inscribed radius of the unit-circumradius icosahedron
+# the square's half-width over k max(sigma): a ray passing within k sigma of the centre meets the
+# square (perpendicular to the line of sight through the centre) within k max(sigma) / cos of
+# the ray's angle to that line, and that angle is below k max(sigma) / distance
+QUAD_MARGIN = 1.02
 # INRIA 3DGS real SH, the constants and the numpy basis terms shared with splatting/gaussians/sh.py
 C0, C1, C2, C3, sh_terms = sh_basis.C0, sh_basis.C1, sh_basis.C2, sh_basis.C3, sh_basis.sh_terms
 
@@ -94,12 +97,13 @@ def lowpass_for_view(data, R, T, focal, eps2d):
 def gaussian_points(data, max_degree=3, lowpass_m=LOWPASS_M):
     """Structured 3DGS array -> per-point arrays for the Gaussian mode, Blender frame.
 
-    co (N, 3); opacity (N,) sigmoid; rot (N, 3) XYZ Euler of C R (R from the wxyz quaternion);
-    scale (N, 3) k * sqrt(exp(log scale)^2 + lowpass_m^2) (lowpass_m a number or (N_file,),
-    lowpass_for_view); k (N,) the proxy extent in sigmas,
-    min(K_SIGMA, the radius where alpha falls to 1/255); Gaussians that never reach 1/255 are
-    left out (keep (N_file,) says which); sh (N, K, 3) coefficients with sh[:, 0] = f_dc and
-    f_rest read channel-major (f_rest_{c * (K-1) + k - 1}); degree.
+    co (N, 3); opacity (N,) sigmoid; w (N, 3, 3) the whitening W = S^-1 (C R)^T (rows g_w0..2:
+    W (p - co) is p's offset from the centre in sigmas, Blender frame); sigma (N, 3) =
+    sqrt(exp(log scale)^2 + lowpass_m^2) (lowpass_m a number or (N_file,), lowpass_for_view);
+    k (N,) the extent in sigmas, min(K_SIGMA, the radius where alpha falls to 1/255); half (N,)
+    the camera-facing square's half-width, QUAD_MARGIN k max(sigma); Gaussians that never reach
+    1/255 are left out (keep (N_file,) says which); sh (N, K, 3) coefficients with sh[:, 0] =
+    f_dc and f_rest read channel-major (f_rest_{c * (K-1) + k - 1}); degree.
     """
     f = lambda k: data[k].astype(np.float64)  # noqa: E731
     names = data.dtype.names
@@ -112,9 +116,7 @@ def gaussian_points(data, max_degree=3, lowpass_m=LOWPASS_M):
         for c in range(3):
             sh[:, k, c] = f(f"f_rest_{c * n_rest_file + k - 1}")
     R = quat_to_matrix(np.stack([f(f"rot_{i}") for i in range(4)], 1))
-    # the ellipsoid is {C R S u : |u| <= 1}: its rotation in Blender's frame is C R (a proper
-    # rotation), with the file's scales on the same local axes (not C R C^T, which would
-    # swap the local y and z scales)
+    # the ellipsoid is {C R S u : |u| <= 1} in Blender's frame: its whitening is S^-1 (C R)^T
     Rb = frames.C @ R
     op = 1.0 / (1.0 + np.exp(-f("opacity")))
     keep = op * 255.0 > 1.0
@@ -122,23 +124,81 @@ def gaussian_points(data, max_degree=3, lowpass_m=LOWPASS_M):
     k = np.minimum(k, K_SIGMA)
     lp = np.asarray(lowpass_m, np.float64).reshape(-1, 1)
     sig = np.sqrt(np.exp(2 * np.stack([f(f"scale_{i}") for i in range(3)], 1)) + lp ** 2)
+    w = np.transpose(Rb, (0, 2, 1)) / sig[:, :, None]
     return {"co": frames.to_blender(np.stack([f("x"), f("y"), f("z")], 1))[keep],
-            "opacity": op[keep], "rot": matrix_to_euler_xyz(Rb)[keep],
-            "scale": (k[:, None] * sig)[keep], "k": k[keep],
-            "sh": sh[keep], "degree": deg, "keep": keep}
+            "opacity": op[keep], "w": w[keep], "sigma": sig[keep], "k": k[keep],
+            "half": (QUAD_MARGIN * k * sig.max(1))[keep], "sh": sh[keep], "degree": deg, "keep": keep}
 
 
 # ---- bpy side ----------------------------------------------------------------------------
 
 def gaussian_node_group(material, name="splat_gaussians"):
-    """Geometry Nodes: vertices -> points -> an icosahedron instance per point (g_rot, g_scale)."""
-    def icosahedron(n):
-        ico = n.new("GeometryNodeMeshIcoSphere")
-        ico.inputs["Radius"].default_value = 1.0 / ICO_INRADIUS
-        ico.inputs["Subdivisions"].default_value = 1
-        return ico
+    """Geometry Nodes: vertices -> points -> a square per point facing the camera, realized.
 
-    return instance_node_group(name, material, icosahedron)
+    Each square ([-1, 1]^2 scaled by g_half) lies in the plane through the Gaussian's centre
+    perpendicular to the line from the camera, so a camera ray meets the squares in the order of
+    the centres' distances: the rasterizer's order (module docstring).  The camera is the scene's
+    active one (Active Camera, Blender 4.1+) or the modifier's `Camera` input (3.x); the squares
+    turn with it whenever it moves.  Realized, so the shader's Object coordinates are the
+    splat object's own and its attributes (g_mu, g_w0..2, sh_k) reach the shader as mesh
+    attributes."""
+    import bpy
+
+    ng = bpy.data.node_groups.new(name, "GeometryNodeTree")
+    new_socket(ng, "Geometry", "INPUT", "NodeSocketGeometry")
+    new_socket(ng, "Geometry", "OUTPUT", "NodeSocketGeometry")
+    n, link = ng.nodes, ng.links.new
+    gin, gout = n.new("NodeGroupInput"), n.new("NodeGroupOutput")
+    if hasattr(bpy.types, "GeometryNodeInputActiveCamera"):
+        cam = n.new("GeometryNodeInputActiveCamera").outputs[0]
+    else:  # 3.x: the camera object is the modifier's input (set_camera)
+        new_socket(ng, "Camera", "INPUT", "NodeSocketObject")
+        cam = gin.outputs["Camera"]
+    info = n.new("GeometryNodeObjectInfo")
+    info.transform_space = "RELATIVE"  # the camera in the splat object's own coordinates
+    link(cam, info.inputs["Object"])
+    to_points = n.new("GeometryNodeMeshToPoints")
+    to_points.mode = "VERTICES"
+    pos = n.new("GeometryNodeInputPosition")
+    towards = n.new("ShaderNodeVectorMath")
+    towards.operation = "SUBTRACT"
+    link(info.outputs["Location"], towards.inputs[0])
+    link(pos.outputs[0], towards.inputs[1])
+    align = n.new("FunctionNodeAlignRotationToVector" if hasattr(bpy.types, "FunctionNodeAlignRotationToVector")
+                  else "FunctionNodeAlignEulerToVector")
+    align.axis = "Z"
+    link(towards.outputs["Vector"], align.inputs["Vector"])
+    grid = n.new("GeometryNodeMeshGrid")
+    grid.inputs["Size X"].default_value = grid.inputs["Size Y"].default_value = 2.0
+    grid.inputs["Vertices X"].default_value = grid.inputs["Vertices Y"].default_value = 2
+    set_mat = n.new("GeometryNodeSetMaterial")
+    set_mat.inputs["Material"].default_value = material
+    link(grid.outputs["Mesh"], set_mat.inputs["Geometry"])
+    half = n.new("GeometryNodeInputNamedAttribute")
+    half.data_type = "FLOAT"
+    half.inputs["Name"].default_value = "g_half"
+    inst = n.new("GeometryNodeInstanceOnPoints")
+    link(gin.outputs[0], to_points.inputs["Mesh"])
+    link(to_points.outputs["Points"], inst.inputs["Points"])
+    link(set_mat.outputs["Geometry"], inst.inputs["Instance"])
+    link(align.outputs["Rotation"], inst.inputs["Rotation"])
+    link(enabled_output(half, "Attribute"), inst.inputs["Scale"])
+    realize = n.new("GeometryNodeRealizeInstances")
+    link(inst.outputs["Instances"], realize.inputs[0])
+    link(realize.outputs[0], gout.inputs[0])
+    for i, node in enumerate(n):
+        node.location = (200 * (i % 6), -200 * (i // 6))
+    return ng
+
+
+def set_camera(obj, camera):
+    """3.x: point the squares of `obj` at `camera` (4.1+ follows the scene's active camera)."""
+    mod = obj.modifiers.get("splat_gaussians")
+    if mod is None or camera is None:
+        return
+    ident = next((s.identifier for s in getattr(mod.node_group, "inputs", ()) if s.name == "Camera"), None)
+    if ident is not None:
+        mod[ident] = camera
 
 
 def _sh_basis(b, x, y, z, degree):
@@ -166,61 +226,66 @@ def _sh_basis(b, x, y, z, degree):
 def gaussian_material(degree, name="splat_gaussian"):
     """Emission material with the Gaussian falloff and SH colour (see the module docstring)."""
     mat, b = new_material(name)
+    attr = lambda nm, out="Vector": b.attr(nm, out, "GEOMETRY")  # noqa: E731  (realized squares)
     tex = b.n.new("ShaderNodeTexCoord")
     geo = b.n.new("ShaderNodeNewGeometry")
-    # Object coordinates and World->Object vectors use the instance's own transform, so both
-    # are whitened (units of K_SIGMA sigma); this also holds when the imported object is moved
-    P = b.vmath("SCALE", tex.outputs["Object"], scale=b.attr("g_k", "Fac"))
+    # offsets and the ray direction in the splat object's coordinates (so moving the object keeps
+    # the shading), whitened by the Gaussian's own W (rows g_w0..2): sigma units
+    mu = attr("g_mu")
+    v = b.vmath("SUBTRACT", tex.outputs["Object"], mu)
     vt = b.n.new("ShaderNodeVectorTransform")
     vt.vector_type, vt.convert_from, vt.convert_to = "VECTOR", "WORLD", "OBJECT"
     b.link(geo.outputs["Incoming"], vt.inputs[0])
-    D = b.vmath("NORMALIZE", vt.outputs[0])
+    rows = [attr(f"g_w{i}") for i in range(3)]
+    P, Dw = b.n.new("ShaderNodeCombineXYZ"), b.n.new("ShaderNodeCombineXYZ")
+    for i, w in enumerate(rows):
+        b.link(b.vmath("DOT_PRODUCT", w, v), P.inputs[i])
+        b.link(b.vmath("DOT_PRODUCT", w, vt.outputs[0]), Dw.inputs[i])
+    P = P.outputs[0]
+    D = b.vmath("NORMALIZE", Dw.outputs[0])
     t = b.vmath("DOT_PRODUCT", P, D)
     d2 = b.math("SUBTRACT", b.vmath("DOT_PRODUCT", P, P), b.mul(t, t))  # sigma units
-    alpha = b.mul(b.attr("opacity", "Fac"), b.math("EXPONENT", b.mul(b.math("MAXIMUM", d2, 0.0), -0.5)))
+    alpha = b.mul(attr("opacity", "Fac"), b.math("EXPONENT", b.mul(b.math("MAXIMUM", d2, 0.0), -0.5)))
     alpha = b.mul(alpha, b.math("GREATER_THAN", alpha, ALPHA_MIN))
     alpha = b.math("MINIMUM", alpha, ALPHA_MAX)
 
-    # view direction camera -> the Gaussian's centre, as the rasterizer's eval_sh: the camera is
-    # at P + Incoming * (view distance), the centre is the instance's location; Blender (x, y, z)
+    # view direction camera -> the Gaussian's centre, as the rasterizer's eval_sh, in the splat
+    # object's coordinates: the camera is at P + Incoming * (view distance); Blender (x, y, z)
     # -> canonical (x, z, -y)
-    cam_data, info = b.n.new("ShaderNodeCameraData"), b.n.new("ShaderNodeObjectInfo")
-    cam_pos = b.vmath("ADD", geo.outputs["Position"],
-                      b.vmath("SCALE", geo.outputs["Incoming"], scale=cam_data.outputs["View Distance"]))
+    cam_data = b.n.new("ShaderNodeCameraData")
+    cam_pos = b.vmath("ADD", tex.outputs["Object"],
+                      b.vmath("SCALE", vt.outputs[0], scale=cam_data.outputs["View Distance"]))
     sep = b.n.new("ShaderNodeSeparateXYZ")
-    b.link(b.vmath("NORMALIZE", b.vmath("SUBTRACT", info.outputs["Location"], cam_pos)), sep.inputs[0])
+    b.link(b.vmath("NORMALIZE", b.vmath("SUBTRACT", mu, cam_pos)), sep.inputs[0])
     x, y, z = sep.outputs[0], sep.outputs[2], b.mul(sep.outputs[1], -1.0)
-    col = b.vmath("SCALE", b.attr("sh_0"), scale=C0)
+    col = b.vmath("SCALE", attr("sh_0"), scale=C0)
     for k, Y in enumerate(_sh_basis(b, x, y, z, degree), start=1):
-        col = b.vmath("ADD", col, b.vmath("SCALE", b.attr(f"sh_{k}"), scale=Y))
+        col = b.vmath("ADD", col, b.vmath("SCALE", attr(f"sh_{k}"), scale=Y))
     col = b.vmath("ADD", col, (0.5, 0.5, 0.5))
     # max(0, .) as the rasterizer's eval_sh; no upper clamp per Gaussian (the rasterizer clamps
     # only the composited pixel, as the PNG does).  The value stays display-referred: it is
     # composited as is and written through the Raw view transform (DISPLAY_VIEW_TRANSFORM)
     col = b.vmath("MAXIMUM", col, (0.0, 0.0, 0.0))
 
-    front = emission_over_clear(b, col, alpha)
-    clear_back = b.n.new("ShaderNodeBsdfTransparent")
-    back = b.n.new("ShaderNodeMixShader")  # back faces transparent: each Gaussian is met once
-    b.link(geo.outputs["Backfacing"], back.inputs["Fac"])
-    b.link(front, back.inputs[1])
-    b.link(clear_back.outputs[0], back.inputs[2])
-    return finish_material(mat, b, back.outputs[0], columns=12)
+    # one square per Gaussian: no back face to skip
+    return finish_material(mat, b, emission_over_clear(b, col, alpha), columns=12)
 
 
 def make_gaussian_object(name, pts, material, node_group, collection=None):
-    """Vertex-only mesh with opacity, g_rot, g_scale, sh_k attributes and the instancing modifier."""
+    """Vertex-only mesh with opacity, g_mu, g_w0..2, g_half, sh_k attributes and the modifier."""
     import bpy
 
     mesh = bpy.data.meshes.new(name)
     mesh.vertices.add(len(pts["co"]))
     mesh.vertices.foreach_set("co", np.ascontiguousarray(pts["co"], dtype=np.float32).ravel())
-    for key in ("opacity", "k"):
-        a = mesh.attributes.new("opacity" if key == "opacity" else "g_k", "FLOAT", "POINT")
-        a.data.foreach_set("value", np.ascontiguousarray(pts[key], dtype=np.float32))
-    vectors = {"g_rot": pts["rot"], "g_scale": pts["scale"]}
+    for key, arr in (("opacity", pts["opacity"]), ("g_half", pts["half"])):
+        a = mesh.attributes.new(key, "FLOAT", "POINT")
+        a.data.foreach_set("value", np.ascontiguousarray(arr, dtype=np.float32))
+    vectors = {"g_mu": pts["co"], **{f"g_w{i}": pts["w"][:, i] for i in range(3)}}
     vectors.update({f"sh_{k}": pts["sh"][:, k] for k in range(pts["sh"].shape[1])})
     for key, arr in vectors.items():
         a = mesh.attributes.new(key, "FLOAT_VECTOR", "POINT")
         a.data.foreach_set("vector", np.ascontiguousarray(arr, dtype=np.float32).ravel())
-    return link_with_nodes(name, mesh, node_group, "splat_gaussians", collection)
+    obj = link_with_nodes(name, mesh, node_group, "splat_gaussians", collection)
+    set_camera(obj, bpy.context.scene.camera)
+    return obj
