@@ -48,9 +48,9 @@ MIN_TRANSPARENT = 32  # Cycles min_transparent_bounces: hits before Russian roul
 # Gaussians overlap the encoding's concave curve brightens the mix (50 % black over white:
 # 0.735 instead of 0.5), the speckles on dark tyres and tubes of the trained bike.
 DISPLAY_VIEW_TRANSFORM = "Raw"
-# the square's half-width over k max(sigma): a ray passing within k sigma of the centre meets the
-# square (perpendicular to the line of sight through the centre) within k max(sigma) / cos of
-# the ray's angle to that line, and that angle is below k max(sigma) / distance
+# the rectangle's half-widths over the k-sigma shadow's: a ray passing within k sigma of the
+# centre meets the rectangle (perpendicular to the line of sight through the centre) within the
+# shadow / cos of the ray's angle to that line, and that angle is below k max(sigma) / distance
 QUAD_MARGIN = 1.02
 # INRIA 3DGS real SH, the constants and the numpy basis terms shared with splatting/gaussians/sh.py
 C0, C1, C2, C3, sh_terms = sh_basis.C0, sh_basis.C1, sh_basis.C2, sh_basis.C3, sh_basis.sh_terms
@@ -100,8 +100,9 @@ def gaussian_points(data, max_degree=3, lowpass_m=LOWPASS_M):
     co (N, 3); opacity (N,) sigmoid; w (N, 3, 3) the whitening W = S^-1 (C R)^T (rows g_w0..2:
     W (p - co) is p's offset from the centre in sigmas, Blender frame); sigma (N, 3) =
     sqrt(exp(log scale)^2 + lowpass_m^2) (lowpass_m a number or (N_file,), lowpass_for_view);
-    k (N,) the extent in sigmas, min(K_SIGMA, the radius where alpha falls to 1/255); half (N,)
-    the camera-facing square's half-width, QUAD_MARGIN k max(sigma); Gaussians that never reach
+    k (N,) the extent in sigmas, min(K_SIGMA, the radius where alpha falls to 1/255); axes (N, 3,
+    3) the k-sigma ellipsoid's semi-axes k sigma_i (C R)_i (g_a0..2); along (N, 3) its long axis
+    plus 1e-3 of the middle one (g_along, the rectangle's orientation); Gaussians that never reach
     1/255 are left out (keep (N_file,) says which); sh (N, K, 3) coefficients with sh[:, 0] =
     f_dc and f_rest read channel-major (f_rest_{c * (K-1) + k - 1}); degree.
     """
@@ -125,23 +126,32 @@ def gaussian_points(data, max_degree=3, lowpass_m=LOWPASS_M):
     lp = np.asarray(lowpass_m, np.float64).reshape(-1, 1)
     sig = np.sqrt(np.exp(2 * np.stack([f(f"scale_{i}") for i in range(3)], 1)) + lp ** 2)
     w = np.transpose(Rb, (0, 2, 1)) / sig[:, :, None]
+    axes = np.transpose(Rb * (k[:, None] * sig)[:, None, :], (0, 2, 1))  # (N, 3 axes, xyz): k sigma_i (C R)_i
+    order = np.argsort(-sig, axis=1)
+    n = np.arange(len(sig))
+    # the rectangle's in-plane x axis follows the long axis; a thousandth of the middle one keeps
+    # it defined when the long axis points at the camera
+    along = axes[n, order[:, 0]] + 1e-3 * axes[n, order[:, 1]]
     return {"co": frames.to_blender(np.stack([f("x"), f("y"), f("z")], 1))[keep],
-            "opacity": op[keep], "w": w[keep], "sigma": sig[keep], "k": k[keep],
-            "half": (QUAD_MARGIN * k * sig.max(1))[keep], "sh": sh[keep], "degree": deg, "keep": keep}
+            "opacity": op[keep], "w": w[keep], "sigma": sig[keep], "k": k[keep], "axes": axes[keep],
+            "along": along[keep], "sh": sh[keep], "degree": deg, "keep": keep}
 
 
 # ---- bpy side ----------------------------------------------------------------------------
 
 def gaussian_node_group(material, name="splat_gaussians"):
-    """Geometry Nodes: vertices -> points -> a square per point facing the camera, realized.
+    """Geometry Nodes: vertices -> points -> a rectangle per point facing the camera, realized.
 
-    Each square ([-1, 1]^2 scaled by g_half) lies in the plane through the Gaussian's centre
-    perpendicular to the line from the camera, so a camera ray meets the squares in the order of
-    the centres' distances: the rasterizer's order (module docstring).  The camera is the scene's
-    active one (Active Camera, Blender 4.1+) or the modifier's `Camera` input (3.x); the squares
-    turn with it whenever it moves.  Realized, so the shader's Object coordinates are the
-    splat object's own and its attributes (g_mu, g_w0..2, sh_k) reach the shader as mesh
-    attributes."""
+    Each rectangle ([-1, 1]^2) lies in the plane through the Gaussian's centre perpendicular to
+    the line from the camera, so a camera ray meets the rectangles in the order of the centres'
+    distances: the rasterizer's order (module docstring).  In that plane its x axis follows the
+    long axis (g_along), and its half-widths are the k-sigma ellipsoid's extents along x and y
+    (sqrt(sum_i (u . a_i)^2) over the semi-axes g_a0..2), times QUAD_MARGIN: the box of the
+    Gaussian's shadow, so a ray grazing a tube meets few empty rectangles (Cycles walks at most
+    1024 transparent hits; beyond that a ray turns opaque).  The camera is the scene's active one
+    (Active Camera, Blender 4.1+) or the modifier's `Camera` input (3.x); the rectangles turn
+    with it whenever it moves.  Realized, so the shader's Object coordinates are the splat
+    object's own and the attributes (g_mu, g_w0..2, sh_k) reach the shader as mesh attributes."""
     import bpy
 
     ng = bpy.data.node_groups.new(name, "GeometryNodeTree")
@@ -157,37 +167,72 @@ def gaussian_node_group(material, name="splat_gaussians"):
     info = n.new("GeometryNodeObjectInfo")
     info.transform_space = "RELATIVE"  # the camera in the splat object's own coordinates
     link(cam, info.inputs["Object"])
+
+    def vmath(op, a, b=None):
+        node = n.new("ShaderNodeVectorMath")
+        node.operation = op
+        for i, x in enumerate((a, b)):
+            if x is not None:
+                link(x, node.inputs[i])
+        return node.outputs["Value" if op in ("DOT_PRODUCT", "LENGTH") else "Vector"]
+
+    def named(attr, kind="FLOAT_VECTOR"):
+        a = n.new("GeometryNodeInputNamedAttribute")
+        a.data_type = kind
+        a.inputs["Name"].default_value = attr
+        return enabled_output(a, "Attribute")
+
+    def math(op, a, b=None):
+        node = n.new("ShaderNodeMath")
+        node.operation = op
+        for i, x in enumerate((a, b)):
+            if isinstance(x, (int, float)):
+                node.inputs[i].default_value = float(x)
+            elif x is not None:
+                link(x, node.inputs[i])
+        return node.outputs[0]
+
+    def extent(u):  # half-width of the k-sigma ellipsoid's shadow along unit u
+        sq = [vmath("DOT_PRODUCT", u, named(f"g_a{i}")) for i in range(3)]
+        return math("SQRT", math("ADD", math("ADD", math("MULTIPLY", sq[0], sq[0]), math("MULTIPLY", sq[1], sq[1])),
+                                 math("MULTIPLY", sq[2], sq[2])))
+
     to_points = n.new("GeometryNodeMeshToPoints")
     to_points.mode = "VERTICES"
     pos = n.new("GeometryNodeInputPosition")
-    towards = n.new("ShaderNodeVectorMath")
-    towards.operation = "SUBTRACT"
-    link(info.outputs["Location"], towards.inputs[0])
-    link(pos.outputs[0], towards.inputs[1])
-    align = n.new("FunctionNodeAlignRotationToVector" if hasattr(bpy.types, "FunctionNodeAlignRotationToVector")
-                  else "FunctionNodeAlignEulerToVector")
-    align.axis = "Z"
-    link(towards.outputs["Vector"], align.inputs["Vector"])
+    towards = vmath("NORMALIZE", vmath("SUBTRACT", info.outputs["Location"], pos.outputs[0]))
+    y_axis = vmath("NORMALIZE", vmath("CROSS_PRODUCT", towards, named("g_along")))
+    x_axis = vmath("CROSS_PRODUCT", y_axis, towards)
+    rotations = "FunctionNodeAlignRotationToVector" if hasattr(bpy.types, "FunctionNodeAlignRotationToVector") \
+        else "FunctionNodeAlignEulerToVector"
+    face = n.new(rotations)
+    face.axis = "Z"
+    link(towards, face.inputs["Vector"])
+    turn = n.new(rotations)
+    turn.axis, turn.pivot_axis = "X", "Z"
+    link(face.outputs["Rotation"], turn.inputs["Rotation"])
+    link(x_axis, turn.inputs["Vector"])
+    size = n.new("ShaderNodeCombineXYZ")
+    link(math("MULTIPLY", extent(x_axis), QUAD_MARGIN), size.inputs[0])
+    link(math("MULTIPLY", extent(y_axis), QUAD_MARGIN), size.inputs[1])
+    size.inputs[2].default_value = 1.0
     grid = n.new("GeometryNodeMeshGrid")
     grid.inputs["Size X"].default_value = grid.inputs["Size Y"].default_value = 2.0
     grid.inputs["Vertices X"].default_value = grid.inputs["Vertices Y"].default_value = 2
     set_mat = n.new("GeometryNodeSetMaterial")
     set_mat.inputs["Material"].default_value = material
     link(grid.outputs["Mesh"], set_mat.inputs["Geometry"])
-    half = n.new("GeometryNodeInputNamedAttribute")
-    half.data_type = "FLOAT"
-    half.inputs["Name"].default_value = "g_half"
     inst = n.new("GeometryNodeInstanceOnPoints")
     link(gin.outputs[0], to_points.inputs["Mesh"])
     link(to_points.outputs["Points"], inst.inputs["Points"])
     link(set_mat.outputs["Geometry"], inst.inputs["Instance"])
-    link(align.outputs["Rotation"], inst.inputs["Rotation"])
-    link(enabled_output(half, "Attribute"), inst.inputs["Scale"])
+    link(turn.outputs["Rotation"], inst.inputs["Rotation"])
+    link(size.outputs[0], inst.inputs["Scale"])
     realize = n.new("GeometryNodeRealizeInstances")
     link(inst.outputs["Instances"], realize.inputs[0])
     link(realize.outputs[0], gout.inputs[0])
     for i, node in enumerate(n):
-        node.location = (200 * (i % 6), -200 * (i // 6))
+        node.location = (200 * (i % 8), -200 * (i // 8))
     return ng
 
 
@@ -229,18 +274,27 @@ def gaussian_material(degree, name="splat_gaussian"):
     attr = lambda nm, out="Vector": b.attr(nm, out, "GEOMETRY")  # noqa: E731  (realized squares)
     tex = b.n.new("ShaderNodeTexCoord")
     geo = b.n.new("ShaderNodeNewGeometry")
-    # offsets and the ray direction in the splat object's coordinates (so moving the object keeps
-    # the shading), whitened by the Gaussian's own W (rows g_w0..2): sigma units
+    # everything in the splat object's coordinates (so moving the object keeps the shading): the
+    # hit's offset v from the centre g_mu, and the camera, at the hit + Incoming * (view distance)
     mu = attr("g_mu")
     v = b.vmath("SUBTRACT", tex.outputs["Object"], mu)
     vt = b.n.new("ShaderNodeVectorTransform")
     vt.vector_type, vt.convert_from, vt.convert_to = "VECTOR", "WORLD", "OBJECT"
     b.link(geo.outputs["Incoming"], vt.inputs[0])
+    cam_data = b.n.new("ShaderNodeCameraData")
+    cam_pos = b.vmath("ADD", tex.outputs["Object"],
+                      b.vmath("SCALE", vt.outputs[0], scale=cam_data.outputs["View Distance"]))
+    view = b.vmath("SUBTRACT", mu, cam_pos)  # camera -> centre
+    # The rasterizer's 2D Gaussian is the 3D one projected by the projection linearised at the
+    # centre (EWA), whose lines of sight are all parallel to camera -> centre: the 2D value at a
+    # pixel is the 3D Gaussian's peak along the line parallel to `view` through the hit, not along
+    # the pixel's own ray (that differs by up to ~0.4 alpha at the edges of Gaussians stretched in
+    # depth, seen end-on).  Whitened by the Gaussian's W (rows g_w0..2): sigma units
     rows = [attr(f"g_w{i}") for i in range(3)]
     P, Dw = b.n.new("ShaderNodeCombineXYZ"), b.n.new("ShaderNodeCombineXYZ")
     for i, w in enumerate(rows):
         b.link(b.vmath("DOT_PRODUCT", w, v), P.inputs[i])
-        b.link(b.vmath("DOT_PRODUCT", w, vt.outputs[0]), Dw.inputs[i])
+        b.link(b.vmath("DOT_PRODUCT", w, view), Dw.inputs[i])
     P = P.outputs[0]
     D = b.vmath("NORMALIZE", Dw.outputs[0])
     t = b.vmath("DOT_PRODUCT", P, D)
@@ -249,14 +303,10 @@ def gaussian_material(degree, name="splat_gaussian"):
     alpha = b.mul(alpha, b.math("GREATER_THAN", alpha, ALPHA_MIN))
     alpha = b.math("MINIMUM", alpha, ALPHA_MAX)
 
-    # view direction camera -> the Gaussian's centre, as the rasterizer's eval_sh, in the splat
-    # object's coordinates: the camera is at P + Incoming * (view distance); Blender (x, y, z)
-    # -> canonical (x, z, -y)
-    cam_data = b.n.new("ShaderNodeCameraData")
-    cam_pos = b.vmath("ADD", tex.outputs["Object"],
-                      b.vmath("SCALE", vt.outputs[0], scale=cam_data.outputs["View Distance"]))
+    # SH at the direction camera -> the Gaussian's centre, as the rasterizer's eval_sh; Blender
+    # (x, y, z) -> canonical (x, z, -y)
     sep = b.n.new("ShaderNodeSeparateXYZ")
-    b.link(b.vmath("NORMALIZE", b.vmath("SUBTRACT", mu, cam_pos)), sep.inputs[0])
+    b.link(b.vmath("NORMALIZE", view), sep.inputs[0])
     x, y, z = sep.outputs[0], sep.outputs[2], b.mul(sep.outputs[1], -1.0)
     col = b.vmath("SCALE", attr("sh_0"), scale=C0)
     for k, Y in enumerate(_sh_basis(b, x, y, z, degree), start=1):
@@ -272,16 +322,16 @@ def gaussian_material(degree, name="splat_gaussian"):
 
 
 def make_gaussian_object(name, pts, material, node_group, collection=None):
-    """Vertex-only mesh with opacity, g_mu, g_w0..2, g_half, sh_k attributes and the modifier."""
+    """Vertex-only mesh with opacity, g_mu, g_w0..2, g_a0..2, g_along, sh_k attributes and the modifier."""
     import bpy
 
     mesh = bpy.data.meshes.new(name)
     mesh.vertices.add(len(pts["co"]))
     mesh.vertices.foreach_set("co", np.ascontiguousarray(pts["co"], dtype=np.float32).ravel())
-    for key, arr in (("opacity", pts["opacity"]), ("g_half", pts["half"])):
-        a = mesh.attributes.new(key, "FLOAT", "POINT")
-        a.data.foreach_set("value", np.ascontiguousarray(arr, dtype=np.float32))
-    vectors = {"g_mu": pts["co"], **{f"g_w{i}": pts["w"][:, i] for i in range(3)}}
+    a = mesh.attributes.new("opacity", "FLOAT", "POINT")
+    a.data.foreach_set("value", np.ascontiguousarray(pts["opacity"], dtype=np.float32))
+    vectors = {"g_mu": pts["co"], "g_along": pts["along"], **{f"g_w{i}": pts["w"][:, i] for i in range(3)},
+               **{f"g_a{i}": pts["axes"][:, i] for i in range(3)}}
     vectors.update({f"sh_{k}": pts["sh"][:, k] for k in range(pts["sh"].shape[1])})
     for key, arr in vectors.items():
         a = mesh.attributes.new(key, "FLOAT_VECTOR", "POINT")
