@@ -95,7 +95,7 @@ def blender_worker(ply, cameras_json, cams, mode, out_dir, eps2d, antialiased):
             scene = reset_scene()
             t0 = time.time()
             import_splats([ply], mode=mode, camera=camera, eps2d=eps2d,
-                          antialiased=antialiased and mode == "camera")
+                          antialiased=antialiased and mode in EXACT)
             timing["import_s"].append(time.time() - t0)
         script.setup_render(scene, camera, args)
         t = time.time()

@@ -46,7 +46,7 @@ def main(argv):
     p.add_argument("--eps2d", type=float, default=0.3,
                    help="the screen-space low-pass (px^2) the Gaussians were trained with (default 0.3)")
     p.add_argument("--antialiased", action="store_true",
-                   help="camera mode: the Gaussians were trained with the mip filter (opacity compensation)")
+                   help="gaussian and camera modes: the Gaussians were trained with the mip filter (opacity compensation)")
     p.add_argument("--shading", choices=["emission", "lit"], default="emission",
                    help="preview mode: emission = the Gaussians' own (baked) colour; lit = Principled BSDF under the studio lights")
     p.add_argument("--radius-scale", type=float, default=None,
@@ -79,8 +79,8 @@ def main(argv):
         raise UserError("--shading and --radius-scale go with --mode preview")
     if not 0 < args.eps2d < 1e3:  # also refuses NaN
         raise UserError(f"--eps2d must be a positive number of px^2, got {args.eps2d}")
-    if args.antialiased and args.mode != "camera":
-        raise UserError("--antialiased goes with --mode camera")
+    if args.antialiased and args.mode == "preview":
+        raise UserError("--antialiased goes with --mode gaussian or camera")
     if args.mode == "camera" and not args.render and not args.save:
         raise UserError("--mode camera builds the Gaussians for one camera: give --render or --save")
 

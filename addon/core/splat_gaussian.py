@@ -94,7 +94,7 @@ def lowpass_for_view(data, R, T, focal, eps2d):
     return np.sqrt(eps2d) * np.maximum(z, 1e-3) / float(focal)
 
 
-def gaussian_points(data, max_degree=3, lowpass_m=LOWPASS_M):
+def gaussian_points(data, max_degree=3, lowpass_m=LOWPASS_M, antialiased=False):
     """Structured 3DGS array -> per-point arrays for the Gaussian mode, Blender frame.
 
     co (N, 3); opacity (N,) sigmoid; w (N, 3, 3) the whitening W = S^-1 (C R)^T (rows g_w0..2:
@@ -102,7 +102,9 @@ def gaussian_points(data, max_degree=3, lowpass_m=LOWPASS_M):
     sqrt(exp(log scale)^2 + lowpass_m^2) (lowpass_m a number or (N_file,), lowpass_for_view);
     k (N,) the extent in sigmas, min(K_SIGMA, the radius where alpha falls to 1/255); axes (N, 3,
     3) the k-sigma ellipsoid's semi-axes k sigma_i (C R)_i (g_a0..2); along (N, 3) its long axis
-    plus 1e-3 of the middle one (g_along, the rectangle's orientation); Gaussians that never reach
+    plus 1e-3 of the middle one (g_along, the rectangle's orientation); mip (N, 3) p_i = the
+    product over the other two axes j of sigma0_j^2 / sigma_j^2 (sigma0 without the low-pass;
+    ones unless antialiased: gaussian_material's mip filter); Gaussians that never reach
     1/255 are left out (keep (N_file,) says which); sh (N, K, 3) coefficients with sh[:, 0] =
     f_dc and f_rest read channel-major (f_rest_{c * (K-1) + k - 1}); degree.
     """
@@ -132,9 +134,11 @@ def gaussian_points(data, max_degree=3, lowpass_m=LOWPASS_M):
     # the rectangle's in-plane x axis follows the long axis; a thousandth of the middle one keeps
     # it defined when the long axis points at the camera
     along = axes[n, order[:, 0]] + 1e-3 * axes[n, order[:, 1]]
+    q = np.exp(2 * np.stack([f(f"scale_{i}") for i in range(3)], 1)) / sig ** 2 if antialiased else np.ones_like(sig)
+    mip = np.stack([q[:, 1] * q[:, 2], q[:, 0] * q[:, 2], q[:, 0] * q[:, 1]], 1)
     return {"co": frames.to_blender(np.stack([f("x"), f("y"), f("z")], 1))[keep],
             "opacity": op[keep], "w": w[keep], "sigma": sig[keep], "k": k[keep], "axes": axes[keep],
-            "along": along[keep], "sh": sh[keep], "degree": deg, "keep": keep}
+            "along": along[keep], "mip": mip[keep], "sh": sh[keep], "degree": deg, "keep": keep}
 
 
 # ---- bpy side ----------------------------------------------------------------------------
@@ -268,8 +272,9 @@ def _sh_basis(b, x, y, z, degree):
     return out
 
 
-def gaussian_material(degree, name="splat_gaussian"):
-    """Emission material with the Gaussian falloff and SH colour (see the module docstring)."""
+def gaussian_material(degree, antialiased=False, name="splat_gaussian"):
+    """Emission material with the Gaussian falloff and SH colour (see the module docstring);
+    antialiased: times the mip filter's opacity compensation (g_mip)."""
     mat, b = new_material(name)
     attr = lambda nm, out="Vector": b.attr(nm, out, "GEOMETRY")  # noqa: E731  (realized squares)
     tex = b.n.new("ShaderNodeTexCoord")
@@ -299,7 +304,18 @@ def gaussian_material(degree, name="splat_gaussian"):
     D = b.vmath("NORMALIZE", Dw.outputs[0])
     t = b.vmath("DOT_PRODUCT", P, D)
     d2 = b.math("SUBTRACT", b.vmath("DOT_PRODUCT", P, P), b.mul(t, t))  # sigma units
-    alpha = b.mul(attr("opacity", "Fac"), b.math("EXPONENT", b.mul(b.math("MAXIMUM", d2, 0.0), -0.5)))
+    opacity = attr("opacity", "Fac")
+    if antialiased:
+        # the mip filter: opacity * sqrt(det S / det(S + eps2d I)), S the projected covariance.
+        # Projected along the line of sight n, det S is det(Sigma) n^T Sigma^-1 n (up to the
+        # focal's square, which cancels), so with Sigma' = Sigma + s^2 I (the low-pass) and
+        # m = W n (W whitens Sigma') the ratio is sum_i p_i m_i^2 / |m|^2, p_i the other two
+        # axes' product of sigma0^2 / sigma^2 (g_mip, at import)
+        m = Dw.outputs[0]
+        m2 = b.vmath("MULTIPLY", m, m)
+        ratio = b.math("DIVIDE", b.vmath("DOT_PRODUCT", m2, attr("g_mip")), b.vmath("DOT_PRODUCT", m, m))
+        opacity = b.mul(opacity, b.math("SQRT", ratio))
+    alpha = b.mul(opacity, b.math("EXPONENT", b.mul(b.math("MAXIMUM", d2, 0.0), -0.5)))
     alpha = b.mul(alpha, b.math("GREATER_THAN", alpha, ALPHA_MIN))
     alpha = b.math("MINIMUM", alpha, ALPHA_MAX)
 
@@ -322,7 +338,7 @@ def gaussian_material(degree, name="splat_gaussian"):
 
 
 def make_gaussian_object(name, pts, material, node_group, collection=None):
-    """Vertex-only mesh with opacity, g_mu, g_w0..2, g_a0..2, g_along, sh_k attributes and the modifier."""
+    """Vertex-only mesh with opacity, g_mu, g_w0..2, g_a0..2, g_along, g_mip, sh_k attributes and the modifier."""
     import bpy
 
     mesh = bpy.data.meshes.new(name)
@@ -330,7 +346,7 @@ def make_gaussian_object(name, pts, material, node_group, collection=None):
     mesh.vertices.foreach_set("co", np.ascontiguousarray(pts["co"], dtype=np.float32).ravel())
     a = mesh.attributes.new("opacity", "FLOAT", "POINT")
     a.data.foreach_set("value", np.ascontiguousarray(pts["opacity"], dtype=np.float32))
-    vectors = {"g_mu": pts["co"], "g_along": pts["along"], **{f"g_w{i}": pts["w"][:, i] for i in range(3)},
+    vectors = {"g_mu": pts["co"], "g_along": pts["along"], "g_mip": pts["mip"], **{f"g_w{i}": pts["w"][:, i] for i in range(3)},
                **{f"g_a{i}": pts["axes"][:, i] for i in range(3)}}
     vectors.update({f"sh_{k}": pts["sh"][:, k] for k in range(pts["sh"].shape[1])})
     for key, arr in vectors.items():
