@@ -6,7 +6,7 @@ cameras.json) and trained Gaussians, either gaussians/whole.ply or the parts com
 rest pose (splatting.bike.BikeModel, drawn with the eps2d and mip filter the parts were trained
 with).  For each of 4 ring cameras (0, 9, 18, 27) it renders the Gaussians with our rasterizer,
 and imports them into Blender in each mode and renders them with Cycles, no denoising:
-- gaussian: ellipsoids with falloff and SH, for any camera (imported once), SAMPLES samples;
+- gaussian: Gaussians on rectangles facing the camera, for any camera (imported once), 1 sample;
 - camera: camera-facing quads that draw what the rasterizer draws (imported per camera), 1 sample;
 - preview: spheres (imported once), SAMPLES samples.
 

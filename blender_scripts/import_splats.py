@@ -3,10 +3,10 @@
     blender -b -P blender_scripts/import_splats.py -- --ply FILE.ply [--render FILE.png] [--save FILE.blend]
     python blender_scripts/import_splats.py --ply FILE.ply --render out.png [--mode gaussian|preview]
 
---mode gaussian (default): oriented ellipsoids with a Gaussian falloff and view-dependent SH
-colour, for any camera; --mode camera: camera-facing quads that draw what our rasterizer draws,
-for the render camera only (docs/import_splats.md); --mode preview: one sphere per Gaussian
-(fast, DC colour only).
+--mode gaussian (default): Gaussians with their falloff and view-dependent SH colour on
+rectangles that turn to the camera, for any camera; --mode camera: camera-facing quads that
+draw what our rasterizer draws, for the render camera only (docs/import_splats.md); --mode
+preview: one sphere per Gaussian (fast, DC colour only).
 
 --ply also takes a folder or a glob of per-frame .ply files: they import as frames 1..N and
 --render writes FILE_00001.png ... (or only --frame N, to FILE).  The camera is ring view 3 of
@@ -38,7 +38,7 @@ def main(argv):
     p.add_argument("--samples", type=int, default=None)
     p.add_argument("--denoise", choices=["NONE", "FAST", "BALANCED", "HIGH"], default=None)
     p.add_argument("--mode", choices=["gaussian", "camera", "preview"], default="gaussian",
-                   help="gaussian: ellipsoids, Gaussian falloff, SH colour, any camera (default); camera: "
+                   help="gaussian: Gaussian falloff, SH colour, any camera (default); camera: "
                         "camera-facing quads that draw what our rasterizer draws, for the render camera only; "
                         "preview: spheres")
     p.add_argument("--sh-degree", type=int, choices=[0, 1, 2, 3], default=3,

@@ -1,27 +1,32 @@
-"""3DGS Gaussians in Blender as Gaussians: oriented ellipsoids with a Gaussian falloff and
-view-dependent colour from their spherical harmonics (Cycles; splat_import.py's default mode).
+"""3DGS Gaussians in Blender as Gaussians, for any camera: a Gaussian falloff and view-dependent
+colour from their spherical harmonics (Cycles; splat_import.py's default mode).
 
-Geometry: Geometry Nodes instance a proxy icosahedron on every point, rotated by the point's
-`g_rot` (XYZ Euler of C R, Blender frame) and scaled by `g_scale` = k (sx, sy, sz), with k =
-`g_k` = min(K_SIGMA, the radius in sigmas where the Gaussian's alpha falls to 1/255); the
-icosahedron is sized so that its inscribed sphere is the unit sphere, i.e. the proxy encloses
-the whole k-sigma ellipsoid.  (sx, sy, sz) include the LOWPASS_M 3D filter below.
+Geometry: Geometry Nodes put one rectangle on every Gaussian's centre, in the plane
+perpendicular to the line from the camera (the scene's active camera, re-evaluated whenever it
+moves), and realize them.  A camera ray therefore meets the Gaussians in the order of their
+centres' distances, which along one ray is the rasterizer's order (the centres' depths): the
+order 3DGS is trained with.  Closed proxies around each ellipsoid (the earlier import) are met
+where the ray enters them, so a large Gaussian inside a tube was composited before the small
+ones on its surface (docs/import_splats.md: 5.6 dB behind the rasterizer on the demo bike).
+In its plane the rectangle follows the Gaussian's long axis and spans the shadow of its k-sigma
+ellipsoid, k = min(K_SIGMA, the radius in sigmas where alpha falls to 1/255), so a ray grazing a
+tube meets few empty rectangles (Cycles walks at most 1024 transparent hits).
 
-Opacity (shader): the Texture Coordinate node's Object output and a World->Object Vector
-Transform both use the instance's own transform, so in them the ellipsoid is the unit sphere
-and the ray direction D is whitened too (P times g_k is in sigma units).  The ray's closest approach to the centre in sigma
-units is d^2 = |P|^2 - (P . D/|D|)^2 for any point P on the ray (P in sigma units), so the hit
-on the proxy's front face carries the 3D Gaussian's peak along the ray, which for a pinhole ray
-is the projected 2D Gaussian the rasterizer evaluates: alpha = opacity * exp(-d^2 / 2), dropped
-below 1/255 and capped at 0.99 as 3DGS does.  Back faces are transparent, so each Gaussian is met
-once, and Cycles composites the hits front to back along each ray (per-pixel sorted blending).
+Opacity (shader): with v the hit's offset from the centre (g_mu) and n the direction camera ->
+centre, both in the splat object's coordinates and whitened by the Gaussian's W = S^-1 (C R)^T
+(rows g_w0..2; S includes the LOWPASS_M 3D filter below), d^2 = |W v|^2 - (W v . Wn/|Wn|)^2 is
+the squared distance, in sigmas, of the line through the hit parallel to n from the centre.
+The 3D Gaussian's peak along that line is the rasterizer's projected 2D Gaussian (EWA: the
+projection linearised at the centre has its lines of sight parallel to n): alpha = opacity *
+exp(-d^2 / 2), times the mip filter's compensation for antialiased models, dropped below 1/255
+and capped at 0.99 as 3DGS does.  Cycles composites the hits front to back along each ray.
 
-Colour (shader): colour = max(0, 0.5 + sum_k Y_k(d) sh_k) in the INRIA 3DGS basis and order
-(splatting/gaussians/sh.py), d the unit direction camera -> the Gaussian's centre (as eval_sh);
-the result is the sRGB display value 3DGS trains against.  It is emitted as is, and rendered
-through the Raw view transform, so Cycles composites display values front to back exactly as the
-rasterizer does (see DISPLAY_VIEW_TRANSFORM).  SH coefficient k of a point is the instance
-attribute `sh_k` (RGB as a vector); degrees 0-3 follow the file's f_rest count.
+Colour (shader): colour = max(0, 0.5 + sum_k Y_k(n) sh_k) in the INRIA 3DGS basis and order
+(splatting/gaussians/sh.py), as eval_sh; the result is the sRGB display value 3DGS trains
+against.  It is emitted as is, and rendered through the Raw view transform, so Cycles
+composites display values front to back exactly as the rasterizer does (see
+DISPLAY_VIEW_TRANSFORM).  SH coefficient k of a point is the mesh attribute `sh_k` (RGB as a
+vector); degrees 0-3 follow the file's f_rest count.
 """
 import numpy as np
 
@@ -37,10 +42,6 @@ K_SIGMA = 3.0  # largest proxy extent in standard deviations (3DGS's screen-spac
 # (the "3D filter" of Mip-Splatting).  Without it thin parts render too faint and too thin.
 LOWPASS_M = (0.3 ** 0.5) * 12.0 / 2084.97
 ALPHA_MIN, ALPHA_MAX = 1.0 / 255.0, 0.99  # 3DGS's skip threshold and cap
-# Cycles transparent bounces: a ray meets two proxy surfaces per Gaussian it passes (the back
-# face is transparent); trained parts stack a few hundred along a ray through the bike.
-TRANSPARENT_BOUNCES = 1024
-MIN_TRANSPARENT = 32  # Cycles min_transparent_bounces: hits before Russian roulette may stop a ray
 # The rasterizer blends the Gaussians' sRGB display colours (what 3DGS trains against); Cycles
 # blends whatever the emission holds.  Emitting the display value and writing it through the Raw
 # view transform makes Cycles blend in the same space.  Emitting linear colour under Standard

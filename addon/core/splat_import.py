@@ -209,8 +209,8 @@ def import_splats(paths, shading="emission", radius_scale=RADIUS_SCALE, first_fr
                   sh_degree=3, camera=None, eps2d=sb.EPS2D, antialiased=False):
     """Import .ply files into the current scene; several files become frames first_frame, +1, ...
 
-    mode "gaussian" (default): oriented ellipsoids with a Gaussian falloff and SH colour up to
-    `sh_degree` (splat_gaussian.py; emission only), seen from any camera.  mode "camera":
+    mode "gaussian" (default): Gaussians (falloff, mip filter, SH colour up to `sh_degree`) on
+    rectangles that turn to the scene camera (splat_gaussian.py; emission only), any camera.  mode "camera":
     camera-facing quads that draw exactly what the rasterizer draws, for `camera` only
     (splat_billboard.py).  mode "preview": one sphere per Gaussian (fast; `shading` and
     `radius_scale` apply here).  camera: (K, R, T, width, height), OpenCV world-to-camera in the
