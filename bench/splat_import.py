@@ -6,9 +6,12 @@ cameras.json) and trained Gaussians, either gaussians/whole.ply or the parts com
 rest pose (splatting.bike.BikeModel, drawn with the eps2d and mip filter the parts were trained
 with).  For each of 4 ring cameras (0, 9, 18, 27) it renders the Gaussians with our rasterizer,
 and imports them into Blender in each mode and renders them with Cycles, no denoising:
-- gaussian: ellipsoids with falloff and SH, for any camera (imported once), SAMPLES samples;
+- gaussian: Gaussians on rectangles facing the camera, for any camera (imported once), 1 sample;
 - camera: camera-facing quads that draw what the rasterizer draws (imported per camera), 1 sample;
-- preview: spheres (imported once), SAMPLES samples.
+- preview: spheres (imported once), SAMPLES samples;
+- plate (only when asked for, --modes ...,plate): our rasterizer's own image (8-bit RGBA PNG) on a
+  plane filling the camera's view, 1 sample: the faithful alternative for a fixed camera that
+  is no import of the Gaussians at all.
 
 Metrics per image, RGB premultiplied on black in [0, 1]:
 - box PSNR: PSNR over the bounding box of the union of both masks (alpha > 0.5), so empty
@@ -69,6 +72,8 @@ def gaussians_ply(bike_dir, work):
 
 
 MODES = ("gaussian", "camera", "preview")
+ALL_MODES = MODES + ("plate",)
+EXACT = ("gaussian", "camera", "plate")  # deterministic: the pixel-centre ray, no Russian roulette, 1 sample
 
 
 def blender_worker(ply, cameras_json, cams, mode, out_dir, eps2d, antialiased):
@@ -87,22 +92,58 @@ def blender_worker(ply, cameras_json, cams, mode, out_dir, eps2d, antialiased):
     timing = {"import_s": [], "render_s": []}
     scene = None
     for c in cams:
-        args = argparse.Namespace(camera=f"{cameras_json}:camera{c:04d}", samples=1 if mode == "camera" else SAMPLES,
-                                  denoise="NONE", mode=mode, size=512, view=3)
+        args = argparse.Namespace(camera=f"{cameras_json}:camera{c:04d}", samples=1 if mode in EXACT else SAMPLES,
+                                  denoise="NONE", mode="camera" if mode == "plate" else mode, size=512, view=3)
         camera = script.render_camera(args, [ply])
-        if scene is None or mode == "camera":
+        if mode == "plate":
+            scene = reset_scene()
+            t0 = time.time()
+            script.setup_render(scene, camera, args)  # the camera mode's settings: Raw, pixel-centre ray
+            _plate(scene, os.path.join(out_dir, f"raster_{c:04d}.png"), camera)
+            timing["import_s"].append(time.time() - t0)
+        elif scene is None or mode == "camera":
             scene = reset_scene()
             t0 = time.time()
             import_splats([ply], mode=mode, camera=camera, eps2d=eps2d,
-                          antialiased=antialiased and mode == "camera")
+                          antialiased=antialiased and mode in EXACT)
             timing["import_s"].append(time.time() - t0)
-        script.setup_render(scene, camera, args)
+        if mode != "plate":
+            script.setup_render(scene, camera, args)
         t = time.time()
         render.render_atomic(scene, os.path.join(out_dir, f"{mode}_{c:04d}.png"), derive=False)
         timing["render_s"].append(time.time() - t)
         print(f"  {mode}: camera {c} {timing['render_s'][-1]:.1f} s", flush=True)
     with open(os.path.join(out_dir, f"{mode}_timing.json"), "w") as f:
         json.dump(timing, f)
+
+
+def _plate(scene, png, camera):
+    """A plane 1 m in front of the scene camera, exactly filling its view, emitting the straight
+    RGBA PNG as is (Non-Color, nearest texel: pixel centres fall on texel centres)."""
+    import bpy
+
+    K, _, _, w, h = camera
+    bpy.ops.mesh.primitive_plane_add(size=1.0)
+    plane = bpy.context.active_object
+    plane.scale = (w / K[0, 0], h / K[1, 1], 1.0)  # at 1 m the view is W / fx wide
+    plane.parent, plane.location = scene.camera, (0.0, 0.0, -1.0)
+    mat = bpy.data.materials.new("plate")
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = bpy.data.images.load(png)
+    tex.image.colorspace_settings.name = "Non-Color"
+    tex.interpolation = "Closest"
+    emit, clear, mix, out = (nt.nodes.new(t) for t in ("ShaderNodeEmission", "ShaderNodeBsdfTransparent",
+                                                     "ShaderNodeMixShader", "ShaderNodeOutputMaterial"))
+    nt.links.new(tex.outputs["Color"], emit.inputs["Color"])
+    nt.links.new(tex.outputs["Alpha"], mix.inputs["Fac"])
+    nt.links.new(clear.outputs[0], mix.inputs[1])
+    nt.links.new(emit.outputs[0], mix.inputs[2])
+    nt.links.new(mix.outputs[0], out.inputs["Surface"])
+    plane.data.materials.append(mat)
 
 
 def _png(path):
@@ -130,11 +171,21 @@ def run(results, out_dir, bike_dir=None, cams=CAMERAS, picture=None, modes=MODES
     os.makedirs(work, exist_ok=True)
     ply, eps2d, antialiased = gaussians_ply(bike_dir, work)
     cameras_json = os.path.join(bike_dir, "views", "whole", "cameras.json")
+    g = read_ply(ply)
+    ring, _ = load_cameras(cameras_json)
+    if "plate" in modes:  # the rasterizer's images, straight RGBA, for the plate's texture
+        from PIL import Image
+
+        with torch.no_grad():
+            for c in cams:
+                out = render_gaussians(g, ring[c], eps2d=eps2d, antialiased=antialiased)
+                a = out["alpha"].numpy()[..., None]
+                rgb = np.where(a > 0, out["rgb"].clamp(0, 1).numpy() / np.maximum(a, 1e-12), 0.0).clip(0, 1)
+                Image.fromarray((np.concatenate([rgb, a], -1) * 255).round().astype(np.uint8), "RGBA").save(
+                    os.path.join(work, f"raster_{c:04d}.png"))
     for mode in modes:
         subprocess.run([sys.executable, __file__, "--worker", ply, cameras_json, ",".join(map(str, cams)), mode, work,
                         str(eps2d), str(int(antialiased))], check=True)
-    g = read_ply(ply)
-    ring, _ = load_cameras(cameras_json)
     rows = {"raster": [], **{m: [] for m in modes}}
     pics = []
     with torch.no_grad():
@@ -154,7 +205,7 @@ def run(results, out_dir, bike_dir=None, cams=CAMERAS, picture=None, modes=MODES
                 ims[mode] = bl
             pics.append((ras, ims, mesh))
     summary = {"cameras": list(cams), "gaussians": len(g), "bike": os.path.basename(bike_dir.rstrip("/")),
-               "samples": {m: 1 if m == "camera" else SAMPLES for m in modes}, "eps2d": eps2d,
+               "samples": {m: 1 if m in EXACT else SAMPLES for m in modes}, "eps2d": eps2d,
                "antialiased": antialiased}
     for k, rs in rows.items():
         summary[k] = {m: float(np.mean([r[m] for r in rs])) for m in rs[0]}
@@ -215,7 +266,7 @@ def main(argv=None):
     ap.add_argument("--out", help="bench output folder (results + pictures)")
     ap.add_argument("--bike", help="bike folder (default: the first suitable one under OUT/bikes)")
     ap.add_argument("--picture", help="also write the labelled README picture here")
-    ap.add_argument("--modes", default=",".join(MODES), help=f"comma-separated subset of {','.join(MODES)}")
+    ap.add_argument("--modes", default=",".join(MODES), help=f"comma-separated subset of {','.join(ALL_MODES)}")
     a = ap.parse_args(argv)
     if a.worker:
         w = a.worker
@@ -224,8 +275,8 @@ def main(argv=None):
     modes = tuple(m for m in a.modes.split(",") if m)
     if not a.out:
         ap.error("--out is required")
-    if not modes or any(m not in MODES for m in modes):
-        ap.error(f"--modes must be a comma-separated subset of {','.join(MODES)}, got {a.modes}")
+    if not modes or any(m not in ALL_MODES for m in modes):
+        ap.error(f"--modes must be a comma-separated subset of {','.join(ALL_MODES)}, got {a.modes}")
     if a.bike and not is_bike(a.bike):
         ap.error(f"--bike {a.bike} has no views/whole/cameras.json and trained Gaussians")
     sys.path.insert(0, ROOT)

@@ -3,10 +3,10 @@
     blender -b -P blender_scripts/import_splats.py -- --ply FILE.ply [--render FILE.png] [--save FILE.blend]
     python blender_scripts/import_splats.py --ply FILE.ply --render out.png [--mode gaussian|preview]
 
---mode gaussian (default): oriented ellipsoids with a Gaussian falloff and view-dependent SH
-colour, for any camera; --mode camera: camera-facing quads that draw what our rasterizer draws,
-for the render camera only (docs/import_splats.md); --mode preview: one sphere per Gaussian
-(fast, DC colour only).
+--mode gaussian (default): Gaussians with their falloff and view-dependent SH colour on
+rectangles that turn to the camera, for any camera; --mode camera: camera-facing quads that
+draw what our rasterizer draws, for the render camera only (docs/import_splats.md); --mode
+preview: one sphere per Gaussian (fast, DC colour only).
 
 --ply also takes a folder or a glob of per-frame .ply files: they import as frames 1..N and
 --render writes FILE_00001.png ... (or only --frame N, to FILE).  The camera is ring view 3 of
@@ -38,7 +38,7 @@ def main(argv):
     p.add_argument("--samples", type=int, default=None)
     p.add_argument("--denoise", choices=["NONE", "FAST", "BALANCED", "HIGH"], default=None)
     p.add_argument("--mode", choices=["gaussian", "camera", "preview"], default="gaussian",
-                   help="gaussian: ellipsoids, Gaussian falloff, SH colour, any camera (default); camera: "
+                   help="gaussian: Gaussian falloff, SH colour, any camera (default); camera: "
                         "camera-facing quads that draw what our rasterizer draws, for the render camera only; "
                         "preview: spheres")
     p.add_argument("--sh-degree", type=int, choices=[0, 1, 2, 3], default=3,
@@ -46,7 +46,7 @@ def main(argv):
     p.add_argument("--eps2d", type=float, default=0.3,
                    help="the screen-space low-pass (px^2) the Gaussians were trained with (default 0.3)")
     p.add_argument("--antialiased", action="store_true",
-                   help="camera mode: the Gaussians were trained with the mip filter (opacity compensation)")
+                   help="gaussian and camera modes: the Gaussians were trained with the mip filter (opacity compensation)")
     p.add_argument("--shading", choices=["emission", "lit"], default="emission",
                    help="preview mode: emission = the Gaussians' own (baked) colour; lit = Principled BSDF under the studio lights")
     p.add_argument("--radius-scale", type=float, default=None,
@@ -79,8 +79,8 @@ def main(argv):
         raise UserError("--shading and --radius-scale go with --mode preview")
     if not 0 < args.eps2d < 1e3:  # also refuses NaN
         raise UserError(f"--eps2d must be a positive number of px^2, got {args.eps2d}")
-    if args.antialiased and args.mode != "camera":
-        raise UserError("--antialiased goes with --mode camera")
+    if args.antialiased and args.mode == "preview":
+        raise UserError("--antialiased goes with --mode gaussian or camera")
     if args.mode == "camera" and not args.render and not args.save:
         raise UserError("--mode camera builds the Gaussians for one camera: give --render or --save")
 
@@ -135,11 +135,11 @@ def setup_render(scene, camera, args):
     s = replace(render.RenderSettings(), size=size)
     if args.samples:
         s = replace(s, samples=args.samples)
-    elif args.mode == "camera":
+    elif args.mode != "preview":
         s = replace(s, samples=1)  # deterministic: every sample is the same pixel-centre ray
     if args.denoise:
         s = replace(s, denoise=args.denoise)
-    elif args.mode == "camera":
+    elif args.mode != "preview":
         s = replace(s, denoise="NONE")
     try:
         render.configure_cycles(scene, s)
@@ -151,18 +151,7 @@ def setup_render(scene, camera, args):
         # Each translucent sphere costs one transparent bounce (back faces are skipped in the
         # material); configure_cycles' 2 would turn a stack of splats opaque black.
         cy.transparent_max_bounces = 64
-    elif args.mode == "gaussian":
-        cy.transparent_max_bounces = splat_gaussian.TRANSPARENT_BOUNCES
-        # The rasterizer evaluates each pixel at its centre: a 0.01 px wide filter makes every
-        # sample the centre ray (splat_billboard.POINT_FILTER); Cycles' default 1.5 px
-        # Blackman-Harris widens sub-pixel Gaussians by about a pixel.  Samples then only
-        # average the Russian roulette below
-        cy.pixel_filter_type, cy.filter_width = splat_billboard.POINT_FILTER
-        # Russian roulette only after MIN_TRANSPARENT hits: from the first hit it kills paths
-        # behind a few faint Gaussians at random (unbiased, but noise where 3DGS blends
-        # deterministically); never would walk every ray through all of them (12x slower)
-        cy.min_transparent_bounces = splat_gaussian.MIN_TRANSPARENT
-    else:  # camera: the pixel-centre ray, through every quad (no Russian roulette)
+    else:  # gaussian and camera: the pixel-centre ray, through every square (no Russian roulette)
         cy.pixel_filter_type, cy.filter_width = splat_billboard.POINT_FILTER
         cy.transparent_max_bounces = cy.min_transparent_bounces = splat_billboard.TRANSPARENT_BOUNCES
     if args.mode != "preview":
@@ -171,6 +160,8 @@ def setup_render(scene, camera, args):
     render.setup_lighting(scene)
     cam = render.ensure_camera(scene, size, float(K[0, 0]))
     render.place_camera(cam, R, T)
+    for obj in scene.objects:  # Blender 3.x: the Gaussian squares face this camera
+        splat_gaussian.set_camera(obj, cam)
 
 
 def render(scene, paths, args):

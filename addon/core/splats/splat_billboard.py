@@ -1,13 +1,11 @@
 """3DGS Gaussians in Blender for one fixed camera, drawn as our rasterizer draws them
 (splat_import.py's `camera` mode).
 
-Why: the view-independent Gaussian mode (splat_gaussian.py) gives each Gaussian a closed proxy
-around its 3-sigma ellipsoid, and Cycles composites the proxies in the order a ray meets their
-front faces.  The rasterizer composites in the order of the Gaussians' centre depths.  Where a
-trained model stacks Gaussians of different sizes (a tube's surface over the ones inside it),
-the large proxy of a Gaussian behind is met first, and the hidden Gaussians' colours show
-through as blotches.  No closed proxy can fix that for every view.  For one camera it can be
-fixed exactly:
+Why, beside the Gaussian mode (splat_gaussian.py, any camera, its rectangles turned to the
+camera by Geometry Nodes): here every number is the rasterizer's own, computed in numpy for one
+camera (the projected 2D Gaussian with the perspective Jacobian at the FOV-clamped point, the
+box, the opacity, the colour), so the Cycles render is the rasterizer's image within 8-bit
+rounding, at the price of one import per camera:
 
 - Geometry: each Gaussian becomes a flat quad through its centre, parallel to the image plane
   (instance rotation = the camera's axes, x right, y down, z forward).  A camera ray meets the

@@ -210,15 +210,15 @@ def import_splats(paths, shading="emission", radius_scale=RADIUS_SCALE, first_fr
                   sh_degree=3, camera=None, eps2d=sb.EPS2D, antialiased=False):
     """Import .ply files into the current scene; several files become frames first_frame, +1, ...
 
-    mode "gaussian" (default): oriented ellipsoids with a Gaussian falloff and SH colour up to
-    `sh_degree` (splat_gaussian.py; emission only), seen from any camera.  mode "camera":
+    mode "gaussian" (default): Gaussians (falloff, mip filter, SH colour up to `sh_degree`) on
+    rectangles that turn to the scene camera (splat_gaussian.py; emission only), any camera.  mode "camera":
     camera-facing quads that draw exactly what the rasterizer draws, for `camera` only
     (splat_billboard.py).  mode "preview": one sphere per Gaussian (fast; `shading` and
     `radius_scale` apply here).  camera: (K, R, T, width, height), OpenCV world-to-camera in the
     canonical frame; "camera" mode needs it, "gaussian" mode sizes its low-pass for it (eps2d px^2
     at each Gaussian's depth; without it, the training ring's 12 m and 2084.97 px).  eps2d and
-    antialiased: the low-pass and mip filter the Gaussians were trained with (camera mode draws
-    both; gaussian mode draws eps2d).  Every file is read and validated before anything is
+    antialiased: the low-pass and mip filter the Gaussians were trained with (both modes draw
+    both).  Every file is read and validated before anything is
     created, so bad input leaves the scene untouched.  Returns the list of objects (one per
     file, in frame order).
     """
@@ -237,8 +237,8 @@ def import_splats(paths, shading="emission", radius_scale=RADIUS_SCALE, first_fr
         datas = [read_splat_ply(p) for p in paths]
         lowpass = ([sg.LOWPASS_M * (eps2d / sb.EPS2D) ** 0.5] * len(datas) if camera is None else
                    [sg.lowpass_for_view(d, camera[1], camera[2], camera[0][0, 0], eps2d) for d in datas])
-        clouds = [sg.gaussian_points(d, sh_degree, lp) for d, lp in zip(datas, lowpass)]
-        mat = sg.gaussian_material(max(c["degree"] for c in clouds))
+        clouds = [sg.gaussian_points(d, sh_degree, lp, antialiased) for d, lp in zip(datas, lowpass)]
+        mat = sg.gaussian_material(max(c["degree"] for c in clouds), antialiased)
         ng = sg.gaussian_node_group(mat)
         make = sg.make_gaussian_object
     elif mode == "camera":

@@ -143,9 +143,10 @@ class ShaderExpr:
             out = self.math("MULTIPLY", out, x)
         return out
 
-    def attr(self, name, output="Vector"):
-        """An instance attribute written by Geometry Nodes (Instance on Points copies point attributes)."""
+    def attr(self, name, output="Vector", kind="INSTANCER"):
+        """An instance attribute written by Geometry Nodes (Instance on Points copies point
+        attributes), or with kind="GEOMETRY" one of the (realized) mesh's own."""
         a = self.n.new("ShaderNodeAttribute")
-        a.attribute_type = "INSTANCER"
+        a.attribute_type = kind
         a.attribute_name = name
         return a.outputs[output]
