@@ -355,7 +355,7 @@ def test_gaussian_mode_follows_a_moved_camera(tmp_path, fresh_scene):
     import argparse
 
     from addon.core import render
-    from addon.core.splat_import import import_splats
+    from addon.core.splats.splat_import import import_splats
     from splatting.raster.camera import ring_camera
     from splatting.raster.sparse import render_gaussians
 
