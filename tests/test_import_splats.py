@@ -354,7 +354,7 @@ def test_gaussian_mode_follows_a_moved_camera(tmp_path, fresh_scene):
     draws it (the rectangles turn to the camera), not as the first view left them."""
     import argparse
 
-    from addon.core import render
+    from addon.core.render import render
     from addon.core.splats.splat_import import import_splats
     from splatting.raster.camera import ring_camera
     from splatting.raster.sparse import render_gaussians
