@@ -98,9 +98,11 @@ def check_side_on_labels(objs, P2):
     for i, o in enumerate(objs):
         uv = project_rect(P2, corners(o["h"], o["w"], o["l"], [o["x"], o["y"], o["z"]], o["rotation_y"]))
         box = (uv[0].min(), uv[1].min(), uv[0].max(), uv[1].max())
-        # contains the amodal 2D box (label values are rounded to 0.01; pixel edges)
-        assert box[0] <= o["x1"] + 0.5 and box[1] <= o["y1"] + 0.5
-        assert box[2] >= o["x2"] - 0.5 and box[3] >= o["y2"] - 0.5
+        # contains the amodal 2D box (label values are rounded to 0.01; pixel edges; the 3D box widens
+        # each Gaussian to where it alone reaches alpha 0.5, and a dense stack of them (the mesh
+        # avatar's helmet shell) reaches 0.5 about 1 cm further, ~1 px at 9 m)
+        assert box[0] <= o["x1"] + 1.0 and box[1] <= o["y1"] + 1.0
+        assert box[2] >= o["x2"] - 1.0 and box[3] >= o["y2"] - 1.0
         assert o["alpha"] == pytest.approx(math.remainder(o["rotation_y"] - math.atan2(o["x"], o["z"]), 2 * math.pi),
                                            abs=0.011)
         if i == 0:  # side-on: the box matches within a few pixels on every side
