@@ -92,3 +92,14 @@ def test_bad_continuation_settings_are_refused():
                dict(converge_m=-1.0), dict(min_gain=1.0)):
         with pytest.raises(UserError):
             ik.solve(rest, tg, **kw)
+
+
+def test_only_weighted_pairs_decide():
+    # a 1.6 m rider from the generic start: its feet are far after 50 steps, but weighted 0 they do not count
+    rest, tg = template_rest_joints(1.6), targets("city", STROKE4)
+    kw = dict(init="generic", pair_weights=[1.0, 1.0, 1.0, 0.0, 0.0])
+    res = ik.solve(rest, tg, **kw)
+    feet = torch.maximum(res.residuals["left_ankle->pedal_left"], res.residuals["right_ankle->pedal_right"])
+    assert float(feet.min()) > ik.CONVERGED_M
+    assert same(res, ik.solve(rest, tg, max_iterations=50, **kw))
+    assert ik.solve(rest, tg, init="generic").history.shape[0] > 50  # counted, they go on

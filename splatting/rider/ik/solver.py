@@ -143,6 +143,8 @@ def solve(rest_joints, targets, init_local_aa=None, init_root=None, objective="p
     if pair_weights is not None:
         pw = finite_tensor(pair_weights, "pair_weights", (len(pairs),)).to(f32)
     chamfer = objective == "chamfer"
+    if not (pw > 0).any():
+        cap = iterations  # no pair counts: nothing to converge
 
     def make_loss(ix):  # the loss over the batch rows ix (None: all of them)
         T0x, Ux, P0x = (T0, U, P0) if ix is None else (T0[ix], U[ix], P0[ix])
