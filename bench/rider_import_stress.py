@@ -138,8 +138,8 @@ def ride(joints, keypoints):
     from splatting.bike.pose import posed_bike_keypoints
     from splatting.rider import ik
     poses = torch.tensor([[p, 0, 0, 0, 0, 0, 0, 0] for p in CRANK_DEG], dtype=torch.float64)
-    # the joints as the rider file stores them (float32) and the roster reads them: the IK, not converged
-    # in its 50 steps for a rider at the saddle's lowest, can land elsewhere from the float64 ones
+    # the joints as the rider file stores them (float32) and the roster reads them: with 50 steps alone the
+    # IK, not converged for a rider at the saddle's lowest, landed elsewhere from the float64 ones
     joints = np.asarray(joints, np.float32)
     res = ik.solve(torch.as_tensor(joints, dtype=torch.float64), posed_bike_keypoints(keypoints, poses),
                    saddle_fit=True, saddle_shared=True)

@@ -199,7 +199,9 @@ def test_exact_start_skips_adam_and_changes_nothing():
     # a start that misses a target (out of reach) still runs every iteration
     far = {k: v.clone() for k, v in targets.items()}
     far["pedal_right"] = far["pedal_right"] + torch.tensor([0.0, -0.5, 0.0], dtype=far["pedal_right"].dtype)
-    assert ik.solve(rest, far).history.shape[0] == 50
+    assert ik.solve(rest, far, max_iterations=50).history.shape[0] == 50
+    # and goes on past 50 (a pedal 50 cm off is far from converged), stopping where it stops gaining
+    assert 50 < ik.solve(rest, far).history.shape[0] < 300
 
 
 def test_keeps_the_best_iteration():

@@ -14,7 +14,8 @@ skeleton, positive = flexion) is projected onto theta >= 0 after every step (the
 backwards), penalised above HINGE_MAX_RAD, and the off-hinge part of their rotation is penalised;
 a small quadratic prior pulls all free rotations toward the initial pose; a tiny one pulls the
 saddle offset toward 0 so the seat only moves when the legs need it.
-Per frame the iteration with the lowest loss is kept.  Residuals are distances (m) between each
+Per frame the iteration with the lowest loss is kept; frames still farther than CONVERGED_M from a
+target after `iterations` steps go on (up to EXTEND_FACTOR x iterations) while they still gain.  Residuals are distances (m) between each
 pair's joint and target at that iteration; a pair is flagged unreachable above `flag_threshold_m`.
 
 Speed: only the kinematic chain that reaches the end-effectors is built, with constant joints
@@ -26,12 +27,12 @@ Files: slots (parameter layout, hinges, default pairs), start (initial pose, sad
 (the reduced forward kinematics), targets (input checks; the bike keypoints it reaches for are splatting.bike.pose.posed_bike_keypoints), solver (solve).
 """
 from splatting.rider.ik.chain import ReducedChain
-from splatting.rider.ik.slots import (DEFAULT_PAIRS, EXACT_START_M, FLAG_THRESHOLD_M, HINGE_FLEX_DIRECTION, HINGE_MAX_RAD,
-                                      IK_JOINTS, OBJECTIVES, PELVIS_ABOVE_SEAT_M, SEAT_RANGE_M, SLOT_JOINTS,
+from splatting.rider.ik.slots import (CONVERGED_M, DEFAULT_PAIRS, EXACT_START_M, EXTEND_FACTOR, FLAG_THRESHOLD_M,
+                                      HINGE_FLEX_DIRECTION, HINGE_MAX_RAD, IK_JOINTS, OBJECTIVES, PELVIS_ABOVE_SEAT_M, SEAT_RANGE_M, SLOT_JOINTS,
                                       hinge_axes, pair_name)
 from splatting.rider.ik.solver import IKResult, solve
 from splatting.rider.ik.start import analytic_init_pose, cycling_init_pose, saddle_offset_for_reach
 
-__all__ = ["DEFAULT_PAIRS", "EXACT_START_M", "FLAG_THRESHOLD_M", "HINGE_FLEX_DIRECTION", "HINGE_MAX_RAD", "IK_JOINTS", "IKResult",
+__all__ = ["CONVERGED_M", "DEFAULT_PAIRS", "EXACT_START_M", "EXTEND_FACTOR", "FLAG_THRESHOLD_M", "HINGE_FLEX_DIRECTION", "HINGE_MAX_RAD", "IK_JOINTS", "IKResult",
            "OBJECTIVES", "PELVIS_ABOVE_SEAT_M", "ReducedChain", "SEAT_RANGE_M", "SLOT_JOINTS", "analytic_init_pose",
            "cycling_init_pose", "hinge_axes", "pair_name", "saddle_offset_for_reach", "solve"]

@@ -71,6 +71,13 @@ class ReducedChain:
         self.needs_identity = any(L["carry"] and int(L["slots"].max()) == len(SLOT_JOINTS) for L in self.levels)
         self.eff_cols = torch.tensor([col[j] for j in eff])
 
+    def rows(self, ix):
+        """The same chain for the batch rows ix (a LongTensor): what solve continues on."""
+        out = object.__new__(ReducedChain)
+        out.__dict__.update(self.__dict__)
+        out.levels = [dict(L, d=L["d"][ix], C=None if L["C"] is None else L["C"][ix]) for L in self.levels]
+        return out
+
     def __call__(self, rot, trans):
         """rot (B, 12, 3, 3) slot rotations, trans (B, 3) -> effector positions (B, E, 3)."""
         if self.needs_identity:
