@@ -22,7 +22,10 @@ FIDELITY = {
               "sh_degree": 2, "eps2d": 0.173},  # 0.173 px^2: Cycles' 1.5 px Blackman-Harris pixel filter
 }
 
-RECIPES = {"default": DEFAULT, "fidelity": FIDELITY}
+# downloaded bikes (docs/curation.md, "Real bikes against Blender"): what bench/real_bikes.py builds them with
+REAL = {"train": {"iterations": 3000, "densify_max_gaussians": 15000}, "posed": {}}
+
+RECIPES = {"default": DEFAULT, "fidelity": FIDELITY, "real": REAL}
 
 
 # the configs' modules load torch (~2.5 s, python -X importtime); imported where a config is made, so
