@@ -142,7 +142,8 @@ def scores(lib_root, mid):
         if best is None or mg.sum() > best[0]:
             x0, y0, x1, y1 = union_box(mg, ms, pad=6)
             best = (mg.sum(), g[y0:y1, x0:x1], s[y0:y1, x0:x1])
-    return m, (posed.get("metrics") or {}).get("gaussians"), best[1:]
+    n = (posed.get("metrics") or {}).get("gaussians")   # per part
+    return m, sum(n.values()) if isinstance(n, dict) else n, best[1:]
 
 
 def picture(pairs, path, h=300):
