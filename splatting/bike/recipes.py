@@ -8,6 +8,10 @@ fidelity  issue 14's recipe, the one that reaches its 32 dB: parts trained with 
           0.9842, rounds 4-5). Its price: 3.1x the default fine-tune's CPU (1 631 s against 528 s
           on this machine) and 1.9x the Gaussians to store and render (83 787 against 44 881).
 
+real      downloaded bikes (docs/curation.md, "Real models against Blender"): antialiased parts,
+          1 000 steps, then a short densified fine-tune (48 poses, 1 500 steps, eps2d 0.173);
+          what bench/real_bikes.py builds with, `library build --recipe real`.
+
 Each recipe is {"train": TrainConfig fields, "posed": PosedTrainConfig fields}; the command lines
 are `train --antialiased` and `bike-posed-train --densify --densify-max 30000 --iterations 10000
 --lr-decay 0.03 --lr-tail 2000 --sh-degree 2 --eps2d 0.173`. `make bench` builds its bike with
