@@ -46,6 +46,8 @@ STAGES = {
     # BlazePose on the roster riders at 64/128/256 px (mediapipe in its own venv: BLAZEPOSE_PYTHON; issue 28)
     "rider_realism": ("bench.rider_realism", lambda m, r, out: m.run(r, out)),
     "library": ("bench.library", lambda m, r, out: m.run(r, out)),  # library_build_s, dataset_ray_overhead
+    # the real downloaded bikes: curated, built with the real-bike recipe, vs Blender (issue 27)
+    "real_bikes": ("bench.real_bikes", lambda m, r, out: m.run(r, out)),
     # gaussian_vs_blender_equal_fidelity: the trained bike vs Cycles/Workbench, interleaved (issue 14)
     "blender_compare": ("bench.blender_compare", lambda m, r, out: m.run(r, out)),
 }
@@ -80,6 +82,7 @@ TARGETS = {
     "sequence_plausibility": "max_lateral_accel_mps2 ≤ bound (3.0), slip and cadence error ≈ 0",
     "frames_geometry": "tyres_within_3cm_share 1.0, labelled_box_overlaps 0",
     "lod_psnr_drop_db": "≤ 0.5 dB",
+    "real_bikes": "≥ 5 development models at box PSNR ≥ 30 dB and IoU ≥ 0.97 (10 random poses each; issue 27)",
     "bike_relit": "box PSNR ≥ 30 dB, IoU ≥ 0.97 (means)",
     "rider_relit": "box PSNR ≥ 30 dB, IoU ≥ 0.97 (means)",
     "relight_render_overhead": "≤ 0.2",

@@ -8,6 +8,10 @@ fidelity  issue 14's recipe, the one that reaches its 32 dB: parts trained with 
           0.9842, rounds 4-5). Its price: 3.1x the default fine-tune's CPU (1 631 s against 528 s
           on this machine) and 1.9x the Gaussians to store and render (83 787 against 44 881).
 
+real      downloaded bikes (docs/curation.md, "Real models against Blender"): antialiased parts,
+          1 000 steps, then a short densified fine-tune (48 poses, 1 500 steps, eps2d 0.173);
+          what bench/real_bikes.py builds with, `library build --recipe real`.
+
 Each recipe is {"train": TrainConfig fields, "posed": PosedTrainConfig fields}; the command lines
 are `train --antialiased` and `bike-posed-train --densify --densify-max 30000 --iterations 10000
 --lr-decay 0.03 --lr-tail 2000 --sh-degree 2 --eps2d 0.173`. `make bench` builds its bike with
@@ -22,7 +26,14 @@ FIDELITY = {
               "sh_degree": 2, "eps2d": 0.173},  # 0.173 px^2: Cycles' 1.5 px Blackman-Harris pixel filter
 }
 
-RECIPES = {"default": DEFAULT, "fidelity": FIDELITY}
+# downloaded bikes (docs/curation.md, "Real bikes against Blender"): what bench/real_bikes.py builds them with
+# (docs/curation.md): parts trained antialiased for 1000 steps (3000 changed the frame by +0.08 dB,
+# IoU +0.0000), then a short densified fine-tune on 48 posed renders with Cycles' pixel filter: on
+# the spoked city bike 31.87 dB / IoU 0.952 against 30.81 / 0.928 for the plain parts' fine-tune
+REAL = {"train": {"antialiased": True, "iterations": 1000, "densify_max_gaussians": 15000},
+        "posed": {"poses": 48, "iterations": 1500, "densify": True, "densify_max": 30000, "eps2d": 0.173}}
+
+RECIPES = {"default": DEFAULT, "fidelity": FIDELITY, "real": REAL}
 
 
 # the configs' modules load torch (~2.5 s, python -X importtime); imported where a config is made, so

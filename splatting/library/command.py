@@ -17,6 +17,7 @@ import time
 from cyclist_formats import checks
 from cyclist_formats.atomic import remove_stale
 from cyclist_formats.errors import UserError
+from splatting.bike.recipes import RECIPES  # torch-free: names and option dicts
 from splatting.library.ray_address import check_address
 from splatting.library import manifest
 
@@ -39,14 +40,17 @@ def add_arguments(p):
     b = p.add_argument_group("budget (recorded in library.json; a library keeps one budget)")
     b.add_argument("--size", type=int, default=512, help="view size in pixels (default 512)")
     b.add_argument("--samples", type=int, default=None, help="Cycles samples (default: the renderer's)")
-    b.add_argument("--iterations", type=int, default=3000, help="training iterations per part (default 3000)")
+    b.add_argument("--iterations", type=int, default=None,
+                   help="training iterations per part (default: the recipe's, else 3000)")
     b.add_argument("--time-budget-s", type=float, default=600.0, help="training wall-time cap per part (default 600)")
-    b.add_argument("--max-gaussians", type=int, default=15000, help="per part / avatar (default 15000)")
+    b.add_argument("--max-gaussians", type=int, default=None,
+                   help="per part / avatar (default: the recipe's, else 15000)")
     b.add_argument("--rider-iterations", type=int, default=1500, help="avatar training iterations (default 1500)")
     b.add_argument("--gt-poses", type=int, default=3, help="ground-truth poses per bike (default 3)")
-    b.add_argument("--recipe", choices=("default", "fidelity"), default="default",
+    b.add_argument("--recipe", choices=tuple(RECIPES), default="default",
                    help="asset recipe (splatting/bike/recipes.py): fidelity = parts trained antialiased and issue "
                         "14's long fine-tune (32 dB at random poses; 3.1x the fine-tune's CPU, 1.9x the Gaussians); "
+                        "real = downloaded bikes' (docs/curation.md); "
                         "--posed-* options still override it (default: default)")
     f = p.add_argument_group("posed fine-tune (python -m splatting bike-posed-train; recorded like the budget)")
     f.add_argument("--no-posed-train", action="store_true",
@@ -115,13 +119,14 @@ def select(args):
 
 def budget_of(args):
     """The Budget of the flags (checked field by field; torch-free, so check_args runs it first)."""
-    from splatting.bike.recipes import RECIPES
     from splatting.library.settings import budget
-    return budget(view_size=args.size, samples=args.samples, iterations=args.iterations,
-                  time_budget_s=args.time_budget_s, max_gaussians=args.max_gaussians,
+    train = RECIPES[args.recipe]["train"]  # the recipe's part budget unless given
+    return budget(view_size=args.size, samples=args.samples, iterations=args.iterations or train.get("iterations", 3000),
+                  time_budget_s=args.time_budget_s,
+                  max_gaussians=args.max_gaussians or train.get("densify_max_gaussians", 15000),
                   rider_iterations=args.rider_iterations, gt_poses=args.gt_poses, gt_seed=0,
                   riders_root=os.path.abspath(args.riders_root), posed_train=not args.no_posed_train,
-                  antialiased=bool(RECIPES[args.recipe]["train"].get("antialiased")))
+                  antialiased=bool(train.get("antialiased")))
 
 
 def settings_of(args):
