@@ -13,7 +13,6 @@ the same IK, crank angle 0) and is drawn by the rasterizer from the same camera:
 """
 import argparse
 import json
-import math
 import os
 import subprocess
 import sys
@@ -24,6 +23,7 @@ import torch
 from cyclist_formats import rider_file
 from cyclist_formats.errors import UserError
 from splatting import paths
+from bench import labelled_sheet, main_with_errors, save_png
 
 CRANK_DEG = (0.0, 90.0, 180.0, 270.0)
 SCRIPT = paths.blender_script("render_rider_on_bike.py")
@@ -144,29 +144,17 @@ def main(argv=None):
                             "--samples", str(args.samples)])
         if r.returncode != 0:
             raise UserError("render_rider_on_bike.py failed")
-        from PIL import Image, ImageDraw
+        from PIL import Image
         for name, folder in avatars:
             png = os.path.join(args.work, f"{name}_avatar.png")
             res = avatar_tile(args.bike, folder, png, args.size)
             print(f"{name} (avatar): worst IK residual {max(res.values()) * 100:.2f} cm", flush=True)
             jobs.append({"out": png, "label": f"{name} (trained Gaussians)"})
         tiles = [Image.open(j["out"]).convert("RGB") for j in jobs]
-        cols = 3
-        rows_n = math.ceil(len(tiles) / cols)
-        sheet = Image.new("RGB", (cols * args.size, rows_n * args.size), (184, 186, 189))
-        for k, (t, j) in enumerate(zip(tiles, jobs)):
-            x, y = (k % cols) * args.size, (k // cols) * args.size
-            sheet.paste(t, (x, y))
-            ImageDraw.Draw(sheet).text((x + 6, y + 6), j["label"], fill=(0, 0, 0))
-        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-        sheet.save(args.out)
+        save_png(labelled_sheet(tiles, [j["label"] for j in jobs], 3, (184, 186, 189)), args.out)
         print(f"wrote {args.out}")
     return 0
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except UserError as e:
-        print(f"import_sheet: error: {e}", file=sys.stderr)
-        sys.exit(2)
+    main_with_errors(main, "import_sheet")

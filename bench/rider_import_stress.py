@@ -27,6 +27,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 from cyclist_formats.errors import UserError  # noqa: E402
+from bench import main_with_errors  # noqa: E402
 
 MODELS = {"mh_woman": "mh_woman/human.glb", "mh_man": "mh_man/man.glb",
           "quaternius_superhero_female": "quaternius_superhero_female/Superhero_Female.glb",
@@ -225,8 +226,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except UserError as e:
-        print(f"rider_import_stress: error: {e}", file=sys.stderr)
-        sys.exit(2)
+    main_with_errors(main, "rider_import_stress")

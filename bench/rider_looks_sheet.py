@@ -11,7 +11,6 @@ rider's left; the pictures are tiled with each rider's id and look.  Pictures th
 """
 import argparse
 import json
-import math
 import os
 import subprocess
 import sys
@@ -26,6 +25,7 @@ if ROOT not in sys.path:
 from cyclist_formats import rider_file  # noqa: E402
 from cyclist_formats.errors import UserError  # noqa: E402
 from splatting import paths  # noqa: E402
+from bench import labelled_sheet, main_with_errors, save_png  # noqa: E402
 
 SCRIPT = paths.blender_script("render_rider_on_bike.py")
 
@@ -100,31 +100,16 @@ def main(argv=None):
                         "--samples", str(args.samples)])
     if r.returncode != 0:
         raise UserError("render_rider_on_bike.py failed")
-    from PIL import Image, ImageDraw
-    from cyclist_formats.atomic import atomic_path
+    from PIL import Image
     tiles = []
     for j in jobs:
         im = Image.open(j["out"]).convert("RGB")
         w, h = im.size
         tiles.append(im.crop((int(CROP[0] * w), int(CROP[1] * h), int(CROP[2] * w), int(CROP[3] * h))))
-    tw, th = tiles[0].size
-    rows = math.ceil(len(tiles) / args.cols)
-    sheet = Image.new("RGB", (args.cols * tw, rows * th), "white")
-    for k, (t, j) in enumerate(zip(tiles, jobs)):
-        x, y = (k % args.cols) * tw, (k // args.cols) * th
-        sheet.paste(t, (x, y))
-        for n, ln in enumerate(j["label"]):
-            ImageDraw.Draw(sheet).text((x + 5, y + 4 + 11 * n), ln, fill=(0, 0, 0))
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with atomic_path(args.out) as tmp:
-        sheet.save(tmp, format="PNG")
+    save_png(labelled_sheet(tiles, [j["label"] for j in jobs], args.cols, "white"), args.out)
     print(f"wrote {args.out}")
     return 0
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except UserError as e:
-        print(f"rider_looks_sheet: error: {e}", file=sys.stderr)
-        sys.exit(2)
+    main_with_errors(main, "rider_looks_sheet")

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 from PIL import Image
 
-from cyclist_formats.atomic import atomic_path
+from bench import save_png
 from cyclist_formats.errors import UserError
 from cyclist_formats.instances import RIDER_ID
 from splatting.cyclist.render import over
@@ -157,9 +157,7 @@ def main(argv=None):
         print(f"error: {e}", file=sys.stderr)
         return 2
     sheet = compose([top, bottom])
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with atomic_path(args.out) as tmp:
-        Image.fromarray(sheet).save(tmp, format="PNG")
+    save_png(sheet, args.out)
     print(args.out)
     return 0
 

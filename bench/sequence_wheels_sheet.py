@@ -20,10 +20,9 @@ import sys
 
 import numpy as np
 import torch
-from PIL import Image
 
 from bench.sequence_signal_sheet import compose
-from cyclist_formats.atomic import atomic_path
+from bench import save_png
 from cyclist_formats.errors import UserError
 from splatting.dataset import camera_presets
 from splatting.dataset.config import resolve_assets, validate
@@ -149,9 +148,7 @@ def main(argv=None):
     sheet = np.full((top.shape[0] + bottom.shape[0], W, 3), 255, np.uint8)
     sheet[:top.shape[0], :top.shape[1]] = top
     sheet[top.shape[0]:, :bottom.shape[1]] = bottom
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with atomic_path(args.out) as tmp:
-        Image.fromarray(sheet).save(tmp, format="PNG")
+    save_png(sheet, args.out)
     print(args.out)
     return 0
 

@@ -16,6 +16,7 @@ from ..rig import armature as arm_mod
 from ..rig.articulation import apply_pose
 from ..bike_asset import open_bike, save_bike
 from ..contract import UserError, bike_folder, instances
+from .scene_state import delete_faces
 from .sub_parts import SOURCES, sub_part_triangles
 from ..frames import to_canonical
 
@@ -35,20 +36,6 @@ def _canonical_triangles(obj):
     P = np.empty(len(me.loop_triangles), np.int64)
     me.loop_triangles.foreach_get("polygon_index", P)
     return V, T.reshape(-1, 3), P
-
-
-def _delete_polygons(obj, mask):
-    import bmesh
-
-    bm = bmesh.new()
-    bm.from_mesh(obj.data)
-    bm.faces.ensure_lookup_table()
-    bmesh.ops.delete(bm, geom=[f for f in bm.faces if mask[f.index]], context="FACES")
-    loose = [v for v in bm.verts if not v.link_faces]
-    bmesh.ops.delete(bm, geom=loose, context="VERTS")
-    bm.to_mesh(obj.data)
-    bm.free()
-    obj.data.update()
 
 
 def split_sub_parts(parts, kp):
@@ -72,11 +59,11 @@ def split_sub_parts(parts, kp):
             o.name = o.data.name = sub
             for c in obj.users_collection:
                 c.objects.link(o)
-            _delete_polygons(o, ~m)
+            delete_faces(o, ~m)
             o.pass_index = instances.SUB_PART_IDS[sub]
             found[sub] = o
         if masks:
-            _delete_polygons(obj, np.any(list(masks.values()), axis=0))
+            delete_faces(obj, np.any(list(masks.values()), axis=0))
     return found
 
 
