@@ -282,3 +282,16 @@ def pass_views(g, albedo, normal, gloss, antialiased=False):
         imgs.append(torch.cat([a, alpha[..., None]], -1))
     views = Views(cams, torch.stack(imgs), [c.name for c in cams], "<memory>")
     return views, {k: torch.stack(x) for k, x in targets.items()}
+
+
+def random_relight_files(plys, seed=0):
+    """A relight file beside each PLY: albedo, gloss, unit normals (random: what matters here is
+    that they are read, posed and shaded, not that they look like a bike)."""
+    from cyclist_formats import bike_folder
+    from splatting.gaussians.container import read_ply
+    g = torch.Generator().manual_seed(seed)
+    for ply in plys:
+        n = len(read_ply(ply))
+        nrm = torch.nn.functional.normalize(torch.randn(n, 3, generator=g), dim=-1)
+        bike_folder.write_relight(ply, torch.rand(n, 3, generator=g).numpy() * 0.8, nrm.numpy(),
+                                  torch.rand(n, 3, generator=g).numpy() * 0.1)

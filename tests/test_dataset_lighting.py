@@ -11,21 +11,9 @@ import pytest
 import torch
 
 from cyclist_formats import bike_folder
-from helpers import RIDER, make_bike, small_config, write_yaml
+from helpers import RIDER, make_bike, random_relight_files, small_config, write_yaml
 
 RELIT = {"mode": "relit", "elevation_deg": [20, 70], "strength": [2, 5], "sky": [0.1, 0.5]}
-
-
-def _relight_files(plys, seed=0):
-    """A relight file beside each PLY: albedo, gloss, unit normals (random: what matters here is
-    that they are read, posed and shaded, not that they look like a bike)."""
-    from splatting.gaussians.container import read_ply
-    g = torch.Generator().manual_seed(seed)
-    for ply in plys:
-        n = len(read_ply(ply))
-        nrm = torch.nn.functional.normalize(torch.randn(n, 3, generator=g), dim=-1)
-        bike_folder.write_relight(ply, torch.rand(n, 3, generator=g).numpy() * 0.8, nrm.numpy(),
-                                  torch.rand(n, 3, generator=g).numpy() * 0.1)
 
 
 @pytest.fixture(scope="module")
@@ -37,10 +25,10 @@ def assets(tmp_path_factory):
     from splatting.rider.roster import load_rider
     root = tmp_path_factory.mktemp("relit")
     d = make_bike(str(root), "rl", n=300, sh_degree=1)
-    _relight_files([os.path.join(d, "gaussians", p + ".ply") for p in ("frame", "steering", "crank")])
+    random_relight_files([os.path.join(d, "gaussians", p + ".ply") for p in ("frame", "steering", "crank")])
     folder = root / "riders" / RIDER
     mesh_avatar(load_rider(RIDER), 1500).save(str(folder))
-    _relight_files([str(folder / "rider.ply")], seed=1)
+    random_relight_files([str(folder / "rider.ply")], seed=1)
     return str(root)
 
 
@@ -88,7 +76,7 @@ def test_relit_refuses_assets_without_relight_channels(assets, tmp_path):
     rc, msg = _main(_cfg(root), tmp_path)
     assert rc == 2 and len(msg.splitlines()) == 1, msg
     assert "'rl'" in msg and "'crank'" in msg and "relight-fit --views" in msg
-    _relight_files([os.path.join(root, "rl", "gaussians", "crank.ply")])
+    random_relight_files([os.path.join(root, "rl", "gaussians", "crank.ply")])
     os.remove(bike_folder.relight_path(os.path.join(root, "riders", RIDER, "rider.ply")))
     rc, msg = _main(_cfg(root), tmp_path)
     assert rc == 2 and len(msg.splitlines()) == 1 and RIDER in msg and "relight-fit" in msg, msg
@@ -230,7 +218,7 @@ def _bike_recording(assets, name, config):
     if not os.path.isdir(d):
         make_bike(assets, name, n=300, sh_degree=1)
         plys = [os.path.join(d, "gaussians", p + ".ply") for p in ("frame", "steering", "crank")]
-        _relight_files(plys)
+        random_relight_files(plys)
         for ply in plys:
             with open(ply[:-4] + ".json", "w") as f:
                 json.dump({"config": config}, f)

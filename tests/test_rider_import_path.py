@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-from cyclist_formats import bike_folder
-from helpers import CITY_KEYPOINTS, make_bike, small_config, write_yaml
+from helpers import CITY_KEYPOINTS, make_bike, random_relight_files, small_config, write_yaml
 
 bpy = pytest.importorskip("bpy")
 from rigged_humans import ROOT, SOURCE_RIDER, build_rigged_human, expected_colors, export, write_texture  # noqa: E402
@@ -28,17 +27,6 @@ def run(env, *args):
                        env=env)
     assert r.returncode == 0, (args[:2], r.stderr[-2500:])
     return r
-
-
-def random_relight(plys, seed=0):
-    """Relight channels for the stand-in bike's random Gaussians (what is tested is the rider's)."""
-    from splatting.gaussians.container import read_ply
-    g = torch.Generator().manual_seed(seed)
-    for ply in plys:
-        n = len(read_ply(ply))
-        nrm = torch.nn.functional.normalize(torch.randn(n, 3, generator=g), dim=-1)
-        bike_folder.write_relight(ply, torch.rand(n, 3, generator=g).numpy() * 0.8, nrm.numpy(),
-                                  torch.rand(n, 3, generator=g).numpy() * 0.1)
 
 
 @pytest.fixture(scope="module")
@@ -62,7 +50,7 @@ def path(tmp_path_factory):
     run(env, "relight-fit", "--views", av / "views", "--ply", av / "rider.ply", "--iterations", "30", "--max-size", "96",
         "--quiet")
     bike = make_bike(str(d / "bikes"), "city_rl", n=300, sh_degree=1, kp=CITY_KEYPOINTS)
-    random_relight([os.path.join(bike, "gaussians", p + ".ply") for p in ("frame", "steering", "crank")])
+    random_relight_files([os.path.join(bike, "gaussians", p + ".ply") for p in ("frame", "steering", "crank")])
     return {"root": d, "env": env, "avatar": av, "riders": riders, "bikes": d / "bikes",
             "rider_file": d / "data" / "imported_riders" / RIDER_ID / "rider.npz"}
 
