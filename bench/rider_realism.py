@@ -58,7 +58,8 @@ CODE = ("splatting/rider", "splatting/cyclist", "splatting/dataset", "splatting/
 
 def _camera(scale):
     from splatting.dataset import camera_presets
-    spec = camera_presets.resolve({"preset": "nuscenes", "pitch_deg": 0.0, "roll_deg": 0.0, "scale": float(scale)})
+    from splatting.dataset.config_models import Camera
+    spec = camera_presets.resolve(Camera(preset="nuscenes", pitch_deg=0.0, roll_deg=0.0, scale=float(scale)))
     return camera_presets.street_camera(spec)
 
 

@@ -49,7 +49,7 @@ def config(bikes_root, riders_root, bike, rider, seed, exposure, subframes, scal
 def find_crossing(cfg, sequences=40):
     """(sequence, signal frame, side-on crossing frame) of a crossing cyclist that signals before
     its turn and then crosses 6-14 m ahead, in view, at its most side-on frame."""
-    spec = camera_presets.resolve(cfg["camera"])
+    spec = camera_presets.resolve(cfg.camera)
     best = None
     for s in range(sequences):
         sd = draw_sequence(cfg, s)
