@@ -34,7 +34,8 @@ import numpy as np
 
 from .. import frames
 from .splat_gaussian import ALPHA_MAX, ALPHA_MIN, C0, quat_to_matrix, matrix_to_euler_xyz, sh_degree_of, sh_terms
-from .splat_nodes import emission_over_clear, finish_material, instance_node_group, link_with_nodes, new_material
+from .splat_nodes import (emission_over_clear, finish_material, instance_node_group, link_with_nodes, new_material,
+                          point_mesh)
 
 EPS2D = 0.3  # the rasterizer's default screen-space low-pass, px^2 (splatting/raster/sparse.py)
 NEAR = 0.01  # the rasterizer's near cut, metres
@@ -161,15 +162,6 @@ def billboard_material(name="splat_camera_quad"):
 
 def make_billboard_object(name, pts, material, node_group, collection=None):
     """Vertex-only mesh with opacity, g_rot, g_scale, g_conic, g_rgb attributes and the quad modifier."""
-    import bpy
-
-    mesh = bpy.data.meshes.new(name)
-    mesh.vertices.add(len(pts["co"]))
-    mesh.vertices.foreach_set("co", np.ascontiguousarray(pts["co"], dtype=np.float32).ravel())
-    a = mesh.attributes.new("opacity", "FLOAT", "POINT")
-    a.data.foreach_set("value", np.ascontiguousarray(pts["opacity"], dtype=np.float32))
-    for key, arr in (("g_rot", pts["rot"]), ("g_scale", pts["scale"]), ("g_conic", pts["conic"]),
-                     ("g_rgb", pts["rgb"])):
-        a = mesh.attributes.new(key, "FLOAT_VECTOR", "POINT")
-        a.data.foreach_set("vector", np.ascontiguousarray(arr, dtype=np.float32).ravel())
+    mesh = point_mesh(name, pts["co"], pts["opacity"], {"g_rot": pts["rot"], "g_scale": pts["scale"],
+                                                         "g_conic": pts["conic"], "g_rgb": pts["rgb"]})
     return link_with_nodes(name, mesh, node_group, "splat_camera_quads", collection)

@@ -32,7 +32,8 @@ import numpy as np
 
 from .. import frames
 from ..contract import sh_basis
-from .splat_nodes import emission_over_clear, enabled_output, finish_material, link_with_nodes, new_material, new_socket
+from .splat_nodes import (emission_over_clear, enabled_output, finish_material, link_with_nodes, new_material,
+                          new_socket, point_mesh)
 
 K_SIGMA = 3.0  # largest proxy extent in standard deviations (3DGS's screen-space cut-off is 3 sigma too)
 # The rasterizer adds 0.3 px^2 to every projected covariance (eps2d, 3DGS's low-pass), so the
@@ -342,17 +343,10 @@ def make_gaussian_object(name, pts, material, node_group, collection=None):
     """Vertex-only mesh with opacity, g_mu, g_w0..2, g_a0..2, g_along, g_mip, sh_k attributes and the modifier."""
     import bpy
 
-    mesh = bpy.data.meshes.new(name)
-    mesh.vertices.add(len(pts["co"]))
-    mesh.vertices.foreach_set("co", np.ascontiguousarray(pts["co"], dtype=np.float32).ravel())
-    a = mesh.attributes.new("opacity", "FLOAT", "POINT")
-    a.data.foreach_set("value", np.ascontiguousarray(pts["opacity"], dtype=np.float32))
     vectors = {"g_mu": pts["co"], "g_along": pts["along"], "g_mip": pts["mip"], **{f"g_w{i}": pts["w"][:, i] for i in range(3)},
                **{f"g_a{i}": pts["axes"][:, i] for i in range(3)}}
     vectors.update({f"sh_{k}": pts["sh"][:, k] for k in range(pts["sh"].shape[1])})
-    for key, arr in vectors.items():
-        a = mesh.attributes.new(key, "FLOAT_VECTOR", "POINT")
-        a.data.foreach_set("vector", np.ascontiguousarray(arr, dtype=np.float32).ravel())
+    mesh = point_mesh(name, pts["co"], pts["opacity"], vectors)
     obj = link_with_nodes(name, mesh, node_group, "splat_gaussians", collection)
     set_camera(obj, bpy.context.scene.camera)
     return obj

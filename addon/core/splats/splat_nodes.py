@@ -89,6 +89,23 @@ def finish_material(mat, b, surface, columns):
     return mat
 
 
+def point_mesh(name, co, opacity, vectors):
+    """A vertex-only mesh at `co` (N, 3) with a float `opacity` and a FLOAT_VECTOR point attribute
+    per entry of `vectors` ({name: (N, 3)}): what the Gaussian and quad modes' modifiers read."""
+    import bpy
+    import numpy as np
+
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(co))
+    mesh.vertices.foreach_set("co", np.ascontiguousarray(co, dtype=np.float32).ravel())
+    a = mesh.attributes.new("opacity", "FLOAT", "POINT")
+    a.data.foreach_set("value", np.ascontiguousarray(opacity, dtype=np.float32))
+    for key, arr in vectors.items():
+        a = mesh.attributes.new(key, "FLOAT_VECTOR", "POINT")
+        a.data.foreach_set("vector", np.ascontiguousarray(arr, dtype=np.float32).ravel())
+    return mesh
+
+
 def link_with_nodes(name, mesh, node_group, modifier, collection=None):
     """A new object for `mesh` in `collection` (default: the scene's) with a Geometry Nodes modifier."""
     import bpy
