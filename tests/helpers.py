@@ -295,3 +295,17 @@ def random_relight_files(plys, seed=0):
         nrm = torch.nn.functional.normalize(torch.randn(n, 3, generator=g), dim=-1)
         bike_folder.write_relight(ply, torch.rand(n, 3, generator=g).numpy() * 0.8, nrm.numpy(),
                                   torch.rand(n, 3, generator=g).numpy() * 0.1)
+
+
+def kill_and_resume(generate, cfg, whole, resumed, removed, compared, generated):
+    """A killed run resumed: `resumed` generated in full, the `removed` files (relative paths) deleted,
+    generated again (it must redo `generated` samples); then every `compared` file is byte for byte
+    the one in `whole`, a run never interrupted."""
+    generate(cfg, resumed, log=lambda m: None, progress=False)
+    for rel in removed:
+        os.remove(os.path.join(resumed, rel))
+    r = generate(cfg, resumed, log=lambda m: None, progress=False)
+    assert r["generated"] == generated
+    for rel in compared:
+        with open(os.path.join(whole, rel), "rb") as f, open(os.path.join(resumed, rel), "rb") as g:
+            assert f.read() == g.read(), rel

@@ -9,7 +9,7 @@ import os
 import numpy as np
 import pytest
 
-from helpers import CITY_KEYPOINTS, street_config, write_test_bike
+from helpers import CITY_KEYPOINTS, kill_and_resume, street_config, write_test_bike
 
 
 @pytest.fixture(scope="module")
@@ -298,17 +298,11 @@ def test_sequence_tracks_formats_and_resume(bikes, tmp_path):
     assert read(os.path.join(a, "kitti_tracking", "training", "image_02", "0000", "000002.png")) == \
         read(os.path.join(a, "images", "0000", "000002.png"))
     # a killed run: a frame's shard and image gone, a half-assembled sequence's text files gone
-    generate(cfg, b, log=lambda m: None, progress=False)
-    os.remove(os.path.join(b, "shards", "0000", "000001.json"))
-    os.remove(os.path.join(b, "images", "0000", "000002.png"))
-    for rel in ("annotations.json", "mot/0000/gt/gt.txt", "kitti_tracking/training/label_02/0000.txt"):
-        os.remove(os.path.join(b, rel))
-    r = generate(cfg, b, log=lambda m: None, progress=False)
-    assert r["generated"] == 2
-    for rel in ("annotations.json", "images/0000/000001.png", "images/0000/000002.png", "mot/0000/gt/gt.txt",
-                "mot/0000/seqinfo.ini", "kitti_tracking/training/label_02/0000.txt",
-                "kitti_tracking/training/calib/0000.txt", "shards/0000/000001.json"):
-        assert read(os.path.join(a, rel)) == read(os.path.join(b, rel)), rel
+    kill_and_resume(generate, cfg, a, b, ["shards/0000/000001.json", "images/0000/000002.png", "annotations.json",
+                                          "mot/0000/gt/gt.txt", "kitti_tracking/training/label_02/0000.txt"],
+                    ["annotations.json", "images/0000/000001.png", "images/0000/000002.png", "mot/0000/gt/gt.txt",
+                     "mot/0000/seqinfo.ini", "kitti_tracking/training/label_02/0000.txt",
+                     "kitti_tracking/training/calib/0000.txt", "shards/0000/000001.json"], generated=2)
 
 
 def test_preset_and_command_line(tmp_path):

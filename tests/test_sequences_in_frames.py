@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import kitti_synth as ks
-from helpers import RIDER, small_config, write_test_bike
+from helpers import RIDER, kill_and_resume, small_config, write_test_bike
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEV = next((p for p in (os.path.join(ROOT, "..", "shared", "realism", "kitti_dev"),
@@ -193,18 +193,12 @@ def test_formats_static_tracks_and_resume_byte_identical(bikes, tmp_path):
             [float(v) for v in (car.split()[4], car.split()[5])] +
             [float(car.split()[6]) - float(car.split()[4]), float(car.split()[7]) - float(car.split()[5])], abs=0.006)
     # kill and resume: a shard, an image, a scan and the assembled files gone
-    generate(cfg, b, log=lambda m: None, progress=False)
-    os.remove(os.path.join(b, "shards", "0001", "000001.json"))
-    os.remove(os.path.join(b, "images", "0000", "000002.png"))
-    for rel in ("annotations.json", "mot/0001/gt/gt.txt", "kitti_tracking/training/label_02/0000.txt",
-                "kitti_tracking/training/calib/0001.txt"):
-        os.remove(os.path.join(b, rel))
-    r = generate(cfg, b, log=lambda m: None, progress=False)
-    assert r["generated"] == 2
-    for rel in ("annotations.json", "images/0000/000002.png", "images/0001/000001.png", "mot/0001/gt/gt.txt",
-                "kitti_tracking/training/label_02/0000.txt", "kitti_tracking/training/calib/0001.txt",
-                "kitti_tracking/training/velodyne/0001/000001.bin", "shards/0001/000001.json"):
-        assert read(os.path.join(a, rel)) == read(os.path.join(b, rel)), rel
+    kill_and_resume(generate, cfg, a, b, ["shards/0001/000001.json", "images/0000/000002.png", "annotations.json",
+                                          "mot/0001/gt/gt.txt", "kitti_tracking/training/label_02/0000.txt",
+                                          "kitti_tracking/training/calib/0001.txt"],
+                    ["annotations.json", "images/0000/000002.png", "images/0001/000001.png", "mot/0001/gt/gt.txt",
+                     "kitti_tracking/training/label_02/0000.txt", "kitti_tracking/training/calib/0001.txt",
+                     "kitti_tracking/training/velodyne/0001/000001.bin", "shards/0001/000001.json"], generated=2)
 
 
 def test_command_refuses_a_moving_camera_and_a_missing_folder_in_one_line(bikes, tmp_path):
