@@ -81,6 +81,17 @@ def avatar_tile(bike_dir, folder, out, size):
     return frame.ik["residual_m"]
 
 
+def render_on_bike(jobs, work, bike, size, samples):
+    """Blender renders of the posed riders of `jobs` ({"rider": rider file, "out": png, ...}) sitting on
+    `bike` (blender_scripts/render_rider_on_bike.py, one process for all)."""
+    job_file = os.path.join(work, "jobs.json")
+    with open(job_file, "w") as f:
+        json.dump(jobs, f)
+    r = subprocess.run([sys.executable, SCRIPT, "--bike", bike, "--jobs", job_file, "--size", str(size),
+                        "--samples", str(samples)])
+    if r.returncode != 0:
+        raise UserError("render_rider_on_bike.py failed")
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m bench.rider_import_sheet", description=__doc__.splitlines()[0])
     p.add_argument("--bike", required=True, help="a bike folder with keypoints.json and bike.blend")
@@ -138,12 +149,7 @@ def main(argv=None):
                          f"{w['pelvis'] * 100:.2f} |")
         open(args.table, "w").write("\n".join(lines) + "\n")
     if args.out:
-        job_file = os.path.join(args.work, "jobs.json")
-        json.dump(jobs, open(job_file, "w"))
-        r = subprocess.run([sys.executable, SCRIPT, "--bike", args.bike, "--jobs", job_file, "--size", str(args.size),
-                            "--samples", str(args.samples)])
-        if r.returncode != 0:
-            raise UserError("render_rider_on_bike.py failed")
+        render_on_bike(jobs, args.work, args.bike, args.size, args.samples)
         from PIL import Image
         for name, folder in avatars:
             png = os.path.join(args.work, f"{name}_avatar.png")

@@ -12,7 +12,6 @@ rider's left; the pictures are tiled with each rider's id and look.  Pictures th
 import argparse
 import json
 import os
-import subprocess
 import sys
 
 import numpy as np
@@ -24,10 +23,9 @@ if ROOT not in sys.path:
 
 from cyclist_formats import rider_file  # noqa: E402
 from cyclist_formats.errors import UserError  # noqa: E402
-from splatting import paths  # noqa: E402
 from bench import labelled_sheet, main_with_errors, save_png  # noqa: E402
+from bench.rider_import_sheet import render_on_bike  # noqa: E402
 
-SCRIPT = paths.blender_script("render_rider_on_bike.py")
 
 
 def posed_on_bike(rider, keypoints):
@@ -94,12 +92,7 @@ def main(argv=None):
         rider_file.write_rider_file(jobs[-1]["rider"], verts, rider.faces.numpy(), rider.joints.numpy(), W,
                                     rider.colors.numpy(), {"id": spec["id"], "posed": "crank 0 on " + os.path.basename(args.bike)})
         print(f"posed {k + 1}/{len(specs)} {spec['id']} (worst IK residual {worst * 100:.2f} cm)", flush=True)
-    job_file = os.path.join(args.work, "jobs.json")
-    json.dump(jobs, open(job_file, "w"))
-    r = subprocess.run([sys.executable, SCRIPT, "--bike", args.bike, "--jobs", job_file, "--size", str(args.size),
-                        "--samples", str(args.samples)])
-    if r.returncode != 0:
-        raise UserError("render_rider_on_bike.py failed")
+    render_on_bike(jobs, args.work, args.bike, args.size, args.samples)
     from PIL import Image
     tiles = []
     for j in jobs:
