@@ -22,3 +22,14 @@ def _torch_threads():
     if "torch" in sys.modules:
         sys.modules["torch"].set_num_threads(1)
     yield
+
+
+@pytest.fixture(scope="module")
+def bikes(tmp_path_factory):
+    """A bikes root holding the stand-in test bike (helpers.write_test_bike), one per test module
+    (a module may define its own `bikes`)."""
+    from helpers import write_test_bike
+
+    root = tmp_path_factory.mktemp("bikes")
+    write_test_bike(str(root))
+    return str(root)

@@ -68,15 +68,6 @@ def test_no_foot_down_is_the_ordinary_ik():
         solve_with_feet(rest, tg, ["both"], ik.DEFAULT_PAIRS, [0, 0.3, 0], [0.0])
 
 
-@pytest.fixture(scope="module")
-def bikes(tmp_path_factory):
-    from helpers import write_test_bike
-
-    root = tmp_path_factory.mktemp("feet")
-    write_test_bike(str(root))
-    return str(root)
-
-
 def test_a_stop_puts_a_foot_down_once_still_and_leans_onto_it(bikes):
     """The `stop` manoeuvre: foot_down is "left" / "right" exactly from the first frame below
     0.05 m/s, the bike leans onto that side (8 deg after the ramp), and a rendered frame's rider

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from helpers import fixed_scene, street_config, write_test_bike  # noqa: F401
+from helpers import fixed_scene, street_config  # noqa: F401
 
 LEVELS = [{"below_px": 100, "keep": 0.5}, {"below_px": 50, "keep": 0.25}, {"below_px": 20, "keep": 0.1}]
 
@@ -70,13 +70,6 @@ def test_reduce_grows_only_the_kept_gaussians_by_their_parts_lost_importance():
         assert torch.allclose(d, torch.full_like(d, want), atol=1e-5) and want > 0
     same, all_idx = lod.reduce(g, order, 1.0)
     assert same is g and len(all_idx) == 400
-
-
-@pytest.fixture(scope="module")
-def bikes(tmp_path_factory):
-    root = tmp_path_factory.mktemp("lod_bikes")
-    write_test_bike(str(root))
-    return str(root)
 
 
 def _sample(cfg):

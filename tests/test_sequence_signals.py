@@ -10,15 +10,8 @@ import numpy as np
 import pytest
 import torch
 
-from helpers import CITY_KEYPOINTS, street_config, write_test_bike
+from helpers import CITY_KEYPOINTS, street_config
 from splatting.dataset.config_models import Sequence
-
-
-@pytest.fixture(scope="module")
-def bikes(tmp_path_factory):
-    root = tmp_path_factory.mktemp("sig_bikes")
-    write_test_bike(str(root))
-    return str(root)
 
 
 # ---------------------------------------------------------------- the signal poses (IK)

@@ -9,14 +9,7 @@ import os
 import numpy as np
 import pytest
 
-from helpers import CITY_KEYPOINTS, kill_and_resume, street_config, write_test_bike
-
-
-@pytest.fixture(scope="module")
-def bikes(tmp_path_factory):
-    root = tmp_path_factory.mktemp("seq_bikes")
-    write_test_bike(str(root))
-    return str(root)
+from helpers import CITY_KEYPOINTS, kill_and_resume, street_config
 
 
 def geom():

@@ -13,20 +13,13 @@ import numpy as np
 import pytest
 
 import kitti_synth as ks
-from helpers import RIDER, kill_and_resume, small_config, write_test_bike
+from helpers import RIDER, kill_and_resume, small_config
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEV = next((p for p in (os.path.join(ROOT, "..", "shared", "realism", "kitti_dev"),
                         os.path.join(ROOT, "..", "..", "shared", "realism", "kitti_dev")) if os.path.isdir(p)), "")
 DONTCARE = "DontCare -1 -1 -10 5.00 29.89 24.12 67.61 -1 -1 -1 -1000 -1000 -1000 -10"
 ONLY = ("straight", "turn_left", "turn_right", "cross", "overtake", "stop", "start", "swerve")
-
-
-@pytest.fixture(scope="module")
-def bikes(tmp_path_factory):
-    root = str(tmp_path_factory.mktemp("bikes"))
-    write_test_bike(root)
-    return root
 
 
 def seq_config(bikes, frames, length=3, manoeuvres=None, **kw):

@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from helpers import RIDER, fixed_scene, street_config, write_test_bike  # noqa: F401
+from helpers import RIDER, fixed_scene, street_config  # noqa: F401
 from splatting.dataset.config_models import Camera
 
 KITTI_K = (721.5377, 609.5593, 172.854)
@@ -81,13 +81,6 @@ def test_presets_pitch_and_custom_camera():
 
 
 # ---------------------------------------------------------------- occlusion and masks
-
-@pytest.fixture(scope="module")
-def bikes(tmp_path_factory):
-    root = tmp_path_factory.mktemp("street_bikes")
-    write_test_bike(str(root))
-    return str(root)
-
 
 @pytest.fixture(scope="module")
 def assets_for(bikes):
