@@ -309,3 +309,19 @@ def kill_and_resume(generate, cfg, whole, resumed, removed, compared, generated)
     for rel in compared:
         with open(os.path.join(whole, rel), "rb") as f, open(os.path.join(resumed, rel), "rb") as g:
             assert f.read() == g.read(), rel
+
+
+def with_blocks(cfg, **kw):
+    """cfg (a plain config dict) with each keyword merged in: a dict into the block of that name,
+    anything else set as is."""
+    for k, v in kw.items():
+        cfg[k] = dict(cfg.get(k, {}), **v) if isinstance(v, dict) and isinstance(cfg.get(k), dict) else v
+    return cfg
+
+
+def resolved(cfg):
+    """The validated config with its assets resolved (one torch thread: the shared cores)."""
+    import torch
+    torch.set_num_threads(1)
+    from splatting.dataset.config import resolve_assets, validate
+    return resolve_assets(validate(cfg))

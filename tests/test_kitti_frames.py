@@ -138,7 +138,7 @@ def test_the_development_frames_parse():
 
 # ---------------------------------------------------------------- samples on a synthetic frame
 
-from helpers import CITY_KEYPOINTS, RIDER, small_config  # noqa: E402
+from helpers import CITY_KEYPOINTS, RIDER, resolved, small_config, with_blocks  # noqa: E402
 
 
 def frames_config(bikes, frames, **kw):
@@ -146,16 +146,7 @@ def frames_config(bikes, frames, **kw):
                        street={"cyclists": [2, 3], "parked_bikes": [0, 1], "distance_m": [5, 30], "lateral_m": [-8, 8]},
                        pose={"theta_s_deg": [-12, 12], "theta_x_deg": [-6, 6]})
     cfg.pop("image_size")
-    for k, v in kw.items():
-        cfg[k] = dict(cfg.get(k, {}), **v) if isinstance(v, dict) and isinstance(cfg.get(k), dict) else v
-    return cfg
-
-
-def resolved(cfg):
-    import torch
-    torch.set_num_threads(1)
-    from splatting.dataset.config import resolve_assets, validate
-    return resolve_assets(validate(cfg))
+    return with_blocks(cfg, **kw)
 
 
 def fixed(monkeypatch, instances):

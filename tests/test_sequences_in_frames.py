@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import kitti_synth as ks
-from helpers import RIDER, kill_and_resume, small_config
+from helpers import RIDER, kill_and_resume, resolved, small_config, with_blocks
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEV = next((p for p in (os.path.join(ROOT, "..", "shared", "realism", "kitti_dev"),
@@ -28,16 +28,7 @@ def seq_config(bikes, frames, length=3, manoeuvres=None, **kw):
                        sequence={"enabled": True, "length": length, "fps": 10.0, "ego": {"motion": "static"},
                                  **({"manoeuvres": manoeuvres} if manoeuvres else {})})
     cfg.pop("image_size")
-    for k, v in kw.items():
-        cfg[k] = dict(cfg.get(k, {}), **v) if isinstance(v, dict) and isinstance(cfg.get(k), dict) else v
-    return cfg
-
-
-def resolved(cfg):
-    import torch
-    torch.set_num_threads(1)
-    from splatting.dataset.config import resolve_assets, validate
-    return resolve_assets(validate(cfg))
+    return with_blocks(cfg, **kw)
 
 
 def read(path):
