@@ -44,6 +44,13 @@ def test_lossless_round_trip(tmp_path, degree):
         assert torch.equal(getattr(g, f), getattr(h, f)), f
 
 
+def test_an_empty_part_reads_back(tmp_path):
+    """A part pruned to no Gaussians (a tiny build's pedal) is a valid, empty PLY."""
+    write_ply(random_gaussians(0, 3), tmp_path / "g.ply")
+    h = read_ply(tmp_path / "g.ply")
+    assert len(h) == 0 and h.sh_degree == 0
+
+
 def test_f_rest_is_channel_major(tmp_path):
     """f_rest_0..14 are red's 15 higher-order coefficients, 15..29 green's, 30..44 blue's (INRIA)."""
     g = random_gaussians(3, 3)

@@ -137,6 +137,6 @@ def read_ply(path, sh_degree=None) -> Gaussians:
     if sh_degree is None:
         sh_degree = 0
         for d in (1, 2, 3):
-            if sh.shape[1] >= sh_coeffs(d) and sh[:, sh_coeffs(d - 1):sh_coeffs(d)].abs().max() > 0:
+            if sh.shape[1] >= sh_coeffs(d) and bool((sh[:, sh_coeffs(d - 1):sh_coeffs(d)] != 0).any()):  # (none: empty)
                 sh_degree = d
     return g.with_sh_degree(sh_degree)
