@@ -43,7 +43,7 @@ def test_looks_are_drawn_per_id_deterministically_and_vary_over_the_roster():
 
 def test_skin_tones_differ_across_the_roster():
     skins = {r["colors"]["skin"] for r in load_roster() if "colors" in r}
-    lum = sorted(_lum(looks._hex(s)) for s in skins)
+    lum = sorted(_lum(looks.hex_rgb(s)) for s in skins)
     assert len(skins) >= 8
     assert lum[-1] - lum[0] > 0.5  # from very dark to very light
     assert sum(v < 0.4 for v in lum) >= 3 and sum(v > 0.6 for v in lum) >= 3
@@ -69,9 +69,9 @@ def test_jersey_pattern_is_painted(pattern):
     plain = _with_look(RIDER, top_pattern="plain", accent="#ffff00", bag="none")
     top = (r.regions == REGIONS.index("top")).numpy()
     c, c0 = r.colors.numpy()[top], plain.colors.numpy()[top]
-    accent = np.all(np.abs(c - looks._hex("#ffff00")) < 1e-6, axis=1)
+    accent = np.all(np.abs(c - looks.hex_rgb("#ffff00")) < 1e-6, axis=1)
     assert 0.005 < accent.mean() < 0.8, pattern  # a pattern, not a new plain colour
-    assert not np.all(np.abs(c0 - looks._hex("#ffff00")) < 1e-6, axis=1).any()
+    assert not np.all(np.abs(c0 - looks.hex_rgb("#ffff00")) < 1e-6, axis=1).any()
     # the pattern is the only difference on the jersey (its hems darken whatever colour is under them)
     rim = looks.boundary(r.faces.numpy(), top)[top]
     assert np.allclose(c[~accent & ~rim], c0[~accent & ~rim])
@@ -81,7 +81,7 @@ def test_hems_are_darker_than_their_garment():
     r = _with_look(RIDER, top_pattern="plain", bag="none")
     top = (r.regions == REGIONS.index("top")).numpy()
     rim = looks.boundary(r.faces.numpy(), top)
-    base = looks._hex(r.spec["colors"]["top"])
+    base = looks.hex_rgb(r.spec["colors"]["top"])
     assert rim.sum() > 50
     assert np.allclose(r.colors.numpy()[rim], base * 0.55, atol=1e-6)
     inner = top & ~rim
@@ -197,7 +197,7 @@ def test_exported_mesh_carries_the_accessories(tmp_path):
     m = trimesh.load(p, process=False)
     assert len(m.vertices) == len(r.vertices) and len(m.faces) == len(r.faces)
     helmet = (r.regions == REGIONS.index("helmet")).numpy()
-    want = np.round(looks._hex(r.spec["colors"]["helmet"]) * 255)
+    want = np.round(looks.hex_rgb(r.spec["colors"]["helmet"]) * 255)
     got = np.asarray(m.visual.vertex_colors)[helmet, :3].astype(float)
     assert (np.abs(got - want).max(1) <= 1).mean() > 0.8  # the shell in the helmet colour (vents darker)
 
@@ -216,7 +216,7 @@ def test_dataset_looks_recolour_hair_and_bag_per_instance_without_changing_earli
     assert np.array_equal(gain, gain0) and "hair" not in look0 and "bag" not in look0
     hairs = [appearance.draw_look(a, 3, i, 0)[0]["hair"] for i in range(20)]
     assert len({tuple(np.round(h, 4)) for h in hairs}) >= 5
-    palette = np.stack([looks._hex(c) for c in looks.HAIR_COLOURS + looks.GREY_HAIR])
+    palette = np.stack([looks.hex_rgb(c) for c in looks.HAIR_COLOURS + looks.GREY_HAIR])
     for h in hairs:  # natural hair: a palette colour made 20 % darker or lighter at most
         ratio = h / palette
         assert (np.ptp(ratio, axis=1) < 1e-6).any() or np.any(h >= 1.0)

@@ -27,16 +27,11 @@ from cyclist_formats.instances import RIDER_ID
 from splatting.cyclist.look_defaults import RECOLOUR, RECOLOUR_EXTRA
 from splatting.gaussians.sh import C0
 from splatting.rider.body import REGIONS
-from splatting.rider.looks import GREY_HAIR, HAIR_COLOURS, look_of
+from splatting.rider.looks import GREY_HAIR, HAIR_COLOURS, hex_rgb, look_of
 
 PAINT_MIN_SAT = 0.2
 PAINT_HUE_DEG = 30.0
 TAG = 0xA99E  # separates these draws from the sample's main stream
-
-
-def _hex_rgb(h):
-    h = h.lstrip("#")
-    return np.array([int(h[i:i + 2], 16) for i in (0, 2, 4)], float) / 255.0
 
 
 def _lum(rgb):
@@ -140,7 +135,7 @@ def draw_look(a, seed, index, instance):
     for region in RECOLOUR_EXTRA:
         keep = rng2.uniform() < a.keep_share
         if region == "hair":
-            c = _hex_rgb(palette[int(rng2.integers(len(palette)))]) * rng2.uniform(0.8, 1.2)
+            c = hex_rgb(palette[int(rng2.integers(len(palette)))]) * rng2.uniform(0.8, 1.2)
         else:
             c = np.array(colorsys.hsv_to_rgb(rng2.uniform(), rng2.uniform(*a.saturation), rng2.uniform(*a.value)))
         if region in a.regions:  # absent otherwise: a dataset's record of its looks stays as before
@@ -161,7 +156,7 @@ def apply_look(g, ids, look, gain, rider_reg=None, rider_colors=None, paint=None
         for region in ("top", "bottom", "shoes", "helmet", "hair", "bag"):
             # a rider without the region's colour (no hair, no bag, an imported body) has nothing to turn
             if look.get(region) is not None and region in rider_colors:
-                recolour(g.sh, full_reg == REGIONS.index(region), _hex_rgb(rider_colors[region]), look[region], sh)
+                recolour(g.sh, full_reg == REGIONS.index(region), hex_rgb(rider_colors[region]), look[region], sh)
     if paint is not None and look.get("paint") is not None:
         recolour(g.sh, paint, paint_rgb, look["paint"], sh)
     return replace(g, sh=apply_gain(sh, gain))

@@ -28,7 +28,7 @@ from cyclist_formats.atomic import atomic_path
 from cyclist_formats.errors import UserError
 from splatting import paths
 from splatting.rider.kinematics import JOINT_INDEX, JOINT_NAMES, forward_kinematics
-from splatting.rider.looks import dress, look_of
+from splatting.rider.looks import dress, hex_rgb, look_of
 
 CACHE_DIR = paths.DATA / "anny_cache"
 ROOT = paths.ROOT
@@ -170,11 +170,6 @@ def _bone_to_joint(labels, parents):
     return np.array(out)
 
 
-def _hex_rgb(h):
-    h = h.lstrip("#")
-    return np.array([int(h[i:i + 2], 16) for i in (0, 2, 4)], float) / 255.0
-
-
 # clothing regions of a rider (index = the region id each vertex and avatar Gaussian carries)
 REGIONS = ("skin", "top", "bottom", "shoes", "helmet", "hair", "bag")
 
@@ -207,7 +202,7 @@ def region_ids(verts, weights, joints, eye_y):
 def _region_colors(verts, weights, joints, eye_y, colors):
     """Per-vertex colours of the regions (region_ids) from the rider's '#rrggbb' colours."""
     # region_ids paints no hair or bag (only looks.py adds those), so they may have no colour here
-    palette = np.stack([_hex_rgb(colors.get(r, colors["skin"])) for r in REGIONS])
+    palette = np.stack([hex_rgb(colors.get(r, colors["skin"])) for r in REGIONS])
     return palette[region_ids(verts, weights, joints, eye_y)]
 
 

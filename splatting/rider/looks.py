@@ -36,7 +36,8 @@ BAG_COLOURS = ("#222222", "#3a4a2f", "#1f3a5f", "#7a1f1f", "#555a60", "#c2571a")
 ACCENTS = ("#ffffff", "#111111", "#f4d35e", "#ee964b", "#0d3b66", "#f95738", "#2ec4b6", "#e71d36", "#c0c0c0")
 
 
-def _hex(h):
+def hex_rgb(h):
+    """'#rrggbb' -> (3,) float rgb in [0, 1] (the roster's and the looks' colours)."""
     h = h.lstrip("#")
     return np.array([int(h[i:i + 2], 16) for i in (0, 2, 4)], float) / 255.0
 
@@ -190,8 +191,8 @@ def dress(verts, faces, weights, joints, eye_y, eyes, colors, regions, look, reg
     verts, faces = np.asarray(verts, float), np.asarray(faces, np.int64)
     reg = np.asarray(regions).copy()
     R = {n: i for i, n in enumerate(region_names)}
-    base = {n: _hex(colors[n]) for n in ("skin", "top", "bottom", "shoes", "helmet")}
-    accent = _hex(look["accent"])
+    base = {n: hex_rgb(colors[n]) for n in ("skin", "top", "bottom", "shoes", "helmet")}
+    accent = hex_rgb(look["accent"])
     if np.abs(accent - base["top"]).sum() < 0.3:  # an accent the colour of the jersey shows nothing
         accent = 1.0 - base["top"]
     col = np.stack([base.get(n, base["skin"]) for n in region_names])[reg]
@@ -256,7 +257,7 @@ def dress(verts, faces, weights, joints, eye_y, eyes, colors, regions, look, reg
         col[white] = [0.93, 0.92, 0.9]
         col[head & fwd & (np.abs(y - e[1]) < 0.008) & (np.abs(z - e[2]) < 0.007)] = [0.12, 0.08, 0.06]
         brow = head & fwd & (np.abs(y - (e[1] + 0.02)) < 0.005) & (np.abs(z - e[2]) < 0.022)
-        col[brow] = _hex(look["hair_colour"]) * 0.8
+        col[brow] = hex_rgb(look["hair_colour"]) * 0.8
     nose_y = eyes[:, 1].mean() - 0.045
     lips = head & fwd & (np.abs(y - (nose_y - 0.025)) < 0.006) & (np.abs(z) < 0.022)
     col[lips] = skin * np.array([0.8, 0.5, 0.5])
@@ -268,7 +269,7 @@ def dress(verts, faces, weights, joints, eye_y, eyes, colors, regions, look, reg
     hc = np.array([np.median(x[hv]), 0.0, np.median(z[hv])])
     back = x < hc[0] - 0.01
     scalp = head & ((y > eye_y + 0.045) | back & (y > eye_y - 0.035)) & ~(np.abs(z) > np.percentile(np.abs(z[hv]), 93))
-    hair_rgb = _hex(look["hair_colour"])
+    hair_rgb = hex_rgb(look["hair_colour"])
     out_v, out_f, out_w, out_c, out_r, parts = [verts], [faces], [weights], [col], [reg], {}
 
     def add(name, v, f, w, c, r):
@@ -335,11 +336,11 @@ def dress(verts, faces, weights, joints, eye_y, eyes, colors, regions, look, reg
         v, f = box([back_x - 0.13, y0, -0.15], [back_x + 0.02, y1, 0.15], n=20)
         body = np.flatnonzero(np.isin(dom, [J["spine1"], J["spine2"], J["spine3"], J["pelvis"]]))
         nearest = body[np.argmin(((v[:, None, :] - verts[body][None]) ** 2).sum(-1), 1)]
-        c = np.broadcast_to(_hex(look["bag_colour"]), v.shape).copy()
+        c = np.broadcast_to(hex_rgb(look["bag_colour"]), v.shape).copy()
         c[(np.abs(v[:, 1] - (y0 + 0.7 * (y1 - y0))) < 0.012) & (v[:, 0] < back_x - 0.12)] *= 0.5  # zip line
         add("backpack", v, f, weights[nearest], c, "bag")
         # straps over the shoulders, painted on the jersey
         strap = (reg == R["top"]) & (np.abs(np.abs(z) - 0.085) < 0.018) & (y > y0 + 0.1)
-        col[strap] = _hex(look["bag_colour"]) * 0.8
+        col[strap] = hex_rgb(look["bag_colour"]) * 0.8
     return (np.concatenate(out_v), np.concatenate(out_f), np.concatenate(out_w), np.clip(np.concatenate(out_c), 0, 1),
             np.concatenate(out_r), parts)
