@@ -177,8 +177,11 @@ def _footprint(footprint_xz, who):
     return f
 
 
+OBSTACLE_M = (0.3, 2.5)  # a scan point this high above the road (m) inside a footprint: something stands there
+
+
 def ground_support(points_velo, T_velo_to_rect, plane, footprint_xz, margin=0.5, ground_tol_m=0.15,
-                   obstacle_m=(0.3, 2.5)):
+                   obstacle_m=OBSTACLE_M):
     """What the scan shows at a footprint (polygon in rect x, z on the road):
     ground = points within ground_tol_m of the plane inside the footprint grown by margin (the
     road around the spot: a cyclist must stand on seen ground), obstacle = points obstacle_m[0] to

@@ -21,12 +21,12 @@ import math
 import numpy as np
 
 from splatting.dataset.frames import placement, source
+from splatting.dataset.frames.lidar import OBSTACLE_M
 from splatting.dataset.frames.placement import FOOT_L, FOOT_W, HEIGHT
 from splatting.dataset.frames.road import convex_overlap, footprint, rectangle, road_axis
 from splatting.dataset.sequences.writers import KITTI_TYPES_MOT
 
 SPACING_M = 0.5           # LiDAR support checked at positions this far apart along a track
-OBSTACLE_M = (0.3, 2.5)   # a scan point this high above the road inside a footprint blocks it (lidar.ground_support)
 FOOT_R = 0.5 * math.hypot(FOOT_L, FOOT_W)
 
 
@@ -60,9 +60,8 @@ class FrameWorld:
         lo, hi = self.cfg.street.lateral_m
         if not lo <= x <= hi:
             return False
-        top = self.road.to_rect(np.array([[x, HEIGHT, z]]))
-        (_, vt), zt = self.road.project_rect(top)[0][0], self.road.project_rect(top)[1][0]
-        return bool(zt > 0.5 and vt < self.fr.height)
+        uv, zc = self.road.project_rect(self.road.to_rect(np.array([[x, HEIGHT, z]])))
+        return bool(zc[0] > 0.5 and uv[0, 1] < self.fr.height)
 
     # ------------------------------------------------------------------ the whole trajectory
     def track_ok(self, kind, pose):
