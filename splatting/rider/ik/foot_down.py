@@ -8,15 +8,14 @@ the bike: ANKLE_ABOVE_GROUND_M over the ground plane, FOOT_OUT_M out from the bi
 FOOT_AHEAD_M ahead of the crank axle, measured in the world (the leaning bike's road).  The IK
 runs in the bike's frame, so the target is the world point brought into it through theta_X.
 A leg too short for the road at that lean is stretched toward it: `ground_gap_m` reports how
-far the ankle stays above its target height.  docs/sequences.md ("Foot down").
+far the ankle stays from its target.  docs/sequences.md ("Foot down").
 """
 import math
 
 import torch
 
-from splatting.rider.ik.signals import _merge
+from splatting.rider.ik.signals import merge_results, released, solve_in_groups
 from splatting.rider.ik.slots import HINGE_SLOTS, SLOT_JOINTS, hinge_axes, pair_name
-from splatting.rider.ik.solver import solve
 from splatting.rider.ik.start import KNEE_POLE, _frame, _two_bone, _unit
 from splatting.rider.kinematics import JOINT_INDEX, PARENTS, forward_kinematics
 from splatting.rotations import rodrigues, rotmat_to_axis_angle
@@ -72,22 +71,18 @@ def solve_with_feet(rest_joints, targets, feet, pairs, crank_axle, theta_x_deg, 
     """ik.solve for B frames where frame b has feet[b] (one of FEET) on the ground and its bike
     leans by theta_x_deg[b]: frames are solved in groups by grounded foot (that foot's pedal pair
     left out), the leg then set by pose_leg.  Returns an IKResult over all B frames, `free`
-    marking the released pedal pair and `ground_gap_m` (B,) the grounded ankle's height over its
+    marking the released pedal pair and `ground_gap_m` (B,) the grounded ankle's distance from its
     target (0 where no foot is down or the leg reaches)."""
     bad = [f for f in feet if f not in FEET]
     if bad:
         raise ValueError(f"unknown foot {bad[0]!r} (known: {', '.join(FEET)})")
     rest = torch.as_tensor(rest_joints, dtype=torch.float64)
     B = len(feet)
+    names = [pair_name(j, t) for j, t in pairs]
     gap = torch.zeros(B, dtype=torch.float32)
-    groups = {}
-    for b, f in enumerate(feet):
-        groups.setdefault((None if f == "none" else f), []).append(b)
     parts = []
-    for foot, idx in groups.items():
-        held = tuple(p for p in pairs if foot is None or p[0] != f"{foot}_ankle")
-        tg = {k: (v[idx] if torch.is_tensor(v) and v.dim() == 2 and v.shape[0] == B else v) for k, v in targets.items()}
-        res = solve(rest, tg, pairs=held, **kw)
+    for foot, idx, tg, res in solve_in_groups(rest, targets, [None if f == "none" else f for f in feet], pairs,
+                                              "ankle", **kw):
         free_name = None
         if foot is not None:
             la = res.local_aa.clone()
@@ -105,44 +100,15 @@ def solve_with_feet(rest_joints, targets, feet, pairs, crank_axle, theta_x_deg, 
                 tgt = tg[pedal].to(torch.float64).reshape(-1, 3).expand(len(idx), 3)
                 res.residuals[free_name] = torch.linalg.vector_norm(joints[:, JOINT_INDEX[f"{foot}_ankle"]] - tgt, dim=-1).float()
                 res.flagged[free_name] = torch.zeros(len(idx), dtype=torch.bool)
-        parts.append((idx, free_name, res))
-    out = _merge(parts, B, pairs)
-    out.ground_gap_m = gap
-    return out
+        res.ground_gap_m = gap[idx]
+        parts.append((idx, released(res, names, free_name)))
+    return merge_results(B, parts, names=names)
 
 
 def combine(B, parts):
     """IKResults of disjoint frame subsets [(frame indices, IKResult), ...] -> one IKResult over B
     frames in order (a batch where some frames have a foot down and others an arm signal)."""
-    first = parts[0][1]
-
-    def empty(t):
-        return None if t is None else torch.zeros((B,) + tuple(t.shape[1:]), dtype=t.dtype)
-
-    out = {k: empty(getattr(first, k)) for k in ("local_aa", "root_trans", "joints", "loss", "seat_offset", "seat")}
-    names = list(first.residuals)
-    resid = {n: torch.zeros(B, dtype=torch.float32) for n in names}
-    flagged = {n: torch.zeros(B, dtype=torch.bool) for n in names}
-    free = {n: torch.zeros(B, dtype=torch.bool) for n in names}
-    gap = torch.zeros(B, dtype=torch.float32)
-    iters = max(r.history.shape[0] for _, r in parts)
-    history = torch.zeros(iters, B, dtype=first.history.dtype)
-    for idx, r in parts:
-        ix = torch.as_tensor(idx)
-        for k, v in out.items():
-            if v is not None:
-                v[ix] = getattr(r, k).to(v.dtype)
-        for n in names:
-            resid[n][ix] = r.residuals[n].to(torch.float32)
-            flagged[n][ix] = r.flagged[n]
-            if r.free is not None:
-                free[n][ix] = r.free[n]
-        if getattr(r, "ground_gap_m", None) is not None:
-            gap[ix] = r.ground_gap_m
-        h = r.history
-        history[:, ix] = torch.cat([h, h[-1:].expand(iters - h.shape[0], -1)]) if h.shape[0] < iters else h
-    res = type(first)(local_aa=out["local_aa"], root_trans=out["root_trans"], joints=out["joints"], loss=out["loss"],
-                      residuals=resid, flagged=flagged, seat_offset=out["seat_offset"], history=history,
-                      threshold_m=first.threshold_m, seat=out["seat"], free=free)
-    res.ground_gap_m = gap
+    res = merge_results(B, parts)
+    if getattr(res, "ground_gap_m", None) is None:
+        res.ground_gap_m = torch.zeros(B, dtype=torch.float32)
     return res

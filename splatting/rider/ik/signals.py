@@ -23,7 +23,7 @@ import torch
 
 from cyclist_formats.errors import UserError
 from splatting.rider.ik.slots import SLOT_JOINTS, HINGE_SLOTS, hinge_axes, pair_name
-from splatting.rider.ik.solver import IKResult, solve
+from splatting.rider.ik.solver import solve
 from splatting.rider.ik.start import _frame, _two_bone, _unit
 from splatting.rider.kinematics import JOINT_INDEX, PARENTS, forward_kinematics
 from splatting.rotations import rodrigues, rotmat_to_axis_angle
@@ -85,14 +85,9 @@ def solve_with_signals(rest_joints, targets, signals, pairs, **kw):
         raise UserError(f"unknown arm signal {bad[0]!r} (known: {', '.join(SIGNALS)})")
     rest = torch.as_tensor(rest_joints, dtype=torch.float64)
     B = len(signals)
-    groups = {}
-    for b, s in enumerate(signals):
-        groups.setdefault(FREE_HAND.get(s), []).append(b)
+    names = [pair_name(j, t) for j, t in pairs]
     parts = []
-    for hand, idx in groups.items():
-        held = tuple(p for p in pairs if hand is None or p[0] != f"{hand}_wrist")
-        tg = {k: (v[idx] if torch.is_tensor(v) and v.dim() == 2 and v.shape[0] == B else v) for k, v in targets.items()}
-        res = solve(rest, tg, pairs=held, **kw)
+    for hand, idx, tg, res in solve_in_groups(rest, targets, [FREE_HAND.get(s) for s in signals], pairs, "wrist", **kw):
         if hand is not None:
             grip = dict(pairs).get(f"{hand}_wrist")  # None: the bike has no such grip (nothing to release)
             la = res.local_aa.clone()
@@ -108,38 +103,67 @@ def solve_with_signals(rest_joints, targets, signals, pairs, **kw):
                 tgt = tg[grip].to(torch.float64).reshape(-1, 3).expand(len(idx), 3)
                 res.residuals[n] = torch.linalg.vector_norm(joints[:, JOINT_INDEX[f"{hand}_wrist"]] - tgt, dim=-1).float()
                 res.flagged[n] = torch.zeros(len(idx), dtype=torch.bool)
-        parts.append((idx, None if hand is None else pair_name(f"{hand}_wrist", dict(pairs).get(f"{hand}_wrist", "")), res))
-    return _merge(parts, B, pairs)
+        free_name = None if hand is None else pair_name(f"{hand}_wrist", dict(pairs).get(f"{hand}_wrist", ""))
+        parts.append((idx, released(res, names, free_name)))
+    return merge_results(B, parts, names=names)
 
 
-def _merge(parts, B, pairs):
-    first = parts[0][2]
-    out = {}
-    for name in ("local_aa", "root_trans", "joints", "loss"):
-        ref = getattr(first, name)
-        out[name] = torch.zeros((B,) + tuple(ref.shape[1:]), dtype=ref.dtype)
-    seat_off = None if first.seat_offset is None else torch.zeros(B, dtype=first.seat_offset.dtype)
-    seat = None if first.seat is None else torch.zeros(B, 3, dtype=first.seat.dtype)
-    names = [pair_name(j, t) for j, t in pairs]
+def solve_in_groups(rest, targets, sides, pairs, joint, **kw):
+    """ik.solve for B frames grouped by sides[b] ("left", "right" or None), each group without the
+    pair of its side's `joint` ("wrist": a released hand, "ankle": a foot off its pedal; None: every
+    pair held) -> (side, frame indices, the group's targets, IKResult) per group, in first-seen order."""
+    B = len(sides)
+    groups = {}
+    for b, side in enumerate(sides):
+        groups.setdefault(side, []).append(b)
+    for side, idx in groups.items():
+        held = tuple(p for p in pairs if side is None or p[0] != f"{side}_{joint}")
+        tg = {k: (v[idx] if torch.is_tensor(v) and v.dim() == 2 and v.shape[0] == B else v) for k, v in targets.items()}
+        yield side, idx, tg, solve(rest, tg, pairs=held, **kw)
+
+
+def merge_results(B, parts, names=None):
+    """IKResults of disjoint frame subsets [(frame indices, IKResult), ...] -> one IKResult over B
+    frames in order: its residuals, flags and `free` under `names` (default: the first part's), a
+    shorter history padded with its last loss, and `ground_gap_m` where a part has one (a batch
+    where some frames have a foot down and others an arm signal: foot_down.py)."""
+    first = parts[0][1]
+
+    def empty(t):
+        return None if t is None else torch.zeros((B,) + tuple(t.shape[1:]), dtype=t.dtype)
+
+    out = {k: empty(getattr(first, k)) for k in ("local_aa", "root_trans", "joints", "loss", "seat_offset", "seat")}
+    names = list(first.residuals) if names is None else list(names)
     resid = {n: torch.zeros(B, dtype=torch.float32) for n in names}
     flagged = {n: torch.zeros(B, dtype=torch.bool) for n in names}
     free = {n: torch.zeros(B, dtype=torch.bool) for n in names}
-    iters = max(r.history.shape[0] for _, _, r in parts)
+    gaps = any(getattr(r, "ground_gap_m", None) is not None for _, r in parts)
+    gap = torch.zeros(B, dtype=torch.float32)
+    iters = max(r.history.shape[0] for _, r in parts)
     history = torch.zeros(iters, B, dtype=first.history.dtype)
-    for idx, free_name, r in parts:
-        ix = torch.tensor(idx)
-        for name in ("local_aa", "root_trans", "joints", "loss"):
-            out[name][ix] = getattr(r, name).to(out[name].dtype)
-        if seat_off is not None:
-            seat_off[ix] = r.seat_offset.to(seat_off.dtype)
-        if seat is not None:
-            seat[ix] = r.seat.to(seat.dtype)
-        h = r.history
-        history[:, ix] = torch.cat([h, h[-1:].expand(iters - h.shape[0], -1)]) if h.shape[0] < iters else h
-        for (j, t), n in zip(pairs, names):
+    for idx, r in parts:
+        ix = torch.as_tensor(idx)
+        for k, v in out.items():
+            if v is not None:
+                v[ix] = getattr(r, k).to(v.dtype)
+        for n in names:
             resid[n][ix] = r.residuals[n].to(torch.float32)
             flagged[n][ix] = r.flagged[n]
-            free[n][ix] = n == free_name
-    return IKResult(local_aa=out["local_aa"], root_trans=out["root_trans"], joints=out["joints"], loss=out["loss"],
-                    residuals=resid, flagged=flagged, seat_offset=seat_off, history=history,
-                    threshold_m=first.threshold_m, seat=seat, free=free)
+            if r.free is not None:
+                free[n][ix] = r.free[n]
+        if getattr(r, "ground_gap_m", None) is not None:
+            gap[ix] = r.ground_gap_m
+        h = r.history
+        history[:, ix] = torch.cat([h, h[-1:].expand(iters - h.shape[0], -1)]) if h.shape[0] < iters else h
+    res = type(first)(local_aa=out["local_aa"], root_trans=out["root_trans"], joints=out["joints"], loss=out["loss"],
+                      residuals=resid, flagged=flagged, seat_offset=out["seat_offset"], history=history,
+                      threshold_m=first.threshold_m, seat=out["seat"], free=free)
+    if gaps:
+        res.ground_gap_m = gap
+    return res
+
+
+def released(res, names, free_name):
+    """res with `free` marking the pair free_name (a released hand or foot; None: none) among names."""
+    res.free = {n: torch.full((len(res.loss),), n == free_name, dtype=torch.bool) for n in names}
+    return res
