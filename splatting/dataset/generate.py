@@ -300,12 +300,12 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
                 people = list(assets.persons[rider].posed(rot, root).numpy())
             else:
                 people = [f.rider_joints for f in posed]
+        rot, root = assets.avatars[rider].last if rider is not None else (None, None)  # the group's rider pose
         for b, (j, f, person) in enumerate(zip(js, posed, people)):
             if rider is not None and accessories.varies(cfg.appearance):  # drawn per instance, as the colours
                 worn[j] = accessories.draw(cfg.appearance, cfg.seed, look_at, j, accessories.own_choice(assets.bodies[rider].spec))
                 rkeys[j] = assets.wearing(rider, worn[j])
                 if rkeys[j] != rider:  # the same pose, the redressed rider's Gaussians
-                    rot, root = assets.avatars[rider].last
                     f = accessories.swap_rider(f, assets.avatars[rkeys[j]], rot[b:b + 1], None if root is None else root[b:b + 1])
             frames[j] = (d["instances"][j], f, person)
         if relit is not None:
