@@ -189,12 +189,16 @@ def test_default_fields_draw_nothing_and_change_nothing(monkeypatch, root, tmp_p
     assert json.dumps(a[1], sort_keys=True) == json.dumps(b[1], sort_keys=True) and a[2] == b[2]
 
 
-def _fake_trained(riders_root, rider_id):
-    """A trained avatar folder for rider_id (its mesh avatar saved as rider.ply + skinning.npz)."""
+def _fake_trained(riders_root, rider_id, bare=False):
+    """A trained avatar folder for rider_id (its mesh avatar saved as rider.ply + skinning.npz); bare: its
+    accessory-free base in <folder>/bare (what `rider-avatar --bare` trains)."""
     from splatting.cyclist.assets import mesh_avatar
+    from splatting.rider.body import redress
+    from splatting.rider.looks import BARE
     from splatting.rider.roster import load_rider
-    av = mesh_avatar(load_rider(rider_id), 3000)
-    av.save(os.path.join(riders_root, rider_id))
+    rider = load_rider(rider_id)
+    av = mesh_avatar(redress(rider, **BARE) if bare else rider, 3000)
+    av.save(os.path.join(riders_root, rider_id, *(["bare"] if bare else [])))
     return av
 
 
@@ -242,3 +246,59 @@ def test_relit_sets_refuse_accessories(root):
     from splatting.dataset.config import validate
     with pytest.raises(UserError, match="appearance"):
         validate(small_config(root, lighting={"mode": "relit"}, appearance={"helmet_share": 0.5}))
+
+
+def test_a_bare_base_takes_every_draw(root, tmp_path):
+    from splatting.cyclist.appearance import dc_rgb
+    from splatting.dataset.generate import Assets, make_sample
+    from splatting.rider.looks import hex_rgb, look_of
+    riders_root = str(tmp_path / "riders")
+    _fake_trained(riders_root, RIDER)  # trained in its look: helmet, long hair, backpack
+    base = _fake_trained(riders_root, RIDER, bare=True)
+    raw = small_config(root, riders=[RIDER], riders_root=riders_root, synthetic_assets="auto",
+                       appearance={"helmet_share": 0.5, "bag_share": 0.5, "hair_styles": ALL_HAIR})
+    cfg = _cfg(raw)  # no refusal: the bare base can lose the helmet and change the hair
+    assets = Assets(cfg)
+    assets.cyclist("city_t", RIDER)
+    n = len(base)
+    for choice in ({"helmet": False, "hair": "bald", "bag": "none"}, {"helmet": False, "hair": "buzz", "bag": "none"},
+                   {"helmet": True, "hair": "long", "bag": "backpack"}):
+        key = assets.wearing(RIDER, choice)
+        assert key != RIDER  # the bare base, even for the rider's own look
+        av, body = assets.avatars[key], assets.bodies[key]
+        assert len(av) == n + sum(b - a for a, b in body.accessory_parts.values())
+        assert torch.equal(av.gaussians.means[:n], base.gaussians.means)
+        changed = ((av.gaussians.sh[:n] - base.gaussians.sh).abs() > 1e-6).flatten(1).any(1)
+        if choice["hair"] == "bald":
+            assert not bool(changed.any()) and not body.accessory_parts
+        else:  # the scalp painted in the hair colour (a buzz cut; under the long hair's shell too)
+            assert int(changed.sum()) > 20
+            y = base.gaussians.means[changed, 1]
+            assert float(y.min()) > 0.8 * body.height_m
+            want = torch.tensor(hex_rgb(look_of(body.spec)["hair_colour"]), dtype=torch.float32)
+            rgb = dc_rgb(av.gaussians.sh[:n][changed])
+            assert float((rgb - want).abs().mean()) < 0.25
+    _, image, _, _ = make_sample(cfg, 0, assets)
+    assert set(image["instances"][0]["accessories"]) == {"helmet", "hair", "bag"}
+
+
+def test_rider_avatar_bare_trains_the_accessory_free_look(tmp_path, monkeypatch):
+    """`rider-avatar --bare`: the rest mesh Blender renders for training is the body alone (bald, no
+    helmet, no bag); the steps after it are stopped here (Blender and training are not run)."""
+    import trimesh
+    from splatting.rider import avatar_build
+    from splatting.rider.roster import load_rider
+
+    class Stop(Exception):
+        pass
+
+    def stop(*a, **k):
+        raise Stop
+    monkeypatch.setattr(avatar_build, "render_views", stop)
+    for bare in (False, True):
+        out = str(tmp_path / f"bare_{bare}")
+        with pytest.raises(Stop):
+            avatar_build.build_avatar(RIDER, out, bare=bare, log=lambda m: None)
+        mesh = trimesh.load(os.path.join(out, "rest_mesh.ply"), process=False)
+        rider = load_rider(RIDER)
+        assert len(mesh.vertices) == (rider.body_vertex_count if bare else len(rider.vertices))

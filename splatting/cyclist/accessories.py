@@ -12,16 +12,20 @@ straps on the jersey).  Which Gaussians an instance gets:
 - mesh avatar (no trained avatar, or synthetic_assets: always): Gaussians on the redressed mesh's
   vertices (assets.mesh_avatar), so body and accessories are exactly those of a roster rider with
   that look, every accessory removable: the body under it is the mesh's own skin.
-- trained avatar: its Gaussians hold the look it was trained in.  Under a helmet the training views
-  never saw the skull, under a backpack never the back, so a trained accessory cannot be taken off
-  (the body there is missing, not hidden); and its hair is in its Gaussians.  A trained avatar can
-  only gain what it was trained without: the helmet and the backpack are added as Gaussian sets on
-  the accessories' mesh vertices.  `check_trained` refuses, before any work, a config that asks a
-  trained avatar for more (an accessory-free trained base is the way to remove them: not built yet).
+- trained avatar with a bare base (`rider-avatar --bare`: the same rider trained bald, without helmet
+  or bag, in <avatar>/bare/): the base's Gaussians, its scalp recoloured where the draw paints hair,
+  plus every accessory of the draw as a Gaussian set on the accessory's mesh vertices.  Every instance
+  of the rider uses it (its own look too), so no look is drawn by another model than the rest.
+- trained avatar without a base: its Gaussians hold the look it was trained in.  Under a helmet the
+  training views never saw the skull, under a backpack never the back, so a trained accessory cannot
+  be taken off (the body there is missing, not hidden), and its hair is in its Gaussians.  It can only
+  gain what it was trained without: a helmet, a backpack, as sets.  `check` refuses, before any work,
+  a config that asks such an avatar for more.
 
 The draw's own Generator is seeded with (seed, sample index, instance, TAG, 29), so a sample's
 accessories are a function of (config, index), and the colour draws (appearance.draw_look) are
-unchanged by them.  An instance whose draw is its rider's own look gets the rider's own avatar.
+unchanged by them.  Without a bare base, an instance whose draw is its rider's own look gets the
+rider's own avatar.
 """
 from dataclasses import replace
 
@@ -30,12 +34,12 @@ import torch
 
 from cyclist_formats.errors import UserError
 from cyclist_formats.instances import RIDER_ID
-from splatting.cyclist.appearance import TAG
+from splatting.cyclist.appearance import TAG, recolour, rider_regions
 from splatting.cyclist.assets import mesh_avatar, mesh_gaussians, trained_avatar_folder
 from splatting.gaussians.container import Gaussians
 from splatting.rider.avatar import RiderAvatar
-from splatting.rider.body import redress
-from splatting.rider.looks import look_of
+from splatting.rider.body import REGIONS, redress
+from splatting.rider.looks import hex_rgb, look_of
 from splatting.rider.roster import get_spec
 
 FIELDS = ("helmet", "hair", "bag")  # the look fields a dataset draws per instance
@@ -77,8 +81,8 @@ def check(cfg):
             raise UserError(f"appearance: rider {r!r} is a {spec.get('body')} body without a roster look; per-instance "
                             f"accessories (helmet_share, bag_share, hair_styles) need anny roster riders")
         folder = trained_avatar_folder(r, cfg.riders_root, cfg.synthetic_assets)
-        if folder is None:
-            continue
+        if folder is None or trained_avatar_folder(r, cfg.riders_root, cfg.synthetic_assets, bare=True):
+            continue  # a mesh avatar, or a trained one with a bare base: every draw can be worn
         own = own_choice(spec)
         why = None
         if a.hair_styles is not None and list(a.hair_styles) != [own["hair"]]:
@@ -88,30 +92,51 @@ def check(cfg):
         elif a.bag_share is not None and own["bag"] != "none" and a.bag_share < 1:
             why = ("appearance.bag_share", "it was trained wearing a backpack (the back under it was never seen)")
         if why:
-            raise UserError(f"{why[0]}: rider {r!r} has a trained avatar in {folder}, and {why[1]}; use mesh avatars "
-                            f"(synthetic_assets: always) or leave the field null for it")
+            raise UserError(f"{why[0]}: rider {r!r} has a trained avatar in {folder}, and {why[1]}; train its bare base "
+                            f"(`python -m splatting rider-avatar --id {r} --bare --out {folder}/bare`), use mesh avatars "
+                            f"(synthetic_assets: always) or leave the field null")
 
 
-def dressed_avatar(avatar, body, choice, trained, n=None):
+def dressed_avatar(avatar, body, choice, trained, n=None, bare=None):
     """(RiderAvatar, Rider) of a rider wearing choice (draw's dict): avatar and body are the rider's own
-    (assets.load_avatar), trained whether the avatar is a trained one.  Mesh avatar: the redressed
-    mesh's (n: its subsample).  Trained: the trained Gaussians plus the accessory sets it lacks (ADDABLE),
-    as Gaussians on the accessories' vertices with their colours and skinning weights."""
+    (assets.load_avatar), trained whether the avatar is a trained one, bare its accessory-free trained
+    base (RiderAvatar of `rider-avatar --bare`) or None.  Mesh avatar: the redressed mesh's (n: its
+    subsample).  Bare base: its Gaussians, the scalp recoloured where the draw paints hair on it, plus
+    every accessory of the draw as a set.  Trained without a base: its Gaussians plus the sets it lacks
+    (ADDABLE).  A set: Gaussians on the accessory's vertices with their colours and skinning weights."""
     dressed = redress(body, **choice)
     if not trained:
         return mesh_avatar(dressed, n), dressed
-    own = {k: look_of(body.spec)[k] for k in FIELDS}
-    add = [ADDABLE[k] for k in ADDABLE if choice[k] != own[k]]
-    if choice["hair"] != own["hair"] or any(part not in dressed.accessory_parts for part in add):
-        raise UserError(f"rider {body.id}: a trained avatar can gain a helmet or a backpack, not lose one or change "
-                        f"its hair ({own} -> {choice})")
+    if bare is not None:
+        base, add = _scalp_painted(bare, dressed), list(dressed.accessory_parts)
+    else:
+        own = {k: look_of(body.spec)[k] for k in FIELDS}
+        add = [ADDABLE[k] for k in ADDABLE if choice[k] != own[k]]
+        if choice["hair"] != own["hair"] or any(part not in dressed.accessory_parts for part in add):
+            raise UserError(f"rider {body.id}: a trained avatar without a bare base can gain a helmet or a backpack, "
+                            f"not lose one or change its hair ({own} -> {choice})")
+        base = avatar
     if not add:
-        return avatar, body
+        return base, dressed
     idx = torch.cat([torch.arange(*dressed.accessory_parts[p]) for p in add])
     sets = mesh_gaussians(dressed, idx, len(dressed.vertices))  # the full mesh avatar's spacing
-    out = RiderAvatar(Gaussians.cat([avatar.gaussians, sets]), torch.cat([avatar.weights, dressed.weights[idx]]),
-                      avatar.rest_joints.clone(), avatar.rider_id, avatar.method, avatar.eps2d)
+    out = RiderAvatar(Gaussians.cat([base.gaussians, sets]), torch.cat([base.weights, dressed.weights[idx]]),
+                      base.rest_joints.clone(), base.rider_id, base.method, base.eps2d)
     return out, dressed
+
+
+def _scalp_painted(bare, dressed):
+    """The bare (bald) base avatar with the Gaussians on the scalp the dressed look paints as hair turned
+    from skin to the hair colour, shading kept (appearance.recolour): a buzz cut, and the scalp under a
+    hair shell, as looks.dress paints them on the mesh."""
+    n = dressed.body_vertex_count
+    body = replace(dressed, vertices=dressed.vertices[:n], regions=dressed.regions[:n])  # the skin, not the shells
+    hair = rider_regions(bare.gaussians.means, body) == REGIONS.index("hair")
+    if not bool(hair.any()):
+        return bare
+    skin, colour = hex_rgb(dressed.spec["colors"]["skin"]), hex_rgb(look_of(dressed.spec)["hair_colour"])
+    g = replace(bare.gaussians, sh=recolour(bare.gaussians.sh, hair, skin, colour))
+    return RiderAvatar(g, bare.weights, bare.rest_joints, bare.rider_id, bare.method, bare.eps2d)
 
 
 def swap_rider(frame, avatar, rotations, root):

@@ -20,7 +20,7 @@ from cyclist_formats.errors import UserError
 from splatting.bike.model import BikeModel
 from splatting.gaussians.container import Gaussians
 from splatting.gaussians.sh import rgb_to_sh0
-from splatting.rider.avatar import PLY_NAME, RiderAvatar, SKINNING_NAME
+from splatting.rider.avatar import BARE_NAME, PLY_NAME, RiderAvatar, SKINNING_NAME
 from splatting.rider.roster import load_rider
 
 SYNTHETIC_MODES = ("auto", "always", "never")
@@ -147,9 +147,10 @@ def mesh_avatar(rider, n=None, seed=0):
     return RiderAvatar(g, rider.weights[idx].clone(), rider.joints.clone(), rider.id, method="mesh_vertices")
 
 
-def trained_avatar_folder(rider_id, riders_root, synthetic="auto"):
-    """The folder of the rider's trained avatar that load_avatar takes, or None (it builds the mesh avatar)."""
-    folder = os.path.join(riders_root, rider_id)
+def trained_avatar_folder(rider_id, riders_root, synthetic="auto", bare=False):
+    """The folder of the rider's trained avatar that load_avatar takes, or None (it builds the mesh avatar);
+    bare: of its accessory-free base (`rider-avatar --bare`, <folder>/bare/)."""
+    folder = os.path.join(riders_root, rider_id, *([BARE_NAME] if bare else []))
     trained = all(os.path.isfile(os.path.join(folder, f)) for f in (PLY_NAME, SKINNING_NAME))
     return folder if synthetic != "always" and trained else None
 

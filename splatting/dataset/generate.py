@@ -29,6 +29,7 @@ from splatting.dataset.labels import BoxMask, annotation, vehicle_class
 from splatting.dataset.person_keypoints import COCO17_TOLERANCE_M, PersonKeypoints, RecordingAvatar
 from splatting.dataset.street import draw_street
 from splatting.gaussians.container import Gaussians
+from splatting.rider.avatar import RiderAvatar
 from splatting.raster.api import EPS2D, eps2d_cat
 
 
@@ -64,17 +65,19 @@ class Assets:
 
     def wearing(self, rider, choice):
         """The key of the rider wearing choice (accessories.draw's dict) in avatars and bodies: the rider
-        id itself for its own look, else (rider, helmet, hair, bag), its avatar built once
-        (accessories.dressed_avatar).  The rider's own avatar must be loaded (cyclist())."""
-        body = self.bodies[rider]
-        if choice == accessories.own_choice(body.spec):
+        id itself for its own look (unless it has a bare base), else (rider, helmet, hair, bag), its
+        avatar built once (accessories.dressed_avatar).  The rider's own avatar must be loaded (cyclist())."""
+        body, c = self.bodies[rider], self.cfg
+        bare = trained_avatar_folder(rider, c.riders_root, c.synthetic_assets, bare=True)
+        if bare is None and choice == accessories.own_choice(body.spec):
             return rider
         key = (rider, *(choice[k] for k in accessories.FIELDS))
         if key not in self.avatars:
-            c = self.cfg
             trained = trained_avatar_folder(rider, c.riders_root, c.synthetic_assets) is not None
+            if bare is not None and (rider, "bare") not in self.avatars:
+                self.avatars[(rider, "bare")] = RiderAvatar.load(bare)
             self.avatars[key], self.bodies[key] = accessories.dressed_avatar(
-                self.avatars[rider], body, choice, trained, c.rider_gaussians)
+                self.avatars[rider], body, choice, trained, c.rider_gaussians, self.avatars.get((rider, "bare")))
         return key
 
     def lod_order(self, bike, rider, g, ids):
@@ -354,7 +357,7 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
         aa.append(bike_aa if idx is None else bike_aa.index_select(0, idx))
         # and each model with the low-pass it was trained with (bike and rider may differ)
         cyc = assets.cyclists[(inst["bike"], inst["rider"])]
-        e = frame_eps2d(frame.ids, cyc.bike, cyc.avatar)
+        e = frame_eps2d(frame.ids, cyc.bike, cyc.avatar if rkeys[k] == inst["rider"] else assets.avatars[rkeys[k]])
         if fs is not None:  # the full model, for the LiDAR scan
             scan_parts.append((frame.gaussians, e, bike_aa if bike_trained_aa else False))
         eps.append((len(g), e if idx is None or not torch.is_tensor(e) else e.index_select(0, idx)))
