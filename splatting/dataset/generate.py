@@ -29,8 +29,8 @@ from splatting.dataset.labels import BoxMask, annotation, vehicle_class
 from splatting.dataset.person_keypoints import COCO17_TOLERANCE_M, PersonKeypoints, RecordingAvatar
 from splatting.dataset.street import draw_street
 from splatting.gaussians.container import Gaussians
-from splatting.rider.avatar import RiderAvatar
 from splatting.raster.api import EPS2D, eps2d_cat
+from splatting.rider.avatar import RiderAvatar
 
 
 class Assets:
@@ -41,6 +41,7 @@ class Assets:
         self.bikes, self.avatars, self.cyclists, self.persons = {}, {}, {}, {}
         self._scene = None
         self.lod_orders, self.bodies, self.looks, self.label_prep = {}, {}, {}, {}
+        self.bare_bases = {}  # rider id -> its bare base RiderAvatar (rider-avatar --bare) or None
 
     def cyclist(self, bike, rider):
         key = (bike, rider)
@@ -68,16 +69,17 @@ class Assets:
         id itself for its own look (unless it has a bare base), else (rider, helmet, hair, bag), its
         avatar built once (accessories.dressed_avatar).  The rider's own avatar must be loaded (cyclist())."""
         body, c = self.bodies[rider], self.cfg
-        bare = trained_avatar_folder(rider, c.riders_root, c.synthetic_assets, bare=True)
+        if rider not in self.bare_bases:
+            folder = trained_avatar_folder(rider, c.riders_root, c.synthetic_assets, bare=True)
+            self.bare_bases[rider] = None if folder is None else RiderAvatar.load(folder)
+        bare = self.bare_bases[rider]
         if bare is None and choice == accessories.own_choice(body.spec):
             return rider
         key = (rider, *(choice[k] for k in accessories.FIELDS))
         if key not in self.avatars:
             trained = trained_avatar_folder(rider, c.riders_root, c.synthetic_assets) is not None
-            if bare is not None and (rider, "bare") not in self.avatars:
-                self.avatars[(rider, "bare")] = RiderAvatar.load(bare)
             self.avatars[key], self.bodies[key] = accessories.dressed_avatar(
-                self.avatars[rider], body, choice, trained, c.rider_gaussians, self.avatars.get((rider, "bare")))
+                self.avatars[rider], body, choice, trained, c.rider_gaussians, bare)
         return key
 
     def lod_order(self, bike, rider, g, ids):
@@ -479,7 +481,7 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
         image["lighting"] = relit.record(cam)
     for rec, look in zip(image["instances"], looks):  # the sampled look: None = kept
         rec["appearance"] = look
-    for rec, w in zip(image["instances"], worn):  # the accessories drawn (and drawn: the rendered instance's)
+    for rec, w in zip(image["instances"], worn):  # the accessories each rider wears, where drawn
         if w is not None:
             rec["accessories"] = w
     if keeps:  # the level each instance was rendered at (share of its Gaussians)
