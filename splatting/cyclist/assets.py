@@ -20,7 +20,7 @@ from cyclist_formats.errors import UserError
 from splatting.bike.model import BikeModel
 from splatting.gaussians.container import Gaussians
 from splatting.gaussians.sh import rgb_to_sh0
-from splatting.rider.avatar import PLY_NAME, RiderAvatar, SKINNING_NAME
+from splatting.rider.avatar import BARE_NAME, PLY_NAME, RiderAvatar, SKINNING_NAME
 from splatting.rider.roster import load_rider
 
 SYNTHETIC_MODES = ("auto", "always", "never")
@@ -130,24 +130,38 @@ def load_bike(d, synthetic="auto", n_per_part=2000, log=None):
     return BikeModel(parts, kdoc, meta, source=d)
 
 
+def mesh_gaussians(rider, idx, n_total=None):
+    """Gaussians on the rider mesh's vertices idx with their colours, each as wide as the vertex
+    spacing of n_total (default len(idx)) Gaussians spread over the skin, so the skin is closed."""
+    area = 2.0 * rider.height_m ** 2 * 0.35  # ~1.9 m^2 skin for a 1.8 m adult (Du Bois order)
+    scale = 0.8 * math.sqrt(area / (len(idx) if n_total is None else n_total))
+    return _gaussians(rider.vertices[idx].numpy(), rider.colors[idx].numpy(), scale, opacity=0.98)
+
+
 def mesh_avatar(rider, n=None, seed=0):
     """An untrained RiderAvatar: Gaussians on (a subset of) the rider mesh's vertices, with the
-    vertex colours and skinning weights.  Scale ~ the vertex spacing so the skin is closed."""
+    vertex colours and skinning weights."""
     V = len(rider.vertices)
     idx = np.arange(V) if n is None or n >= V else np.sort(np.random.default_rng(seed).choice(V, n, replace=False))
-    area = 2.0 * rider.height_m ** 2 * 0.35  # ~1.9 m^2 skin for a 1.8 m adult (Du Bois order)
-    scale = 0.8 * math.sqrt(area / len(idx))
-    g = _gaussians(rider.vertices[idx].numpy(), rider.colors[idx].numpy(), scale, opacity=0.98)
+    g = mesh_gaussians(rider, idx)
     return RiderAvatar(g, rider.weights[idx].clone(), rider.joints.clone(), rider.id, method="mesh_vertices")
+
+
+def trained_avatar_folder(rider_id, riders_root, synthetic="auto", bare=False):
+    """The folder of the rider's trained avatar that load_avatar takes, or None (it builds the mesh avatar);
+    bare: of its accessory-free base (`rider-avatar --bare`, <folder>/bare/)."""
+    folder = os.path.join(riders_root, rider_id, *([BARE_NAME] if bare else []))
+    trained = all(os.path.isfile(os.path.join(folder, f)) for f in (PLY_NAME, SKINNING_NAME))
+    return folder if synthetic != "always" and trained else None
 
 
 def load_avatar(rider_id, riders_root="data/riders", synthetic="auto", n=None, log=None):
     """(RiderAvatar, rider body) for a roster id: trained avatar folder if present, else mesh_avatar."""
     rider = load_rider(rider_id)
-    folder = os.path.join(riders_root, rider_id)
-    trained = all(os.path.isfile(os.path.join(folder, f)) for f in (PLY_NAME, SKINNING_NAME))
-    if synthetic != "always" and trained:
+    folder = trained_avatar_folder(rider_id, riders_root, synthetic)
+    if folder is not None:
         return RiderAvatar.load(folder), rider
+    folder = os.path.join(riders_root, rider_id)
     if synthetic == "never":
         raise UserError(f"no trained avatar in {folder}; build one with "
                         f"`python -m splatting rider-avatar --id {rider_id} --out {folder}`")

@@ -9,3 +9,6 @@ RECOLOUR = ("top", "bottom", "shoes", "helmet", "paint")  # regions appearance v
 # the roster's looks added hair and bags (splatting/rider/looks.py): drawn from their own Generator, so the
 # draws above (and every dataset made before) stay as they were
 RECOLOUR_EXTRA = ("hair", "bag")
+# the hair styles of the roster's looks (splatting/rider/looks.py HAIR_STYLES, which loads numpy and torch;
+# tests/test_accessories.py checks they are the same): what `appearance.hair_styles` may list
+HAIR_STYLES = ("bald", "buzz", "short", "long", "bun")

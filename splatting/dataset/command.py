@@ -235,11 +235,16 @@ class LooksSheet:
         p.add_argument("--riders-root", default="data/riders")
         p.add_argument("--count", type=int, default=12)
         p.add_argument("--seed", type=int, default=0)
+        p.add_argument("--accessories", action="store_true",
+                       help="vary the rider's per-instance accessories (helmet, hair, backpack) instead of the colours")
+        p.add_argument("--scale", type=float, default=1.0, help="camera resolution scale (0.05-4; the tiles' size)")
 
     @staticmethod
     def check_args(args):
         if args.count < 1:
             raise UserError("--count must be >= 1")
+        if not 0.05 <= args.scale <= 4:  # also refuses nan
+            raise UserError(f"--scale must be within 0.05..4, got {args.scale}")
         if not args.out.lower().endswith(".png"):
             raise UserError("--out must be a .png file")
 
@@ -247,7 +252,8 @@ class LooksSheet:
     def run(args):
         from splatting.dataset.looks_sheet import write_looks_sheet
 
-        print(write_looks_sheet(args.out, args.bike, args.rider, args.riders_root, args.count, args.seed))
+        print(write_looks_sheet(args.out, args.bike, args.rider, args.riders_root, args.count, args.seed,
+                                accessories_only=args.accessories, scale=args.scale))
         return 0
 
 

@@ -14,6 +14,7 @@ from cyclist_formats import bike_folder, typed_config
 from cyclist_formats.errors import UserError
 from cyclist_formats.text_files import read_yaml
 from splatting import paths
+from splatting.cyclist import accessories
 from splatting.dataset import lighting
 from splatting.dataset.backgrounds import list_images
 from splatting.dataset.config_models import DatasetConfig, require_config
@@ -97,6 +98,7 @@ def resolve_assets(cfg):
         update["bikes"] = list(cfg.bikes)
     cfg = cfg.model_copy(update=update)
     lighting.check_assets(cfg)
+    accessories.check(cfg)
     return cfg
 
 

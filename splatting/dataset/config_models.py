@@ -23,7 +23,7 @@ from pydantic_core import PydanticCustomError
 from cyclist_formats import checks
 from cyclist_formats.typed_config import (AutoOr, Block, Bool, Field, Int, IntRange, Number, Range, Str, Vec3,
                                           defaults_of, field_error)
-from splatting.cyclist.look_defaults import DEFAULT_COMPENSATE, DEFAULT_LEVELS, RECOLOUR, RECOLOUR_EXTRA
+from splatting.cyclist.look_defaults import DEFAULT_COMPENSATE, DEFAULT_LEVELS, HAIR_STYLES, RECOLOUR, RECOLOUR_EXTRA
 from splatting.dataset.sequences.trajectory import MANOEUVRES
 
 # ------------------------------------------------------------------ camera
@@ -238,6 +238,15 @@ class Appearance(Block):
     value: Range(0, 1) = [0.12, 0.95]
     brightness: Range(0.05, 4) = [0.75, 1.25]
     white_balance: Annotated[Number, Field(ge=0, le=0.5)] = 0.08
+    # per-instance accessories (splatting/cyclist/accessories.py); each null = the rider's own look (drawn
+    # per rider id), so earlier configs draw nothing new and keep their bytes.  They act whether or not
+    # `enabled` (the colours) is on.
+    helmet_share: Optional[Annotated[Number, Field(ge=0, le=1)]] = Field(
+        None, description="per instance: share of riders wearing a helmet (null: the rider's own)")
+    bag_share: Optional[Annotated[Number, Field(ge=0, le=1)]] = Field(
+        None, description="per instance: share of riders wearing a backpack (null: the rider's own)")
+    hair_styles: Optional[Annotated[list[Literal[HAIR_STYLES]], Field(min_length=1)]] = Field(
+        None, description="per instance: a hair style drawn uniformly from these (null: the rider's own)")
 
 
 class Lighting(Block):
@@ -401,6 +410,10 @@ class DatasetConfig(Block):
             raise field_error("lod.levels", "a level for shorter instances must not keep more Gaussians")
         if self.mode == "frames" and not self.frames:
             raise field_error("frames", f"frames mode needs a KITTI object folder (or --frames DIR), got {self.frames!r}")
+        a = self.appearance
+        if self.lighting.mode == "relit" and (a.helmet_share, a.bag_share, a.hair_styles) != (None, None, None):
+            raise field_error("appearance.helmet_share", "per-instance accessories (helmet_share, bag_share, hair_styles) "
+                                                         "need baked lighting (relight channels are per trained avatar)")
         self._check_sequence()
         return self
 

@@ -14,8 +14,8 @@ import torch
 from cyclist_formats.atomic import atomic_path, write_json
 from cyclist_formats.instances import RIDER_ID
 from splatting.bike.model import KEYPOINTS as BIKE_KEYPOINTS
-from splatting.cyclist import appearance, lod
-from splatting.cyclist.assets import bike_dir, load_avatar, load_bike
+from splatting.cyclist import accessories, appearance, lod
+from splatting.cyclist.assets import bike_dir, load_avatar, load_bike, trained_avatar_folder
 from splatting.cyclist.compose import Cyclist, frame_eps2d
 from splatting.cyclist.render import keypoint_visibility, orbit_camera, over, project_points, to_uint8
 from splatting.cyclist.scene_render import MASK_ALPHA, render_scene, union
@@ -30,6 +30,7 @@ from splatting.dataset.person_keypoints import COCO17_TOLERANCE_M, PersonKeypoin
 from splatting.dataset.street import draw_street
 from splatting.gaussians.container import Gaussians
 from splatting.raster.api import EPS2D, eps2d_cat
+from splatting.rider.avatar import RiderAvatar
 
 
 class Assets:
@@ -40,6 +41,7 @@ class Assets:
         self.bikes, self.avatars, self.cyclists, self.persons = {}, {}, {}, {}
         self._scene = None
         self.lod_orders, self.bodies, self.looks, self.label_prep = {}, {}, {}, {}
+        self.bare_bases = {}  # rider id -> its bare base RiderAvatar (rider-avatar --bare) or None
 
     def cyclist(self, bike, rider):
         key = (bike, rider)
@@ -61,6 +63,24 @@ class Assets:
                 av = self.avatars[rider]
             self.cyclists[key] = Cyclist(self.bikes[bike], av, c.ik_iterations)
         return self.cyclists[key]
+
+    def wearing(self, rider, choice):
+        """The key of the rider wearing choice (accessories.draw's dict) in avatars and bodies: the rider
+        id itself for its own look (unless it has a bare base), else (rider, helmet, hair, bag), its
+        avatar built once (accessories.dressed_avatar).  The rider's own avatar must be loaded (cyclist())."""
+        body, c = self.bodies[rider], self.cfg
+        if rider not in self.bare_bases:
+            folder = trained_avatar_folder(rider, c.riders_root, c.synthetic_assets, bare=True)
+            self.bare_bases[rider] = None if folder is None else RiderAvatar.load(folder)
+        bare = self.bare_bases[rider]
+        if bare is None and choice == accessories.own_choice(body.spec):
+            return rider
+        key = (rider, *(choice[k] for k in accessories.FIELDS))
+        if key not in self.avatars:
+            trained = trained_avatar_folder(rider, c.riders_root, c.synthetic_assets) is not None
+            self.avatars[key], self.bodies[key] = accessories.dressed_avatar(
+                self.avatars[rider], body, choice, trained, c.rider_gaussians, bare)
+        return key
 
     def lod_order(self, bike, rider, g, ids):
         """The level-of-detail ranking of a (bike, rider)'s posed Gaussians (pose does not change
@@ -263,6 +283,9 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
     for j, inst in enumerate(d["instances"]):
         groups.setdefault((inst["bike"], inst["rider"]), []).append(j)
     frames = [None] * len(d["instances"])
+    look_at = index if look_index is None else look_index
+    # per instance: the accessories drawn (None: not drawn), the key of its rider's avatar in assets
+    worn, rkeys = [None] * len(frames), [i["rider"] for i in d["instances"]]
     for (bike, rider), js in groups.items():
         cyc = assets.cyclist(bike, rider)
         if fs is not None:  # both tyres on the frame's road plane (frames.contact)
@@ -282,7 +305,13 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
                 people = list(assets.persons[rider].posed(rot, root).numpy())
             else:
                 people = [f.rider_joints for f in posed]
-        for j, f, person in zip(js, posed, people):
+        rot, root = assets.avatars[rider].last if rider is not None else (None, None)  # the group's rider pose
+        for b, (j, f, person) in enumerate(zip(js, posed, people)):
+            if rider is not None and accessories.varies(cfg.appearance):  # drawn per instance, as the colours
+                worn[j] = accessories.draw(cfg.appearance, cfg.seed, look_at, j, accessories.own_choice(assets.bodies[rider].spec))
+                rkeys[j] = assets.wearing(rider, worn[j])
+                if rkeys[j] != rider:  # the same pose, the redressed rider's Gaussians
+                    f = accessories.swap_rider(f, assets.avatars[rkeys[j]], rot[b:b + 1], None if root is None else root[b:b + 1])
             frames[j] = (d["instances"][j], f, person)
         if relit is not None:
             relit.posed(bike, rider, js, [f.pose for f in posed])
@@ -309,19 +338,19 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
     for k, (inst, frame, _) in enumerate(frames):
         g = frame.gaussians
         slot = torch.where(frame.ids == RIDER_ID, 2 * k + 2, 2 * k + 1).long()
-        prep = assets.label_inputs(inst["bike"], inst["rider"], frame)
+        prep = assets.label_inputs(inst["bike"], rkeys[k], frame)
         boxes.append(extent_box(g, inst["pose"], prep=prep["extent"]))  # labels come from the full model, LOD or not
         idx = None
         if cfg.appearance.enabled:
-            look, gain = appearance.draw_look(cfg.appearance, cfg.seed, index if look_index is None else look_index, k)
-            g = appearance.apply_look(g, frame.ids, look, gain, **assets.look_inputs(inst["bike"], inst["rider"], frame))
+            look, gain = appearance.draw_look(cfg.appearance, cfg.seed, look_at, k)
+            g = appearance.apply_look(g, frame.ids, look, gain, **assets.look_inputs(inst["bike"], rkeys[k], frame))
             looks.append({"colours": {r: None if c is None else [round(float(x), 4) for x in c] for r, c in look.items()},
                           "gain": [round(float(x), 4) for x in gain]})
         looked = g
         if lod_cfg.enabled:
             keeps.append(lod.level_keep(_height_px(boxes[-1], cam), lod_levels))
             if keeps[-1] < 1.0:
-                g, idx = lod.reduce(g, assets.lod_order(inst["bike"], inst["rider"], g, frame.ids), keeps[-1],
+                g, idx = lod.reduce(g, assets.lod_order(inst["bike"], rkeys[k], g, frame.ids), keeps[-1],
                                     lod_cfg.compensate, frame.ids)
                 slot = slot.index_select(0, idx)
         # a bike whose parts were trained antialiased is drawn so (its rider and the rest as trained)
@@ -330,7 +359,7 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
         aa.append(bike_aa if idx is None else bike_aa.index_select(0, idx))
         # and each model with the low-pass it was trained with (bike and rider may differ)
         cyc = assets.cyclists[(inst["bike"], inst["rider"])]
-        e = frame_eps2d(frame.ids, cyc.bike, cyc.avatar)
+        e = frame_eps2d(frame.ids, cyc.bike, cyc.avatar if rkeys[k] == inst["rider"] else assets.avatars[rkeys[k]])
         if fs is not None:  # the full model, for the LiDAR scan
             scan_parts.append((frame.gaussians, e, bike_aa if bike_trained_aa else False))
         eps.append((len(g), e if idx is None or not torch.is_tensor(e) else e.index_select(0, idx)))
@@ -397,7 +426,7 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
         vis_b, vis_r = box_mask(L["label"], box, sb), box_mask(L["label"], box, sr)
         am_b = amodal_mask(L["amodal"].get(sb), box, vis_b)
         am_r = amodal_mask(L["amodal"].get(sr), box, vis_r)
-        means, prep = frame.gaussians.means.numpy(), assets.label_inputs(inst["bike"], inst["rider"], frame)
+        means, prep = frame.gaussians.means.numpy(), assets.label_inputs(inst["bike"], rkeys[k], frame)
         ext_b = projected_extent(means[prep["bike"]], cam)
         bx = boxes[k]
         loc, ry, alpha = fs.box3d(bx) if fs is not None else kitti.box3d(R, T, bx)
@@ -452,6 +481,9 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
         image["lighting"] = relit.record(cam)
     for rec, look in zip(image["instances"], looks):  # the sampled look: None = kept
         rec["appearance"] = look
+    for rec, w in zip(image["instances"], worn):  # the accessories each rider wears, where drawn
+        if w is not None:
+            rec["accessories"] = w
     if keeps:  # the level each instance was rendered at (share of its Gaussians)
         for rec, keep in zip(image["instances"], keeps):
             rec["lod_keep"] = keep
@@ -515,6 +547,9 @@ def config_record(cfg):
     rec = cfg.model_dump()
     if not lighting.relit(cfg):
         del rec["lighting"]
+    for k in ("helmet_share", "bag_share", "hair_styles"):  # per-instance accessories: only when drawn
+        if rec["appearance"][k] is None:
+            del rec["appearance"][k]
     if cfg.mode != "frames":
         del rec["frames"], rec["insert"]
     if not cfg.sequence.enabled:

@@ -31,6 +31,7 @@ from splatting.training.record import avatar_trained_eps2d as trained_eps2d
 SKINNING_METHOD = "barycentric_nearest_triangle"
 PLY_NAME = "rider.ply"
 SKINNING_NAME = "skinning.npz"
+BARE_NAME = "bare"  # <avatar folder>/bare/: the same rider trained in the accessory-free look (looks.BARE)
 PURE_WEIGHT = 1.0 - 1e-6  # a Gaussian this dominated by one joint moves rigidly with it
 NEWTON_ITERATIONS = 8
 

@@ -1,7 +1,9 @@
 """Build a rider's Gaussian avatar (the command: `python -m splatting rider-avatar --id ID`, rider/command.py).
 
 Steps, each skipped when its output exists (so a killed run resumes):
-  1. rest_mesh.ply   the T-posed rider mesh with vertex colours (body.export_rider)
+  1. rest_mesh.ply   the T-posed rider mesh with vertex colours (body.export_rider); with bare, the rider
+                     redressed in the accessory-free look (looks.BARE): the base datasets add per-instance
+                     accessories to (splatting/cyclist/accessories.py; default folder <avatar>/bare/)
   2. views/          36 ring views in Blender (blender_scripts/render_rider.py, a subprocess)
   3. rider.ply       Gaussians trained on those views (splatting.training.trainer; rider.json = metrics)
   4. skinning.npz    per-Gaussian LBS weights from the body model (avatar.RiderAvatar)
@@ -18,7 +20,8 @@ from cyclist_formats.errors import UserError
 from splatting import paths
 from splatting.gaussians.container import read_ply
 from splatting.rider.avatar import PLY_NAME, RiderAvatar, SKINNING_NAME
-from splatting.rider.body import export_rider
+from splatting.rider.body import export_rider, redress
+from splatting.rider.looks import BARE
 from splatting.rider.roster import load_rider
 from splatting.training.trainer import train, TrainConfig
 
@@ -45,11 +48,13 @@ def render_views(mesh, views_dir, samples=None, python=None, log=print, size=Non
 
 
 def build_avatar(rider_id, out_dir, iterations=None, time_budget_s=None, max_gaussians=None, samples=None,
-                 threads=1, log=print, size=None):
+                 threads=1, log=print, size=None, bare=False):
     """Run the four steps; returns {"avatar": out_dir, "steps": {step: seconds or "skipped"}, "train": metrics}."""
 
 
     rider = load_rider(rider_id)  # UserError for an unknown id, before any work
+    if bare:
+        rider = redress(rider, **BARE)  # UserError for a body without a roster look
     os.makedirs(out_dir, exist_ok=True)
     mesh = os.path.join(out_dir, "rest_mesh.ply")
     views = os.path.join(out_dir, "views")

@@ -28,7 +28,7 @@ from cyclist_formats.atomic import atomic_path
 from cyclist_formats.errors import UserError
 from splatting import paths
 from splatting.rider.kinematics import JOINT_INDEX, JOINT_NAMES, forward_kinematics
-from splatting.rider.looks import dress, hex_rgb, look_of
+from splatting.rider.looks import dress, hex_rgb, look_of, validate_look
 
 CACHE_DIR = paths.DATA / "anny_cache"
 ROOT = paths.ROOT
@@ -88,6 +88,12 @@ class Rider:
     # vertices [0, body_vertex_count) are the body's own (keypoint regressors pick among them); the
     # rest are accessories (helmet, hair, backpack: looks.py).  None: all are the body's.
     body_vertex_count: int = None
+    # what `dress` started from (the anny path; None for SMPL and imported bodies): the body's own
+    # vertices, faces, weights, joints and eye centres, float64 as dressed, so `redress` can put the
+    # same body into another look (per-instance accessories, splatting/cyclist/accessories.py)
+    undressed: dict = None
+    # the appended accessories' vertex ranges, {name: (first, last + 1)} (looks.dress's parts)
+    accessory_parts: dict = None
 
 
 def _cache_dir():
@@ -225,16 +231,38 @@ def build_rider(spec):
     weights /= weights.sum(1, keepdims=True)
 
     eyes = heads[[idx["eye.L"], idx["eye.R"]]]
-    eye_y = eyes[:, 1].mean()
     height = float(verts[:, 1].max() - verts[:, 1].min())  # the body's, before any helmet or hair
-    n_body = len(verts)
-    verts, faces, weights, colors, regions, _ = dress(
-        verts, model.faces.long().numpy(), weights, joints, eye_y, eyes, spec["colors"],
-        region_ids(verts, weights, joints, eye_y), look_of(spec), REGIONS)
+    undressed = {"vertices": verts, "faces": model.faces.long().numpy(), "weights": weights, "joints": joints,
+                 "eyes": eyes, "height_m": height}
+    return _dressed(spec, undressed, look_of(spec))
+
+
+def _dressed(spec, u, look):
+    """The Rider of roster entry spec: the undressed body u (build_rider's) in the look."""
+    eye_y = u["eyes"][:, 1].mean()
+    verts, faces, weights, colors, regions, parts = dress(
+        u["vertices"], u["faces"], u["weights"], u["joints"], eye_y, u["eyes"], spec["colors"],
+        region_ids(u["vertices"], u["weights"], u["joints"], eye_y), look, REGIONS)
     f32 = lambda a: torch.from_numpy(np.ascontiguousarray(a)).float()
     return Rider(id=spec["id"], vertices=f32(verts), faces=torch.from_numpy(np.ascontiguousarray(faces)).long(),
-                 joints=f32(joints), weights=f32(weights), colors=f32(colors), height_m=height, spec=dict(spec),
-                 regions=torch.from_numpy(np.ascontiguousarray(regions)), body_vertex_count=n_body)
+                 joints=f32(u["joints"]), weights=f32(weights), colors=f32(colors), height_m=u["height_m"],
+                 spec=dict(spec), regions=torch.from_numpy(np.ascontiguousarray(regions)),
+                 body_vertex_count=len(u["vertices"]), undressed=u, accessory_parts=dict(parts))
+
+
+def redress(rider, **look):
+    """The same body in its look with some fields replaced (looks.LOOK_FIELDS: e.g. helmet=False,
+    hair="bun", bag="backpack"): a new Rider whose first body_vertex_count vertices, faces and weights
+    are the rider's own; its colours, regions and appended accessories are what `dress` makes of the
+    new look, exactly as a roster entry with that `look:` block would be built."""
+    if rider.undressed is None:
+        raise UserError(f"rider {rider.id} ({rider.spec.get('body', 'anny')} body) has no roster look to change; "
+                        f"per-instance accessories need an anny roster rider")
+    bad = validate_look(look)
+    if bad:
+        raise UserError(bad)
+    spec = dict(rider.spec, look=dict(rider.spec.get("look") or {}, **look))
+    return _dressed(spec, rider.undressed, look_of(spec))
 
 
 def pose_vertices(rider, local_rotmats, root_trans=None):

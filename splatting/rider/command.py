@@ -83,6 +83,8 @@ class Avatar:
         p.add_argument("--samples", type=int, default=None, help="Cycles samples for the 36 views")
         p.add_argument("--size", type=int, default=None, help="pixels a side of the 36 views (default 512)")
         p.add_argument("--threads", type=int, default=1, help="torch threads for training")
+        p.add_argument("--bare", action="store_true", help="train the rider without helmet, hair or bag: the base "
+                       "that datasets add per-instance accessories to (default --out data/riders/ID/bare)")
 
     @staticmethod
     def check_args(args):
@@ -97,15 +99,16 @@ class Avatar:
     @staticmethod
     def run(args):
         from splatting import paths
+        from splatting.rider.avatar import BARE_NAME
         from splatting.rider.avatar_build import build_avatar
 
         for name in ("iterations", "max_gaussians", "samples"):
             v = getattr(args, name)
             if v is not None and v < 1:
                 raise UserError(f"--{name.replace('_', '-')} must be >= 1")
-        out = args.out or os.path.join(paths.DATA, "riders", args.id)
+        out = args.out or os.path.join(paths.DATA, "riders", args.id, *([BARE_NAME] if args.bare else []))
         res = build_avatar(args.id, out, args.iterations, args.time_budget_s, args.max_gaussians, args.samples,
-                           args.threads, size=args.size)
+                           args.threads, size=args.size, bare=args.bare)
         print(f"{out}: avatar ready ({', '.join(f'{k} {v}' for k, v in res['steps'].items())})")
         return 0
 

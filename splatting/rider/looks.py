@@ -30,6 +30,9 @@ HAIR_STYLES = ("bald", "buzz", "short", "long", "bun")
 LOOK_FIELDS = {"top_pattern": TOP_PATTERNS, "bottom_pattern": BOTTOM_PATTERNS, "sleeves": ("short", "long"),
                "legs": ("shorts", "long"), "hair": HAIR_STYLES, "helmet": (True, False), "bag": ("none", "backpack")}
 COLOUR_FIELDS = ("accent", "hair_colour", "bag_colour")
+# the accessory-free look of a rider's bare base avatar (`rider-avatar --bare`): no helmet, no bag, bald,
+# so every accessory can be added to it as a set (splatting/cyclist/accessories.py)
+BARE = {"helmet": False, "hair": "bald", "bag": "none"}
 HAIR_COLOURS = ("#1b1410", "#3b2a1e", "#5a3a22", "#8a5a2b", "#b98c4f", "#d8c27a", "#7a2e17")
 GREY_HAIR = ("#9a9690", "#c9c6c0", "#6e6a66")
 BAG_COLOURS = ("#222222", "#3a4a2f", "#1f3a5f", "#7a1f1f", "#555a60", "#c2571a")
