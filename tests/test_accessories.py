@@ -95,10 +95,10 @@ def test_helmet_share_0_and_1_give_no_and_every_helmet(monkeypatch, root):
         rec = image["instances"][0]
         assert rec["accessories"] == {"helmet": share == 1.0, "hair": "bald", "bag": "none"}
         key = (RIDER, share == 1.0, "bald", "none")
-        body = assets.bodies[key]
+        avatar, body = assets.model(key)
         n_helmet = int((body.regions == REGIONS.index("helmet")).sum())
         # the instance's rider Gaussians are that body's vertices: the helmet set is there or not
-        assert len(assets.avatars[key]) == len(body.vertices)
+        assert len(avatar) == len(body.vertices)
         if share == 1.0:
             a, b = body.accessory_parts["helmet"]
             assert n_helmet == b - a > 500
@@ -125,7 +125,7 @@ def test_accessory_sets_follow_their_bone():
     from splatting.rider.roster import load_rider
     body = load_rider(BARE)
     avatar, dressed = accessories.dressed_avatar(mesh_avatar(body), body, {"helmet": True, "hair": "long",
-                                                                          "bag": "backpack"}, trained=False)
+                                                                          "bag": "backpack"}, trained=None)
     parts = dressed.accessory_parts
     assert set(parts) >= {"helmet", "hair", "ponytail", "backpack"}
     # the body is the rider's own: same vertices and weights before the accessories
@@ -189,16 +189,23 @@ def test_default_fields_draw_nothing_and_change_nothing(monkeypatch, root, tmp_p
     assert json.dumps(a[1], sort_keys=True) == json.dumps(b[1], sort_keys=True) and a[2] == b[2]
 
 
-def _fake_trained(riders_root, rider_id, bare=False):
-    """A trained avatar folder for rider_id (its mesh avatar saved as rider.ply + skinning.npz); bare: its
-    accessory-free base in <folder>/bare (what `rider-avatar --bare` trains)."""
+def _fake_trained(riders_root, rider_id, bare=False, record=True, **look):
+    """A trained avatar folder for rider_id (its mesh avatar saved as rider.ply + skinning.npz, and the
+    look.json `rider-avatar` writes unless not record); bare: its accessory-free base in <folder>/bare
+    (what `rider-avatar --bare` trains); look: fields it was trained in other than its roster look's."""
     from splatting.cyclist.assets import mesh_avatar
+    from splatting.rider.avatar_look import write_look
     from splatting.rider.body import redress
     from splatting.rider.looks import BARE
     from splatting.rider.roster import load_rider
     rider = load_rider(rider_id)
-    av = mesh_avatar(redress(rider, **BARE) if bare else rider, 3000)
-    av.save(os.path.join(riders_root, rider_id, *(["bare"] if bare else [])))
+    if bare or look:
+        rider = redress(rider, **(BARE if bare else look))
+    av = mesh_avatar(rider, 3000)
+    folder = os.path.join(riders_root, rider_id, *(["bare"] if bare else []))
+    av.save(folder)
+    if record:
+        write_look(folder, rider)
     return av
 
 
@@ -215,7 +222,7 @@ def test_trained_avatars_gain_only_what_they_lack(root, tmp_path):
     assets.cyclist("city_t", BARE)
     trained = assets.avatars[BARE]
     key = assets.wearing(BARE, {"helmet": True, "hair": "buzz", "bag": "backpack"})
-    av, body = assets.avatars[key], assets.bodies[key]
+    av, body = assets.model(key)
     (h0, h1), (b0, b1) = body.accessory_parts["helmet"], body.accessory_parts["backpack"]
     assert len(av) == len(trained) + (h1 - h0) + (b1 - b0)
     assert torch.equal(av.gaussians.means[:len(trained)], trained.gaussians.means)  # the trained body as it was
@@ -227,7 +234,8 @@ def test_trained_avatars_gain_only_what_they_lack(root, tmp_path):
     # mesh avatars of the same rider take them all
     _cfg(small_config(root, riders=[RIDER], appearance={"helmet_share": 0.5, "bag_share": 0.0, "hair_styles": ["bun"]}))
     with pytest.raises(UserError):
-        accessories.dressed_avatar(trained, assets.bodies[BARE], {"helmet": False, "hair": "bun", "bag": "none"}, True)
+        accessories.dressed_avatar(trained, assets.bodies[BARE], {"helmet": False, "hair": "bun", "bag": "none"},
+                                   assets.own(BARE))
 
 
 @pytest.mark.parametrize("app, field", [({"helmet_share": 1.5}, "appearance.helmet_share"),
@@ -265,7 +273,7 @@ def test_a_bare_base_takes_every_draw(root, tmp_path):
                    {"helmet": True, "hair": "long", "bag": "backpack"}):
         key = assets.wearing(RIDER, choice)
         assert key != RIDER  # the bare base, even for the rider's own look
-        av, body = assets.avatars[key], assets.bodies[key]
+        av, body = assets.model(key)
         assert len(av) == n + sum(b - a for a, b in body.accessory_parts.values())
         assert torch.equal(av.gaussians.means[:n], base.gaussians.means)
         changed = ((av.gaussians.sh[:n] - base.gaussians.sh).abs() > 1e-6).flatten(1).any(1)
