@@ -10,7 +10,7 @@ import pytest
 import roma
 import torch
 
-from helpers import RIDER, fixed_scene, small_config, street_config, write_test_bike
+from helpers import RIDER, dataset_main, fixed_scene, small_config, street_config, write_test_bike
 
 BARE = "f_teen_slim_150"  # its own look: buzz cut, no helmet, no bag (blend_assets/riders.yaml)
 ALL_HAIR = ["bald", "buzz", "short", "long", "bun"]
@@ -352,19 +352,6 @@ def test_the_record_not_the_roster_says_what_a_trained_avatar_wears(root, tmp_pa
                           appearance={"bag_share": 0.5}))
 
 
-def _main(cfg, tmp_path):
-    import contextlib
-    import io
-
-    from helpers import write_yaml
-    from splatting.cli import main
-    path = write_yaml(str(tmp_path / "c.yaml"), cfg)
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err):
-        rc = main(["dataset", "--config", path, "--out", str(tmp_path / "o"), "--quiet"])
-    return rc, err.getvalue().strip()
-
-
 def test_an_avatar_without_a_record_is_refused_when_accessories_are_drawn(root, tmp_path):
     """A trained avatar without look.json (built before avatars recorded their look, as the demo's):
     with accessory fields set the dataset refuses it before any work, in one line naming its folder
@@ -376,12 +363,12 @@ def test_an_avatar_without_a_record_is_refused_when_accessories_are_drawn(root, 
     folder = os.path.join(riders_root, RIDER)
     raw = small_config(root, riders=[RIDER], riders_root=riders_root, synthetic_assets="auto", count=1)
     for app in ({"helmet_share": 1.0}, {"bag_share": 1.0}, {"hair_styles": ["long"]}):
-        rc, msg = _main(dict(raw, appearance=app), tmp_path)
+        rc, msg = dataset_main(dict(raw, appearance=app), tmp_path)
         assert rc != 0 and len(msg.splitlines()) == 1, msg
         assert folder in msg and LOOK_NAME in msg and f"rider-avatar --id {RIDER} --out {folder}" in msg, msg
         assert not os.path.exists(tmp_path / "o")
     _fake_trained(riders_root, RIDER, bare=True, record=False)  # a bare base without one: the same
-    rc, msg = _main(dict(raw, appearance={"helmet_share": 0.5}), tmp_path)
+    rc, msg = dataset_main(dict(raw, appearance={"helmet_share": 0.5}), tmp_path)
     assert rc != 0 and len(msg.splitlines()) == 1 and f"--bare --out {os.path.join(folder, 'bare')}" in msg, msg
     shutil.rmtree(os.path.join(folder, "bare"))
     # fields null: it works, and renders what the same avatar with a record renders
