@@ -176,6 +176,19 @@ def write_yaml(path, cfg):
     return path
 
 
+def dataset_main(cfg, tmp_path):
+    """(exit code, stderr stripped) of `dataset --config <cfg as yaml> --out tmp_path/o --quiet`, in process."""
+    import contextlib
+    import io
+
+    from splatting.cli import main
+    path = write_yaml(str(tmp_path / "c.yaml"), cfg)
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        rc = main(["dataset", "--config", path, "--out", str(tmp_path / "o"), "--quiet"])
+    return rc, err.getvalue().strip()
+
+
 # ------------------------------------------------------------- street scenes
 
 def street_config(root, **kw):

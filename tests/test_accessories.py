@@ -10,7 +10,7 @@ import pytest
 import roma
 import torch
 
-from helpers import RIDER, fixed_scene, small_config, street_config, write_test_bike
+from helpers import RIDER, dataset_main, fixed_scene, small_config, street_config, write_test_bike
 
 BARE = "f_teen_slim_150"  # its own look: buzz cut, no helmet, no bag (blend_assets/riders.yaml)
 ALL_HAIR = ["bald", "buzz", "short", "long", "bun"]
@@ -95,10 +95,10 @@ def test_helmet_share_0_and_1_give_no_and_every_helmet(monkeypatch, root):
         rec = image["instances"][0]
         assert rec["accessories"] == {"helmet": share == 1.0, "hair": "bald", "bag": "none"}
         key = (RIDER, share == 1.0, "bald", "none")
-        body = assets.bodies[key]
+        avatar, body = assets.model(key)
         n_helmet = int((body.regions == REGIONS.index("helmet")).sum())
         # the instance's rider Gaussians are that body's vertices: the helmet set is there or not
-        assert len(assets.avatars[key]) == len(body.vertices)
+        assert len(avatar) == len(body.vertices)
         if share == 1.0:
             a, b = body.accessory_parts["helmet"]
             assert n_helmet == b - a > 500
@@ -125,7 +125,7 @@ def test_accessory_sets_follow_their_bone():
     from splatting.rider.roster import load_rider
     body = load_rider(BARE)
     avatar, dressed = accessories.dressed_avatar(mesh_avatar(body), body, {"helmet": True, "hair": "long",
-                                                                          "bag": "backpack"}, trained=False)
+                                                                          "bag": "backpack"}, trained=None)
     parts = dressed.accessory_parts
     assert set(parts) >= {"helmet", "hair", "ponytail", "backpack"}
     # the body is the rider's own: same vertices and weights before the accessories
@@ -189,16 +189,23 @@ def test_default_fields_draw_nothing_and_change_nothing(monkeypatch, root, tmp_p
     assert json.dumps(a[1], sort_keys=True) == json.dumps(b[1], sort_keys=True) and a[2] == b[2]
 
 
-def _fake_trained(riders_root, rider_id, bare=False):
-    """A trained avatar folder for rider_id (its mesh avatar saved as rider.ply + skinning.npz); bare: its
-    accessory-free base in <folder>/bare (what `rider-avatar --bare` trains)."""
+def _fake_trained(riders_root, rider_id, bare=False, record=True, **look):
+    """A trained avatar folder for rider_id (its mesh avatar saved as rider.ply + skinning.npz, and the
+    look.json `rider-avatar` writes unless not record); bare: its accessory-free base in <folder>/bare
+    (what `rider-avatar --bare` trains); look: fields it was trained in other than its roster look's."""
     from splatting.cyclist.assets import mesh_avatar
+    from splatting.rider.avatar_look import write_look
     from splatting.rider.body import redress
     from splatting.rider.looks import BARE
     from splatting.rider.roster import load_rider
     rider = load_rider(rider_id)
-    av = mesh_avatar(redress(rider, **BARE) if bare else rider, 3000)
-    av.save(os.path.join(riders_root, rider_id, *(["bare"] if bare else [])))
+    if bare or look:
+        rider = redress(rider, **(BARE if bare else look))
+    av = mesh_avatar(rider, 3000)
+    folder = os.path.join(riders_root, rider_id, *(["bare"] if bare else []))
+    av.save(folder)
+    if record:
+        write_look(folder, rider)
     return av
 
 
@@ -215,7 +222,7 @@ def test_trained_avatars_gain_only_what_they_lack(root, tmp_path):
     assets.cyclist("city_t", BARE)
     trained = assets.avatars[BARE]
     key = assets.wearing(BARE, {"helmet": True, "hair": "buzz", "bag": "backpack"})
-    av, body = assets.avatars[key], assets.bodies[key]
+    av, body = assets.model(key)
     (h0, h1), (b0, b1) = body.accessory_parts["helmet"], body.accessory_parts["backpack"]
     assert len(av) == len(trained) + (h1 - h0) + (b1 - b0)
     assert torch.equal(av.gaussians.means[:len(trained)], trained.gaussians.means)  # the trained body as it was
@@ -227,7 +234,8 @@ def test_trained_avatars_gain_only_what_they_lack(root, tmp_path):
     # mesh avatars of the same rider take them all
     _cfg(small_config(root, riders=[RIDER], appearance={"helmet_share": 0.5, "bag_share": 0.0, "hair_styles": ["bun"]}))
     with pytest.raises(UserError):
-        accessories.dressed_avatar(trained, assets.bodies[BARE], {"helmet": False, "hair": "bun", "bag": "none"}, True)
+        accessories.dressed_avatar(trained, assets.bodies[BARE], {"helmet": False, "hair": "bun", "bag": "none"},
+                                   assets.own(BARE))
 
 
 @pytest.mark.parametrize("app, field", [({"helmet_share": 1.5}, "appearance.helmet_share"),
@@ -265,7 +273,7 @@ def test_a_bare_base_takes_every_draw(root, tmp_path):
                    {"helmet": True, "hair": "long", "bag": "backpack"}):
         key = assets.wearing(RIDER, choice)
         assert key != RIDER  # the bare base, even for the rider's own look
-        av, body = assets.avatars[key], assets.bodies[key]
+        av, body = assets.model(key)
         assert len(av) == n + sum(b - a for a, b in body.accessory_parts.values())
         assert torch.equal(av.gaussians.means[:n], base.gaussians.means)
         changed = ((av.gaussians.sh[:n] - base.gaussians.sh).abs() > 1e-6).flatten(1).any(1)
@@ -302,3 +310,147 @@ def test_rider_avatar_bare_trains_the_accessory_free_look(tmp_path, monkeypatch)
         mesh = trimesh.load(os.path.join(out, "rest_mesh.ply"), process=False)
         rider = load_rider(RIDER)
         assert len(mesh.vertices) == (rider.body_vertex_count if bare else len(rider.vertices))
+
+
+def test_the_record_not_the_roster_says_what_a_trained_avatar_wears(root, tmp_path):
+    """A trained avatar wears what its look.json says: trained without the backpack its roster look now
+    has, it is given the backpack set when one is drawn; trained with one its roster look lacks, it is
+    not given a second, and cannot lose it."""
+    from cyclist_formats.errors import UserError
+    from splatting.dataset.generate import Assets, make_sample
+    no_bag, with_bag = str(tmp_path / "no_bag"), str(tmp_path / "with_bag")
+    trained = _fake_trained(no_bag, RIDER, bag="none")  # roster: helmet, long hair, backpack
+    cfg = _cfg(small_config(root, riders=[RIDER], riders_root=no_bag, synthetic_assets="auto",
+                            appearance={"bag_share": 1.0}))
+    assets = Assets(cfg)
+    assets.cyclist("city_t", RIDER)
+    assert assets.own(RIDER) == {"helmet": True, "hair": "long", "bag": "none"}
+    key = assets.wearing(RIDER, {"helmet": True, "hair": "long", "bag": "backpack"})
+    av, body = assets.model(key)
+    b0, b1 = body.accessory_parts["backpack"]
+    assert len(av) == len(trained) + b1 - b0  # the backpack set, and nothing else
+    assert torch.equal(av.gaussians.means[len(trained):], body.vertices[b0:b1])
+    _, image, _, _ = make_sample(cfg, 0, assets)
+    assert image["instances"][0]["accessories"]["bag"] == "backpack"
+    # a null bag_share keeps what the avatar wears (no backpack), not the roster's backpack
+    cfg = _cfg(small_config(root, riders=[RIDER], riders_root=no_bag, synthetic_assets="auto",
+                            appearance={"helmet_share": 1.0}))
+    _, image, _, _ = make_sample(cfg, 0, Assets(cfg))
+    assert image["instances"][0]["accessories"] == {"helmet": True, "hair": "long", "bag": "none"}
+
+    trained = _fake_trained(with_bag, BARE, bag="backpack")  # roster: buzz cut, no helmet, no bag
+    cfg = _cfg(small_config(root, riders=[BARE], riders_root=with_bag, synthetic_assets="auto",
+                            appearance={"bag_share": 1.0}))
+    assets = Assets(cfg)
+    assets.cyclist("city_t", BARE)
+    assert assets.wearing(BARE, {"helmet": False, "hair": "buzz", "bag": "backpack"}) == BARE
+    _, image, _, _ = make_sample(cfg, 0, assets)
+    assert image["instances"][0]["accessories"]["bag"] == "backpack"
+    assert len(assets.avatars[BARE]) == len(trained)  # its own Gaussians: no second backpack
+    with pytest.raises(UserError, match=r"appearance\.bag_share"):  # the back under it was never seen
+        _cfg(small_config(root, riders=[BARE], riders_root=with_bag, synthetic_assets="auto",
+                          appearance={"bag_share": 0.5}))
+
+
+def test_an_avatar_without_a_record_is_refused_when_accessories_are_drawn(root, tmp_path):
+    """A trained avatar without look.json (built before avatars recorded their look, as the demo's):
+    with accessory fields set the dataset refuses it before any work, in one line naming its folder
+    and the command that rebuilds it; with the fields null it renders as before (the record unread)."""
+    import shutil
+    from splatting.rider.avatar_look import LOOK_NAME
+    riders_root = str(tmp_path / "riders")
+    _fake_trained(riders_root, RIDER, record=False)
+    folder = os.path.join(riders_root, RIDER)
+    raw = small_config(root, riders=[RIDER], riders_root=riders_root, synthetic_assets="auto", count=1)
+    for app in ({"helmet_share": 1.0}, {"bag_share": 1.0}, {"hair_styles": ["long"]}):
+        rc, msg = dataset_main(dict(raw, appearance=app), tmp_path)
+        assert rc != 0 and len(msg.splitlines()) == 1, msg
+        assert folder in msg and LOOK_NAME in msg and f"rider-avatar --id {RIDER} --out {folder}" in msg, msg
+        assert not os.path.exists(tmp_path / "o")
+    _fake_trained(riders_root, RIDER, bare=True, record=False)  # a bare base without one: the same
+    rc, msg = dataset_main(dict(raw, appearance={"helmet_share": 0.5}), tmp_path)
+    assert rc != 0 and len(msg.splitlines()) == 1 and f"--bare --out {os.path.join(folder, 'bare')}" in msg, msg
+    shutil.rmtree(os.path.join(folder, "bare"))
+    # fields null: it works, and renders what the same avatar with a record renders
+    with_record = str(tmp_path / "with_record")
+    shutil.copytree(riders_root, with_record)
+    from splatting.rider.avatar_look import write_look
+    from splatting.rider.roster import load_rider
+    write_look(os.path.join(with_record, RIDER), load_rider(RIDER))
+    a = _sample(_cfg(raw), 0)
+    b = _sample(_cfg(dict(raw, riders_root=with_record)), 0)
+    assert "accessories" not in a[1]["instances"][0]
+    assert np.array_equal(a[0], b[0]) and json.dumps(a[1], sort_keys=True) == json.dumps(b[1], sort_keys=True)
+    assert a[0].std() > 0
+
+
+def test_dressed_riders_are_evicted_and_rebuilt_identically(root):
+    """The dressed-rider cache holds DRESSED_CACHE riders over all riders; the least recently used one
+    goes (with what was computed of it), and drawn again it is rebuilt to the same Gaussians."""
+    import itertools
+    from cyclist_formats.instances import RIDER_ID
+    from splatting.dataset import generate
+    from splatting.dataset.generate import Assets
+    cfg = _cfg(small_config(root, riders=[RIDER, BARE], appearance={"helmet_share": 0.5}))
+    assets = Assets(cfg)
+    keys = []
+    for rider in (RIDER, BARE):
+        assets.cyclist("city_t", rider)
+        for helmet, hair, bag in itertools.product((True, False), ("bald", "bun"), ("none", "backpack")):
+            keys.append(assets.wearing(rider, {"helmet": helmet, "hair": hair, "bag": bag}))
+            if len(keys) == 1:
+                first = assets.dressed(keys[0])
+                g = first.avatar.gaussians
+                assets.lod_order("city_t", keys[0], g, torch.full((len(g),), RIDER_ID))
+                assert first.derived  # the lod ranking lives with the dressed rider
+    assert len(set(keys)) > generate.DRESSED_CACHE and all(isinstance(k, tuple) for k in keys)
+    info = assets.dressed.cache_info()
+    assert info.maxsize == generate.DRESSED_CACHE == info.currsize
+    again = assets.dressed(keys[0])
+    assert again is not first and not again.derived  # evicted, with its ranking, then rebuilt
+    assert assets.dressed.cache_info().misses == info.misses + 1
+    a, b = first.avatar, again.avatar
+    for name in ("means", "quats", "log_scales", "opacity_logits", "sh"):
+        assert torch.equal(getattr(a.gaussians, name), getattr(b.gaussians, name)), name
+    assert torch.equal(a.weights, b.weights) and torch.equal(first.body.vertices, again.body.vertices)
+    assert assets.dressed(keys[0]) is again  # and cached again
+
+
+def test_rider_avatar_records_the_look_it_trains(tmp_path, monkeypatch):
+    """`rider-avatar` writes look.json before the rest mesh: the look the views are rendered in (bare:
+    looks.BARE); a folder holding a build of another look is refused before any work; one built before
+    the record existed is resumed without a record (its look is unknown: no guess)."""
+    from cyclist_formats.errors import UserError
+    from splatting.rider import avatar_build
+    from splatting.rider.avatar_look import LOOK_NAME, read_look
+    from splatting.rider.looks import BARE, look_of
+    from splatting.rider.roster import get_spec
+
+    class Stop(Exception):
+        pass
+
+    def stop(*a, **k):
+        raise Stop
+    monkeypatch.setattr(avatar_build, "render_views", stop)
+    own = look_of(get_spec(RIDER))
+    for bare in (False, True):
+        out = str(tmp_path / f"bare_{bare}")
+        with pytest.raises(Stop):
+            avatar_build.build_avatar(RIDER, out, bare=bare, log=lambda m: None)
+        rec = read_look(out)
+        assert rec == {"rider": RIDER, "look": dict(own, **BARE) if bare else own}
+    dressed = str(tmp_path / "bare_False")
+    mesh = os.path.join(dressed, "rest_mesh.ply")
+    before = os.stat(mesh).st_mtime_ns
+    with pytest.raises(UserError, match="another look"):  # --bare into a dressed build: not skipped through
+        avatar_build.build_avatar(RIDER, dressed, bare=True, log=lambda m: None)
+    assert os.stat(mesh).st_mtime_ns == before and read_look(dressed)["look"] == own
+    os.remove(os.path.join(dressed, LOOK_NAME))  # a build from before the records
+    logs = []
+    with pytest.raises(Stop):
+        avatar_build.build_avatar(RIDER, dressed, log=logs.append)
+    assert not os.path.exists(os.path.join(dressed, LOOK_NAME)) and any(LOOK_NAME in m for m in logs)
+    with open(os.path.join(dressed, LOOK_NAME), "w") as f:
+        f.write('{"rider": 3}')
+    with pytest.raises(UserError, match=LOOK_NAME):  # a corrupt record is not taken for a missing one
+        avatar_build.build_avatar(RIDER, dressed, log=lambda m: None)

@@ -1,8 +1,6 @@
 """Per-image light in datasets (`lighting:`, splatting/dataset/lighting.py): config checks, refusal
 of assets without relight channels, determinism, the recorded sun is the one rendered, and relit
 samples differ from baked ones in the RGB only."""
-import contextlib
-import io
 import math
 import os
 
@@ -11,7 +9,7 @@ import pytest
 import torch
 
 from cyclist_formats import bike_folder
-from helpers import RIDER, make_bike, random_relight_files, small_config, write_yaml
+from helpers import RIDER, dataset_main, make_bike, random_relight_files, small_config
 
 RELIT = {"mode": "relit", "elevation_deg": [20, 70], "strength": [2, 5], "sky": [0.1, 0.5]}
 
@@ -39,15 +37,6 @@ def _cfg(root, **kw):
     return cfg
 
 
-def _main(cfg, tmp_path):
-    from splatting.cli import main
-    path = write_yaml(str(tmp_path / "c.yaml"), cfg)
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err):
-        rc = main(["dataset", "--config", path, "--out", str(tmp_path / "o"), "--quiet"])
-    return rc, err.getvalue().strip()
-
-
 @pytest.mark.parametrize("light, field", [
     ({"mode": "sunny"}, "lighting.mode"),
     ({"elevation_deg": [60, 20]}, "lighting.elevation_deg"),
@@ -61,7 +50,7 @@ def _main(cfg, tmp_path):
     ({"sunrise": 1}, "lighting.sunrise"),
 ])
 def test_bad_lighting_fields_are_named(tmp_path, light, field):
-    rc, msg = _main(small_config(str(tmp_path), lighting=light), tmp_path)
+    rc, msg = dataset_main(small_config(str(tmp_path), lighting=light), tmp_path)
     assert rc == 2 and f"config field '{field}'" in msg and len(msg.splitlines()) == 1, msg
     assert not os.path.exists(tmp_path / "o" / "annotations.json")
 
@@ -70,18 +59,18 @@ def test_relit_refuses_assets_without_relight_channels(assets, tmp_path):
     import shutil
     root = str(tmp_path / "copy")
     shutil.copytree(assets, root)
-    rc, msg = _main(_cfg(root, synthetic_assets="always"), tmp_path)
+    rc, msg = dataset_main(_cfg(root, synthetic_assets="always"), tmp_path)
     assert rc == 2 and "synthetic_assets" in msg and len(msg.splitlines()) == 1, msg
     os.remove(bike_folder.relight_path(os.path.join(root, "rl", "gaussians", "crank.ply")))
-    rc, msg = _main(_cfg(root), tmp_path)
+    rc, msg = dataset_main(_cfg(root), tmp_path)
     assert rc == 2 and len(msg.splitlines()) == 1, msg
     assert "'rl'" in msg and "'crank'" in msg and "relight-fit --views" in msg
     random_relight_files([os.path.join(root, "rl", "gaussians", "crank.ply")])
     os.remove(bike_folder.relight_path(os.path.join(root, "riders", RIDER, "rider.ply")))
-    rc, msg = _main(_cfg(root), tmp_path)
+    rc, msg = dataset_main(_cfg(root), tmp_path)
     assert rc == 2 and len(msg.splitlines()) == 1 and RIDER in msg and "relight-fit" in msg, msg
     shutil.rmtree(os.path.join(root, "riders", RIDER))
-    rc, msg = _main(_cfg(root), tmp_path)
+    rc, msg = dataset_main(_cfg(root), tmp_path)
     assert rc == 2 and len(msg.splitlines()) == 1 and "rider-avatar" in msg, msg
     assert not os.path.exists(tmp_path / "o")
 

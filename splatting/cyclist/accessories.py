@@ -22,11 +22,18 @@ straps on the jersey).  Which Gaussians an instance gets:
   gain what it was trained without: a helmet, a backpack, as sets.  `check` refuses, before any work,
   a config that asks such an avatar for more.
 
+What a trained avatar (or bare base) wears is read from its folder's look.json (rider/avatar_look.py,
+written by `rider-avatar`), not from the roster: an avatar trained before the looks existed, or before
+its roster entry changed, wears another look than its roster entry now draws.  Its look is also the
+rider's own look for the fields a config leaves null.  A trained avatar without the record is refused
+when any field is drawn (with all three null nothing here runs, and such avatars work as before).
+
 The draw's own Generator is seeded with (seed, sample index, instance, TAG, 29), so a sample's
 accessories are a function of (config, index), and the colour draws (appearance.draw_look) are
 unchanged by them.  Without a bare base, an instance whose draw is its rider's own look gets the
 rider's own avatar.
 """
+import os
 from dataclasses import replace
 
 import numpy as np
@@ -38,8 +45,9 @@ from splatting.cyclist.appearance import TAG, recolour, rider_regions
 from splatting.cyclist.assets import mesh_avatar, mesh_gaussians, trained_avatar_folder
 from splatting.gaussians.container import Gaussians
 from splatting.rider.avatar import RiderAvatar
+from splatting.rider.avatar_look import LOOK_NAME, read_look
 from splatting.rider.body import REGIONS, redress
-from splatting.rider.looks import hex_rgb, look_of
+from splatting.rider.looks import BARE, hex_rgb, look_of
 from splatting.rider.roster import get_spec
 
 FIELDS = ("helmet", "hair", "bag")  # the look fields a dataset draws per instance
@@ -54,7 +62,8 @@ def varies(a):
 
 def draw(a, seed, index, instance, own):
     """The accessories {helmet: bool, hair: style, bag: 'none' | 'backpack'} of one instance under
-    Appearance block a; own: the rider's look (looks.look_of), kept for every field left null.
+    Appearance block a; own: what the rider wears (Assets.own: its trained avatar's record, else its
+    roster look), kept for every field left null.
     Three numbers are drawn whichever fields are set, so setting one leaves the others' draws."""
     rng = np.random.default_rng([int(seed), int(index), int(instance), TAG, 29])
     u_helmet, u_bag, u_hair = rng.uniform(), rng.uniform(), rng.uniform()
@@ -69,6 +78,21 @@ def own_choice(spec):
     return {k: look[k] for k in FIELDS}
 
 
+def trained_choice(folder, rider_id, bare=False):
+    """The accessories the trained avatar (bare: base) in folder wears, from its look.json; UserError,
+    naming the folder and how to rebuild it, when it has no record or the record is another rider's."""
+    rec = read_look(folder)
+    build = f"`python -m splatting rider-avatar --id {rider_id}{' --bare' if bare else ''} --out {folder}`"
+    if rec is None:
+        raise UserError(f"rider {rider_id!r}: the trained avatar in {folder} has no {LOOK_NAME} (built before avatars "
+                        f"recorded their look), so what it wears is unknown; move it away and rebuild it ({build}), "
+                        f"or leave appearance.helmet_share, bag_share and hair_styles null")
+    if rec["rider"] != rider_id or rec["look"] is None:
+        what = f"rider {rec['rider']!r}" if rec["rider"] != rider_id else "no roster look"
+        raise UserError(f"rider {rider_id!r}: {os.path.join(folder, LOOK_NAME)} records {what}; rebuild it ({build})")
+    return {k: rec["look"][k] for k in FIELDS}
+
+
 def check(cfg):
     """Before any work: every rider of the (asset-resolved) config can wear what the Appearance block
     draws (module docstring); one UserError naming the field, the rider and why."""
@@ -81,9 +105,16 @@ def check(cfg):
             raise UserError(f"appearance: rider {r!r} is a {spec.get('body')} body without a roster look; per-instance "
                             f"accessories (helmet_share, bag_share, hair_styles) need anny roster riders")
         folder = trained_avatar_folder(r, cfg.riders_root, cfg.synthetic_assets)
-        if folder is None or trained_avatar_folder(r, cfg.riders_root, cfg.synthetic_assets, bare=True):
-            continue  # a mesh avatar, or a trained one with a bare base: every draw can be worn
-        own = own_choice(spec)
+        if folder is None:
+            continue  # a mesh avatar: every draw can be worn
+        base = trained_avatar_folder(r, cfg.riders_root, cfg.synthetic_assets, bare=True)
+        if base is not None:  # a bare base takes every draw, if it is bare
+            worn = trained_choice(base, r, bare=True)
+            if worn != BARE:
+                raise UserError(f"rider {r!r}: the bare base in {base} was trained wearing {worn}, not {BARE}; rebuild "
+                                f"it (`python -m splatting rider-avatar --id {r} --bare --out {base}`)")
+            continue
+        own = trained_choice(folder, r)
         why = None
         if a.hair_styles is not None and list(a.hair_styles) != [own["hair"]]:
             why = ("appearance.hair_styles", f"its hair ({own['hair']}) is in its trained Gaussians")
@@ -97,20 +128,21 @@ def check(cfg):
                             f"(synthetic_assets: always) or leave the field null")
 
 
-def dressed_avatar(avatar, body, choice, trained, n=None, bare=None):
+def dressed_avatar(avatar, body, choice, trained=None, n=None, bare=None):
     """(RiderAvatar, Rider) of a rider wearing choice (draw's dict): avatar and body are the rider's own
-    (assets.load_avatar), trained whether the avatar is a trained one, bare its accessory-free trained
-    base (RiderAvatar of `rider-avatar --bare`) or None.  Mesh avatar: the redressed mesh's (n: its
-    subsample).  Bare base: its Gaussians, the scalp recoloured where the draw paints hair on it, plus
-    every accessory of the draw as a set.  Trained without a base: its Gaussians plus the sets it lacks
-    (ADDABLE).  A set: Gaussians on the accessory's vertices with their colours and skinning weights."""
+    (assets.load_avatar), trained None for a mesh avatar, else what the trained avatar wears (its
+    trained_choice), bare its accessory-free trained base (RiderAvatar of `rider-avatar --bare`) or None.
+    Mesh avatar: the redressed mesh's (n: its subsample).  Bare base: its Gaussians, the scalp recoloured
+    where the draw paints hair on it, plus every accessory of the draw as a set.  Trained without a base:
+    its Gaussians plus the sets it lacks (ADDABLE).  A set: Gaussians on the accessory's vertices with
+    their colours and skinning weights."""
     dressed = redress(body, **choice)
-    if not trained:
+    if trained is None:
         return mesh_avatar(dressed, n), dressed
     if bare is not None:
         base, add = _scalp_painted(bare, dressed), list(dressed.accessory_parts)
     else:
-        own = {k: look_of(body.spec)[k] for k in FIELDS}
+        own = trained
         add = [ADDABLE[k] for k in ADDABLE if choice[k] != own[k]]
         if choice["hair"] != own["hair"] or any(part not in dressed.accessory_parts for part in add):
             raise UserError(f"rider {body.id}: a trained avatar without a bare base can gain a helmet or a backpack, "

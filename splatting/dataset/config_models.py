@@ -238,9 +238,9 @@ class Appearance(Block):
     value: Range(0, 1) = [0.12, 0.95]
     brightness: Range(0.05, 4) = [0.75, 1.25]
     white_balance: Annotated[Number, Field(ge=0, le=0.5)] = 0.08
-    # per-instance accessories (splatting/cyclist/accessories.py); each null = the rider's own look (drawn
-    # per rider id), so earlier configs draw nothing new and keep their bytes.  They act whether or not
-    # `enabled` (the colours) is on.
+    # per-instance accessories (splatting/cyclist/accessories.py); each null = what the rider wears (its
+    # trained avatar's look.json, else its roster look drawn per rider id), so earlier configs draw nothing
+    # new and keep their bytes.  They act whether or not `enabled` (the colours) is on.
     helmet_share: Optional[Annotated[Number, Field(ge=0, le=1)]] = Field(
         None, description="per instance: share of riders wearing a helmet (null: the rider's own)")
     bag_share: Optional[Annotated[Number, Field(ge=0, le=1)]] = Field(

@@ -5,8 +5,10 @@ order (assets, poses and placements, camera, background), and everything after t
 torch on CPU, so a sample renders to the same bytes whenever and in whichever worker it runs.
 That is what makes a killed-and-resumed run identical to an uninterrupted one.
 """
+import functools
 import json
 import os
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -33,6 +35,23 @@ from splatting.raster.api import EPS2D, eps2d_cat
 from splatting.rider.avatar import RiderAvatar
 
 
+# Riders in a drawn look (per-instance accessories) kept per process: a least-recently-used cache over
+# all riders.  Each is a whole avatar (240k Gaussians at SH degree 3 with skinning weights: ~80 MB; the
+# demo's 15k at degree 0 with its redressed body: 5.7 MB) and a rider has up to 20 looks (2 x 5 x 2),
+# so unbounded a worker could hold ~1.6 GB per rider; 8 hold ~0.65 GB at most.  An evicted one is
+# rebuilt from its key when drawn again, to the same Gaussians (its build draws nothing), in ~0.25 s.
+DRESSED_CACHE = 8
+
+
+@dataclass
+class Dressed:
+    """A rider in a drawn look (Assets.dressed): its avatar, its redressed body, and what was computed
+    of it once per bike (Assets' lod_orders, looks, label_prep entries), evicted with it."""
+    avatar: object
+    body: object
+    derived: dict = field(default_factory=dict)
+
+
 class Assets:
     """Per-process cache of loaded bikes, rider avatars, body keypoint regressors and the 3DGS scene."""
 
@@ -42,6 +61,9 @@ class Assets:
         self._scene = None
         self.lod_orders, self.bodies, self.looks, self.label_prep = {}, {}, {}, {}
         self.bare_bases = {}  # rider id -> its bare base RiderAvatar (rider-avatar --bare) or None
+        self.owns = {}  # rider id -> what its own avatar wears (own())
+        # functools' LRU (C implementation) over the dressed riders, per Assets: key -> Dressed
+        self.dressed = functools.lru_cache(maxsize=DRESSED_CACHE)(self._dress)
 
     def cyclist(self, bike, rider):
         key = (bike, rider)
@@ -64,42 +86,75 @@ class Assets:
             self.cyclists[key] = Cyclist(self.bikes[bike], av, c.ik_iterations)
         return self.cyclists[key]
 
-    def wearing(self, rider, choice):
-        """The key of the rider wearing choice (accessories.draw's dict) in avatars and bodies: the rider
-        id itself for its own look (unless it has a bare base), else (rider, helmet, hair, bag), its
-        avatar built once (accessories.dressed_avatar).  The rider's own avatar must be loaded (cyclist())."""
-        body, c = self.bodies[rider], self.cfg
+    def bare(self, rider):
+        """The rider's bare base RiderAvatar (`rider-avatar --bare`), loaded once, or None."""
         if rider not in self.bare_bases:
+            c = self.cfg
             folder = trained_avatar_folder(rider, c.riders_root, c.synthetic_assets, bare=True)
             self.bare_bases[rider] = None if folder is None else RiderAvatar.load(folder)
-        bare = self.bare_bases[rider]
-        if bare is None and choice == accessories.own_choice(body.spec):
+        return self.bare_bases[rider]
+
+    def own(self, rider):
+        """What the rider's own avatar wears (accessories.FIELDS), the draw's value of a null field: a
+        trained avatar's, from its look.json (accessories.trained_choice), unless a bare base dresses
+        every instance; else the roster look's."""
+        if rider not in self.owns:
+            c = self.cfg
+            folder = trained_avatar_folder(rider, c.riders_root, c.synthetic_assets)
+            roster = folder is None or self.bare(rider) is not None
+            self.owns[rider] = (accessories.own_choice(self.bodies[rider].spec) if roster
+                                else accessories.trained_choice(folder, rider))
+        return self.owns[rider]
+
+    def wearing(self, rider, choice):
+        """The key of the rider wearing choice (accessories.draw's dict): the rider id itself for what
+        its own avatar wears (unless it has a bare base), else (rider, helmet, hair, bag), its avatar
+        built now or still in the dressed cache.  The rider's own avatar must be loaded (cyclist())."""
+        if self.bare(rider) is None and choice == self.own(rider):
             return rider
         key = (rider, *(choice[k] for k in accessories.FIELDS))
-        if key not in self.avatars:
-            trained = trained_avatar_folder(rider, c.riders_root, c.synthetic_assets) is not None
-            self.avatars[key], self.bodies[key] = accessories.dressed_avatar(
-                self.avatars[rider], body, choice, trained, c.rider_gaussians, bare)
+        self.dressed(key)
         return key
+
+    def _dress(self, key):
+        """The Dressed of a wearing() key (accessories.dressed_avatar), a function of the key alone."""
+        rider, choice, c = key[0], dict(zip(accessories.FIELDS, key[1:])), self.cfg
+        trained = None if trained_avatar_folder(rider, c.riders_root, c.synthetic_assets) is None else self.own(rider)
+        return Dressed(*accessories.dressed_avatar(self.avatars[rider], self.bodies[rider], choice, trained,
+                                                   c.rider_gaussians, self.bare(rider)))
+
+    def model(self, rider):
+        """(avatar, body) of a rider key: a rider id's own (body None for no rider), or a dressed one's."""
+        if isinstance(rider, tuple):
+            d = self.dressed(rider)
+            return d.avatar, d.body
+        return self.avatars.get(rider), self.bodies.get(rider)
+
+    def _once(self, table, bike, rider, make):
+        """table's entry of (bike, rider), made once: a dressed rider's is kept with it in the dressed
+        cache (evicted with it), any other in the Assets' table of that name."""
+        if isinstance(rider, tuple):
+            store, key = self.dressed(rider).derived, (table, bike)
+        else:
+            store, key = getattr(self, table), (bike, rider)
+        if key not in store:
+            store[key] = make()
+        return store[key]
 
     def lod_order(self, bike, rider, g, ids):
         """The level-of-detail ranking of a (bike, rider)'s posed Gaussians (pose does not change
         opacities or scales, so it is computed once)."""
-        key = (bike, rider)
-        if key not in self.lod_orders:
-            self.lod_orders[key] = lod.ranking(g, ids)
-        return self.lod_orders[key]
+        return self._once("lod_orders", bike, rider, lambda: lod.ranking(g, ids))
 
     def look_inputs(self, bike, rider, frame):
         """What appearance.apply_look needs of a (bike, rider), computed once: the rider Gaussians'
         clothing regions and colours, the bike's paint Gaussians and reference colour."""
-        key = (bike, rider)
-        if key not in self.looks:
+        def make():
             out = {}
-            body = self.bodies.get(rider)
+            avatar, body = self.model(rider)
             # an imported rider has no clothing regions (its clothes are its own textures): the gain alone applies
             if body is not None and body.regions is not None:
-                out.update(rider_reg=appearance.rider_regions(self.avatars[rider].gaussians.means, body),
+                out.update(rider_reg=appearance.rider_regions(avatar.gaussians.means, body),
                            rider_colors=appearance.reference_colours(body))
             paint = (self.meta(bike).get("spec") or {}).get("frame_colour")
             if paint is not None:
@@ -107,8 +162,8 @@ class Assets:
                 if bool(m.any()):
                     ref = appearance.dc_rgb(frame.gaussians.sh[m]).median(0).values
                     out.update(paint=m, paint_rgb=ref.numpy())
-            self.looks[key] = out
-        return self.looks[key]
+            return out
+        return self._once("looks", bike, rider, make)
 
     def meta(self, bike):
         return getattr(self.bikes[bike], "meta", None) or {}
@@ -117,14 +172,12 @@ class Assets:
         """What the labels need of a (bike, rider)'s Gaussians apart from their posed means,
         computed once (pose changes neither opacities, scales nor ids): extent_prep(), and the
         indices of the dense (opacity >= 0.1) bike and rider Gaussians for the projected extents."""
-        key = (bike, rider)
-        if key not in self.label_prep:
+        def make():
             g = frame.gaussians
             dense = (g.opacities >= 0.1).numpy()
             is_r = (frame.ids == RIDER_ID).numpy()
-            self.label_prep[key] = {"extent": extent_prep(g), "bike": np.flatnonzero(dense & ~is_r),
-                                    "rider": np.flatnonzero(dense & is_r)}
-        return self.label_prep[key]
+            return {"extent": extent_prep(g), "bike": np.flatnonzero(dense & ~is_r), "rider": np.flatnonzero(dense & is_r)}
+        return self._once("label_prep", bike, rider, make)
 
     def scene(self):
         if self._scene is None:
@@ -308,10 +361,10 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
         rot, root = assets.avatars[rider].last if rider is not None else (None, None)  # the group's rider pose
         for b, (j, f, person) in enumerate(zip(js, posed, people)):
             if rider is not None and accessories.varies(cfg.appearance):  # drawn per instance, as the colours
-                worn[j] = accessories.draw(cfg.appearance, cfg.seed, look_at, j, accessories.own_choice(assets.bodies[rider].spec))
+                worn[j] = accessories.draw(cfg.appearance, cfg.seed, look_at, j, assets.own(rider))
                 rkeys[j] = assets.wearing(rider, worn[j])
                 if rkeys[j] != rider:  # the same pose, the redressed rider's Gaussians
-                    f = accessories.swap_rider(f, assets.avatars[rkeys[j]], rot[b:b + 1], None if root is None else root[b:b + 1])
+                    f = accessories.swap_rider(f, assets.model(rkeys[j])[0], rot[b:b + 1], None if root is None else root[b:b + 1])
             frames[j] = (d["instances"][j], f, person)
         if relit is not None:
             relit.posed(bike, rider, js, [f.pose for f in posed])
@@ -359,7 +412,7 @@ def make_sample(cfg, index, assets, drawn=None, camera=None, look_index=None):
         aa.append(bike_aa if idx is None else bike_aa.index_select(0, idx))
         # and each model with the low-pass it was trained with (bike and rider may differ)
         cyc = assets.cyclists[(inst["bike"], inst["rider"])]
-        e = frame_eps2d(frame.ids, cyc.bike, cyc.avatar if rkeys[k] == inst["rider"] else assets.avatars[rkeys[k]])
+        e = frame_eps2d(frame.ids, cyc.bike, cyc.avatar if rkeys[k] == inst["rider"] else assets.model(rkeys[k])[0])
         if fs is not None:  # the full model, for the LiDAR scan
             scan_parts.append((frame.gaussians, e, bike_aa if bike_trained_aa else False))
         eps.append((len(g), e if idx is None or not torch.is_tensor(e) else e.index_select(0, idx)))

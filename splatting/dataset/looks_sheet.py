@@ -47,10 +47,10 @@ def render_sheet(cfg, bike, rider, n=12, cols=4, log=print):
     variants = []
     for i in range(n):
         if accessories.varies(cfg.appearance):
-            worn = accessories.draw(cfg.appearance, cfg.seed, i, 0, accessories.own_choice(assets.bodies[rider].spec))
+            worn = accessories.draw(cfg.appearance, cfg.seed, i, 0, assets.own(rider))
             key = assets.wearing(rider, worn)
             rot, root = assets.avatars[rider].last
-            f = frame if key == rider else accessories.swap_rider(frame, assets.avatars[key], rot, root)
+            f = frame if key == rider else accessories.swap_rider(frame, assets.model(key)[0], rot, root)
             variants.append((f, None, np.ones(3), {}))
             log(f"accessories {i + 1}/{n}: {worn}")
         else:

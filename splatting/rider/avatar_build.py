@@ -1,6 +1,10 @@
 """Build a rider's Gaussian avatar (the command: `python -m splatting rider-avatar --id ID`, rider/command.py).
 
 Steps, each skipped when its output exists (so a killed run resumes):
+  0. look.json       the look the rider is trained in (avatar_look.py), written first: datasets read it to
+                     know what the avatar wears.  A folder that already holds a build keeps its record; one
+                     whose record names another rider or look is refused (its steps would be skipped and
+                     the avatar be of the other look), one built before the record existed gets none
   1. rest_mesh.ply   the T-posed rider mesh with vertex colours (body.export_rider); with bare, the rider
                      redressed in the accessory-free look (looks.BARE): the base datasets add per-instance
                      accessories to (splatting/cyclist/accessories.py; default folder <avatar>/bare/)
@@ -20,6 +24,7 @@ from cyclist_formats.errors import UserError
 from splatting import paths
 from splatting.gaussians.container import read_ply
 from splatting.rider.avatar import PLY_NAME, RiderAvatar, SKINNING_NAME
+from splatting.rider.avatar_look import LOOK_NAME, look_record, read_look, write_look
 from splatting.rider.body import export_rider, redress
 from splatting.rider.looks import BARE
 from splatting.rider.roster import load_rider
@@ -55,12 +60,22 @@ def build_avatar(rider_id, out_dir, iterations=None, time_budget_s=None, max_gau
     rider = load_rider(rider_id)  # UserError for an unknown id, before any work
     if bare:
         rider = redress(rider, **BARE)  # UserError for a body without a roster look
-    os.makedirs(out_dir, exist_ok=True)
     mesh = os.path.join(out_dir, "rest_mesh.ply")
     views = os.path.join(out_dir, "views")
     ply = os.path.join(out_dir, PLY_NAME)
     skin = os.path.join(out_dir, SKINNING_NAME)
+    started = any(os.path.exists(p) for p in (mesh, views, ply, skin))
+    record = read_look(out_dir) if os.path.isdir(out_dir) else None  # UserError for a corrupt one
+    if started and record is not None and record != look_record(rider):
+        raise UserError(f"{out_dir} holds an avatar build of rider {record['rider']} in another look ({LOOK_NAME}: "
+                        f"{record['look']}); move it away or choose another --out")
+    os.makedirs(out_dir, exist_ok=True)
     steps = {}
+    if not started:
+        write_look(out_dir, rider)
+    elif record is None:  # what it was trained in is unknown: no record rather than a guess
+        log(f"rider-avatar: {out_dir} was built before avatars recorded their look; no {LOOK_NAME} written "
+            f"(datasets drawing accessories per instance refuse it: move it away and rebuild for them)")
 
     def step(name, done, fn):
         if done:
