@@ -86,7 +86,7 @@ class Builder:
 
 def synth_bike(nseg=24, tyre_r=0.022, rider=False, chainring=True, third_wheel=None, front_R=0.35,
                chain_guard=False, front_twin=None, extras=(), wheelbase=1.07, crank_angle=180.0,
-               crank_phase=30.0, drive_side=1):
+               crank_phase=30.0):
     """A city bike from primitives in the canonical frame; (V, T, labels, truth keypoints).
 
     rider: False; True (torso, head, arms to the bar, thighs: separate pieces); "legs" (also
@@ -96,7 +96,10 @@ def synth_bike(nseg=24, tyre_r=0.022, rider=False, chainring=True, third_wheel=N
     ground), "basket" (wire basket on the bar, steers), "rack" (rear rack with two panniers),
     "mudguards" (touching the tyres), "stabilisers" (a child's training wheels), "tall_post"
     (saddle 30 cm higher), "cargo" (a long-john box between the saddle and the front wheel; with
-    wheelbase ~1.8 and a smaller front wheel)."""
+    wheelbase ~1.8 and a smaller front wheel), "wide_saddle" (a cruiser's 32 cm saddle of many
+    vertices instead of the box).
+    crank_angle: the arms' angle apart; crank_phase: the right arm's angle from forward (+X),
+    counter-clockwise seen from +Z (30: the right pedal ahead and up)."""
     b = Builder()
     R = 0.35
     ra, ca = np.array([-0.45, R, 0.0]), np.array([0.0, 0.29, 0.0])
@@ -152,7 +155,7 @@ def synth_bike(nseg=24, tyre_r=0.022, rider=False, chainring=True, third_wheel=N
     b.box(pr, [0.045, 0.012, 0.05], CRANK)
     b.box(pl, [0.045, 0.012, 0.05], CRANK)
     if chainring:
-        b.torus(ca + [0, 0, drive_side * 0.05], 0.1, 0.006, 32, 4, CRANK)
+        b.torus(ca + [0, 0, 0.05], 0.1, 0.006, 32, 4, CRANK)
     if chain_guard:   # a closed box over the ring and the chain's top run (a city bike's chain case)
         b.box([-0.16, 0.31, 0.05], [0.3, 0.13, 0.012], FRAME)
     _extras(b, extras, ra, fa, ca, R, front_R, tyre_r, bar, hb)

@@ -176,3 +176,18 @@ def test_cues_on_points_whose_truth_is_known():
     cs = orientation.cues(X * [-1, 1, -1], {**flip, "front_axle": flip["rear_axle"],
                                              "rear_axle": flip["front_axle"]}, 0.35, True, False)
     assert orientation.verdict(cs) == "backwards", cs
+
+
+def test_a_narrow_pedal_stays_on_its_own_side():
+    """The shape finder puts a pedal body's centre 0.14 wheel radii (5 cm) in from its outer end: a
+    child's narrow pedal whose outer end is 4.5 cm out would land across the bike's plane (the
+    code before put pedal_left at Z = +0.4 cm).  Point clouds of two pedal blocks, truth by
+    construction."""
+    from addon.core.curation import shape_keypoints as sk
+    g = np.stack(np.meshgrid(np.linspace(-0.04, 0.04, 9), np.linspace(-0.01, 0.01, 3), np.linspace(-0.01, 0.01, 3),
+                             indexing="ij"), -1).reshape(-1, 3)
+    X = np.concatenate([g + [0.17, 0.29, 0.035], g + [-0.17, 0.29, -0.035]])
+    fa, ra = np.array([0.6, 0.35, 0.0]), np.array([-0.45, 0.35, 0.0])
+    ca, pl, pr, has_crank = sk.pedals(X, fa, ra, 0.35, 0.01)
+    assert has_crank and pl[2] < 0 < pr[2], (pl, pr)
+    assert np.linalg.norm(pl[:2] - [-0.17, 0.29]) < 0.01 and np.linalg.norm(pr[:2] - [0.17, 0.29]) < 0.01, (pl, pr)
