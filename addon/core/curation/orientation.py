@@ -95,4 +95,4 @@ def conflict_line(cs):
     bar = next(c for c in cs if c.name == "bar")
     return (f"cannot tell the front from the back: {crank.text}, so the far one is the front (a crank sits "
             f"nearer the rear wheel), but {bar.text} towards the axle the crank is nearer; "
-            f"give the keypoints with --keypoints FILE.json")
+            f"place the wheel centres in the annotator panel (Curate from wheel centres)")

@@ -82,7 +82,8 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
             v = res.record["forward_check"]["verdict"]
     if v == "backwards":
         raise UserError("the bike faces backwards whichever way it is curated (" +
-                        "; ".join(c.text for c in res.cues if c.sign) + "); give the keypoints with --keypoints FILE.json")
+                        "; ".join(c.text for c in res.cues if c.sign) + "); place the wheel centres in the "
+                        "annotator panel (Curate from wheel centres)")
     if err:
         raise UserError(err)
     return res
