@@ -65,12 +65,28 @@ class Builder:
              (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
         self.add(V, T, lab)
 
+    def ellipsoid(self, c, h, lab, n=24):
+        """A closed UV ellipsoid of half axes h (dense: a sculpted saddle's many vertices)."""
+        u, v = np.meshgrid(np.linspace(0, np.pi, n + 1)[1:-1], np.linspace(0, 2 * np.pi, 2 * n, endpoint=False),
+                           indexing="ij")
+        P = np.stack([np.sin(u) * np.cos(v), np.cos(u), np.sin(u) * np.sin(v)], -1).reshape(-1, 3)
+        V = np.concatenate([P, [[0, 1, 0], [0, -1, 0]]]) * h + c
+        T, m = [], 2 * n
+        for i in range(n - 2):
+            for j in range(m):
+                p, q = i * m + j, i * m + (j + 1) % m
+                T += [(p, q, q + m), (p, q + m, p + m)]
+        top, bot = len(P), len(P) + 1
+        T += [(top, (j + 1) % m, j) for j in range(m)] + [(bot, (n - 3) * m + j, (n - 3) * m + (j + 1) % m) for j in range(m)]
+        self.add(V, T, lab)
+
     def arrays(self):
         return np.concatenate(self.V), np.concatenate(self.T), np.array(self.lab)
 
 
 def synth_bike(nseg=24, tyre_r=0.022, rider=False, chainring=True, third_wheel=None, front_R=0.35,
-               chain_guard=False, front_twin=None, extras=(), wheelbase=1.07, crank_angle=180.0):
+               chain_guard=False, front_twin=None, extras=(), wheelbase=1.07, crank_angle=180.0,
+               crank_phase=30.0):
     """A city bike from primitives in the canonical frame; (V, T, labels, truth keypoints).
 
     rider: False; True (torso, head, arms to the bar, thighs: separate pieces); "legs" (also
@@ -80,7 +96,10 @@ def synth_bike(nseg=24, tyre_r=0.022, rider=False, chainring=True, third_wheel=N
     ground), "basket" (wire basket on the bar, steers), "rack" (rear rack with two panniers),
     "mudguards" (touching the tyres), "stabilisers" (a child's training wheels), "tall_post"
     (saddle 30 cm higher), "cargo" (a long-john box between the saddle and the front wheel; with
-    wheelbase ~1.8 and a smaller front wheel)."""
+    wheelbase ~1.8 and a smaller front wheel), "wide_saddle" (a cruiser's 32 cm saddle of many
+    vertices instead of the box).
+    crank_angle: the arms' angle apart; crank_phase: the right arm's angle from forward (+X),
+    counter-clockwise seen from +Z (30: the right pedal ahead and up)."""
     b = Builder()
     R = 0.35
     ra, ca = np.array([-0.45, R, 0.0]), np.array([0.0, 0.29, 0.0])
@@ -115,14 +134,17 @@ def synth_bike(nseg=24, tyre_r=0.022, rider=False, chainring=True, third_wheel=N
     seat_top = np.array([-0.2, 0.97 + (0.3 if "tall_post" in extras else 0.0), 0.0])
     st = seat_top - [0, 0.06, 0]
     b.tube(ca, st, 0.016, FRAME)                                   # seat tube + post
-    b.box(seat_top - [0, 0.03, 0], [0.12, 0.03, 0.07], FRAME)       # saddle
+    if "wide_saddle" in extras:    # a cruiser's sprung saddle, 32 cm wide, densely modelled
+        b.ellipsoid(seat_top - [0, 0.04, 0], [0.13, 0.04, 0.16], FRAME, 48)
+    else:
+        b.box(seat_top - [0, 0.03, 0], [0.12, 0.03, 0.07], FRAME)   # saddle
     b.tube(st - [0, 0.1, 0], ht, 0.016, FRAME)                     # top tube
     b.tube(ca, hb, 0.02, FRAME)                                    # down tube
     for z in (-0.045, 0.045):
         b.tube(ca + [0, 0, z], ra + [0, 0, z], 0.01, FRAME)          # chain stays
         b.tube(st - [0, 0.12, 0], ra + [0, 0, z], 0.01, FRAME)       # seat stays
     b.tube(ca - [0, 0, 0.036], ca + [0, 0, 0.036], 0.02, FRAME)     # bottom bracket shell
-    ang = np.radians(30)
+    ang = np.radians(crank_phase)   # the right arm's angle from forward (X), counter-clockwise seen from +Z
     v = 0.17 * np.array([np.cos(ang), np.sin(ang), 0])
     # crank_angle: the arms' angle apart (180 opposite; a model's arms at 170 are not)
     al = ang + np.radians(crank_angle)

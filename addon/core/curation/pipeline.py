@@ -6,7 +6,7 @@ import numpy as np
 
 from ..contract import UserError
 from . import keypoints as kpmod
-from . import keypoint_check, mesh, scale, silhouette, split, wheels
+from . import keypoint_check, mesh, orientation, scale, silhouette, split, wheels
 from .rider_removal import drop_rider
 from .shape_fit import check_two_wheels, choose_keypoints, shape_samples
 from .shape_keypoints import bulky as _bulky
@@ -27,6 +27,7 @@ class Result:
     notes: list = field(default_factory=list)
     wheel_diameter: float = DEFAULT_WHEEL_DIAMETER
     record: dict = field(default_factory=dict)
+    cues: list = field(default_factory=list)         # orientation.Cue: which way the bike faces
     split_args: dict = field(default_factory=dict)   # regions() parameters: where fused faces are cut
 
 
@@ -43,21 +44,65 @@ def curate_arrays(V, T, wheel_diameter=DEFAULT_WHEEL_DIAMETER, keypoints=None, h
     Raises UserError when no wheels are found.
     """
     res, err = _sized(V, T, wheel_diameter, keypoints, hints, wheel_centres, {})
-    if (err or res.problems) and wheel_centres is None and res.record.get("forward_cue", "").startswith("handlebar"):
-        # front and back from the bar are a guess (a motor scooter's broad rear body is as wide
-        # and high as its bar): the other way round, when that one validates with fewer problems
+    if wheel_centres is not None:   # the annotator placed the front wheel: their front
+        if err:
+            raise UserError(err)
+        return res
+    v = res.record["forward_check"]["verdict"]
+    bar_guess = res.record.get("forward_cue", "").startswith("handlebar")
+    if v in ("backwards", "conflict") or ((err or res.problems) and bar_guess):
+        # the other way round: the cues say this way is backwards (a mirrored bike: pedal_left on
+        # the right), or disagree, or front and back came from the bar's average place, a guess
+        # (a motor scooter's broad rear body is as wide and high as its bar), and this way has problems
         rear = np.linalg.inv(res.M) @ np.r_[res.keypoints["rear_axle"], 1.0]
         try:
             res2, err2 = _sized(V, T, wheel_diameter, keypoints, hints, wheel_centres, {"front": rear[:3]})
-        except UserError:
-            res2, err2 = res, "refused"
-        if (0 if err2 is None else 1) + len(res2.problems) < (0 if err is None else 1) + len(res.problems):
+        except UserError as e:
+            res2, err2 = None, str(e)
+        if v == "conflict":
+            # the crank and the bar point opposite ways (a toy bike's crank nearer its front wheel,
+            # something wider than the bar high over the rear wheel): only a way that validates
+            # where the other does not is taken; a backwards bike can validate too
+            good = [(r, e) for r, e in ((res, err), (res2, err2)) if r is not None and e is None and not r.problems]
+            if len(good) != 1:
+                raise UserError(orientation.conflict_line(res.cues))
+            if good[0][0] is res2:
+                res, err = res2, err2
+                res.record["forward_cue"] = "the other way round (the only way that validates; the cues disagree)"
+            _note(res, None, "front and back: the crank and the bar disagree, only this way validates")
+            return res
+        if res2 is not None and _rank(res2, err2) < _rank(res, err):
             res, err = res2, err2
-            res.record["forward_cue"] = "the other way validates (bar cue reversed)"
-            res.notes.append("front and back: the bar cue reversed, the other way validates")
+            if v == "backwards":
+                _note(res, "the other way round (the crank and bar cues say so)", "front and back: the other way "
+                      "round, the crank and bar cues say so")
+            else:
+                _note(res, "the other way validates (bar cue reversed)",
+                      "front and back: the bar cue reversed, the other way validates")
+            v = res.record["forward_check"]["verdict"]
+    if v == "backwards":
+        raise UserError("the bike faces backwards whichever way it is curated (" +
+                        "; ".join(c.text for c in res.cues if c.sign) + "); place the wheel centres in the "
+                        "annotator panel (Curate from wheel centres)")
     if err:
         raise UserError(err)
     return res
+
+
+def _note(res, cue, note):
+    if cue:
+        res.record["forward_cue"] = cue
+    res.notes.append(note)
+    res.record["notes"] = res.record["notes"] + [note]
+
+
+_VERDICT_RANK = {"forward": 0, "unknown": 1, "backwards": 2, "conflict": 2}
+
+
+def _rank(res, err):
+    """Order of two curations of one model the two ways round: the one the geometry's cues say
+    faces forward, then the one with fewer problems (a refusal counts as one)."""
+    return _VERDICT_RANK[res.record["forward_check"]["verdict"]], (0 if err is None else 1) + len(res.problems)
 
 
 def _sized(V, T, wheel_diameter, keypoints, hints, wheel_centres, extra):
@@ -151,6 +196,11 @@ def _curate(V, T, wheel_diameter, keypoints, hints, wheel_centres, _size):
             notes.append(f"moved onto their part: {', '.join(moved)}")
         kp_probs, kp_dist = keypoint_check.check(view.P, soup.TW, labels, kp, has_crank)
         problems = problems + kp_probs
+    if pose.crank is not None and pose.apply(pose.crank.centre)[2] < -0.01:
+        notes.append("the chainring is on the bike's left (a mirrored model?): curated as modelled, "
+                     "pedal_left on the left")
+    cues = orientation.cues(X, kp, 0.5 * (pose.front.radius + pose.rear.radius) * pose.scale, has_crank,
+                            pose.crank is not None)
     split_args = {"head_radius": info.get("head_tube_radius"), "wheel_radius": pose.front.radius * pose.scale,
                   "head_span": info.get("head_span"), "has_crank": bool(has_crank)}
     record = {
@@ -159,6 +209,7 @@ def _curate(V, T, wheel_diameter, keypoints, hints, wheel_centres, _size):
         "scale_m_per_unit": float(pose.scale),
         "model_to_canonical": pose.M.tolist(),
         "forward_cue": pose.forward_cue,
+        "forward_check": {"verdict": orientation.verdict(cues), **{c.name: c.text for c in cues}},
         "wheel_radii_model_units": [float(pose.rear.radius), float(pose.front.radius)],
         "chainring_found": pose.crank is not None,
         "wheels_from": wheel_method,
@@ -174,7 +225,8 @@ def _curate(V, T, wheel_diameter, keypoints, hints, wheel_centres, _size):
         "split_args": {k: (v if v is None or isinstance(v, bool) else np.asarray(v, float).tolist())
                        for k, v in split_args.items()},
     }
-    return Result(pose.M, pose.scale, kp, labels, cut, problems, pose.notes + notes, wheel_diameter, record, split_args)
+    return Result(pose.M, pose.scale, kp, labels, cut, problems, pose.notes + notes, wheel_diameter, record, cues,
+                  split_args)
 
 
 NOISY_MEDIAN_DEG = 28.0   # median angle between neighbouring faces above which a dense mesh is noise

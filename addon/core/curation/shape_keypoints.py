@@ -186,6 +186,11 @@ def _pedal_candidates(X, fa, ra, R, zmin, sg):
     return out
 
 
+def _inset(z_outer, R):
+    """|Z| of a pedal body's centre from its outer end's: 0.14 R in, at most half way to the plane."""
+    return max(z_outer - 0.14 * R, 0.5 * z_outer)
+
+
 def pedals(X, fa, ra, R, tyre_half_width):
     """(crank_axle, pedal_left, pedal_right, has_crank) or None.  The pedals are the outermost
     pair of compact things sticking out sideways between the wheels that sit point-symmetric
@@ -205,8 +210,9 @@ def pedals(X, fa, ra, R, tyre_half_width):
         pick = (one[2], one, one)
     if pick is not None:
         (xr, yr, zr), (xl, yl, zl) = pick[1], pick[2]
-        # the pedal body's centre: about 5 cm (0.14 R) in from its outer end
-        ends = [np.array([xr, yr, zr - 0.14 * R]), np.array([xl, yl, -(zl - 0.14 * R)])]
+        # the pedal body's centre: about 5 cm (0.14 R) in from its outer end, and never across the
+        # bike's plane (a narrow child's pedal ending 4 cm out stays on its own side)
+        ends = [np.array([xr, yr, _inset(zr, R)]), np.array([xl, yl, -_inset(zl, R)])]
     else:   # nothing compact on both sides: the outermost surface per side
         m = (X[:, 0] > ra[0] + 0.5 * R) & (X[:, 0] < fa[0] - 0.5 * R) & (X[:, 1] < max(fa[1], ra[1]) + 0.6 * R)
         B = X[m]
@@ -220,7 +226,7 @@ def pedals(X, fa, ra, R, tyre_half_width):
                 return None
             c = B[z > zmax - 0.12 * R]
             lo, hi = c.min(0), c.max(0)
-            ends.append(np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), sg * (zmax - 0.14 * R)]))
+            ends.append(np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), sg * _inset(zmax, R)]))
     pr, pl = ends
     sep = np.linalg.norm(pr[:2] - pl[:2])
     ca = np.array([0.5 * (pr[0] + pl[0]), 0.5 * (pr[1] + pl[1]), 0.0])
