@@ -112,9 +112,24 @@ struct Geo {
   S lim_x, lim_y;  // the clamp bound hit (signed), when clamped
 };
 
+// The camera-independent part of the projection: the unit quaternion, its rotation Rq and the
+// 3D covariance's factor M = Rq diag(scale) (cov3d = M M^T). One camera computes it inside
+// geometry(); several cameras compute it once per Gaussian (preprocess_fwd_cams), with this same
+// code, so every camera's outputs keep the bits of its render alone.
 template <typename S>
-__attribute__((always_inline)) inline void geometry(const Cam& cam, const S* mean, const S* quat, const S* scale, S e,
-                                                    Geo<S>& g) {
+__attribute__((always_inline)) inline void covariance_factor(const S* quat, const S* scale, S* qn, S& qnorm, S* Rq,
+                                                             S* M) {
+  qnorm = std::sqrt(quat[0] * quat[0] + quat[1] * quat[1] + quat[2] * quat[2] + quat[3] * quat[3]);
+  for (int i = 0; i < 4; ++i) qn[i] = quat[i] / qnorm;
+  rotmat(qn, Rq);
+  for (int j = 0; j < 3; ++j)
+    for (int k = 0; k < 3; ++k) M[3 * j + k] = Rq[3 * j + k] * scale[k];
+}
+
+// The camera-dependent part of geometry() for a given M (covariance_factor's): camera-space
+// mean, clamped Jacobian, A = J R M and the 2D covariance (a, b, c) + eps2d. g.M is not read.
+template <typename S>
+__attribute__((always_inline)) inline void project_factor(const Cam& cam, const S* mean, const S* M, S e, Geo<S>& g) {
   S R[9], T[3];
   for (int i = 0; i < 9; ++i) R[i] = (S)cam.R[i];
   for (int i = 0; i < 3; ++i) T[i] = (S)cam.T[i];
@@ -133,14 +148,9 @@ __attribute__((always_inline)) inline void geometry(const Cam& cam, const S* mea
   g.lim_y = yz < -lyn ? -lyn : lyp;
   g.tx = std::min(std::max(xz, -lxn), lxp) * g.zs;
   g.ty = std::min(std::max(yz, -lyn), lyp) * g.zs;
-  g.qnorm = std::sqrt(quat[0] * quat[0] + quat[1] * quat[1] + quat[2] * quat[2] + quat[3] * quat[3]);
-  for (int i = 0; i < 4; ++i) g.qn[i] = quat[i] / g.qnorm;
-  rotmat(g.qn, g.Rq);
-  for (int j = 0; j < 3; ++j)
-    for (int k = 0; k < 3; ++k) g.M[3 * j + k] = g.Rq[3 * j + k] * scale[k];
   for (int i = 0; i < 3; ++i)
     for (int k = 0; k < 3; ++k)
-      g.RM[3 * i + k] = R[3 * i] * g.M[k] + R[3 * i + 1] * g.M[3 + k] + R[3 * i + 2] * g.M[6 + k];
+      g.RM[3 * i + k] = R[3 * i] * M[k] + R[3 * i + 1] * M[3 + k] + R[3 * i + 2] * M[6 + k];
   const S iz = g.iz, iz2 = iz * iz;
   for (int k = 0; k < 3; ++k) {
     g.A0[k] = fx * iz * g.RM[k] - fx * g.tx * iz2 * g.RM[6 + k];
@@ -154,6 +164,13 @@ __attribute__((always_inline)) inline void geometry(const Cam& cam, const S* mea
 }
 
 template <typename S>
+__attribute__((always_inline)) inline void geometry(const Cam& cam, const S* mean, const S* quat, const S* scale, S e,
+                                                    Geo<S>& g) {
+  covariance_factor(quat, scale, g.qn, g.qnorm, g.Rq, g.M);
+  project_factor(cam, mean, g.M, e, g);
+}
+
+template <typename S>
 inline void direction(const Cam& cam, const S* mean, S* d, S& n) {
   for (int i = 0; i < 3; ++i) d[i] = mean[i] - (S)cam.centre[i];
   n = std::max(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), (S)1e-12);
@@ -162,14 +179,19 @@ inline void direction(const Cam& cam, const S* mean, S* d, S& n) {
 
 // nb (the number of SH coefficients used) is a template constant: the SH loops unroll.
 // Gaussian n of one camera (the forward's per-Gaussian step, for one camera or several).
+// M: Gaussian n's covariance_factor, computed once for several cameras (null: computed here).
 template <typename S, int nb>
 __attribute__((always_inline)) inline void preprocess_one(int64_t n, const Cam& cam, const S* means, const S* quats,
                                                           const S* scales, const S* sh, const S* eps, int K,
                                                           S* means2d, S* conics, S* depths, S* colors,
-                                                          int64_t* radii, int64_t* boxes, bool* visible) {
+                                                          int64_t* radii, int64_t* boxes, bool* visible,
+                                                          const S* M = nullptr) {
   {
     Geo<S> g;
-    geometry(cam, means + 3 * n, quats + 4 * n, scales + 3 * n, eps ? eps[n] : (S)cam.eps2d, g);
+    if (M)
+      project_factor(cam, means + 3 * n, M, eps ? eps[n] : (S)cam.eps2d, g);
+    else
+      geometry(cam, means + 3 * n, quats + 4 * n, scales + 3 * n, eps ? eps[n] : (S)cam.eps2d, g);
     const S u = (S)cam.fx * g.p[0] / g.zs + (S)cam.cx, v = (S)cam.fy * g.p[1] / g.zs + (S)cam.cy;
     means2d[2 * n] = u;
     means2d[2 * n + 1] = v;
@@ -215,20 +237,28 @@ void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, c
                           visible);
 }
 
-// C cameras at once: one parallel loop over camera x Gaussian (blocks of 2048 of one camera's
-// Gaussians), the outputs camera-major (camera c's at c * N).
+// C cameras at once: one parallel loop over blocks of PRE_BLOCK Gaussians; per block the
+// camera-independent covariance factor M of each Gaussian once (covariance_factor), then every
+// camera's projection and SH colour of the block while its inputs are still in L1/L2. Outputs
+// camera-major (camera c's at c * N).
+constexpr int64_t PRE_BLOCK = 256;
+
 template <typename S, int nb>
 void preprocess_fwd_cams(int C, int64_t N, const Cam* cams, const S* means, const S* quats, const S* scales,
                          const S* sh, const S* eps, int K, int nt, S* means2d, S* conics, S* depths, S* colors,
                          int64_t* radii, int64_t* boxes, bool* visible) {
-  const int64_t NB = (N + 2047) / 2048;
+  const int64_t NB = (N + PRE_BLOCK - 1) / PRE_BLOCK;
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 1)
-  for (int64_t it = 0; it < C * NB; ++it) {
-    const int64_t c = it / NB, b = it % NB * 2048, e = std::min(b + 2048, N);
-    const int64_t o = c * N;
-    for (int64_t n = b; n < e; ++n)
-      preprocess_one<S, nb>(n, cams[c], means, quats, scales, sh, eps, K, means2d + 2 * o, conics + 3 * o,
-                            depths + o, colors + 3 * o, radii + o, boxes + 4 * o, visible + o);
+  for (int64_t blk = 0; blk < NB; ++blk) {
+    const int64_t b = blk * PRE_BLOCK, e = std::min(b + PRE_BLOCK, N);
+    S M[9 * PRE_BLOCK], qn[4], qnorm, Rq[9];
+    for (int64_t n = b; n < e; ++n) covariance_factor(quats + 4 * n, scales + 3 * n, qn, qnorm, Rq, M + 9 * (n - b));
+    for (int c = 0; c < C; ++c) {
+      const int64_t o = c * N;
+      for (int64_t n = b; n < e; ++n)
+        preprocess_one<S, nb>(n, cams[c], means, quats, scales, sh, eps, K, means2d + 2 * o, conics + 3 * o,
+                              depths + o, colors + 3 * o, radii + o, boxes + 4 * o, visible + o, M + 9 * (n - b));
+    }
   }
 }
 
