@@ -210,7 +210,7 @@ def run_cameras(results, threads=2):
           flush=True)
     st = camera_stages_cpu_ms(SIZES["50k"])
     results["raster_cameras_stages_cpu_ms"] = st
-    print("raster 4 cameras 50k, 1 thread, CPU ms: " + ", ".join(f"{k} {v:.1f}" for k, v in st.items())
+    print("raster 4 cameras 50k, 1 thread, CPU ms: " + ", ".join(f"{k} {v:.2f}" for k, v in st.items())
           + f" ({_load()})", flush=True)
     return results
 
