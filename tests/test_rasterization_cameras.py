@@ -29,7 +29,9 @@ CASES = {
     "eps2d per Gaussian, masked mip filter": {"eps2d": "per", "antialiased": "mask"},
     "mip filter, one background": {"antialiased": True, "backgrounds": "one"},
     "a background per camera, no depth": {"backgrounds": "each", "depth": False},
+    "sh degree 0": {"sh_degree": 0},
     "sh degree 1": {"sh_degree": 1},
+    "sh degree 2": {"sh_degree": 2},
 }
 
 
@@ -184,3 +186,18 @@ def test_gradients_of_a_several_camera_call_equal_those_of_one_call_per_camera(d
     for name, a, p in zip(("means", "quats", "scales", "opacities", "sh"), together, params):
         assert a.abs().sum() > 0, name
         assert torch.equal(a, p.grad), name
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_more_cameras_than_colour_lanes_keep_each_cameras_bits(dtype):
+    # the one pass shades up to 8 (float32) or 4 (float64) cameras per Gaussian at once: nine
+    # cameras take two or three such groups, the last one partly filled
+    means, quats, scales, opac, sh = scene(n=600, dtype=dtype)
+    cs = [ring_camera(a, size=64, focal=2085 * 64 / 512, distance=4.0) for a in range(0, 360, 40)]
+    with torch.no_grad():
+        outs = rasterization(means, quats, scales, opac, sh, cameras=cs, per_camera=True)
+        for i, c in enumerate(cs):
+            one = rasterize(means, quats, scales, opac, sh, c)
+            assert one["alpha"].max() > 0.5
+            for k in ("rgb", "alpha", "depth", "means2d", "radii"):
+                assert torch.equal(outs[i][k], one[k]), (i, k)
