@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <vector>
 
+#include <immintrin.h>
 #include <omp.h>
 
 namespace {
@@ -177,6 +178,21 @@ inline void direction(const Cam& cam, const S* mean, S* d, S& n) {
   for (int i = 0; i < 3; ++i) d[i] /= n;
 }
 
+// Gaussian n's SH colour seen from cam: max(0, sum_k Y_k(view direction) sh_k + 0.5).
+template <typename S, int nb>
+__attribute__((always_inline)) inline void colour_one(int64_t n, const Cam& cam, const S* means, const S* sh, int K,
+                                                      S* colors) {
+  S d[3], dn, Y[16];
+  direction(cam, means + 3 * n, d, dn);
+  sh_basis<S>(d[0], d[1], d[2], nb, Y, nullptr);
+  const S* f = sh + n * K * 3;
+  for (int ch = 0; ch < 3; ++ch) {
+    S acc = 0;
+    for (int k = 0; k < nb; ++k) acc += Y[k] * f[3 * k + ch];
+    colors[3 * n + ch] = std::max(acc + (S)0.5, (S)0);
+  }
+}
+
 // nb (the number of SH coefficients used) is a template constant: the SH loops unroll.
 // Gaussian n of one camera (the forward's per-Gaussian step, for one camera or several).
 // M: Gaussian n's covariance_factor, computed once for several cameras (null: computed here).
@@ -215,16 +231,7 @@ __attribute__((always_inline)) inline void preprocess_one(int64_t n, const Cam& 
     bx[0] = (int64_t)u0, bx[1] = (int64_t)u1, bx[2] = (int64_t)v0, bx[3] = (int64_t)v1;
     radii[n] = (ok && bx[1] >= bx[0] && bx[3] >= bx[2]) ? (int64_t)r : 0;
     visible[n] = radii[n] > 0;
-    if (!COLOUR) return;
-    S d[3], dn, Y[16];
-    direction(cam, means + 3 * n, d, dn);
-    sh_basis<S>(d[0], d[1], d[2], nb, Y, nullptr);
-    const S* f = sh + n * K * 3;
-    for (int ch = 0; ch < 3; ++ch) {
-      S acc = 0;
-      for (int k = 0; k < nb; ++k) acc += Y[k] * f[3 * k + ch];
-      colors[3 * n + ch] = std::max(acc + (S)0.5, (S)0);
-    }
+    if (COLOUR) colour_one<S, nb>(n, cam, means, sh, K, colors);
   }
 }
 
@@ -264,6 +271,121 @@ void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, c
                           visible);
 }
 
+// ---- several cameras, one camera a vector lane (forward only) ----
+// Lanes<S>: 8 float or 4 double lanes (AVX), with std::min / std::max / ceil / floor / sqrt /
+// isfinite lane-wise exactly as the scalar ones (the same comparisons, IEEE sqrt and rounding).
+template <typename S>
+struct Lanes {
+  typedef S V __attribute__((vector_size(32)));
+  static constexpr int L = 32 / sizeof(S);
+#ifdef __AVX__
+  static V sqrt(V x) {
+    if constexpr (sizeof(S) == 4) return (V)_mm256_sqrt_ps((__m256)x);
+    else return (V)_mm256_sqrt_pd((__m256d)x);
+  }
+  template <int MODE>  // _MM_FROUND_TO_POS_INF: ceil, _MM_FROUND_TO_NEG_INF: floor
+  static V round(V x) {
+    if constexpr (sizeof(S) == 4) return (V)_mm256_round_ps((__m256)x, MODE | _MM_FROUND_NO_EXC);
+    else return (V)_mm256_round_pd((__m256d)x, MODE | _MM_FROUND_NO_EXC);
+  }
+  static V ceil(V x) { return round<_MM_FROUND_TO_POS_INF>(x); }
+  static V floor(V x) { return round<_MM_FROUND_TO_NEG_INF>(x); }
+#else  // lane by lane: the same results, without the speed
+  static V sqrt(V x) { for (int l = 0; l < L; ++l) x[l] = std::sqrt(x[l]); return x; }
+  static V ceil(V x) { for (int l = 0; l < L; ++l) x[l] = std::ceil(x[l]); return x; }
+  static V floor(V x) { for (int l = 0; l < L; ++l) x[l] = std::floor(x[l]); return x; }
+#endif
+};
+template <typename V> inline V vmax(V a, V b) { return a < b ? b : a; }  // std::max(a, b)
+template <typename V> inline V vmin(V a, V b) { return b < a ? b : a; }  // std::min(a, b)
+
+// Up to L cameras' constants, lane l = camera l (lanes past nc repeat camera 0: computed, not
+// written). The same conversions and formulas as geometry() / preprocess_one() take per Gaussian.
+template <typename S>
+struct CamLanes {
+  typedef typename Lanes<S>::V V;
+  V R[9], T[3], fx, fy, cx, cy, near, eps2d, W, H, W1, H1, lxp, lxn, lyp, lyn;
+  int nc;
+  CamLanes(const Cam* cams, int n) : nc(n) {
+    for (int l = 0; l < Lanes<S>::L; ++l) {
+      const Cam& cam = cams[l < n ? l : 0];
+      for (int i = 0; i < 9; ++i) R[i][l] = (S)cam.R[i];
+      for (int i = 0; i < 3; ++i) T[i][l] = (S)cam.T[i];
+      const S fx_ = (S)cam.fx, fy_ = (S)cam.fy, W_ = (S)cam.W, H_ = (S)cam.H, cx_ = (S)cam.cx, cy_ = (S)cam.cy;
+      fx[l] = fx_, fy[l] = fy_, cx[l] = cx_, cy[l] = cy_, W[l] = W_, H[l] = H_;
+      W1[l] = (S)(cam.W - 1), H1[l] = (S)(cam.H - 1);
+      near[l] = (S)cam.near, eps2d[l] = (S)cam.eps2d;
+      lxp[l] = (W_ - cx_) / fx_ + (S)0.3 * W_ / ((S)2 * fx_), lxn[l] = cx_ / fx_ + (S)0.3 * W_ / ((S)2 * fx_);
+      lyp[l] = (H_ - cy_) / fy_ + (S)0.3 * H_ / ((S)2 * fy_), lyn[l] = cy_ / fy_ + (S)0.3 * H_ / ((S)2 * fy_);
+    }
+  }
+};
+
+// preprocess_one without the colour for the cameras of cl at once: Gaussian n (mean, its
+// covariance_factor M, its eps2d or null for the cameras'), each camera's outputs at c * N.
+// Line for line project_factor() and preprocess_one() on lanes, so each lane has the bits of the
+// scalar code (tests/test_rasterization_cameras.py checks it).
+template <typename S>
+__attribute__((always_inline)) inline void project_lanes(int64_t n, const CamLanes<S>& cl, int64_t N, const S* mean,
+                                                         const S* M, const S* eps, S* means2d, S* conics, S* depths,
+                                                         int64_t* radii, int64_t* boxes, bool* visible) {
+  typedef Lanes<S> LN;
+  typedef typename LN::V V;
+  const V one = (V){} + (S)1, zero = (V){};
+  V p[3];
+  for (int i = 0; i < 3; ++i) p[i] = cl.R[3 * i] * mean[0] + cl.R[3 * i + 1] * mean[1] + cl.R[3 * i + 2] * mean[2] + cl.T[i];
+  const V z = p[2];
+  auto valid = z > cl.near;
+  const V zs = valid ? z : one;
+  const V iz = one / zs;
+  const V xz = p[0] / zs, yz = p[1] / zs;
+  const V tx = vmin(vmax(xz, -cl.lxn), cl.lxp) * zs;
+  const V ty = vmin(vmax(yz, -cl.lyn), cl.lyp) * zs;
+  V RM[9];
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k) RM[3 * i + k] = cl.R[3 * i] * M[k] + cl.R[3 * i + 1] * M[3 + k] + cl.R[3 * i + 2] * M[6 + k];
+  const V iz2 = iz * iz;
+  V A0[3], A1[3];
+  for (int k = 0; k < 3; ++k) {
+    A0[k] = cl.fx * iz * RM[k] - cl.fx * tx * iz2 * RM[6 + k];
+    A1[k] = cl.fy * iz * RM[3 + k] - cl.fy * ty * iz2 * RM[6 + k];
+  }
+  const V e = eps ? (V){} + *eps : cl.eps2d;
+  const V a = A0[0] * A0[0] + A0[1] * A0[1] + A0[2] * A0[2] + e;
+  const V b = A0[0] * A1[0] + A0[1] * A1[1] + A0[2] * A1[2];
+  const V c = A1[0] * A1[0] + A1[1] * A1[1] + A1[2] * A1[2] + e;
+  const V gdet = a * c - b * b;
+  valid = valid & (gdet > zero);
+  // preprocess_one
+  const V u = cl.fx * p[0] / zs + cl.cx, v = cl.fy * p[1] / zs + cl.cy;
+  const V det = valid ? gdet : one;
+  const V cn0 = c / det, cn1 = -b / det, cn2 = a / det;
+  const V mid = (S)0.5 * (a + c);
+  const V lam = mid + LN::sqrt(vmax(mid * mid - gdet, (V){} + (S)0.1));
+  const auto ok = valid & ((u - u) == zero) & ((v - v) == zero) & ((lam - lam) == zero);  // isfinite
+  const V r = ok ? LN::ceil((S)3 * LN::sqrt(lam)) : zero;
+  const V lo = (V){} + (S)-1e7, hi = (V){} + (S)1e7;
+  const V mu = ok ? vmin(vmax(u, lo), hi) : lo;
+  const V mv = ok ? vmin(vmax(v, lo), hi) : lo;
+  const V u0 = vmin(vmax(LN::ceil(mu - r - (S)0.5), zero), cl.W);
+  const V u1 = vmin(vmax(LN::floor(mu + r - (S)0.5), -one), cl.W1);
+  const V v0 = vmin(vmax(LN::ceil(mv - r - (S)0.5), zero), cl.H);
+  const V v1 = vmin(vmax(LN::floor(mv + r - (S)0.5), -one), cl.H1);
+  for (int l = 0; l < cl.nc; ++l) {
+    const int64_t i = l * N + n;
+    means2d[2 * i] = u[l];
+    means2d[2 * i + 1] = v[l];
+    depths[i] = z[l];
+    conics[3 * i] = cn0[l];
+    conics[3 * i + 1] = cn1[l];
+    conics[3 * i + 2] = cn2[l];
+    int64_t* bx = boxes + 4 * i;
+    bx[0] = (int64_t)u0[l], bx[1] = (int64_t)u1[l], bx[2] = (int64_t)v0[l], bx[3] = (int64_t)v1[l];
+    radii[i] = (ok[l] && bx[1] >= bx[0] && bx[3] >= bx[2]) ? (int64_t)r[l] : 0;
+    visible[i] = radii[i] > 0;
+  }
+}
+
 // C cameras at once: one parallel loop over blocks of PRE_BLOCK Gaussians; per block the
 // camera-independent covariance factor M of each Gaussian once (covariance_factor), then every
 // camera's projection and SH colour of the block while its inputs are still in L1/L2 (the colour
@@ -278,23 +400,27 @@ void preprocess_fwd_cams(int C, int64_t N, const Cam* cams, const S* means, cons
   // the colour camera-lane-wise (colour_lanes) from degree 2 on (measured, 50k, 4 cameras, one
   // thread: degree 3 9.3 -> 8.3 ms, 2 8.4 -> 7.5; degrees 0 and 1 were 0.5 and 1.3 ms slower so)
   constexpr bool LANES = nb >= 9;
-  constexpr int L = 32 / sizeof(S);
+  constexpr int L = Lanes<S>::L;
+  std::vector<CamLanes<S>> groups;
+  for (int c = 0; c < C; c += L) groups.emplace_back(cams + c, std::min(L, C - c));
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 1)
   for (int64_t blk = 0; blk < NB; ++blk) {
     const int64_t b = blk * PRE_BLOCK, e = std::min(b + PRE_BLOCK, N);
     S M[9 * PRE_BLOCK], qn[4], qnorm, Rq[9];
     for (int64_t n = b; n < e; ++n) covariance_factor(quats + 4 * n, scales + 3 * n, qn, qnorm, Rq, M + 9 * (n - b));
-    for (int c = 0; c < C; ++c) {
-      const int64_t o = c * N;
+    for (int gi = 0; gi < (int)groups.size(); ++gi) {
+      const int64_t o = (int64_t)gi * L * N;
       for (int64_t n = b; n < e; ++n)
-        preprocess_one<S, nb, !LANES>(n, cams[c], means, quats, scales, sh, eps, K, means2d + 2 * o, conics + 3 * o,
-                                      depths + o, colors + 3 * o, radii + o, boxes + 4 * o, visible + o,
-                                      M + 9 * (n - b));
+        project_lanes<S>(n, groups[gi], N, means + 3 * n, M + 9 * (n - b), eps ? eps + n : nullptr, means2d + 2 * o,
+                         conics + 3 * o, depths + o, radii + o, boxes + 4 * o, visible + o);
     }
     if (LANES)
       for (int c = 0; c < C; c += L)
         for (int64_t n = b; n < e; ++n)
           colour_lanes<S, nb>(n, cams + c, std::min(L, C - c), N, means, sh, K, colors + 3 * c * N);
+    else
+      for (int c = 0; c < C; ++c)
+        for (int64_t n = b; n < e; ++n) colour_one<S, nb>(n, cams[c], means, sh, K, colors + 3 * c * N);
   }
 }
 
