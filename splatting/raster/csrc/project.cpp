@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
 #include <immintrin.h>
@@ -34,58 +35,68 @@ constexpr double SH_C3[7] = {-0.5900435899266435, 2.890611442640554, -0.45704579
                              -0.4570457994644658, 1.445305721320277, -0.5900435899266435};
 
 // SH basis (INRIA order) at unit direction (x, y, z); with grad, its derivatives d/dx, d/dy, d/dz.
-template <typename S>
+// S: the scalar type T, or a vector of T (several cameras' directions, one a lane: no derivatives);
+// the constants are T either way, so each lane computes what the scalar code does.
+template <typename S, typename T = S>
 inline void sh_basis(S x, S y, S z, int nb, S* Y, S (*dY)[3]) {
-  Y[0] = (S)SH_C0;
-  if (dY) dY[0][0] = dY[0][1] = dY[0][2] = 0;
+  constexpr bool GRAD = std::is_same<S, T>::value;
+  Y[0] = S{} + (T)SH_C0;
+  if constexpr (GRAD)
+    if (dY) dY[0][0] = dY[0][1] = dY[0][2] = 0;
   if (nb > 1) {
-    const S c1 = (S)SH_C1;
+    const T c1 = (T)SH_C1;
     Y[1] = -c1 * y;
     Y[2] = c1 * z;
     Y[3] = -c1 * x;
-    if (dY) {
-      S d[3][3] = {{0, -c1, 0}, {0, 0, c1}, {-c1, 0, 0}};
-      for (int k = 0; k < 3; ++k) std::copy(d[k], d[k] + 3, dY[1 + k]);
+    if constexpr (GRAD) {
+      if (dY) {
+        S d[3][3] = {{0, -c1, 0}, {0, 0, c1}, {-c1, 0, 0}};
+        for (int k = 0; k < 3; ++k) std::copy(d[k], d[k] + 3, dY[1 + k]);
+      }
     }
   }
   if (nb > 4) {
     const S xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
-    const S* c = nullptr;
-    S c2[5];
-    for (int k = 0; k < 5; ++k) c2[k] = (S)SH_C2[k];
+    const T* c = nullptr;
+    T c2[5];
+    for (int k = 0; k < 5; ++k) c2[k] = (T)SH_C2[k];
     c = c2;
     Y[4] = c[0] * xy;
     Y[5] = c[1] * yz;
-    Y[6] = c[2] * ((S)2 * zz - xx - yy);
+    Y[6] = c[2] * ((T)2 * zz - xx - yy);
     Y[7] = c[3] * xz;
     Y[8] = c[4] * (xx - yy);
-    if (dY) {
-      S d[5][3] = {{c[0] * y, c[0] * x, 0},
-                   {0, c[1] * z, c[1] * y},
-                   {c[2] * (S)-2 * x, c[2] * (S)-2 * y, c[2] * (S)4 * z},
-                   {c[3] * z, 0, c[3] * x},
-                   {c[4] * (S)2 * x, c[4] * (S)-2 * y, 0}};
-      for (int k = 0; k < 5; ++k) std::copy(d[k], d[k] + 3, dY[4 + k]);
+    if constexpr (GRAD) {
+      if (dY) {
+        S d[5][3] = {{c[0] * y, c[0] * x, 0},
+                     {0, c[1] * z, c[1] * y},
+                     {c[2] * (S)-2 * x, c[2] * (S)-2 * y, c[2] * (S)4 * z},
+                     {c[3] * z, 0, c[3] * x},
+                     {c[4] * (S)2 * x, c[4] * (S)-2 * y, 0}};
+        for (int k = 0; k < 5; ++k) std::copy(d[k], d[k] + 3, dY[4 + k]);
+      }
     }
     if (nb > 9) {
-      S c3[7];
-      for (int k = 0; k < 7; ++k) c3[k] = (S)SH_C3[k];
-      Y[9] = c3[0] * y * ((S)3 * xx - yy);
+      T c3[7];
+      for (int k = 0; k < 7; ++k) c3[k] = (T)SH_C3[k];
+      Y[9] = c3[0] * y * ((T)3 * xx - yy);
       Y[10] = c3[1] * xy * z;
-      Y[11] = c3[2] * y * ((S)4 * zz - xx - yy);
-      Y[12] = c3[3] * z * ((S)2 * zz - (S)3 * xx - (S)3 * yy);
-      Y[13] = c3[4] * x * ((S)4 * zz - xx - yy);
+      Y[11] = c3[2] * y * ((T)4 * zz - xx - yy);
+      Y[12] = c3[3] * z * ((T)2 * zz - (T)3 * xx - (T)3 * yy);
+      Y[13] = c3[4] * x * ((T)4 * zz - xx - yy);
       Y[14] = c3[5] * z * (xx - yy);
-      Y[15] = c3[6] * x * (xx - (S)3 * yy);
-      if (dY) {
-        S d[7][3] = {{c3[0] * (S)6 * xy, c3[0] * ((S)3 * xx - (S)3 * yy), 0},
-                     {c3[1] * yz, c3[1] * xz, c3[1] * xy},
-                     {c3[2] * (S)-2 * xy, c3[2] * ((S)4 * zz - xx - (S)3 * yy), c3[2] * (S)8 * yz},
-                     {c3[3] * (S)-6 * xz, c3[3] * (S)-6 * yz, c3[3] * ((S)6 * zz - (S)3 * xx - (S)3 * yy)},
-                     {c3[4] * ((S)4 * zz - (S)3 * xx - yy), c3[4] * (S)-2 * xy, c3[4] * (S)8 * xz},
-                     {c3[5] * (S)2 * xz, c3[5] * (S)-2 * yz, c3[5] * (xx - yy)},
-                     {c3[6] * ((S)3 * xx - (S)3 * yy), c3[6] * (S)-6 * xy, 0}};
-        for (int k = 0; k < 7; ++k) std::copy(d[k], d[k] + 3, dY[9 + k]);
+      Y[15] = c3[6] * x * (xx - (T)3 * yy);
+      if constexpr (GRAD) {
+        if (dY) {
+          S d[7][3] = {{c3[0] * (S)6 * xy, c3[0] * ((S)3 * xx - (S)3 * yy), 0},
+                       {c3[1] * yz, c3[1] * xz, c3[1] * xy},
+                       {c3[2] * (S)-2 * xy, c3[2] * ((S)4 * zz - xx - (S)3 * yy), c3[2] * (S)8 * yz},
+                       {c3[3] * (S)-6 * xz, c3[3] * (S)-6 * yz, c3[3] * ((S)6 * zz - (S)3 * xx - (S)3 * yy)},
+                       {c3[4] * ((S)4 * zz - (S)3 * xx - yy), c3[4] * (S)-2 * xy, c3[4] * (S)8 * xz},
+                       {c3[5] * (S)2 * xz, c3[5] * (S)-2 * yz, c3[5] * (xx - yy)},
+                       {c3[6] * ((S)3 * xx - (S)3 * yy), c3[6] * (S)-6 * xy, 0}};
+          for (int k = 0; k < 7; ++k) std::copy(d[k], d[k] + 3, dY[9 + k]);
+        }
       }
     }
   }
@@ -235,32 +246,6 @@ __attribute__((always_inline)) inline void preprocess_one(int64_t n, const Cam& 
   }
 }
 
-// Gaussian n's SH colour for up to L cameras at once (one camera a lane), its coefficients read
-// once: each camera's basis as preprocess_one computes it, then the same sums lane by lane in the
-// same order (one FMA per term, as the scalar loop compiles), so every camera keeps its bits.
-template <typename S, int nb>
-__attribute__((always_inline)) inline void colour_lanes(int64_t n, const Cam* cams, int nc, int64_t N,
-                                                        const S* means, const S* sh, int K, S* colors) {
-  typedef S V __attribute__((vector_size(32)));
-  constexpr int L = 32 / sizeof(S);
-  V Yv[nb];
-  for (int k = 0; k < nb; ++k) Yv[k] = (V){};
-  for (int l = 0; l < nc; ++l) {
-    S d[3], dn, Y[16];
-    direction(cams[l], means + 3 * n, d, dn);
-    sh_basis<S>(d[0], d[1], d[2], nb, Y, nullptr);
-    for (int k = 0; k < nb; ++k) Yv[k][l] = Y[k];
-  }
-  const S* f = sh + n * K * 3;
-  for (int ch = 0; ch < 3; ++ch) {
-    V acc = (V){};
-    for (int k = 0; k < nb; ++k) acc += Yv[k] * f[3 * k + ch];
-    const V r = acc + (S)0.5, zero = (V){};
-    const V c = r < zero ? zero : r;  // std::max(r, 0): r unless r < 0 (NaN stays NaN)
-    for (int l = 0; l < nc && l < L; ++l) colors[3 * (l * N + n) + ch] = c[l];
-  }
-}
-
 template <typename S, int nb>
 void preprocess_fwd(int64_t N, const Cam& cam, const S* means, const S* quats, const S* scales, const S* sh,
                     const S* eps, int K, int nt, S* means2d, S* conics, S* depths, S* colors, int64_t* radii,
@@ -304,13 +289,13 @@ template <typename V> inline V vmin(V a, V b) { return b < a ? b : a; }  // std:
 template <typename S>
 struct CamLanes {
   typedef typename Lanes<S>::V V;
-  V R[9], T[3], fx, fy, cx, cy, near, eps2d, W, H, W1, H1, lxp, lxn, lyp, lyn;
+  V R[9], T[3], centre[3], fx, fy, cx, cy, near, eps2d, W, H, W1, H1, lxp, lxn, lyp, lyn;
   int nc;
   CamLanes(const Cam* cams, int n) : nc(n) {
     for (int l = 0; l < Lanes<S>::L; ++l) {
       const Cam& cam = cams[l < n ? l : 0];
       for (int i = 0; i < 9; ++i) R[i][l] = (S)cam.R[i];
-      for (int i = 0; i < 3; ++i) T[i][l] = (S)cam.T[i];
+      for (int i = 0; i < 3; ++i) T[i][l] = (S)cam.T[i], centre[i][l] = (S)cam.centre[i];
       const S fx_ = (S)cam.fx, fy_ = (S)cam.fy, W_ = (S)cam.W, H_ = (S)cam.H, cx_ = (S)cam.cx, cy_ = (S)cam.cy;
       fx[l] = fx_, fy[l] = fy_, cx[l] = cx_, cy[l] = cy_, W[l] = W_, H[l] = H_;
       W1[l] = (S)(cam.W - 1), H1[l] = (S)(cam.H - 1);
@@ -386,6 +371,30 @@ __attribute__((always_inline)) inline void project_lanes(int64_t n, const CamLan
   }
 }
 
+// colour_one() for the cameras of cl at once: each lane's view direction and SH basis as the
+// scalar code computes them (direction(), sh_basis on lanes), the Gaussian's coefficients read
+// once and the sums lane by lane in the scalar loop's order (one FMA a term).
+template <typename S, int nb>
+__attribute__((always_inline)) inline void colour_lanes(int64_t n, const CamLanes<S>& cl, int64_t N, const S* means,
+                                                        const S* sh, int K, S* colors) {
+  typedef Lanes<S> LN;
+  typedef typename LN::V V;
+  const S* mean = means + 3 * n;
+  V d[3];
+  for (int i = 0; i < 3; ++i) d[i] = mean[i] - cl.centre[i];
+  const V dn = vmax(LN::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), (V){} + (S)1e-12);
+  for (int i = 0; i < 3; ++i) d[i] /= dn;
+  V Y[16];
+  sh_basis<V, S>(d[0], d[1], d[2], nb, Y, nullptr);
+  const S* f = sh + n * K * 3;
+  for (int ch = 0; ch < 3; ++ch) {
+    V acc = (V){};
+    for (int k = 0; k < nb; ++k) acc += Y[k] * f[3 * k + ch];
+    const V c = vmax(acc + (S)0.5, (V){});
+    for (int l = 0; l < cl.nc; ++l) colors[3 * (l * N + n) + ch] = c[l];
+  }
+}
+
 // C cameras at once: one parallel loop over blocks of PRE_BLOCK Gaussians; per block the
 // camera-independent covariance factor M of each Gaussian once (covariance_factor), then every
 // camera's projection and SH colour of the block while its inputs are still in L1/L2 (the colour
@@ -415,9 +424,9 @@ void preprocess_fwd_cams(int C, int64_t N, const Cam* cams, const S* means, cons
                          conics + 3 * o, depths + o, radii + o, boxes + 4 * o, visible + o);
     }
     if (LANES)
-      for (int c = 0; c < C; c += L)
+      for (int gi = 0; gi < (int)groups.size(); ++gi)
         for (int64_t n = b; n < e; ++n)
-          colour_lanes<S, nb>(n, cams + c, std::min(L, C - c), N, means, sh, K, colors + 3 * c * N);
+          colour_lanes<S, nb>(n, groups[gi], N, means, sh, K, colors + 3 * (int64_t)gi * L * N);
     else
       for (int c = 0; c < C; ++c)
         for (int64_t n = b; n < e; ++n) colour_one<S, nb>(n, cams[c], means, sh, K, colors + 3 * c * N);
