@@ -7,10 +7,14 @@ Keys (medians, 512^2, `threads` OpenMP threads, 2 by default as on the target ma
                         measured interleaved (one of each per round), so machine load hits both
   raster_thread_scaling {"1_thread_s", "2_threads_s", "speedup", "speedup_of_fastest"}: fwd+bwd at
                         50k, 1 vs 2 threads, interleaved (medians; and the fastest round of each)
-  raster_cameras        {"one_call_ms", "calls_ms", "speedup", "cameras", "threads"}: 4 cameras at
-                        50k, no grad (a dataset's views), rendered by ONE rasterization() call (one
-                        C++ pass over camera x tile) against one call per camera; alternating rounds,
-                        medians
+  raster_cameras        {"one_call_ms", "calls_ms", "speedup", "one_call_cpu_ms", "calls_cpu_ms",
+                        "cameras", "threads"}: 4 cameras at 50k, no grad (a dataset's views), rendered
+                        by ONE rasterization() call (one C++ pass over camera x tile) against one call
+                        per camera; alternating rounds, medians; *_cpu_ms: time.process_time (all
+                        threads' CPU, the least sensitive to other processes)
+  raster_cameras_stages_cpu_ms  the same two ways at ONE thread, CPU ms per stage (one_* / calls_*:
+                        preprocess, bin_blend, glue, total) and bound = calls_total / one_bin_blend,
+                        the most the one call could gain if its projection, SH and glue were free
   raster_stages_cpu_ms  at 50k, ONE thread, CPU time (time.process_time: the least sensitive to
                         other processes on a shared machine), medians: each C++ stage of the tiled
                         back end (preprocess, bin, blend, blend_bwd, preprocess_bwd) and the torch /
@@ -135,35 +139,79 @@ def time_cameras(n, cameras=4, threads=2, rounds=9, warmup=1):
 
     params = [p.detach() for p in bike_like_gaussians(n)]
     cams = [ring_camera(30.0 + 360.0 * i / cameras) for i in range(cameras)]
-    one, calls = [], []
+    one, calls, one_cpu, calls_cpu = [], [], [], []
     old = torch.get_num_threads()
     torch.set_num_threads(threads)
     try:
         with torch.no_grad():
             for r in range(warmup + rounds):
-                t0 = time.perf_counter()
+                c0, t0 = time.process_time(), time.perf_counter()
                 out = rasterization(*params, cameras=cams, per_camera=True)
-                t1 = time.perf_counter()
+                c1, t1 = time.process_time(), time.perf_counter()
                 for cam in cams:
                     rasterization(*params, cameras=[cam], per_camera=True)
-                t2 = time.perf_counter()
+                c2, t2 = time.process_time(), time.perf_counter()
                 if r >= warmup:
                     one.append(t1 - t0)
                     calls.append(t2 - t1)
+                    one_cpu.append(c1 - c0)
+                    calls_cpu.append(c2 - c1)
     finally:
         torch.set_num_threads(old)
     assert all(o["alpha"].max() > 0.5 for o in out)  # every view sees the bike
     ratio = statistics.median(c / o for c, o in zip(calls, one))
     return {"one_call_ms": round(1e3 * statistics.median(one), 2), "calls_ms": round(1e3 * statistics.median(calls), 2),
-            "speedup": round(ratio, 2), "cameras": cameras, "threads": threads}
+            "speedup": round(ratio, 2), "one_call_cpu_ms": round(1e3 * statistics.median(one_cpu), 2),
+            "calls_cpu_ms": round(1e3 * statistics.median(calls_cpu), 2), "cameras": cameras, "threads": threads}
+
+
+def camera_stages_cpu_ms(n, cameras=4, rounds=9, warmup=2):
+    """One thread, CPU ms of time_cameras' two ways split by stage: preprocess (projection and SH of
+    every camera), bin_blend (binning, sort, tile lists, blending: per camera by nature, each camera
+    its own depth order and its own pixels) and glue (the rest: Python, torch); medians.  bound: the
+    speed-up the one call would have if its preprocess and glue took no time at all."""
+    from splatting.raster import build
+    from splatting.raster.api import rasterization
+    from splatting.raster.camera import ring_camera
+
+    params = [p.detach() for p in bike_like_gaussians(n)]
+    cams = [ring_camera(30.0 + 360.0 * i / cameras) for i in range(cameras)]
+    old, lib = torch.get_num_threads(), build.load()
+    rows = {"one": [], "calls": []}
+    torch.set_num_threads(1)
+    try:
+        with torch.no_grad():
+            for r in range(warmup + rounds):
+                for way, groups in (("one", [cams]), ("calls", [[c] for c in cams])):
+                    build._lib = clock = _StageClock(lib)
+                    t0 = time.process_time()
+                    for g in groups:
+                        rasterization(*params, cameras=g, per_camera=True)
+                    total = 1e3 * (time.process_time() - t0)
+                    st = {k: 1e3 * v for k, v in clock.times.items()}
+                    st["bin_blend"] = st.pop("bin_blend", 0.0) + st.pop("bin", 0.0) + st.pop("blend", 0.0)
+                    st["glue"], st["total"] = total - st["preprocess"] - st["bin_blend"], total
+                    if r >= warmup:
+                        rows[way].append(st)
+    finally:
+        build._lib = lib
+        torch.set_num_threads(old)
+    res = {f"{way}_{k}": round(statistics.median(x[k] for x in rs), 2) for way, rs in rows.items() for k in rs[0]}
+    res["bound"] = round(res["calls_total"] / res["one_bin_blend"], 2)
+    return res
 
 
 def run_cameras(results, threads=2):
     r = time_cameras(SIZES["50k"], threads=threads)
     results["raster_cameras"] = r
     print(f"raster {r['cameras']} cameras 50k, no grad, {threads} thread(s): one call {r['one_call_ms']:.1f} ms, "
-          f"one call each {r['calls_ms']:.1f} ms, {r['speedup']:.2f}x (median of per-round ratios; {_load()})",
+          f"one call each {r['calls_ms']:.1f} ms, {r['speedup']:.2f}x (median of per-round ratios; CPU time of all "
+          f"threads {r['one_call_cpu_ms']:.1f} against {r['calls_cpu_ms']:.1f} ms; {_load()})",
           flush=True)
+    st = camera_stages_cpu_ms(SIZES["50k"])
+    results["raster_cameras_stages_cpu_ms"] = st
+    print("raster 4 cameras 50k, 1 thread, CPU ms: " + ", ".join(f"{k} {v:.2f}" for k, v in st.items())
+          + f" ({_load()})", flush=True)
     return results
 
 
@@ -171,7 +219,9 @@ class _StageClock:
     """Stands in for the tiled back end's ctypes library and times each C call (CPU time)."""
 
     NAMES = {"gs_preprocess_fwd": "preprocess", "gs_bin": "bin", "gs_forward": "blend",
-             "gs_backward": "blend_bwd", "gs_preprocess_bwd": "preprocess_bwd"}
+             "gs_backward": "blend_bwd", "gs_preprocess_bwd": "preprocess_bwd",
+             # the several-camera pass: bin and blend of every camera are one C call
+             "gs_preprocess_fwd_cams": "preprocess", "gs_forward_cameras": "bin_blend"}
 
     def __init__(self, lib):
         self._lib, self.times = lib, {}

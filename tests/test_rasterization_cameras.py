@@ -29,7 +29,9 @@ CASES = {
     "eps2d per Gaussian, masked mip filter": {"eps2d": "per", "antialiased": "mask"},
     "mip filter, one background": {"antialiased": True, "backgrounds": "one"},
     "a background per camera, no depth": {"backgrounds": "each", "depth": False},
+    "sh degree 0": {"sh_degree": 0},
     "sh degree 1": {"sh_degree": 1},
+    "sh degree 2": {"sh_degree": 2},
 }
 
 
@@ -137,3 +139,65 @@ def test_no_gaussians_gives_empty_images_over_the_backgrounds():
     assert meta["batched"] and colors.shape == (2, 96, 96, 3)
     assert alphas.abs().max() == 0 and meta["depths"].abs().max() == 0
     assert torch.equal(colors, bgs[:, None, None, :].expand(2, 96, 96, 3))
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_shared_covariance_factor_keeps_each_cameras_bits_for_any_quaternion(dtype):
+    # the one pass computes each Gaussian's rotation and 3D covariance factor once for every camera
+    # (blocks of 256): quaternions far from unit length, a zero one and a NaN scale (both culled),
+    # and a count that leaves a partial last block must still give every camera its render alone
+    means, quats, scales, opac, sh = scene(n=700, dtype=dtype)
+    g = torch.Generator().manual_seed(3)
+    quats = quats * torch.exp(torch.rand(700, 1, generator=g) * 14.0 - 7.0).to(dtype)
+    quats[5] = 0.0
+    scales[9, 1] = float("nan")
+    cs = cams()
+    with torch.no_grad():
+        outs = rasterization(means, quats, scales, opac, sh, cameras=cs, per_camera=True)
+        alone = [rasterize(means, quats, scales, opac, sh, c) for c in cs]
+    for i, one in enumerate(alone):
+        assert one["alpha"].max() > 0.5 and int(one["radii"][5]) == 0 and int(one["radii"][9]) == 0
+        for k, v in one.items():
+            if torch.is_tensor(v):
+                torch.testing.assert_close(outs[i][k], v, rtol=0, atol=0, equal_nan=True, msg=f"camera {i}: {k}")
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_gradients_of_a_several_camera_call_equal_those_of_one_call_per_camera(dtype):
+    # a loss over every camera's colour, alpha and depth: the same gradients, bit for bit, whether
+    # the cameras come in one rasterization() call or one call each
+    params = [p.clone().requires_grad_(True) for p in scene(n=800, dtype=dtype)]
+    cs = cams()
+    w = torch.rand(len(cs), 96, 96, 3, generator=torch.Generator().manual_seed(1), dtype=dtype)
+
+    def loss(colors, alphas, depths, i):
+        return (colors * w[i]).sum() + 0.3 * alphas.sum() + 0.01 * depths.sum()
+
+    colors, alphas, meta = rasterization(*params, cameras=cs)
+    sum(loss(colors[i], alphas[i], meta["depths"][i], i) for i in range(len(cs))).backward()
+    together = [p.grad.clone() for p in params]
+    for p in params:
+        p.grad = None
+    total = 0
+    for i, c in enumerate(cs):
+        colors, alphas, meta = rasterization(*params, cameras=[c])
+        total = total + loss(colors[0], alphas[0], meta["depths"][0], i)
+    total.backward()
+    for name, a, p in zip(("means", "quats", "scales", "opacities", "sh"), together, params):
+        assert a.abs().sum() > 0, name
+        assert torch.equal(a, p.grad), name
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_more_cameras_than_colour_lanes_keep_each_cameras_bits(dtype):
+    # the one pass shades up to 8 (float32) or 4 (float64) cameras per Gaussian at once: nine
+    # cameras take two or three such groups, the last one partly filled
+    means, quats, scales, opac, sh = scene(n=600, dtype=dtype)
+    cs = [ring_camera(a, size=64, focal=2085 * 64 / 512, distance=4.0) for a in range(0, 360, 40)]
+    with torch.no_grad():
+        outs = rasterization(means, quats, scales, opac, sh, cameras=cs, per_camera=True)
+        for i, c in enumerate(cs):
+            one = rasterize(means, quats, scales, opac, sh, c)
+            assert one["alpha"].max() > 0.5
+            for k in ("rgb", "alpha", "depth", "means2d", "radii"):
+                assert torch.equal(outs[i][k], one[k]), (i, k)

@@ -32,7 +32,9 @@ radii, visible, backend: splatting.raster.sparse.rasterize's), no channel packed
 Differentiable in every Gaussian input.
 
 Several cameras (C > 1) on the tiled back end without a gradient are rendered in ONE pass of the
-C++ back end: the projection and SH of every camera in one parallel loop over camera x Gaussian
+C++ back end: the projection and SH of every camera in one parallel loop over Gaussian blocks, each
+Gaussian's camera-independent rotation and 3D covariance factor computed once for all cameras and
+its projection and colour computed for up to 8 cameras at once, one a vector lane
 (cpu_project.preprocess_cameras), then binning, tile lists and blending with threads over camera x
 chunk and camera x tile (cpu_tiles.composite_cameras, csrc/tiles.cpp forward_cameras); each
 camera's image is bit-identical to its render alone.  With a gradient (training renders one view

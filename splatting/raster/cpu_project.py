@@ -103,7 +103,10 @@ def preprocess(means, quats, scales, sh, camera, sh_degree=None, near=0.01, eps2
 
 
 def preprocess_cameras(means, quats, scales, sh, cameras, sh_degree=None, near=0.01, eps2d=EPS2D):
-    """preprocess() for C cameras of one size in one C call (threads over camera x Gaussian block),
+    """preprocess() for C cameras of one size in one C call (threads over blocks of 256 Gaussians;
+    per block each Gaussian's camera-independent unit quaternion, rotation and covariance factor
+    M = R_q S once, then its projection and SH colour for up to 8 cameras (4 in float64) at once,
+    one a vector lane, each lane the one-camera code's operations in its order),
     forward only (no gradient: the several-camera render of rasterization()). Returns the same
     outputs with a leading camera axis: means2d (C,N,2), conics (C,N,3), depths (C,N), colors (C,N,3),
     radii (C,N), boxes (C,N,4), visible (C,N); camera c's are bit-identical to preprocess(..., cameras[c]).

@@ -814,8 +814,8 @@ void forward(int64_t nv, const int32_t* order, Planes<const S*> in, int Cf_, int
 // Several cameras of one size in one parallel region (no backward: a render for a dataset, a
 // preview, a figure): threads over camera x Gaussian block (records, and each camera's depth sort
 // as one more item, so the serial sorts of two cameras run side by side), camera x chunk (tile
-// counts, then the tile lists), and camera x tile (blending, the busiest tiles of all cameras
-// first). Each camera's image comes from the same steps as forward() after bin(): the same
+// counts, then the tile lists), and camera x tile (blending, camera by camera, the busiest tiles
+// of each first). Each camera's image comes from the same steps as forward() after bin(): the same
 // records, depth order, tile lists and tile blending (blend_tile), so it is bit-identical to a
 // render of that camera alone. Five barriers for all cameras where bin() and forward() take two
 // each and two ends of parallel regions, per camera.
@@ -863,7 +863,10 @@ void forward_cameras(int C, int64_t N, const S* means2d, const S* conics, const 
     for (int q = 0; q < out.n; ++q) out_ptr[(size_t)c * out.n + q] = out.ptr[q] ? out.ptr[q] + c * HW * out.size[q] : nullptr;
   }
   int32_t* list = nullptr;
-  std::vector<int64_t> torder;  // camera * NT + tile, busiest first over every camera
+  // camera * NT + tile: camera by camera (its records stay in cache: at one thread 2-4 % less
+  // time than the busiest tiles of all cameras first, at two the same), each busiest first (the
+  // tail is the last camera's shortest tiles)
+  std::vector<int64_t> torder;
 #pragma omp parallel num_threads(nt)
   {
     // 1. records (index order) and, as the first C items, each camera's depth sort
@@ -928,13 +931,9 @@ void forward_cameras(int C, int64_t N, const S* means2d, const S* conics, const 
       for (int c = 0; c < C; ++c) list_off[c + 1] = list_off[c] + tile_off[(int64_t)c * (NT + 1) + NT];
       if ((int64_t)list_buf.size() < std::max<int64_t>(list_off[C], 1)) list_buf.resize(std::max<int64_t>(list_off[C], 1));
       list = list_buf.data();
-      torder.resize((size_t)C * NT);
-      for (int64_t i = 0; i < (int64_t)C * NT; ++i) torder[i] = i;
-      auto len = [&](int64_t i) {
-        const int64_t* to = tile_off + i / NT * (NT + 1);
-        return to[i % NT + 1] - to[i % NT];
-      };
-      std::stable_sort(torder.begin(), torder.end(), [&](int64_t a, int64_t b) { return len(a) > len(b); });
+      torder.clear();
+      for (int c = 0; c < C; ++c)
+        for (int t : busiest_first(tile_off + (int64_t)c * (NT + 1), NT)) torder.push_back((int64_t)c * NT + t);
     }
 #pragma omp barrier
     // 5. tile lists filled in depth order, channels gathered into depth order
