@@ -8,6 +8,7 @@ import torch
 
 from cyclist_formats import checks
 from cyclist_formats.errors import UserError
+from cyclist_formats.typed_config import add_model_arguments, model_from_args, options_of
 
 # The stage's modules are imported inside the functions below, not at the top: they load torch
 # (~2.5 s, python -X importtime), and `--help` and the argument checks answer before that (0.2-0.5 s).
@@ -119,26 +120,16 @@ class PosedTrain:
         from splatting.rider.posed_train import PosedTrainConfig
 
         p.add_argument("--avatar", required=True, help="a rider avatar folder (rider.ply, skinning.npz, views/)")
-        p.add_argument("--poses", type=int, default=PosedTrainConfig.poses, help="pedalling poses (default %(default)s)")
-        p.add_argument("--cameras", type=int, default=PosedTrainConfig.cameras, help="ring cameras per pose (default %(default)s)")
-        p.add_argument("--iterations", type=int, default=PosedTrainConfig.iterations)
-        p.add_argument("--samples", type=int, default=None, help="Cycles samples for the posed renders")
-        p.add_argument("--scale", type=float, default=PosedTrainConfig.scale, help="training image scale (default %(default)s)")
+        add_model_arguments(p, PosedTrainConfig, options_of(PosedTrainConfig), " (default {default})")
         p.add_argument("--quiet", action="store_true")
 
     @staticmethod
     def run(args):
         from splatting.rider.posed_train import PosedTrainConfig, train_avatar_posed
 
-        if not 0.05 <= args.scale <= 1.0:
-            raise UserError(f"--scale must be in 0.05..1, got {args.scale}")
-        for name, lo, hi in (("poses", 1, 36), ("cameras", 2, 36), ("iterations", 1, 10 ** 7)):
-            v = getattr(args, name)
-            if not lo <= v <= hi:
-                raise UserError(f"--{name} must be in {lo}..{hi}, got {v}")
+        cfg = model_from_args(PosedTrainConfig, args, options_of(PosedTrainConfig), progress=not args.quiet)
         if not os.path.isfile(os.path.join(args.avatar, "skinning.npz")):
             raise UserError(f"not a rider avatar folder (no skinning.npz): {args.avatar}")
-        train_avatar_posed(args.avatar, PosedTrainConfig(poses=args.poses, cameras=args.cameras, iterations=args.iterations,
-                                                         samples=args.samples, scale=args.scale, progress=not args.quiet))
+        train_avatar_posed(args.avatar, cfg)
         return 0
 

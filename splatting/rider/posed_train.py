@@ -22,7 +22,7 @@ import shutil
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
+from typing import Annotated, Optional
 
 import numpy as np
 import torch
@@ -30,6 +30,7 @@ import torch
 from cyclist_formats import bike_folder
 from cyclist_formats.atomic import atomic_path
 from cyclist_formats.errors import UserError
+from cyclist_formats.typed_config import Bool, Field, Int, Number
 from splatting import paths
 from splatting.gaussians.container import write_ply
 from splatting.progress import Progress
@@ -47,16 +48,19 @@ from splatting.training.views import load_views
 RENDER_SCRIPT = paths.blender_script("render_rider.py")
 
 
-@dataclass
 class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (training/trainer.py)
-    poses: int = 4              # pedalling poses rendered
-    cameras: int = 8            # ring cameras per pose (evenly spaced, offset per pose)
-    iterations: int = 600
-    scale: float = 1.0          # training image scale (0.5, 256 px, softened the 512 px silhouettes: IoU 0.97 -> 0.93)
-    rest_fraction: float = 0.25  # share of steps on the rest-pose views
-    samples: int = None         # Cycles samples (default: the renderer's)
-    seed: int = 0
-    progress: bool = True
+    """The avatar's posed fine-tune; a field with a description is a `rider-posed-train` option
+    (rider/command.py derives them), every default written here only."""
+    poses: Annotated[Int, Field(ge=1, le=36, description="pedalling poses")] = 4
+    cameras: Annotated[Int, Field(ge=2, le=36, description="ring cameras per pose (evenly spaced, offset per pose)")] = 8
+    iterations: Annotated[Int, Field(ge=1, le=10 ** 7, description="fine-tuning steps")] = 600
+    # 0.5 (256 px) softened the 512 px silhouettes: IoU 0.97 -> 0.93
+    scale: Annotated[Number, Field(ge=0.05, le=1, description="training image scale")] = 1.0
+    rest_fraction: Annotated[Number, Field(ge=0, le=1)] = 0.25  # share of steps on the rest-pose views
+    samples: Optional[Annotated[Int, Field(ge=1, le=1 << 16)]] = Field(
+        None, description="Cycles samples for the posed renders (None: the renderer's)")
+    seed: Annotated[Int, Field(ge=0)] = 0
+    progress: Bool = True
 
 
 def training_poses(n):

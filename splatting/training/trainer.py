@@ -7,15 +7,16 @@ For speed: coarse-to-fine resolution, every render cropped to the object's box i
 a stop once held-out PSNR no longer improves.  See docs/training.md for the numbers behind the
 defaults.
 """
-import dataclasses
 import os
 import time
-from dataclasses import dataclass, field
+from typing import Annotated, Optional
 
 import torch
 import torch.nn.functional as F
 
 from cyclist_formats.atomic import write_json
+from cyclist_formats.checks import MAX_COUNT, MAX_THREADS
+from cyclist_formats.typed_config import Block, Bool, Choice, Field, Int, Number, record_of
 from splatting.training.strategy import STRATEGIES, DensifyConfig, make_strategy
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, write_ply
@@ -27,58 +28,61 @@ from splatting.training.initialisation import hull_mask, init_gaussians, object_
 from splatting.progress import Progress
 
 DEFAULT_HOLDOUT = (3, 12, 21, 30)
+Rate = Annotated[Number, Field(ge=0)]  # an Adam learning rate (0: the group stays where it is)
 
 
-@dataclass
-class TrainConfig:
-    # fields with a "help" are the command line's options (training/command.py derives them)
-    iterations: int = field(default=3000, metadata={"help": "optimisation steps at most"})
-    time_budget_s: float = field(default=600.0, metadata={"help": "stop after this much wall time"})
-    sh_degree: int = field(default=0, metadata={"help": "spherical-harmonics degree", "choices": (0, 1, 2, 3)})
-    holdout: tuple = field(default=DEFAULT_HOLDOUT, metadata={"help": "held-out view indices (comma list)"})
-    seed: int = field(default=0, metadata={"help": "random seed"})
+class TrainConfig(Block):
+    """A part's training; a field with a description is a `train` option (training/command.py
+    derives them, nested blocks' too), so every default is written here only.  Its record, PART.json's
+    "config", is typed_config.record_of's."""
+    iterations: Annotated[Int, Field(ge=1, le=MAX_COUNT, description="optimisation steps at most")] = 3000
+    time_budget_s: Annotated[Number, Field(gt=0, description="stop after this much wall time")] = 600.0
+    sh_degree: Choice(0, 1, 2, 3) = Field(0, description="spherical-harmonics degree")
+    holdout: tuple[Annotated[Int, Field(ge=0)], ...] = Field(DEFAULT_HOLDOUT, description="held-out view indices (comma list)")
+    seed: Annotated[Int, Field(ge=0, description="random seed")] = 0
     # mip-splatting's 2D filter with opacity compensation (raster/sparse.py); a model trained with it
     # must be rendered with it (its PART.json config says so)
-    antialiased: bool = field(default=False, metadata={"help": "antialiased splatting in training and evaluation"})
+    antialiased: Bool = Field(False, description="antialiased splatting in training and evaluation")
     # the splats' screen-space low-pass (px^2, rasterize's eps2d); the part is drawn with it ever
     # after (PART.json config; absent: 0.3). Cycles' 1.5 px Blackman-Harris pixel filter: 0.173
-    eps2d: float = field(default=EPS2D, metadata={"help": "screen-space low-pass variance (px^2) added to every "
-                                                         "splat in training, kept with the part for every render"})
+    eps2d: Annotated[Number, Field(gt=0, le=10, description="screen-space low-pass variance (px^2) added to every "
+                                                            "splat in training, kept with the part for every render")] = EPS2D
     # 1 by default: on the shared 2-core machine 2 threads ran 4-7x slower per iteration
     # (oversubscription), see docs/training.md; None leaves torch's default
-    threads: int = field(default=1, metadata={"help": "torch.set_num_threads (1: measured fastest on 2 shared cores)"})
+    threads: Optional[Annotated[Int, Field(ge=1, le=MAX_THREADS)]] = Field(
+        1, description="torch.set_num_threads (1: measured fastest on 2 shared cores)")
     # coarse-to-fine: (first iteration, image scale); renders are always cropped to the object
-    resolution_schedule: tuple = ((0, 1.0),)
-    crop_margin_px: int = 8          # at full resolution
+    resolution_schedule: Annotated[tuple[tuple[Annotated[Int, Field(ge=0)], Annotated[Number, Field(gt=0, le=1)]], ...],
+                                   Field(min_length=1)] = ((0, 1.0),)
+    crop_margin_px: Annotated[Int, Field(ge=0)] = 8  # at full resolution
     # INRIA learning rates; the means' rate is x extent (object bounding-box diagonal, metres)
-    lr_means: float = 1.6e-4
-    lr_means_final: float = 1.6e-6
-    lr_sh0: float = 2.5e-3
-    lr_shN: float = 2.5e-3 / 20
-    lr_opacity: float = 0.05
-    lr_scales: float = 5e-3
-    lr_quats: float = 1e-3
-    lambda_dssim: float = 0.2
-    init_max_points: int = 10000     # subsample points.ply beyond this
-    init_opacity: float = 0.1
-    eval_every: int = 200
-    patience: int = 3                # evaluations without a min_delta gain before stopping
-    min_delta_db: float = 0.05
-    progress: bool = True
-    strategy: str = field(default="default", metadata={"help": "densification strategy", "choices": tuple(STRATEGIES)})
-    densify: DensifyConfig = field(default_factory=DensifyConfig)
+    lr_means: Annotated[Number, Field(gt=0)] = 1.6e-4
+    lr_means_final: Annotated[Number, Field(gt=0)] = 1.6e-6
+    lr_sh0: Rate = 2.5e-3
+    lr_shN: Rate = 2.5e-3 / 20
+    lr_opacity: Rate = 0.05
+    lr_scales: Rate = 5e-3
+    lr_quats: Rate = 1e-3
+    lambda_dssim: Annotated[Number, Field(ge=0, le=1)] = 0.2
+    init_max_points: Annotated[Int, Field(ge=1)] = 10000  # subsample points.ply beyond this
+    init_opacity: Annotated[Number, Field(gt=0, lt=1)] = 0.1
+    eval_every: Annotated[Int, Field(ge=1)] = 200
+    patience: Annotated[Int, Field(ge=0)] = 3  # evaluations without a min_delta gain before stopping
+    min_delta_db: Annotated[Number, Field(ge=0)] = 0.05
+    progress: Bool = True
+    strategy: Choice(*STRATEGIES) = Field("default", description="densification strategy")
+    densify: DensifyConfig = Field(default_factory=DensifyConfig)
 
 
-@dataclass
-class FineTuneRates:
+class FineTuneRates(Block):
     """Adam rates and loss weight for fine-tuning Gaussians a full training already placed (the posed
     fine-tunes of riders and bikes): the means' rate (x extent) a tenth of the trainer's start."""
-    lr_means: float = 1.6e-5
-    lr_sh0: float = 2.5e-3
-    lr_opacity: float = 0.02
-    lr_scales: float = 2.5e-3
-    lr_quats: float = 1e-3
-    lambda_dssim: float = 0.2
+    lr_means: Annotated[Number, Field(gt=0)] = 1.6e-5
+    lr_sh0: Rate = 2.5e-3
+    lr_opacity: Rate = 0.02
+    lr_scales: Rate = 2.5e-3
+    lr_quats: Rate = 1e-3
+    lambda_dssim: Annotated[Number, Field(ge=0, le=1)] = 0.2
 
     def rates(self, extent):
         """Adam learning rates per parameter group (the means' scaled by the object's extent)."""
@@ -252,7 +256,7 @@ def train_views(views: Views, cfg: TrainConfig):
         "densify": dens.stats,
         "psnr_history": history,
         "psnr_history_fields": ["iteration", "wall_s", "psnr_crop", "gaussians"],
-        "config": config_dict(cfg),
+        "config": record_of(cfg),
     }
     if ho is not None:
         metrics["psnr"], metrics["ssim"] = [round(x, 4) for x in evaluate(g, ho, antialiased=cfg.antialiased,
@@ -260,14 +264,6 @@ def train_views(views: Views, cfg: TrainConfig):
         metrics["psnr_crop"] = round(evaluate(g, ho, crop=True, antialiased=cfg.antialiased, eps2d=cfg.eps2d)[0], 4)
     metrics["eval_s"] = round(time.time() - t0 - train_wall, 2)
     return g, metrics
-
-
-def config_dict(cfg):
-    """A TrainConfig as the JSON object PART.json's "config" holds."""
-    d = dataclasses.asdict(cfg)
-    d["holdout"] = list(d["holdout"])
-    d["resolution_schedule"] = [list(x) for x in d["resolution_schedule"]]
-    return d
 
 
 def default_out(views_dir):
