@@ -309,14 +309,15 @@ def _shown(v):
 def add_model_arguments(parser, model, fields, help_suffix="; overrides the config's {name}"):
     """One --flag per named field of a pydantic model (a dotted path reaches a nested block's field;
     the flag is named after the field itself), typed from its annotation, help from its description
-    plus help_suffix ({name}: the field path, {default}: its default); default None (the flag
-    overrides the config only when given)."""
+    plus help_suffix ({name}: the field path, {default}: its default; or a callable (path, default)
+    -> text); default None (the flag overrides the config only when given)."""
     for path in fields:
         owner, f = _field_at(model, path)
         if not f.description:
             raise ValueError(f"{owner.__name__}.{path.rsplit('.', 1)[-1]} has no description for its --help")
         default = _shown(f.get_default(call_default_factory=True))
-        helptext = f.description + help_suffix.format(name=path, default=default)
+        suffix = help_suffix(path, default) if callable(help_suffix) else help_suffix.format(name=path, default=default)
+        helptext = f.description + suffix
         parser.add_argument(flag_of(path), dest=dest_of(path), default=None,
                             help=helptext.replace("%", "%%"), **_flag_kind(f.annotation))
 
@@ -333,10 +334,11 @@ def _int_tuple(flag, text):
         raise UserError(f"{flag} wants comma-separated integers, got {text!r}") from None
 
 
-def model_from_args(model, args, fields, **extra):
-    """The model of a command line's flags (add_model_arguments) over the fields' defaults, plus
-    extra fields; the first bad value is one UserError naming its flag ("option '--eps2d': ...")."""
-    raw = {}
+def model_from_args(model, args, fields, base=None, **extra):
+    """The model of a command line's flags (add_model_arguments) over the fields' defaults (or over
+    base, a model instance: a command whose defaults depend on another option), plus extra fields;
+    the first bad value is one UserError naming its flag ("option '--eps2d': ...")."""
+    raw = base.model_dump() if base is not None else {}
     for path in fields:
         v = getattr(args, dest_of(path))
         if v is None:

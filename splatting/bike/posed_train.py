@@ -351,7 +351,7 @@ def done_with(bike_dir, cfg: PosedTrainConfig):
     # fine-tunes recorded before --densify existed ran without it: still this config when it is off
     # and before --lr-decay with constant rates
     # and before --eps2d with rasterize's 0.3
-    have = {"densify": False, "densify_max": PosedTrainConfig.densify_max, "lr_decay": 1.0, "lr_tail": 0,
+    have = {"densify": False, "densify_max": PosedTrainConfig().densify_max, "lr_decay": 1.0, "lr_tail": 0,
             "eps2d": 0.3, **m["config"]}
     return m if have == want and not newer else None
 
