@@ -139,6 +139,12 @@ def record_of(cfg):
 # ------------------------------------------------------------------ errors
 
 def field_error(field, msg, what="config field"):
+    """One line naming the field (`config field 'street.distance_m': expected ...`); what=None: the
+    field is a command-line flag, worded as cyclist_formats.checks words every other flag
+    (`--eps2d must be > 0, got 0.0`)."""
+    if what is None:
+        msg = msg.replace(": expected", " expected").replace("expected a value ", "must be ")
+        return UserError(f"{field} {msg.replace('expected ', 'must be ')}")
     return UserError(f"{what} '{field}': {msg}")
 
 
@@ -337,7 +343,7 @@ def _int_tuple(flag, text):
 def model_from_args(model, args, fields, base=None, **extra):
     """The model of a command line's flags (add_model_arguments) over the fields' defaults (or over
     base, a model instance: a command whose defaults depend on another option), plus extra fields;
-    the first bad value is one UserError naming its flag ("option '--eps2d': ...")."""
+    the first bad value is one UserError naming its flag ("--eps2d must be <= 10, got 11.0")."""
     raw = base.model_dump() if base is not None else {}
     for path in fields:
         v = getattr(args, dest_of(path))
@@ -352,4 +358,4 @@ def model_from_args(model, args, fields, base=None, **extra):
         d[name] = v
     raw.update(extra)
     flags = {p: flag_of(p) for p in fields}
-    return validate(model, raw, "option", lambda path: flags.get(path, path))
+    return validate(model, raw, None, lambda path: flags.get(path, path))

@@ -16,6 +16,8 @@ from cyclist_formats.typed_config import (Block, Bool, Field, Int, Number, add_m
                                           options_of, record_of, updated, validate)
 from splatting.bike.command import PosedTrain
 from splatting.bike.posed_train import PosedTrainConfig
+from splatting.relight import command as relight_command
+from splatting.relight.fit import RelightFitConfig
 from splatting.rider.command import PosedTrain as RiderPosedTrain
 from splatting.rider.posed_train import PosedTrainConfig as RiderPosedTrainConfig
 from splatting.training import command as train_command
@@ -44,6 +46,9 @@ OLD_BIKE_POSED = {**OLD_RATES, "poses": 144, "iterations": 6000, "rest_fraction"
 OLD_RIDER_POSED = {**OLD_RATES, "poses": 4, "cameras": 8, "iterations": 600, "scale": 1.0, "rest_fraction": 0.25,
                    "samples": None, "seed": 0, "progress": True}
 
+OLD_RELIGHT = {"iterations": 300, "lr": 0.05, "max_size": 512, "holdout": (3, 12, 21, 30), "shading_loss": 1.0,
+               "relit_loss": 0.0, "view_normals": False, "view_normal_penalty": 0.0, "seed": 0, "progress": True}
+
 
 def _parser(add):
     p = argparse.ArgumentParser()
@@ -63,7 +68,8 @@ def _typed_equal(got, want):
 
 
 @pytest.mark.parametrize("model, old", [(DensifyConfig, OLD_DENSIFY), (FineTuneRates, OLD_RATES),
-                                        (PosedTrainConfig, OLD_BIKE_POSED), (RiderPosedTrainConfig, OLD_RIDER_POSED)])
+                                        (PosedTrainConfig, OLD_BIKE_POSED), (RiderPosedTrainConfig, OLD_RIDER_POSED),
+                                        (RelightFitConfig, OLD_RELIGHT)])
 def test_defaults_are_the_dataclass_defaults(model, old):
     _typed_equal(dict(vars(model())), old)
 
@@ -85,6 +91,8 @@ COMMANDS = [
      {"help", "bike", "from_rest", "render_threads", "quiet"}),
     ("rider-posed-train", RiderPosedTrain.add_arguments, RiderPosedTrainConfig,
      ["poses", "cameras", "iterations", "scale", "samples"], {"help", "avatar", "quiet"}),
+    ("relight-fit", relight_command.add_arguments, RelightFitConfig,
+     ["iterations", "max_size", "relit_loss", "view_normals"], {"help", "views", "bike", "ply", "quiet"}),
 ]
 
 
@@ -166,28 +174,31 @@ def test_nested_fields_become_options_named_after_themselves():
     cfg = model_from_args(Outer, p.parse_args(["--a", "0.25", "--k", "5", "--on"]), options_of(Outer), hidden=8)
     assert cfg == Outer(a=0.25, hidden=8, on=True, inner=Inner(k=5))
     assert model_from_args(Outer, p.parse_args(["--no-on"]), options_of(Outer)) == Outer()
-    with pytest.raises(UserError, match=r"^option '--k': expected an integer"):
+    with pytest.raises(UserError, match=r"^--k must be an integer, got '5'$"):
         model_from_args(Outer, argparse.Namespace(a=None, on=None, inner_k="5"), options_of(Outer))
 
 
 # -------------------------------------------------- bad values: one line naming the field, exit 2
 
 BAD = [
-    ("train", ["--views", "v", "--eps2d", "nan"], "option '--eps2d': expected a finite number, got nan"),
-    ("train", ["--views", "v", "--eps2d", "11"], "option '--eps2d': expected a value <= 10, got 11.0"),
-    ("train", ["--views", "v", "--iterations", "0"], "option '--iterations': expected a value >= 1, got 0"),
-    ("train", ["--views", "v", "--time-budget-s", "inf"], "option '--time-budget-s': expected a finite number"),
-    ("train", ["--views", "v", "--holdout", "1,-2"], "option '--holdout': item 1: expected a value >= 0, got -2"),
-    ("train", ["--views", "v", "--max-gaussians", "0"], "option '--max-gaussians': expected a value >= 1, got 0"),
-    ("train", ["--views", "v", "--seed", "-1"], "option '--seed': expected a value >= 0, got -1"),
-    ("bike-posed-train", ["--bike", ".", "--lr-decay", "nan"], "option '--lr-decay': expected a finite number"),
-    ("bike-posed-train", ["--bike", ".", "--poses", "4"], "option '--poses': expected a value >= 5, got 4"),
+    ("train", ["--views", "v", "--eps2d", "nan"], "--eps2d must be a finite number, got nan"),
+    ("train", ["--views", "v", "--eps2d", "11"], "--eps2d must be <= 10, got 11.0"),
+    ("train", ["--views", "v", "--iterations", "0"], "--iterations must be >= 1, got 0"),
+    ("train", ["--views", "v", "--time-budget-s", "inf"], "--time-budget-s must be a finite number"),
+    ("train", ["--views", "v", "--holdout", "1,-2"], "--holdout item 1 must be >= 0, got -2"),
+    ("train", ["--views", "v", "--max-gaussians", "0"], "--max-gaussians must be >= 1, got 0"),
+    ("train", ["--views", "v", "--seed", "-1"], "--seed must be >= 0, got -1"),
+    ("bike-posed-train", ["--bike", ".", "--lr-decay", "nan"], "--lr-decay must be a finite number"),
+    ("bike-posed-train", ["--bike", ".", "--poses", "4"], "--poses must be >= 5, got 4"),
     ("bike-posed-train", ["--bike", ".", "--iterations", "10", "--lr-tail", "11"],
-     "option '--lr-tail': expected a value <= iterations (10), got 11"),
-    ("bike-posed-train", ["--bike", ".", "--samples", "0"], "option '--samples': expected a value >= 1, got 0"),
-    ("rider-posed-train", ["--avatar", ".", "--scale", "nan"], "option '--scale': expected a finite number"),
-    ("rider-posed-train", ["--avatar", ".", "--scale", "2"], "option '--scale': expected a value <= 1, got 2.0"),
-    ("rider-posed-train", ["--avatar", ".", "--cameras", "1"], "option '--cameras': expected a value >= 2, got 1"),
+     "--lr-tail must be <= iterations (10), got 11"),
+    ("bike-posed-train", ["--bike", ".", "--samples", "0"], "--samples must be >= 1, got 0"),
+    ("rider-posed-train", ["--avatar", ".", "--scale", "nan"], "--scale must be a finite number"),
+    ("rider-posed-train", ["--avatar", ".", "--scale", "2"], "--scale must be <= 1, got 2.0"),
+    ("rider-posed-train", ["--avatar", ".", "--cameras", "1"], "--cameras must be >= 2, got 1"),
+    ("relight-fit", ["--bike", ".", "--relit-loss", "nan"], "--relit-loss must be a finite number, got nan"),
+    ("relight-fit", ["--views", ".", "--max-size", "8"], "--max-size must be >= 16, got 8"),
+    ("relight-fit", ["--bike", ".", "--iterations", "0"], "--iterations must be >= 1, got 0"),
 ]
 
 
