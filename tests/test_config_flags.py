@@ -18,7 +18,7 @@ from splatting.bike.command import PosedTrain
 from splatting.bike.posed_train import PosedTrainConfig
 from splatting.relight import command as relight_command
 from splatting.relight.fit import RelightFitConfig
-from splatting.rider.command import PosedTrain as RiderPosedTrain
+from splatting.rider.command import Avatar as RiderAvatar, PosedTrain as RiderPosedTrain
 from splatting.rider.posed_train import PosedTrainConfig as RiderPosedTrainConfig
 from splatting.training import command as train_command
 from splatting.training.strategy import DensifyConfig
@@ -114,6 +114,19 @@ def test_every_flag_is_a_model_field_and_back(name, add, model, fields, others):
         assert "(default " in a.help, path
 
 
+def test_rider_avatar_trains_with_the_trainers_fields():
+    """rider-avatar's training flags are TrainConfig fields through the same builder: no flag of its
+    own, the trainer's defaults."""
+    p = _parser(RiderAvatar.add_arguments)
+    opts = _options(p)
+    assert set(opts) == {"help", "id", "out", "samples", "size", "iterations", "time_budget_s",
+                         "densify_max_gaussians", "threads"}
+    assert opts["densify_max_gaussians"].option_strings == ["--max-gaussians"]
+    assert RiderAvatar.train_config(p.parse_args(["--id", "r"])) == TrainConfig()
+    cfg = RiderAvatar.train_config(p.parse_args(["--id", "r", "--iterations", "1500", "--max-gaussians", "9000"]))
+    assert cfg == TrainConfig(iterations=1500, densify=DensifyConfig(max_gaussians=9000))
+
+
 def test_posed_train_options_are_its_config_fields():
     p = _parser(PosedTrain.add_arguments)
     opts = _options(p)
@@ -199,6 +212,8 @@ BAD = [
     ("relight-fit", ["--bike", ".", "--relit-loss", "nan"], "--relit-loss must be a finite number, got nan"),
     ("relight-fit", ["--views", ".", "--max-size", "8"], "--max-size must be >= 16, got 8"),
     ("relight-fit", ["--bike", ".", "--iterations", "0"], "--iterations must be >= 1, got 0"),
+    ("rider-avatar", ["--id", "r", "--out", "a", "--time-budget-s", "nan"], "--time-budget-s must be a finite number"),
+    ("rider-avatar", ["--id", "r", "--out", "a", "--threads", "0"], "--threads must be >= 1, got 0"),
 ]
 
 

@@ -9,6 +9,7 @@ import torch
 from cyclist_formats import checks
 from cyclist_formats.errors import UserError
 from cyclist_formats.typed_config import add_model_arguments, model_from_args, options_of
+from splatting.training.trainer import TrainConfig
 
 # The stage's modules are imported inside the functions below, not at the top: they load torch
 # (~2.5 s, python -X importtime), and `--help` and the argument checks answer before that (0.2-0.5 s).
@@ -69,6 +70,9 @@ def run(args):
           f"{rider.height_m:.3f} m)")
     return 0
 
+# the TrainConfig fields rider-avatar takes on its command line
+AVATAR_TRAINING = ("iterations", "time_budget_s", "densify.max_gaussians", "threads")
+
 
 class Avatar:
     """`python -m splatting rider-avatar --id ID [--out data/riders/ID]`: render, train and skin a rider's
@@ -78,21 +82,21 @@ class Avatar:
     def add_arguments(p):
         p.add_argument("--id", required=True, help="rider id from the roster (python -m splatting rider --list)")
         p.add_argument("--out", help="avatar folder (default data/riders/ID)")
-        p.add_argument("--iterations", type=int, default=None, help="training iterations (reduced budget: e.g. 1500)")
-        p.add_argument("--time-budget-s", type=float, default=None, help="training wall-time cap")
-        p.add_argument("--max-gaussians", type=int, default=None)
+        # the avatar's training: the trainer's own fields, flags and defaults (reduced budget: e.g. --iterations 1500)
+        add_model_arguments(p, TrainConfig, AVATAR_TRAINING, " (default {default})")
         p.add_argument("--samples", type=int, default=None, help="Cycles samples for the 36 views")
         p.add_argument("--size", type=int, default=None, help="pixels a side of the 36 views (default 512)")
-        p.add_argument("--threads", type=int, default=1, help="torch threads for training")
+
+    @staticmethod
+    def train_config(args):
+        """The avatar's TrainConfig of the command line; a bad value is one line naming its flag."""
+        return model_from_args(TrainConfig, args, AVATAR_TRAINING)
 
     @staticmethod
     def check_args(args):
-        checks.count("iterations", args.iterations)
+        Avatar.train_config(args)
         checks.image_size("size", args.size)
-        checks.positive("time_budget_s", args.time_budget_s)
-        checks.gaussians("max_gaussians", args.max_gaussians)
         checks.count("samples", args.samples, hi=1 << 16)
-        checks.threads("threads", args.threads)
         checks.output_dir("out", args.out)
 
     @staticmethod
@@ -100,13 +104,10 @@ class Avatar:
         from splatting import paths
         from splatting.rider.avatar_build import build_avatar
 
-        for name in ("iterations", "max_gaussians", "samples"):
-            v = getattr(args, name)
-            if v is not None and v < 1:
-                raise UserError(f"--{name.replace('_', '-')} must be >= 1")
+        cfg = Avatar.train_config(args)
         out = args.out or os.path.join(paths.DATA, "riders", args.id)
-        res = build_avatar(args.id, out, args.iterations, args.time_budget_s, args.max_gaussians, args.samples,
-                           args.threads, size=args.size)
+        res = build_avatar(args.id, out, cfg.iterations, cfg.time_budget_s, cfg.densify.max_gaussians, args.samples,
+                           cfg.threads, size=args.size)
         print(f"{out}: avatar ready ({', '.join(f'{k} {v}' for k, v in res['steps'].items())})")
         return 0
 
