@@ -8,6 +8,7 @@ import json
 import os
 import subprocess
 import sys
+import typing
 
 import pytest
 
@@ -15,14 +16,14 @@ from cyclist_formats.errors import UserError
 from cyclist_formats.typed_config import (Block, Bool, Field, Int, Number, add_model_arguments, model_from_args,
                                           options_of, record_of, updated, validate)
 from splatting.bike.command import PosedTrain
-from splatting.bike.posed_train import PosedTrainConfig
+from splatting.bike.posed_config import PosedTrainConfig
 from splatting.relight import command as relight_command
 from splatting.relight.fit import RelightFitConfig
 from splatting.rider.command import Avatar as RiderAvatar, PosedTrain as RiderPosedTrain
-from splatting.rider.posed_train import PosedTrainConfig as RiderPosedTrainConfig
+from splatting.rider.posed_config import PosedTrainConfig as RiderPosedTrainConfig
 from splatting.training import command as train_command
 from splatting.training.strategy import DensifyConfig
-from splatting.training.trainer import FineTuneRates, TrainConfig
+from splatting.training.config import FineTuneRates, TrainConfig
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -72,6 +73,12 @@ def _typed_equal(got, want):
                                         (RelightFitConfig, OLD_RELIGHT)])
 def test_defaults_are_the_dataclass_defaults(model, old):
     _typed_equal(dict(vars(model())), old)
+
+
+def test_the_strategy_names_are_the_strategies():
+    from splatting.training.config import STRATEGY_NAMES
+    from splatting.training.strategy import STRATEGIES
+    assert STRATEGY_NAMES == tuple(STRATEGIES) == typing.get_args(TrainConfig.model_fields["strategy"].annotation)
 
 
 def test_train_defaults_are_the_dataclass_defaults():

@@ -107,7 +107,7 @@ class PosedTrain:
 
     @staticmethod
     def add_arguments(p):
-        from splatting.bike.posed_train import PosedTrainConfig
+        from splatting.bike.posed_config import PosedTrainConfig
 
         p.add_argument("--bike", required=True, help="a bike folder with trained parts (gaussians/) and views/whole")
         p.add_argument("--from-rest", action="store_true",
@@ -132,7 +132,7 @@ class PosedTrain:
     @staticmethod
     def config_from_args(args):
         """The PosedTrainConfig of a parsed command line; a bad value is a UserError naming its flag."""
-        from splatting.bike.posed_train import PosedTrainConfig
+        from splatting.bike.posed_config import PosedTrainConfig
 
         return model_from_args(PosedTrainConfig, args, options_of(PosedTrainConfig), progress=not args.quiet)
 

@@ -43,7 +43,7 @@ def train_config(recipe, **runtime):
     """TrainConfig of a recipe (name or dict) plus runtime fields (threads, time_budget_s, ...); a bad
     or unknown field is one UserError naming it."""
     from cyclist_formats.typed_config import validate
-    from splatting.training.trainer import TrainConfig
+    from splatting.training.config import TrainConfig
 
     return validate(TrainConfig, {**_get(recipe)["train"], **runtime}, RECIPE_FIELD)
 
@@ -52,7 +52,7 @@ def posed_config(recipe, **runtime):
     """PosedTrainConfig of a recipe (name or dict) plus runtime fields (progress, ...); a bad or unknown
     field is one UserError naming it."""
     from cyclist_formats.typed_config import validate
-    from splatting.bike.posed_train import PosedTrainConfig
+    from splatting.bike.posed_config import PosedTrainConfig
 
     return validate(PosedTrainConfig, {**_get(recipe)["posed"], **runtime}, RECIPE_FIELD)
 

@@ -137,7 +137,7 @@ def settings_of(args):
 def posed_settings(args):
     """The fine-tune's whole configuration (a PosedTrainConfig): the options given here plus every
     other PosedTrainConfig default (rates, rest fraction, denoiser, ...), so that a default changed
-    in splatting/bike/posed_train.py is a settings change too (it is recorded as posed_<field>),
+    in splatting/bike/posed_config.py is a settings change too (it is recorded as posed_<field>),
     never a silent one.  Resolved here, not in add_arguments: the module imports torch, --help should not."""
     from splatting.bike.recipes import posed_config
     d = posed_config(args.recipe)

@@ -1,7 +1,7 @@
 """The library build's settings as typed objects: the budget and the quality floor as pydantic models
 (one per block, extra="forbid", ranges in the field declarations, errors as one line naming the
 field), the posed fine-tune as the training stage's own PosedTrainConfig (its fields and defaults
-are written once, in splatting/bike/posed_train.py).
+are written once, in splatting/bike/posed_config.py).
 
 The tasks read attributes (`s.budget.view_size`, `s.posed.iterations`); the records on disk (each
 task's settings in OUT/library/tasks/*.json and library.json's "settings" and "quality_floor") are

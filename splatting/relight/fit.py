@@ -31,7 +31,8 @@ from splatting.gaussians.sh import C0
 from splatting.relight.shading import HIGHLIGHT, ROUGHNESS, random_light, srgb_decode, srgb_encode, view_directions
 from splatting.rotations import quat_to_rotmat
 from splatting.training.targets import crop_box, crop_camera, split_views
-from splatting.training.trainer import DEFAULT_HOLDOUT, default_out, train_views, write_trained
+from splatting.training.config import DEFAULT_HOLDOUT
+from splatting.training.trainer import default_out, train_views, write_trained
 from splatting.training.record import ply_trained_antialiased as trained_antialiased, ply_trained_eps2d
 from splatting.training.views import load_views
 

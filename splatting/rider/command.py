@@ -9,7 +9,7 @@ import torch
 from cyclist_formats import checks
 from cyclist_formats.errors import UserError
 from cyclist_formats.typed_config import add_model_arguments, model_from_args, options_of
-from splatting.training.trainer import TrainConfig
+from splatting.training.config import TrainConfig
 
 # The stage's modules are imported inside the functions below, not at the top: they load torch
 # (~2.5 s, python -X importtime), and `--help` and the argument checks answer before that (0.2-0.5 s).
@@ -118,7 +118,7 @@ class PosedTrain:
 
     @staticmethod
     def add_arguments(p):
-        from splatting.rider.posed_train import PosedTrainConfig
+        from splatting.rider.posed_config import PosedTrainConfig
 
         p.add_argument("--avatar", required=True, help="a rider avatar folder (rider.ply, skinning.npz, views/)")
         add_model_arguments(p, PosedTrainConfig, options_of(PosedTrainConfig), " (default {default})")
@@ -126,7 +126,8 @@ class PosedTrain:
 
     @staticmethod
     def run(args):
-        from splatting.rider.posed_train import PosedTrainConfig, train_avatar_posed
+        from splatting.rider.posed_config import PosedTrainConfig
+        from splatting.rider.posed_train import train_avatar_posed
 
         cfg = model_from_args(PosedTrainConfig, args, options_of(PosedTrainConfig), progress=not args.quiet)
         if not os.path.isfile(os.path.join(args.avatar, "skinning.npz")):

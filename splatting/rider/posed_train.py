@@ -22,7 +22,6 @@ import shutil
 import subprocess
 import sys
 import time
-from typing import Annotated, Optional
 
 import numpy as np
 import torch
@@ -30,7 +29,6 @@ import torch
 from cyclist_formats import bike_folder
 from cyclist_formats.atomic import atomic_path
 from cyclist_formats.errors import UserError
-from cyclist_formats.typed_config import Bool, Field, Int, Number
 from splatting import paths
 from splatting.gaussians.container import write_ply
 from splatting.progress import Progress
@@ -39,28 +37,14 @@ from splatting.raster.api import rasterize
 from splatting.rider.avatar import PLY_NAME, RiderAvatar
 from splatting.rider.body import export_rider, pose_vertices
 from splatting.rider.motion import pedal_pose
+from splatting.rider.posed_config import PosedTrainConfig
 from splatting.rider.roster import load_rider
 from splatting.training.metrics import psnr
 from splatting.training.targets import crop_camera, Targets
-from splatting.training.trainer import _params_from, FineTuneRates, finite_grads, gaussians_of, rgba_loss
+from splatting.training.trainer import _params_from, finite_grads, gaussians_of, rgba_loss
 from splatting.training.views import load_views
 
 RENDER_SCRIPT = paths.blender_script("render_rider.py")
-
-
-class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (training/trainer.py)
-    """The avatar's posed fine-tune; a field with a description is a `rider-posed-train` option
-    (rider/command.py derives them), every default written here only."""
-    poses: Annotated[Int, Field(ge=1, le=36, description="pedalling poses")] = 4
-    cameras: Annotated[Int, Field(ge=2, le=36, description="ring cameras per pose (evenly spaced, offset per pose)")] = 8
-    iterations: Annotated[Int, Field(ge=1, le=10 ** 7, description="fine-tuning steps")] = 600
-    # 0.5 (256 px) softened the 512 px silhouettes: IoU 0.97 -> 0.93
-    scale: Annotated[Number, Field(ge=0.05, le=1, description="training image scale")] = 1.0
-    rest_fraction: Annotated[Number, Field(ge=0, le=1)] = 0.25  # share of steps on the rest-pose views
-    samples: Optional[Annotated[Int, Field(ge=1, le=1 << 16)]] = Field(
-        None, description="Cycles samples for the posed renders (None: the renderer's)")
-    seed: Annotated[Int, Field(ge=0)] = 0
-    progress: Bool = True
 
 
 def training_poses(n):

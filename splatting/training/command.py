@@ -9,7 +9,7 @@ The training itself is splatting.training.trainer.train.
 from cyclist_formats import checks
 from cyclist_formats.typed_config import add_model_arguments, model_from_args, options_of
 
-from splatting.training.trainer import TrainConfig, default_out, train
+from splatting.training.config import TrainConfig
 
 OPTIONS = options_of(TrainConfig)  # ("iterations", ..., "densify.max_gaussians")
 
@@ -31,12 +31,16 @@ def config_from_args(args):
 
 def check_args(args):
     """Impossible values and unusable paths, refused before any work."""
+    from splatting.training.trainer import default_out  # the training code: not for --help (training/config.py)
+
     config_from_args(args)
     checks.views_folder(args.views)
     checks.output_file("out", args.out if args.out else default_out(args.views), (".ply",))
 
 
 def run(args):
+    from splatting.training.trainer import default_out, train
+
     cfg = config_from_args(args)
     m = train(args.views, args.out, cfg)
     out = args.out or default_out(args.views)

@@ -13,33 +13,11 @@ the 12 m ring they would make a bike part's "large Gaussian" threshold 13 cm ins
 The parameters live in a dict name -> nn.Parameter with dim 0 = Gaussians, each in its own Adam
 param group (`group["name"]`); every change to the set updates the Adam moments alongside.
 """
-from typing import Annotated
-
 import torch
 
-from cyclist_formats.checks import MAX_GAUSSIANS
 from cyclist_formats.errors import UserError
-from cyclist_formats.typed_config import Block, Bool, Field, Int, Number
+from splatting.training.config import DensifyConfig
 from splatting.rotations import quat_to_rotmat
-
-
-class DensifyConfig(Block):
-    """The adaptive density control's rules (DensifyStrategy); a field with a description is a
-    `train` option (training/command.py)."""
-    grad_threshold: Annotated[Number, Field(gt=0)] = 0.0002  # mean view-space gradient norm (NDC units, INRIA)
-    percent_dense: Annotated[Number, Field(gt=0, le=1)] = 0.01  # x extent: max scale below -> clone, above -> split
-    split_n: Annotated[Int, Field(ge=1)] = 2
-    start: Annotated[Int, Field(ge=0)] = 200  # iterations
-    stop: Annotated[Int, Field(ge=0)] = 2500
-    every: Annotated[Int, Field(ge=1)] = 100
-    reset_every: Annotated[Int, Field(ge=0)] = 0  # opacity reset period (0 = never); INRIA 3000 of 30000
-    min_opacity: Annotated[Number, Field(ge=0, le=1)] = 0.005  # prune below
-    # prune Gaussians wider than this fraction of the image (after a reset) ...
-    max_screen_frac: Annotated[Number, Field(gt=0)] = 0.15
-    max_world_frac: Annotated[Number, Field(gt=0)] = 0.1  # ... or larger than this fraction of the extent
-    # hard budget: 40k gained 0.25 dB (box) on a frame for 1.7x the time (docs/training.md)
-    max_gaussians: Annotated[Int, Field(ge=1, le=MAX_GAUSSIANS, description="hard budget of Gaussians")] = 15000
-    hull_prune: Bool = True  # drop Gaussians whose centre leaves the dilated silhouettes
 
 
 class Strategy:
@@ -231,6 +209,7 @@ class DensifyStrategy(Strategy):
         self._reset_stats(len(params["means"]), params["means"].device)
 
 
+# the classes behind config.STRATEGY_NAMES, the names TrainConfig.strategy takes (tests/test_config_flags.py)
 STRATEGIES = {"default": DensifyStrategy, "fixed": FixedStrategy}
 
 
