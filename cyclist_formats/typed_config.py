@@ -30,7 +30,7 @@ class Block(BaseModel):
     """One config block: unknown fields are errors (a typo would otherwise fall back to a default).
     Frozen: a config is passed to the stages as this object, and none of them may change it on the
     way (a dataset sample is a function of config and index); a changed copy is
-    `cfg.model_copy(update={...})`."""
+    `cfg.model_copy(update={...})`, or `updated(cfg, ...)` to have the copy checked too."""
     # defer_build: the validators are built on first use, not at import (the --help builders read
     # only the field declarations; measured 0.24 s of a loaded 2-core machine's import)
     model_config = ConfigDict(extra="forbid", defer_build=True, frozen=True)
@@ -235,8 +235,8 @@ def validate(model, raw, what="config field", name=None):
 
 # ------------------------------------------------------------------ command line
 # One builder for every command whose options are config fields: the dataset command's overrides of
-# its config file and the training commands' options (train, bike-posed-train, rider-posed-train)
-# alike.  A flag's default is None (not given): the config's value stands, so the default lives in
+# its config file and the training commands' options (train, bike-posed-train, rider-posed-train,
+# relight-fit, rider-avatar) alike.  A flag's default is None (not given): the config's value stands, so the default lives in
 # the field declaration only, and --help shows it from there.
 
 def _field_at(model, path):
