@@ -14,7 +14,7 @@ from splatting.training.config import FineTuneRates, Rate
 HELD_OUT = 4  # the last posed views: scored before and after, never trained on
 
 
-class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (training/trainer.py)
+class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (training/config.py)
     """The posed fine-tune; a field with a description is a `bike-posed-train` option (bike/command.py
     derives them), every default written here only.  Its record (posed_train.json's "config", the
     library's posed_<field> settings) is typed_config.record_of's: every field but progress."""

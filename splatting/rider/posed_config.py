@@ -8,7 +8,7 @@ from cyclist_formats.typed_config import Bool, Field, Int, Number
 from splatting.training.config import FineTuneRates
 
 
-class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (training/trainer.py)
+class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (training/config.py)
     """The avatar's posed fine-tune; a field with a description is a `rider-posed-train` option
     (rider/command.py derives them), every default written here only."""
     poses: Annotated[Int, Field(ge=1, le=36, description="pedalling poses")] = 4
