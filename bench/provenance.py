@@ -104,8 +104,10 @@ def write_key(path, key):
 def relight_fit_key(ply, views_dir, cfg):
     """What a relight fit depends on: the Gaussians file's bytes, its training views, the fit settings
     and the fitting code (a changed Gaussians file with the same count is caught too)."""
-    import dataclasses
-    settings = dataclasses.asdict(cfg) if cfg is not None and dataclasses.is_dataclass(cfg) else repr(cfg)
+    from pydantic import BaseModel
+
+    from cyclist_formats.typed_config import record_of
+    settings = record_of(cfg) if isinstance(cfg, BaseModel) else repr(cfg)
     return {"gaussians": file_hash(ply), "views": tree_hash(views_dir), "settings": settings,
             "code": code_version(*FIT_CODE)}
 

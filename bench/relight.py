@@ -56,6 +56,8 @@ def prepare_bike(work, size=SIZE, progress=print):
           "--size", str(size), "--samples", str(RENDER_SAMPLES), "--denoise", "NONE", "--threads", "1"], "render_views")
     progress(f"  bike_relit: views at {size} px with passes ({time.time() - t:.0f} s)")
     from cyclist_formats import bike_folder
+    from cyclist_formats.typed_config import updated
+    from splatting.training.strategy import DensifyConfig
     from splatting.training.trainer import TrainConfig, train
 
     train_stats = {}
@@ -66,9 +68,8 @@ def prepare_bike(work, size=SIZE, progress=print):
             if st is not None:
                 train_stats[part] = st
             continue
-        cfg = TrainConfig(iterations=ITERATIONS, progress=False, eval_every=100)
-        cfg.densify.max_gaussians = MAX_GAUSSIANS
-        cfg.densify.stop = ITERATIONS // 2
+        cfg = TrainConfig(iterations=ITERATIONS, progress=False, eval_every=100,
+                          densify=updated(DensifyConfig(), max_gaussians=MAX_GAUSSIANS, stop=ITERATIONS // 2))
         # the relight fit as for every other bike (bike_fit_config, keyed: _fit_if_missing), so that a
         # second run finds it current instead of refitting with other settings
         m = train(bike_folder.views_dir(bike, part), ply, cfg)

@@ -14,7 +14,6 @@ the union of both masks' box + 8 px) and mask IoU, as bench/blender_compare.py s
 That chart (box PSNR vs training time and vs Gaussians) is what chose the training defaults
 (docs/training.md).
 """
-import dataclasses
 import json
 import os
 import sys
@@ -59,6 +58,7 @@ def run(results, bikes_dir="out/bikes", bike=None, part="frame", budgets=BUDGETS
         png="out/bench/train_chart.png", time_budget_s=None):
     from bench.train_parts import find_bike
     from cyclist_formats.atomic import write_json
+    from cyclist_formats.typed_config import updated
     from splatting.training.trainer import TrainConfig, train_views
     from splatting.training.views import load_views
 
@@ -71,10 +71,8 @@ def run(results, bikes_dir="out/bikes", bike=None, part="frame", budgets=BUDGETS
     views = load_views(os.path.join(bikes_dir, b, "views", part))
     runs = []
     for budget in budgets:
-        cfg = TrainConfig(threads=threads)
-        cfg.densify.max_gaussians = budget
-        if time_budget_s:
-            cfg.time_budget_s = time_budget_s
+        cfg = updated(TrainConfig(threads=threads), densify={"max_gaussians": budget},
+                      **({"time_budget_s": time_budget_s} if time_budget_s else {}))
         print(f"train_chart: {b}/{part}, budget {budget} ...", flush=True)
         _, m = train_views(views, cfg)
         runs.append({"budget": budget, "history": m["psnr_history"], "psnr": m["psnr"], "ssim": m["ssim"],
@@ -122,22 +120,21 @@ def clean_fidelity(g, reference_dir, antialiased=False, eps2d=0.3):
 
 def config_for(spec, threads):
     """A TrainConfig from a run spec: TrainConfig fields, or DensifyConfig fields (max_gaussians...)."""
+    from cyclist_formats.typed_config import updated
     from splatting.training.strategy import DensifyConfig
     from splatting.training.trainer import TrainConfig
 
-    cfg = TrainConfig(threads=threads, progress=False)
-    dens = {f.name for f in dataclasses.fields(DensifyConfig)}
-    top = {f.name for f in dataclasses.fields(TrainConfig)}
+    top, dens = {"threads": threads, "progress": False}, {}
     for k, v in spec.items():
         if k in ("label", "views"):
             continue
-        if k in dens:
-            setattr(cfg.densify, k, v)
-        elif k in top:
-            setattr(cfg, k, tuple(v) if isinstance(v, list) else v)
+        if k in DensifyConfig.model_fields:
+            dens[k] = v
+        elif k in TrainConfig.model_fields:
+            top[k] = tuple(v) if isinstance(v, list) else v
         else:
             raise ValueError(f"train_chart: unknown run field {k!r} (not in TrainConfig or DensifyConfig)")
-    return cfg
+    return updated(TrainConfig(), **top, densify=dens)
 
 
 def run_fidelity(specs, reference_dir, png, threads=1, out_json=None):

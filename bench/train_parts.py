@@ -52,18 +52,19 @@ def trained_with(ply, cfg):
     """The metrics of <part>.ply when it exists, was trained with cfg and was not cut short by the
     time cap (a capped run's learning rate never finished decaying); else None."""
     from cyclist_formats.atomic import read_json_or_none
-    from splatting.training.trainer import config_dict
+    from cyclist_formats.typed_config import record_of
 
     js = os.path.splitext(ply)[0] + ".json"
     m = read_json_or_none(js) if os.path.isfile(ply) else None
     if not isinstance(m, dict) or not isinstance(m.get("config"), dict) or m.get("stopped") == "time_budget":
         return None
-    return m if same_recipe(m["config"], config_dict(cfg)) else None
+    return m if same_recipe(m["config"], record_of(cfg)) else None
 
 
 def run(results, bikes_dir="out/bikes", bike=None, threads=1, max_gaussians=None, time_budget_s=None,
         parts=None):
     from bench.provenance import not_measured, record
+    from cyclist_formats.typed_config import updated
     from splatting.bike.recipes import train_config
     from splatting.training.trainer import default_out, train
 
@@ -82,7 +83,7 @@ def run(results, bikes_dir="out/bikes", bike=None, threads=1, max_gaussians=None
         # 2-core machine (the city frame took 1242 s under load 5-12), before the learning rate decays
         cfg = train_config(RECIPE, threads=threads, time_budget_s=time_budget_s or 3600.0)
         if max_gaussians:
-            cfg.densify.max_gaussians = max_gaussians
+            cfg = updated(cfg, densify={"max_gaussians": max_gaussians})
         views = os.path.join(bikes_dir, b, "views", part)
         m = trained_with(default_out(views), cfg)
         reused = m is not None

@@ -11,7 +11,6 @@ given): the validated config is dumped back to a dict, and that dict is stored b
 its bytes must not depend on how the check was made.
 """
 import argparse
-import dataclasses
 import math
 import types
 import typing
@@ -22,16 +21,16 @@ from pydantic_core import PydanticCustomError
 
 from .errors import UserError
 
-__all__ = ["Block", "Number", "Int", "Bool", "Str", "Range", "IntRange", "Vec3", "AutoOr", "Field",
-           "validate", "field_error", "defaults_of", "add_model_arguments", "overrides_of", "add_dataclass_arguments",
-           "dataclass_from_args"]
+__all__ = ["Block", "Number", "Int", "Bool", "Str", "Range", "IntRange", "Vec3", "AutoOr", "Field", "record_of", "updated",
+           "Choice", "validate", "field_error", "defaults_of", "add_model_arguments", "overrides_of",
+           "model_from_args", "options_of", "flag_of", "dest_of"]
 
 
 class Block(BaseModel):
     """One config block: unknown fields are errors (a typo would otherwise fall back to a default).
     Frozen: a config is passed to the stages as this object, and none of them may change it on the
     way (a dataset sample is a function of config and index); a changed copy is
-    `cfg.model_copy(update={...})`."""
+    `cfg.model_copy(update={...})`, or `updated(cfg, ...)` to have the copy checked too."""
     # defer_build: the validators are built on first use, not at import (the --help builders read
     # only the field declarations; measured 0.24 s of a loaded 2-core machine's import)
     model_config = ConfigDict(extra="forbid", defer_build=True, frozen=True)
@@ -85,6 +84,15 @@ def IntRange(lo, hi):
     return Annotated[list, PlainValidator(check, json_schema_input_type=list[int])]
 
 
+def Choice(*values):
+    """One of the values, of its exact type (no True for 1, no 1.0 for 1: Literal alone takes them)."""
+    def check(v):
+        if not any(type(v) is type(c) and v == c for c in values):
+            raise PydanticCustomError("choice", "expected one of {values}", {"values": ", ".join(map(repr, values))})
+        return v
+    return Annotated[typing.Literal[values], PlainValidator(check, json_schema_input_type=typing.Literal[values])]
+
+
 def _vec3(v):
     if not (isinstance(v, list) and len(v) == 3 and all(_is_number(x) for x in v)):
         raise PydanticCustomError("vec3", "expected [x, y, z]")
@@ -104,9 +112,39 @@ def AutoOr(lo, hi):
     return Annotated[Any, PlainValidator(check, json_schema_input_type=Optional[float])]
 
 
+def updated(cfg, **fields):
+    """A checked copy of cfg with fields changed; a nested block's fields as a dict
+    (updated(cfg, iterations=500, densify={"max_gaussians": 4000})).  Unlike model_copy(update=...),
+    the copy is validated: a bad value is one UserError naming its field."""
+    raw = cfg.model_dump()
+    for k, v in fields.items():
+        raw[k] = {**raw[k], **v} if isinstance(v, dict) and isinstance(getattr(cfg, k, None), BaseModel) else v
+    return validate(type(cfg), raw)
+
+
+def _lists(v):
+    return [_lists(x) for x in v] if isinstance(v, (tuple, list)) else v
+
+
+def record_of(cfg):
+    """A config as the records on disk hold it (PART.json's and posed_train.json's "config", the
+    library's posed_<field> settings): the one place a training config becomes a dict.  Every field in
+    declaration order, nested blocks as objects, tuples as lists (as JSON reads them back, so a record
+    compares equal to one read from disk), values as given (an int stays an int), less the fields the
+    model lists in RECORD_EXCLUDE (those that change nothing trained, e.g. the progress line)."""
+    d = cfg.model_dump(exclude=set(getattr(cfg, "RECORD_EXCLUDE", ())))
+    return {k: _lists(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+
 # ------------------------------------------------------------------ errors
 
 def field_error(field, msg, what="config field"):
+    """One line naming the field (`config field 'street.distance_m': expected ...`); what=None: the
+    field is a command-line flag, worded as cyclist_formats.checks words every other flag
+    (`--eps2d must be > 0, got 0.0`)."""
+    if what is None:
+        msg = msg.replace(": expected", " expected").replace("expected a value ", "must be ")
+        return UserError(f"{field} {msg.replace('expected ', 'must be ')}")
     return UserError(f"{what} '{field}': {msg}")
 
 
@@ -185,99 +223,139 @@ def _describe(err, model):
     return path or "<top>", f"{msg}, got {value!r}"
 
 
-def validate(model, raw, what="config field"):
-    """raw mapping -> model instance; the first error as one UserError naming its field."""
+def validate(model, raw, what="config field", name=None):
+    """raw mapping -> model instance; the first error as one UserError naming its field (name: field
+    path -> the name to show, e.g. its command-line flag)."""
     try:
         return model.model_validate(raw)
     except ValidationError as e:
         field, msg = _describe(e.errors(include_url=False)[0], model)
-        raise field_error(field, msg, what) from None
+        raise field_error(name(field) if name else field, msg, what) from None
 
 
 # ------------------------------------------------------------------ command line
+# One builder for every command whose options are config fields: the dataset command's overrides of
+# its config file and the training commands' options (train, bike-posed-train, rider-posed-train,
+# relight-fit, rider-avatar) alike.  A flag's default is None (not given): the config's value stands, so the default lives in
+# the field declaration only, and --help shows it from there.
 
-def _flag_kind(annotation):
-    """argparse keywords for a field's type: lists take several values, ints are parsed as ints."""
+def _field_at(model, path):
+    """(model holding the field, FieldInfo) of a dotted path ("densify.max_gaussians")."""
+    *outer, name = path.split(".")
+    for part in outer:
+        model = _strip(model.model_fields[part].annotation)
+    return model, model.model_fields[name]
+
+
+def options_of(model, prefix=""):
+    """The field paths of a model's command-line options: every field with a description, and those
+    of a nested block (a field holding a Block, whose own description is not needed), in declaration
+    order ("iterations", ..., "densify.max_gaussians")."""
+    out = []
+    for name, f in model.model_fields.items():
+        inner = _strip(f.annotation)
+        if inner is not None and not f.description:
+            out += options_of(inner, prefix + name + ".")
+        elif f.description:
+            out.append(prefix + name)
+    return tuple(out)
+
+
+def flag_of(path):
+    """The command-line flag of a field path: its last name ("densify.max_gaussians" -> --max-gaussians)."""
+    return "--" + path.rsplit(".", 1)[-1].replace("_", "-")
+
+
+def dest_of(path):
+    """The argparse dest of a field path ("densify.max_gaussians" -> densify_max_gaussians)."""
+    return path.replace(".", "_")
+
+
+def _members(annotation):
+    """The non-None types of an annotation, Annotated[...] stripped."""
     t = annotation
     while typing.get_origin(t) is Annotated:
         t = typing.get_args(t)[0]
     members = [a for a in typing.get_args(t) if a is not type(None)] \
         if typing.get_origin(t) in (typing.Union, types.UnionType) else [t]
+    out = []
     for m in members:
         while typing.get_origin(m) is Annotated:
             m = typing.get_args(m)[0]
+        out.append(m)
+    return out
+
+
+def _is_tuple(annotation):
+    return any(m is tuple or typing.get_origin(m) is tuple for m in _members(annotation))
+
+
+def _flag_kind(annotation):
+    """argparse keywords for a field's type: lists take several values, a tuple of integers is one
+    comma list, a Choice lists its values, bools are --x / --no-x, ints are parsed as ints."""
+    members = _members(annotation)
+    for m in members:
         if m is list or typing.get_origin(m) is list:
             return {"nargs": "+", "metavar": "ID"}
+    if _is_tuple(annotation):  # parsed by model_from_args, so that a bad list is the field's one line
+        return {}
     t = members[0]
-    while typing.get_origin(t) is Annotated:
-        t = typing.get_args(t)[0]
+    if typing.get_origin(t) is typing.Literal:
+        values = typing.get_args(t)
+        return {"choices": values, "type": type(values[0])}
+    if t is bool:  # type=bool would read "False" as true
+        return {"action": argparse.BooleanOptionalAction}
     return {"type": t} if t in (int, float) else {}
 
 
-def add_model_arguments(parser, model, fields, help_suffix="overrides the config's {name}"):
-    """One --flag per named field of a pydantic model, typed from its annotation, help from its
-    description; default None (the flag overrides the config only when given)."""
-    for name in fields:
-        f = model.model_fields[name]
+def _shown(v):
+    return ",".join(map(str, v)) if isinstance(v, tuple) else str(v)
+
+
+def add_model_arguments(parser, model, fields, help_suffix="; overrides the config's {name}"):
+    """One --flag per named field of a pydantic model (a dotted path reaches a nested block's field;
+    the flag is named after the field itself), typed from its annotation, help from its description
+    plus help_suffix ({name}: the field path, {default}: its default; or a callable (path, default)
+    -> text); default None (the flag overrides the config only when given)."""
+    for path in fields:
+        owner, f = _field_at(model, path)
         if not f.description:
-            raise ValueError(f"{model.__name__}.{name} has no description for its --help")
-        helptext = f"{f.description}; {help_suffix.format(name=name)}"
-        parser.add_argument("--" + name.replace("_", "-"), dest=name, default=None,
+            raise ValueError(f"{owner.__name__}.{path.rsplit('.', 1)[-1]} has no description for its --help")
+        default = _shown(f.get_default(call_default_factory=True))
+        suffix = help_suffix(path, default) if callable(help_suffix) else help_suffix.format(name=path, default=default)
+        helptext = f.description + suffix
+        parser.add_argument(flag_of(path), dest=dest_of(path), default=None,
                             help=helptext.replace("%", "%%"), **_flag_kind(f.annotation))
 
 
 def overrides_of(args, fields):
     """{field: value} of the flags given on the command line (None: not given)."""
-    return {name: getattr(args, name) for name in fields}
-
-
-# Dataclass configs (the training stages'): every field whose metadata has a "help" becomes
-# --field-name with the field's default, type and metadata "choices"; a field holding a dataclass
-# contributes its own fields (dest "outer_inner", flag named after the inner field).
-
-def _dataclass_flags(obj, path=()):
-    """(attribute path, field, default) of every exposed option of the dataclass instance obj."""
-    for f in dataclasses.fields(obj):
-        value = getattr(obj, f.name)
-        if "help" in f.metadata:
-            yield path + (f.name,), f, value
-        elif dataclasses.is_dataclass(value) and not isinstance(value, type):
-            yield from _dataclass_flags(value, path + (f.name,))
-
-
-def add_dataclass_arguments(parser, defaults):
-    """The options of a dataclass config; defaults: an instance (its values are the defaults)."""
-    for path, f, d in _dataclass_flags(defaults):
-        kw = {"help": f.metadata["help"] + " (default %(default)s)"}
-        if isinstance(d, bool):  # --x / --no-x (type=bool would read "False" as true)
-            kw.update(default=d, action=argparse.BooleanOptionalAction)
-        elif isinstance(d, tuple):
-            kw.update(default=",".join(map(str, d)), type=str)
-        else:
-            kw.update(default=d, type=type(d))
-        if "choices" in f.metadata:
-            kw["choices"] = f.metadata["choices"]
-        parser.add_argument("--" + f.name.replace("_", "-"), dest="_".join(path), **kw)
+    return {name: getattr(args, dest_of(name)) for name in fields}
 
 
 def _int_tuple(flag, text):
     try:
         return tuple(int(x) for x in text.split(",") if x.strip())
     except ValueError:
-        raise UserError(f"--{flag} wants comma-separated integers, got {text!r}") from None
+        raise UserError(f"{flag} wants comma-separated integers, got {text!r}") from None
 
 
-def dataclass_from_args(args, defaults, **extra):
-    """A copy of the dataclass instance defaults with the parsed options set (extra: further fields)."""
-    cfg = dataclasses.replace(defaults, **extra)
-    for path, f, d in _dataclass_flags(defaults):
-        v = getattr(args, "_".join(path))
-        if isinstance(d, tuple):
-            v = _int_tuple(f.name.replace("_", "-"), v)
-        obj = cfg
-        for p in path[:-1]:
-            inner = dataclasses.replace(getattr(obj, p))  # no sharing with defaults' nested instance
-            setattr(obj, p, inner)
-            obj = inner
-        setattr(obj, path[-1], v)
-    return cfg
+def model_from_args(model, args, fields, base=None, **extra):
+    """The model of a command line's flags (add_model_arguments) over the fields' defaults (or over
+    base, a model instance: a command whose defaults depend on another option), plus extra fields;
+    the first bad value is one UserError naming its flag ("--eps2d must be <= 10, got 11.0")."""
+    raw = base.model_dump() if base is not None else {}
+    for path in fields:
+        v = getattr(args, dest_of(path))
+        if v is None:
+            continue
+        if _is_tuple(_field_at(model, path)[1].annotation):
+            v = _int_tuple(flag_of(path), v)
+        *outer, name = path.split(".")
+        d = raw
+        for part in outer:
+            d = d.setdefault(part, {})
+        d[name] = v
+    raw.update(extra)
+    flags = {p: flag_of(p) for p in fields}
+    return validate(model, raw, None, lambda path: flags.get(path, path))

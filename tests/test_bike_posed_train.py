@@ -153,8 +153,7 @@ def test_done_with_reads_the_config(tmp_path):
     d = make_bike(tmp_path, sh_degree=0)
     assert done_with(d, PosedTrainConfig()) is None
     cfg = PosedTrainConfig()
-    from dataclasses import asdict
-    c = asdict(cfg)
+    c = cfg.model_dump()
     c.pop("progress")
     with open(os.path.join(d, "gaussians", "posed_train.json"), "w") as f:
         json.dump({"config": c}, f)
@@ -378,10 +377,8 @@ def test_densify_grows_each_part_up_to_its_cap(scene):
 def test_densify_off_keeps_old_records_and_on_is_another_config(tmp_path):
     """A posed_train.json written before --densify existed (no densify keys) is still the default
     config's; a densified fine-tune is not."""
-    from dataclasses import asdict
-
     d = make_bike(tmp_path, sh_degree=0)
-    c = asdict(PosedTrainConfig())
+    c = PosedTrainConfig().model_dump()
     for k in ("progress", "densify", "densify_max"):
         c.pop(k)
     with open(os.path.join(d, "gaussians", "posed_train.json"), "w") as f:

@@ -97,9 +97,9 @@ def test_a_changed_fine_tune_setting_clashes_with_posed_and_gt_only(tmp_path):
         msg = clash(_settings(size=64, **dict({"posed_iterations": 20}, **{k: v})))
         assert "posed:city_a, gt:city_a)" in msg and f"({k} differ)" in msg, msg
         assert "posed__city_a.json gt__city_a.json" in msg and "train" not in msg and "views" not in msg, msg
-    # a default changed in splatting/bike/posed_train.py (not an option here) is a settings change too
+    # a default changed in splatting/bike/posed_config.py (not an option here) is a settings change too
     assert rec["posed_rest_fraction"] > 0 and rec["posed_lr_means"] > 0
-    msg = clash(replace(built, posed=replace(built.posed, rest_fraction=rec["posed_rest_fraction"] / 2)))
+    msg = clash(replace(built, posed=built.posed.model_copy(update={"rest_fraction": rec["posed_rest_fraction"] / 2})))
     assert "(posed:city_a, gt:city_a)" in msg and "(posed_rest_fraction differ)" in msg, msg
     msg = clash(_settings(size=64, posed_iterations=20, iterations=10))
     assert "(train:city_a:frame, train:city_a:steering, train:city_a:crank, posed:city_a ...)" in msg, msg

@@ -6,6 +6,7 @@ from plyfile import PlyData
 
 from splatting.gaussians.container import Gaussians, read_ply, write_ply
 from splatting.raster.sparse import render_gaussians
+from splatting.training.strategy import DensifyConfig
 from splatting.training.trainer import TrainConfig, train_views
 from splatting.training.views import load_views, render_ring_views, write_views
 
@@ -74,8 +75,8 @@ def _blob_views(folder, size=64):
 def test_train_write_read_render_is_identical(tmp_path):
     _blob_views(str(tmp_path / "views"))
     views = load_views(str(tmp_path / "views"))
-    cfg = TrainConfig(iterations=120, sh_degree=1, progress=False, threads=1)
-    cfg.densify.start, cfg.densify.stop, cfg.densify.max_gaussians = 50, 100, 2000
+    cfg = TrainConfig(iterations=120, sh_degree=1, progress=False, threads=1,
+                      densify=DensifyConfig(start=50, stop=100, max_gaussians=2000))
     g, _ = train_views(views, cfg)
     assert g.sh_degree == 1 and g.sh[:, 1:].abs().max() > 0  # the degree-1 band was trained
     write_ply(g, tmp_path / "part.ply")

@@ -170,6 +170,6 @@ def test_relight_fit_defaults_differ_for_a_bike_and_a_views_folder(tmp_path, mon
     bike, views, given, views_vn = seen
     assert (bike.iterations, bike.relit_loss) == (fit.BIKE_ITERATIONS, fit.BIKE_RELIT_LOSS) == (150, 3.0)
     assert bike.view_normals is fit.BIKE_VIEW_NORMALS is True
-    assert (views.iterations, views.relit_loss, views.view_normals) == (fit.RelightFitConfig.iterations, 0.0, False)
+    assert (views.iterations, views.relit_loss, views.view_normals) == (fit.RelightFitConfig().iterations, 0.0, False)
     assert (given.iterations, given.relit_loss, given.view_normals) == (7, 0.0, False)
     assert views_vn.view_normals is True

@@ -1,7 +1,6 @@
 """Per-part trainer: fits a known scene, rejects NaN steps, densify rules and strategies, bad input,
 the command line derived from the config."""
 import argparse
-import dataclasses
 import json
 import math
 import os
@@ -14,6 +13,7 @@ import torch
 from splatting.training import command
 from splatting.training.strategy import STRATEGIES, DensifyConfig, DensifyStrategy, FixedStrategy, Strategy, make_strategy
 from cyclist_formats.errors import UserError
+from cyclist_formats.typed_config import updated
 from splatting.gaussians.container import Gaussians, read_ply
 from splatting.gaussians.sh import rgb_to_sh0
 from splatting.training.trainer import (TrainConfig, default_out, init_gaussians, split_views, train, train_views)
@@ -59,9 +59,8 @@ def make_views(folder, seed=0, points=True):
 
 def fast_config(**kw):
     # threads=1: module fixtures run before conftest's per-test thread limit
-    cfg = TrainConfig(**{"iterations": 400, "progress": False, "threads": 1, **kw})
-    cfg.densify.start, cfg.densify.stop, cfg.densify.max_gaussians = 100, 300, 4000
-    return cfg
+    densify = {"start": 100, "stop": 300, "max_gaussians": 4000, **kw.pop("densify", {})}
+    return updated(TrainConfig(**{"iterations": 400, "progress": False, "threads": 1, **kw}), densify=densify)
 
 
 @pytest.fixture(scope="module")
@@ -122,8 +121,7 @@ def test_nan_view_steps_are_rejected_and_training_continues(views_dir):
 def test_rejected_steps_leave_parameters_untouched(views_dir):
     views = load_views(views_dir)
     views.images[..., 0] = float("nan")  # every step is NaN: nothing may move
-    cfg = fast_config(iterations=30)
-    cfg.densify.hull_prune = False
+    cfg = fast_config(iterations=30, densify={"hull_prune": False})
     g, m = train_views(views, cfg)
     assert m["rejected_steps"] == 30
     gen = torch.Generator().manual_seed(cfg.seed)
@@ -135,8 +133,7 @@ def test_rejected_steps_leave_parameters_untouched(views_dir):
 def test_early_stop_and_time_budget(views_dir):
     views = load_views(views_dir)
     # a gain of 100 dB is never reached: stop at the first evaluation after densification ends
-    cfg = fast_config(iterations=2000, eval_every=50, patience=1, min_delta_db=100.0)
-    cfg.densify.stop = 100
+    cfg = fast_config(iterations=2000, eval_every=50, patience=1, min_delta_db=100.0, densify={"stop": 100})
     _, m = train_views(views, cfg)
     assert m["stopped"] == "early" and m["iterations"] == 150
     assert [h[0] for h in m["psnr_history"]] == [50, 100, 150]
@@ -264,9 +261,9 @@ def parse(*argv):
 def test_cli_defaults_are_the_config_defaults():
     cfg = command.config_from_args(parse())
     d = TrainConfig()
-    for f in dataclasses.fields(TrainConfig):
-        if f.name not in ("progress", "densify"):
-            assert getattr(cfg, f.name) == getattr(d, f.name), f.name
+    for name in TrainConfig.model_fields:
+        if name not in ("progress", "densify"):
+            assert getattr(cfg, name) == getattr(d, name), name
     assert cfg.densify == d.densify
 
 
@@ -305,9 +302,8 @@ def test_fixed_strategy_keeps_the_set_and_default_grows_it(views_dir):
     views = load_views(views_dir)
     counts = {}
     for name in ("fixed", "default"):
-        cfg = fast_config(iterations=160, strategy=name)
-        cfg.densify.start, cfg.densify.stop, cfg.densify.min_opacity = 20, 150, 0.0
-        cfg.densify.hull_prune = False
+        cfg = fast_config(iterations=160, strategy=name,
+                          densify={"start": 20, "stop": 150, "min_opacity": 0.0, "hull_prune": False})
         g, m = train_views(views, cfg)
         counts[name] = len(g)
         if name == "fixed":

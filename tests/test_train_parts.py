@@ -3,7 +3,8 @@ import json
 import os
 
 from bench.train_parts import same_recipe, trained_with
-from splatting.training.trainer import TrainConfig, config_dict
+from cyclist_formats.typed_config import record_of as config_dict, updated
+from splatting.training.trainer import TrainConfig
 
 
 def _part(tmp_path, cfg, stopped="iterations"):
@@ -25,7 +26,7 @@ def test_another_recipe_or_a_capped_run_is_retrained(tmp_path):
     assert trained_with(ply, TrainConfig(iterations=TrainConfig().iterations + 1)) is None
     assert trained_with(ply, TrainConfig(antialiased=not TrainConfig().antialiased)) is None
     cfg = TrainConfig()
-    cfg.densify.max_gaussians += 1
+    cfg = updated(cfg, densify={"max_gaussians": cfg.densify.max_gaussians + 1})
     assert trained_with(ply, cfg) is None
     # stopped by the wall-time cap: its learning rate never finished decaying
     assert trained_with(_part(tmp_path, TrainConfig(), stopped="time_budget"), TrainConfig()) is None

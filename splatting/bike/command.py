@@ -14,7 +14,7 @@ from cyclist_formats import checks
 from cyclist_formats.atomic import write_json
 from cyclist_formats.errors import UserError
 
-from cyclist_formats.typed_config import add_dataclass_arguments, dataclass_from_args
+from cyclist_formats.typed_config import add_model_arguments, model_from_args, options_of
 from cyclist_formats.pose import FIELDS_HELP  # numpy only: --help does not import torch
 
 # The stage's modules are imported inside the functions below, not at the top: they load torch
@@ -107,29 +107,21 @@ class PosedTrain:
 
     @staticmethod
     def add_arguments(p):
-        from splatting.bike.posed_train import PosedTrainConfig
+        from splatting.bike.posed_config import PosedTrainConfig
 
         p.add_argument("--bike", required=True, help="a bike folder with trained parts (gaussians/) and views/whole")
         p.add_argument("--from-rest", action="store_true",
                        help="start from gaussians/<part>_rest.ply as they are and never write them (the layout "
                             "`library build` leaves; default: keep the current <part>.ply as <part>_rest.ply first)")
-        add_dataclass_arguments(p, PosedTrainConfig())  # --poses ... --eps2d, defaults from the dataclass
+        add_model_arguments(p, PosedTrainConfig, options_of(PosedTrainConfig), " (default {default})")  # --poses ... --eps2d
         p.add_argument("--render-threads", type=int,
                        help="Blender's CPU threads for the posed renders (default: its own, 2); the fine-tune uses one")
         p.add_argument("--quiet", action="store_true", help="no progress line")
 
     @staticmethod
     def check_args(args):
-        from splatting.bike.posed_train import HELD_OUT
-
         checks.input_dir("bike", args.bike)
-        checks.integer("poses", args.poses, HELD_OUT + 1, 10_000)
-        checks.count("iterations", args.iterations, hi=10_000_000)
-        checks.count("samples", args.samples, hi=1 << 16)
-        checks.count("densify-max", args.densify_max, hi=10_000_000)
-        checks.number("lr-decay", args.lr_decay, 0.0, 1.0, lo_open=True)
-        checks.integer("lr-tail", args.lr_tail, 0, args.iterations)
-        checks.positive("eps2d", args.eps2d, 10.0)
+        PosedTrain.config_from_args(args)  # the values, one line naming the flag (the model's ranges)
         if args.render_threads is not None:
             checks.threads("render-threads", args.render_threads)
         for p in ("frame", "steering"):
@@ -139,10 +131,10 @@ class PosedTrain:
 
     @staticmethod
     def config_from_args(args):
-        """The PosedTrainConfig of a parsed command line (after check_args)."""
-        from splatting.bike.posed_train import PosedTrainConfig
+        """The PosedTrainConfig of a parsed command line; a bad value is a UserError naming its flag."""
+        from splatting.bike.posed_config import PosedTrainConfig
 
-        return dataclass_from_args(args, PosedTrainConfig(), progress=not args.quiet)
+        return model_from_args(PosedTrainConfig, args, options_of(PosedTrainConfig), progress=not args.quiet)
 
     @staticmethod
     def run(args):

@@ -26,14 +26,11 @@ included (e.g. a few low-rate steps at another --eps2d).  Training poses come
 from seeds 1000, 1001, ... of splatting.bike.pose.sample_poses (48 a seed): never the checks' poses
 (seed 0).
 """
-import dataclasses
 import os
 import shutil
 import subprocess
 import sys
 import time
-from dataclasses import dataclass, field
-
 from PIL import Image
 import numpy as np
 import torch
@@ -41,13 +38,15 @@ import torch
 from cyclist_formats import bike_folder, ring
 from cyclist_formats.atomic import read_json_or_none, write_json
 from cyclist_formats.errors import UserError
+from cyclist_formats.typed_config import record_of
 from splatting import paths
 from splatting.bike.model import BikeModel
+from splatting.bike.posed_config import HELD_OUT, PosedTrainConfig
 from splatting.bike.pose import check_poses, sample_poses
 from splatting.progress import Progress
 from splatting.raster.camera import from_numpy
-from splatting.raster.api import EPS2D, rasterize
-from splatting.training.trainer import FineTuneRates, finite_grads, rgba_loss
+from splatting.raster.api import rasterize
+from splatting.training.trainer import finite_grads, rgba_loss
 from splatting.gaussians.container import Gaussians, read_ply, write_ply
 from splatting.gaussians.sh_rotation import BANDS, sh_band_matrices
 from splatting.training.metrics import box_psnr, mask_iou
@@ -58,39 +57,6 @@ from splatting.training.views import load_views
 RENDER_SCRIPT = paths.blender_script("render_pose.py")
 POSE_SEED = 1000
 POSE_BLOCK = 48
-HELD_OUT = 4  # the last posed views: scored before and after, never trained on
-
-
-@dataclass
-class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (training/trainer.py)
-    # defaults measured in docs/training.md (whole bike at the 12 blender_compare poses): 48 -> 144
-    # poses +0.39 dB, degree-1 SH +0.24, 1000 -> 3000 iterations +0.18, 3000 -> 6000 +0.25.
-    # Fields with a "help" are the command line's options (typed_config.add_dataclass_arguments).
-    poses: int = field(default=144, metadata={"help": "posed whole-bike renders (one random ring camera each)"})
-    iterations: int = field(default=6000, metadata={"help": "fine-tuning steps"})
-    rest_fraction: float = 0.25  # share of steps on the rest-pose whole-bike ring (views/whole)
-    samples: int = field(default=128, metadata={"help": "Cycles samples of the posed renders"})
-    denoise: str = "FAST"
-    seed: int = 0
-    crop_margin_px: int = 8
-    # 1 (2): the fine-tune adds degree-1 (and 2) SH (view-dependent colour), rotated with each part
-    sh_degree: int = field(default=1, metadata={"help": "1 or 2: add view-dependent (degree-1 or 2 SH) colour in "
-                                                        "the fine-tune", "choices": (0, 1, 2)})
-    lr_shN: float = 2.5e-3       # the band-1 coefficients' rate (the DC's; INRIA's /20 gained less)
-    # adaptive density control per part in the first half (docs/training.md)
-    densify: bool = field(default=False, metadata={"help": "grow each part's Gaussians (adaptive density control) "
-                                                           "in the first half of the fine-tune"})
-    densify_max: int = field(default=30000, metadata={"help": "with --densify: most Gaussians per part"})
-    lr_decay: float = field(default=1.0, metadata={"help": "every learning rate decays exponentially to this "
-                                                           "fraction of its start by the last step (1: constant)"})
-    lr_tail: int = field(default=0, metadata={"help": "with --lr-decay: constant rates, then the decay over the "
-                                                      "last N steps only (0: over the whole fine-tune)"})
-    # the bike keeps it (posed_train.json) and every renderer draws its parts with it
-    eps2d: float = field(default=EPS2D, metadata={"help": "screen-space low-pass variance in px^2 added to every "
-                                                          "splat in the fine-tune and kept with the bike for every "
-                                                          "later render (Cycles' 1.5 px Blackman-Harris pixel "
-                                                          "filter has variance 0.173)"})
-    progress: bool = True
 
 
 def training_poses(n):
@@ -298,11 +264,9 @@ def fine_tune(model, rest_views_dir, jobs, cfg: PosedTrainConfig):
         d = {k: v.detach() for k, v in p.items()}
         sh = d["sh0"] if "shN" not in d else torch.cat([d["sh0"], d["shN"]], 1)
         parts[name] = Gaussians(d["means"], d["quats"], d["log_scales"], d["opacity_logits"], sh)
-    cfg_d = dataclasses.asdict(cfg)
-    cfg_d.pop("progress")
     return parts, {"gaussians": {n: len(g.means) for n, g in parts.items()},
                    "densify": {n: d.stats for n, d in dens.items()},
-                   "config": cfg_d, "poses": len(jobs), "held_out_poses": HELD_OUT,
+                   "config": record_of(cfg), "poses": len(jobs), "held_out_poses": HELD_OUT,
                    "held_out_box_psnr_before": before[0], "held_out_iou_before": before[1],
                    "held_out_box_psnr_after": after[0], "held_out_iou_after": after[1],
                    "loss": round(loss_v, 5), "wall_s": round(wall, 1), "antialiased": aa, "eps2d": cfg.eps2d}
@@ -330,8 +294,7 @@ def done_with(bike_dir, cfg: PosedTrainConfig):
     m = read_json_or_none(p)
     if m is None:
         return None
-    want = dataclasses.asdict(cfg)
-    want.pop("progress")
+    want = record_of(cfg)
     gdir = os.path.dirname(p)
     # a part retrained since (its file newer than posed_train.json) needs the fine-tune again
     newer = any(f.endswith(".ply") and not f.endswith("_rest.ply")
@@ -341,7 +304,7 @@ def done_with(bike_dir, cfg: PosedTrainConfig):
     # fine-tunes recorded before --densify existed ran without it: still this config when it is off
     # and before --lr-decay with constant rates
     # and before --eps2d with rasterize's 0.3
-    have = {"densify": False, "densify_max": PosedTrainConfig.densify_max, "lr_decay": 1.0, "lr_tail": 0,
+    have = {"densify": False, "densify_max": PosedTrainConfig().densify_max, "lr_decay": 1.0, "lr_tail": 0,
             "eps2d": 0.3, **m["config"]}
     return m if have == want and not newer else None
 

@@ -18,6 +18,7 @@ are `train --antialiased` and `bike-posed-train --densify --densify-max 30000 --
 `fidelity`, so that bike_fidelity measures the recipe that claims the goal.
 """
 
+RECIPE_FIELD = "recipe field"
 DEFAULT = {"train": {}, "posed": {}}
 
 FIDELITY = {
@@ -36,20 +37,24 @@ REAL = {"train": {"antialiased": True, "iterations": 1000, "densify_max_gaussian
 RECIPES = {"default": DEFAULT, "fidelity": FIDELITY, "real": REAL}
 
 
-# the configs' modules load torch (~2.5 s, python -X importtime); imported where a config is made, so
-# `library build`'s argument checks, which read RECIPES, stay torch-free
+# the configs' modules load torch (~2.5 s, python -X importtime) and pydantic; imported where a config is
+# made, so `library build`'s argument checks, which read RECIPES, stay torch- and pydantic-free
 def train_config(recipe, **runtime):
-    """TrainConfig of a recipe (name or dict) plus runtime fields (threads, time_budget_s, ...)."""
-    from splatting.training.trainer import TrainConfig
+    """TrainConfig of a recipe (name or dict) plus runtime fields (threads, time_budget_s, ...); a bad
+    or unknown field is one UserError naming it."""
+    from cyclist_formats.typed_config import validate
+    from splatting.training.config import TrainConfig
 
-    return TrainConfig(**{**_get(recipe)["train"], **runtime})
+    return validate(TrainConfig, {**_get(recipe)["train"], **runtime}, RECIPE_FIELD)
 
 
 def posed_config(recipe, **runtime):
-    """PosedTrainConfig of a recipe (name or dict) plus runtime fields (progress, ...)."""
-    from splatting.bike.posed_train import PosedTrainConfig
+    """PosedTrainConfig of a recipe (name or dict) plus runtime fields (progress, ...); a bad or unknown
+    field is one UserError naming it."""
+    from cyclist_formats.typed_config import validate
+    from splatting.bike.posed_config import PosedTrainConfig
 
-    return PosedTrainConfig(**{**_get(recipe)["posed"], **runtime})
+    return validate(PosedTrainConfig, {**_get(recipe)["posed"], **runtime}, RECIPE_FIELD)
 
 
 def _get(recipe):

@@ -10,7 +10,6 @@ the same files; OUT/library.json lists every asset with its files and hashes, qu
 build time, settings, and whether it clears the quality floor (datasets use only those).
 The bikes themselves come from `make bikes` (blender_scripts/make_bikes.py).
 """
-from dataclasses import replace
 import os
 import time
 
@@ -138,13 +137,13 @@ def settings_of(args):
 def posed_settings(args):
     """The fine-tune's whole configuration (a PosedTrainConfig): the options given here plus every
     other PosedTrainConfig default (rates, rest fraction, denoiser, ...), so that a default changed
-    in splatting/bike/posed_train.py is a settings change too (it is recorded as posed_<field>),
+    in splatting/bike/posed_config.py is a settings change too (it is recorded as posed_<field>),
     never a silent one.  Resolved here, not in add_arguments: the module imports torch, --help should not."""
     from splatting.bike.recipes import posed_config
     d = posed_config(args.recipe)
-    return replace(d, poses=args.posed_poses or d.poses, iterations=args.posed_iterations or d.iterations,
-                   samples=args.posed_samples or args.samples or d.samples,
-                   sh_degree=d.sh_degree if args.posed_sh_degree is None else args.posed_sh_degree)
+    return d.model_copy(update=dict(poses=args.posed_poses or d.poses, iterations=args.posed_iterations or d.iterations,
+                                    samples=args.posed_samples or args.samples or d.samples,
+                                    sh_degree=d.sh_degree if args.posed_sh_degree is None else args.posed_sh_degree))
 
 
 def floors_of(args):

@@ -1,7 +1,7 @@
 """The library build's settings as typed objects: the budget and the quality floor as pydantic models
 (one per block, extra="forbid", ranges in the field declarations, errors as one line naming the
 field), the posed fine-tune as the training stage's own PosedTrainConfig (its fields and defaults
-are written once, in splatting/bike/posed_train.py).
+are written once, in splatting/bike/posed_config.py).
 
 The tasks read attributes (`s.budget.view_size`, `s.posed.iterations`); the records on disk (each
 task's settings in OUT/library/tasks/*.json and library.json's "settings" and "quality_floor") are
@@ -13,11 +13,11 @@ before anything loads (the posed block comes later, from the recipe).  The comma
 module inside its functions: pydantic costs its --help 0.26 -> 0.61 s (median of 9, loaded 2-core
 machine), and the floor's defaults it shows are manifest.FLOORS.
 """
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Annotated, Any, Optional
 
 from cyclist_formats.checks import MAX_GAUSSIANS, MAX_IMAGE_SIZE
-from cyclist_formats.typed_config import Block, Bool, Field, Int, Number, Str, validate
+from cyclist_formats.typed_config import Block, Bool, Field, Int, Number, Str, record_of, validate
 from splatting.library.manifest import FLOORS
 
 SETTING = "library setting"
@@ -75,7 +75,7 @@ class LibrarySettings:
 
     def posed_record(self):
         """The fine-tune's configuration as bike-posed-train records it ({field: value}, no `progress`)."""
-        return {k: v for k, v in asdict(self.posed).items() if k != "progress"} if self.posed is not None else {}
+        return record_of(self.posed) if self.posed is not None else {}
 
     def record(self):
         """The flat settings dict the library writes: the budget's fields in declaration order

@@ -12,14 +12,16 @@ view, plus shading_loss (how the normals shade under random light directions aga
 import math
 import os
 import time
-from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
 from cyclist_formats import bike_folder
+from cyclist_formats.checks import MAX_IMAGE_SIZE
 from cyclist_formats.errors import UserError
+from cyclist_formats.typed_config import Block, Bool, Field, Int, Number
 from splatting.bike.model import present_parts, trained_antialiased as parts_antialiased
 from splatting.gaussians.container import read_ply
 from splatting.progress import Progress
@@ -29,7 +31,8 @@ from splatting.gaussians.sh import C0
 from splatting.relight.shading import HIGHLIGHT, ROUGHNESS, random_light, srgb_decode, srgb_encode, view_directions
 from splatting.rotations import quat_to_rotmat
 from splatting.training.targets import crop_box, crop_camera, split_views
-from splatting.training.trainer import DEFAULT_HOLDOUT, default_out, train_views, write_trained
+from splatting.training.config import DEFAULT_HOLDOUT
+from splatting.training.trainer import default_out, train_views, write_trained
 from splatting.training.record import ply_trained_antialiased as trained_antialiased, ply_trained_eps2d
 from splatting.training.views import load_views
 
@@ -61,33 +64,35 @@ def bike_fit_config(**kw):
                                "view_normals": BIKE_VIEW_NORMALS, **kw})
 
 
-@dataclass
-class RelightFitConfig:
-    iterations: int = 300
-    lr: float = 0.05
+class RelightFitConfig(Block):
+    """A relight fit; a field with a description is a `relight-fit` option (relight/command.py derives
+    them; its --bike defaults are bike_fit_config's), every default written here only."""
+    iterations: Annotated[Int, Field(ge=1, le=10 ** 7, description="optimisation steps")] = 300
+    lr: Annotated[Number, Field(gt=0)] = 0.05
     # fit at most at this image size (premultiplied passes area-averaged).  512, the demo's view size,
     # not 256: channels fitted at half the resolution they are rendered at blur the 2-5 px tubes
     # (bench/relight.py, city_00 at 512 px, 150 steps: 27.48 -> 28.22 dB; the rider 31.06 ->
     # 31.32 dB over 6 poses) for twice the fit time (frame 20 -> 40 s, avatar 105 s)
-    max_size: int = 512
-    holdout: tuple = DEFAULT_HOLDOUT
+    max_size: Annotated[Int, Field(ge=16, le=MAX_IMAGE_SIZE, description="fit at most at this image size in px")] = 512
+    holdout: tuple[Annotated[Int, Field(ge=0)], ...] = DEFAULT_HOLDOUT
     # weight of shading_loss (the normals judged by how they shade, not only as vectors); 0: off
-    shading_loss: float = 1.0
+    shading_loss: Annotated[Number, Field(ge=0)] = 1.0
     # weight of relit_loss (every channel judged by the display colour it shades to under a random
     # sun and sky, against the passes shaded alike); 0: off.  It shades with the bike's materials
     # (shading.ROUGHNESS), so bikes fit with BIKE_RELIT_LOSS (relight-fit --bike, fit_bike,
     # bench/relight.py) and avatars (roughness 1) without it
-    relit_loss: float = 0.0
+    relit_loss: Annotated[Number, Field(ge=0, description="weight of the relit loss (display colours under random "
+                                                          "suns, a bike's materials; 0: off)")] = 0.0
     # view-dependent normals: each Gaussian's normal seen from v (its unit direction to the camera)
     # is normalize(n + B v), B (N, 3, 3) fitted too (render.view_normals: a Gaussian across a thin
     # tube shows the mean normal of the tube's visible half, which turns with the view)
-    view_normals: bool = False
+    view_normals: Bool = Field(False, description="view-dependent normals, normalize(n + B v) per Gaussian")
     # weight of mean(B^2) in the loss: the ring's views see each Gaussian from one elevation, so B is
     # pinned only along those directions; the smallest B that explains them turns the normals less
     # for the directions a posed part (a turned crank or fork, another camera) shows it from
-    view_normal_penalty: float = VIEW_NORMAL_PENALTY
-    seed: int = 0
-    progress: bool = True
+    view_normal_penalty: Annotated[Number, Field(ge=0)] = VIEW_NORMAL_PENALTY
+    seed: Annotated[Int, Field(ge=0)] = 0
+    progress: Bool = True
 
 
 def _resized(X, scale):

@@ -21,6 +21,7 @@ import time
 import torch
 
 from cyclist_formats.errors import UserError
+from cyclist_formats.typed_config import updated
 from splatting import paths
 from splatting.gaussians.container import read_ply
 from splatting.rider.avatar import PLY_NAME, RiderAvatar, SKINNING_NAME
@@ -93,12 +94,8 @@ def build_avatar(rider_id, out_dir, iterations=None, time_budget_s=None, max_gau
 
     def do_train():
         cfg = TrainConfig(threads=threads)
-        if iterations:
-            cfg.iterations = iterations
-        if time_budget_s:
-            cfg.time_budget_s = time_budget_s
-        if max_gaussians:
-            cfg.densify.max_gaussians = max_gaussians
+        given = {k: v for k, v in (("iterations", iterations), ("time_budget_s", time_budget_s)) if v}
+        cfg = updated(cfg, **given, **({"densify": {"max_gaussians": max_gaussians}} if max_gaussians else {}))
         m = train(views, ply, cfg)
         log(f"rider-avatar: {m['gaussians']} Gaussians, held-out PSNR {m['psnr']} dB (over white)")
 

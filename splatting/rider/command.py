@@ -8,6 +8,8 @@ import torch
 
 from cyclist_formats import checks
 from cyclist_formats.errors import UserError
+from cyclist_formats.typed_config import add_model_arguments, model_from_args, options_of
+from splatting.training.config import TrainConfig
 
 # The stage's modules are imported inside the functions below, not at the top: they load torch
 # (~2.5 s, python -X importtime), and `--help` and the argument checks answer before that (0.2-0.5 s).
@@ -68,6 +70,9 @@ def run(args):
           f"{rider.height_m:.3f} m)")
     return 0
 
+# the TrainConfig fields rider-avatar takes on its command line
+AVATAR_TRAINING = ("iterations", "time_budget_s", "densify.max_gaussians", "threads")
+
 
 class Avatar:
     """`python -m splatting rider-avatar --id ID [--out data/riders/ID]`: render, train and skin a rider's
@@ -77,23 +82,23 @@ class Avatar:
     def add_arguments(p):
         p.add_argument("--id", required=True, help="rider id from the roster (python -m splatting rider --list)")
         p.add_argument("--out", help="avatar folder (default data/riders/ID)")
-        p.add_argument("--iterations", type=int, default=None, help="training iterations (reduced budget: e.g. 1500)")
-        p.add_argument("--time-budget-s", type=float, default=None, help="training wall-time cap")
-        p.add_argument("--max-gaussians", type=int, default=None)
+        # the avatar's training: the trainer's own fields, flags and defaults (reduced budget: e.g. --iterations 1500)
+        add_model_arguments(p, TrainConfig, AVATAR_TRAINING, " (default {default})")
         p.add_argument("--samples", type=int, default=None, help="Cycles samples for the 36 views")
         p.add_argument("--size", type=int, default=None, help="pixels a side of the 36 views (default 512)")
-        p.add_argument("--threads", type=int, default=1, help="torch threads for training")
         p.add_argument("--bare", action="store_true", help="train the rider without helmet, hair or bag: the base "
                        "that datasets add per-instance accessories to (default --out data/riders/ID/bare)")
 
     @staticmethod
+    def train_config(args):
+        """The avatar's TrainConfig of the command line; a bad value is one line naming its flag."""
+        return model_from_args(TrainConfig, args, AVATAR_TRAINING)
+
+    @staticmethod
     def check_args(args):
-        checks.count("iterations", args.iterations)
+        Avatar.train_config(args)
         checks.image_size("size", args.size)
-        checks.positive("time_budget_s", args.time_budget_s)
-        checks.gaussians("max_gaussians", args.max_gaussians)
         checks.count("samples", args.samples, hi=1 << 16)
-        checks.threads("threads", args.threads)
         checks.output_dir("out", args.out)
 
     @staticmethod
@@ -102,13 +107,10 @@ class Avatar:
         from splatting.rider.avatar import BARE_NAME
         from splatting.rider.avatar_build import build_avatar
 
-        for name in ("iterations", "max_gaussians", "samples"):
-            v = getattr(args, name)
-            if v is not None and v < 1:
-                raise UserError(f"--{name.replace('_', '-')} must be >= 1")
+        cfg = Avatar.train_config(args)
         out = args.out or os.path.join(paths.DATA, "riders", args.id, *([BARE_NAME] if args.bare else []))
-        res = build_avatar(args.id, out, args.iterations, args.time_budget_s, args.max_gaussians, args.samples,
-                           args.threads, size=args.size, bare=args.bare)
+        res = build_avatar(args.id, out, cfg.iterations, cfg.time_budget_s, cfg.densify.max_gaussians, args.samples,
+                           cfg.threads, size=args.size, bare=args.bare)
         print(f"{out}: avatar ready ({', '.join(f'{k} {v}' for k, v in res['steps'].items())})")
         return 0
 
@@ -119,29 +121,20 @@ class PosedTrain:
 
     @staticmethod
     def add_arguments(p):
-        from splatting.rider.posed_train import PosedTrainConfig
+        from splatting.rider.posed_config import PosedTrainConfig
 
         p.add_argument("--avatar", required=True, help="a rider avatar folder (rider.ply, skinning.npz, views/)")
-        p.add_argument("--poses", type=int, default=PosedTrainConfig.poses, help="pedalling poses (default %(default)s)")
-        p.add_argument("--cameras", type=int, default=PosedTrainConfig.cameras, help="ring cameras per pose (default %(default)s)")
-        p.add_argument("--iterations", type=int, default=PosedTrainConfig.iterations)
-        p.add_argument("--samples", type=int, default=None, help="Cycles samples for the posed renders")
-        p.add_argument("--scale", type=float, default=PosedTrainConfig.scale, help="training image scale (default %(default)s)")
+        add_model_arguments(p, PosedTrainConfig, options_of(PosedTrainConfig), " (default {default})")
         p.add_argument("--quiet", action="store_true")
 
     @staticmethod
     def run(args):
-        from splatting.rider.posed_train import PosedTrainConfig, train_avatar_posed
+        from splatting.rider.posed_config import PosedTrainConfig
+        from splatting.rider.posed_train import train_avatar_posed
 
-        if not 0.05 <= args.scale <= 1.0:
-            raise UserError(f"--scale must be in 0.05..1, got {args.scale}")
-        for name, lo, hi in (("poses", 1, 36), ("cameras", 2, 36), ("iterations", 1, 10 ** 7)):
-            v = getattr(args, name)
-            if not lo <= v <= hi:
-                raise UserError(f"--{name} must be in {lo}..{hi}, got {v}")
+        cfg = model_from_args(PosedTrainConfig, args, options_of(PosedTrainConfig), progress=not args.quiet)
         if not os.path.isfile(os.path.join(args.avatar, "skinning.npz")):
             raise UserError(f"not a rider avatar folder (no skinning.npz): {args.avatar}")
-        train_avatar_posed(args.avatar, PosedTrainConfig(poses=args.poses, cameras=args.cameras, iterations=args.iterations,
-                                                         samples=args.samples, scale=args.scale, progress=not args.quiet))
+        train_avatar_posed(args.avatar, cfg)
         return 0
 

@@ -22,7 +22,6 @@ import shutil
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -38,25 +37,14 @@ from splatting.raster.api import rasterize
 from splatting.rider.avatar import PLY_NAME, RiderAvatar
 from splatting.rider.body import export_rider, pose_vertices
 from splatting.rider.motion import pedal_pose
+from splatting.rider.posed_config import PosedTrainConfig
 from splatting.rider.roster import load_rider
 from splatting.training.metrics import psnr
 from splatting.training.targets import crop_camera, Targets
-from splatting.training.trainer import _params_from, FineTuneRates, finite_grads, gaussians_of, rgba_loss
+from splatting.training.trainer import _params_from, finite_grads, gaussians_of, rgba_loss
 from splatting.training.views import load_views
 
 RENDER_SCRIPT = paths.blender_script("render_rider.py")
-
-
-@dataclass
-class PosedTrainConfig(FineTuneRates):  # + the fine-tune's learning rates (training/trainer.py)
-    poses: int = 4              # pedalling poses rendered
-    cameras: int = 8            # ring cameras per pose (evenly spaced, offset per pose)
-    iterations: int = 600
-    scale: float = 1.0          # training image scale (0.5, 256 px, softened the 512 px silhouettes: IoU 0.97 -> 0.93)
-    rest_fraction: float = 0.25  # share of steps on the rest-pose views
-    samples: int = None         # Cycles samples (default: the renderer's)
-    seed: int = 0
-    progress: bool = True
 
 
 def training_poses(n):

@@ -12,6 +12,9 @@ The rules, in one place:
   - an avatar's record is rider.json's "config";
   - parts of one bike that disagree are an error: a bike is one model, drawn with one filter.
 Used by splatting.bike.model (BikeModel), bike.posed_train, relight.fit and rider.avatar.
+
+The "config" of each record is cyclist_formats.typed_config.record_of(cfg): the one place a training
+config (trainer.TrainConfig, bike.posed_train.PosedTrainConfig) becomes the dict a record holds.
 """
 import math
 import os

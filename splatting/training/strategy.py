@@ -13,29 +13,11 @@ the 12 m ring they would make a bike part's "large Gaussian" threshold 13 cm ins
 The parameters live in a dict name -> nn.Parameter with dim 0 = Gaussians, each in its own Adam
 param group (`group["name"]`); every change to the set updates the Adam moments alongside.
 """
-from dataclasses import dataclass, field
-
 import torch
 
 from cyclist_formats.errors import UserError
+from splatting.training.config import DensifyConfig
 from splatting.rotations import quat_to_rotmat
-
-
-@dataclass
-class DensifyConfig:
-    grad_threshold: float = 0.0002  # mean view-space gradient norm (NDC units, INRIA)
-    percent_dense: float = 0.01     # x extent: max scale below -> clone, above -> split
-    split_n: int = 2
-    start: int = 200                # iterations
-    stop: int = 2500
-    every: int = 100
-    reset_every: int = 0            # opacity reset period (0 = never); INRIA 3000 of 30000
-    min_opacity: float = 0.005      # prune below
-    max_screen_frac: float = 0.15   # prune Gaussians wider than this fraction of the image (after a reset)
-    max_world_frac: float = 0.1     # ... or larger than this fraction of the extent
-    # hard budget: 40k gained 0.25 dB (box) on a frame for 1.7x the time (docs/training.md)
-    max_gaussians: int = field(default=15000, metadata={"help": "hard budget of Gaussians"})
-    hull_prune: bool = True         # drop Gaussians whose centre leaves the dilated silhouettes
 
 
 class Strategy:
@@ -227,6 +209,7 @@ class DensifyStrategy(Strategy):
         self._reset_stats(len(params["means"]), params["means"].device)
 
 
+# the classes behind config.STRATEGY_NAMES, the names TrainConfig.strategy takes (tests/test_config_flags.py)
 STRATEGIES = {"default": DensifyStrategy, "fixed": FixedStrategy}
 
 

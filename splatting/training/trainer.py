@@ -7,16 +7,16 @@ For speed: coarse-to-fine resolution, every render cropped to the object's box i
 a stop once held-out PSNR no longer improves.  See docs/training.md for the numbers behind the
 defaults.
 """
-import dataclasses
 import os
 import time
-from dataclasses import dataclass, field
 
 import torch
 import torch.nn.functional as F
 
 from cyclist_formats.atomic import write_json
-from splatting.training.strategy import STRATEGIES, DensifyConfig, make_strategy
+from cyclist_formats.typed_config import record_of
+from splatting.training.config import TrainConfig
+from splatting.training.strategy import make_strategy
 from cyclist_formats.errors import UserError
 from splatting.gaussians.container import Gaussians, write_ply
 from splatting.raster.api import EPS2D, rasterize
@@ -26,64 +26,6 @@ from splatting.training.targets import Targets, crop_camera, split_views  # noqa
 from splatting.training.initialisation import hull_mask, init_gaussians, object_extent  # noqa: F401
 from splatting.progress import Progress
 
-DEFAULT_HOLDOUT = (3, 12, 21, 30)
-
-
-@dataclass
-class TrainConfig:
-    # fields with a "help" are the command line's options (training/command.py derives them)
-    iterations: int = field(default=3000, metadata={"help": "optimisation steps at most"})
-    time_budget_s: float = field(default=600.0, metadata={"help": "stop after this much wall time"})
-    sh_degree: int = field(default=0, metadata={"help": "spherical-harmonics degree", "choices": (0, 1, 2, 3)})
-    holdout: tuple = field(default=DEFAULT_HOLDOUT, metadata={"help": "held-out view indices (comma list)"})
-    seed: int = field(default=0, metadata={"help": "random seed"})
-    # mip-splatting's 2D filter with opacity compensation (raster/sparse.py); a model trained with it
-    # must be rendered with it (its PART.json config says so)
-    antialiased: bool = field(default=False, metadata={"help": "antialiased splatting in training and evaluation"})
-    # the splats' screen-space low-pass (px^2, rasterize's eps2d); the part is drawn with it ever
-    # after (PART.json config; absent: 0.3). Cycles' 1.5 px Blackman-Harris pixel filter: 0.173
-    eps2d: float = field(default=EPS2D, metadata={"help": "screen-space low-pass variance (px^2) added to every "
-                                                         "splat in training, kept with the part for every render"})
-    # 1 by default: on the shared 2-core machine 2 threads ran 4-7x slower per iteration
-    # (oversubscription), see docs/training.md; None leaves torch's default
-    threads: int = field(default=1, metadata={"help": "torch.set_num_threads (1: measured fastest on 2 shared cores)"})
-    # coarse-to-fine: (first iteration, image scale); renders are always cropped to the object
-    resolution_schedule: tuple = ((0, 1.0),)
-    crop_margin_px: int = 8          # at full resolution
-    # INRIA learning rates; the means' rate is x extent (object bounding-box diagonal, metres)
-    lr_means: float = 1.6e-4
-    lr_means_final: float = 1.6e-6
-    lr_sh0: float = 2.5e-3
-    lr_shN: float = 2.5e-3 / 20
-    lr_opacity: float = 0.05
-    lr_scales: float = 5e-3
-    lr_quats: float = 1e-3
-    lambda_dssim: float = 0.2
-    init_max_points: int = 10000     # subsample points.ply beyond this
-    init_opacity: float = 0.1
-    eval_every: int = 200
-    patience: int = 3                # evaluations without a min_delta gain before stopping
-    min_delta_db: float = 0.05
-    progress: bool = True
-    strategy: str = field(default="default", metadata={"help": "densification strategy", "choices": tuple(STRATEGIES)})
-    densify: DensifyConfig = field(default_factory=DensifyConfig)
-
-
-@dataclass
-class FineTuneRates:
-    """Adam rates and loss weight for fine-tuning Gaussians a full training already placed (the posed
-    fine-tunes of riders and bikes): the means' rate (x extent) a tenth of the trainer's start."""
-    lr_means: float = 1.6e-5
-    lr_sh0: float = 2.5e-3
-    lr_opacity: float = 0.02
-    lr_scales: float = 2.5e-3
-    lr_quats: float = 1e-3
-    lambda_dssim: float = 0.2
-
-    def rates(self, extent):
-        """Adam learning rates per parameter group (the means' scaled by the object's extent)."""
-        return {"means": self.lr_means * extent, "quats": self.lr_quats, "log_scales": self.lr_scales,
-                "opacity_logits": self.lr_opacity, "sh0": self.lr_sh0}
 
 
 # -- training ------------------------------------------------------------------------------------
@@ -252,7 +194,7 @@ def train_views(views: Views, cfg: TrainConfig):
         "densify": dens.stats,
         "psnr_history": history,
         "psnr_history_fields": ["iteration", "wall_s", "psnr_crop", "gaussians"],
-        "config": config_dict(cfg),
+        "config": record_of(cfg),
     }
     if ho is not None:
         metrics["psnr"], metrics["ssim"] = [round(x, 4) for x in evaluate(g, ho, antialiased=cfg.antialiased,
@@ -260,14 +202,6 @@ def train_views(views: Views, cfg: TrainConfig):
         metrics["psnr_crop"] = round(evaluate(g, ho, crop=True, antialiased=cfg.antialiased, eps2d=cfg.eps2d)[0], 4)
     metrics["eval_s"] = round(time.time() - t0 - train_wall, 2)
     return g, metrics
-
-
-def config_dict(cfg):
-    """A TrainConfig as the JSON object PART.json's "config" holds."""
-    d = dataclasses.asdict(cfg)
-    d["holdout"] = list(d["holdout"])
-    d["resolution_schedule"] = [list(x) for x in d["resolution_schedule"]]
-    return d
 
 
 def default_out(views_dir):
