@@ -126,7 +126,7 @@ def test_rider_avatar_trains_with_the_trainers_fields():
     own, the trainer's defaults."""
     p = _parser(RiderAvatar.add_arguments)
     opts = _options(p)
-    assert set(opts) == {"help", "id", "out", "samples", "size", "iterations", "time_budget_s",
+    assert set(opts) == {"help", "id", "out", "samples", "size", "bare", "iterations", "time_budget_s",
                          "densify_max_gaussians", "threads"}
     assert opts["densify_max_gaussians"].option_strings == ["--max-gaussians"]
     assert RiderAvatar.train_config(p.parse_args(["--id", "r"])) == TrainConfig()
