@@ -3,12 +3,10 @@ rebuilt from the procedural generator (numpy, no bpy).
 
 Truth comes from the construction: the generator's own keypoints, carried through the same
 model-frame transform (tests/test_curation_sides.py's), compared with the curated ones."""
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
 
-from addon.core.curation import keypoint_check, mesh, pipeline, shape_fit
+from addon.core.curation import mesh, pipeline
 
 from test_curation_sides import _model, _procedural
 
@@ -52,29 +50,3 @@ def test_a_pedal_of_two_equal_pieces_is_found_at_its_middle_whichever_way_the_mo
 
     for name in ("pedal_left", "pedal_right"):
         assert np.linalg.norm(res.keypoints[name] - where(name)) < 0.01, (name, res.keypoints[name], where(name))
-
-
-def _same_points(A, B, tol=1e-9):
-    A, B = (np.round(np.asarray(X), 6) for X in (A, B))
-    A, B = (X[np.lexsort(X.T[::-1])] for X in (A, B))
-    return A.shape == B.shape and np.abs(A - B).max() < tol + 1e-6
-
-
-@pytest.mark.parametrize("seed", [1, 2])
-def test_surface_samples_of_a_dense_model_do_not_depend_on_its_triangle_order(seed):
-    """More surface samples than the keypoint finders take (a dense real model): the subset used
-    to be a random choice of the samples in triangle order, so a model turned, re-exported or
-    joined (other triangle order) was measured on other points, and a gap they left along the
-    steering column moved steer_top 4 cm (the fused CC-BY bicycle, Z-up copy).  The kept points
-    are now a function of the surface alone."""
-    V, T, kp, _ = _procedural(0, 45.0)
-    perm = np.random.default_rng(seed).permutation(len(T))
-    keep = np.ones(len(T), bool)
-    view_a = SimpleNamespace(soup=SimpleNamespace(TW=T), P=V)
-    view_b = SimpleNamespace(soup=SimpleNamespace(TW=T[perm][:, [1, 2, 0]]), P=V)
-    a, b = shape_fit.shape_samples(view_a, keep, max_points=5000), shape_fit.shape_samples(view_b, keep, max_points=5000)
-    assert 2500 < len(a) <= 5000
-    assert _same_points(a, b)
-    pa = keypoint_check.part_samples(V, T, keep, max_points=4000)
-    pb = keypoint_check.part_samples(V, T[perm], keep, max_points=4000)
-    assert 2000 < len(pa) <= 4000 and _same_points(pa, pb)

@@ -6,7 +6,7 @@ import numpy as np
 from ..contract import UserError
 from . import keypoints as kpmod
 from . import shape_keypoints as sk
-from .silhouette import surface_samples, thin
+from .silhouette import surface_samples
 from .validate import validate
 
 
@@ -17,7 +17,9 @@ def shape_samples(view, keep_tri, spacing=0.01, max_points=200000):
     remap = np.full(len(view.P), -1)
     remap[used] = np.arange(len(used))
     X = surface_samples(view.P[used], remap[T], spacing)
-    return thin(X, max_points, 0.25 * spacing)
+    if len(X) > max_points:
+        X = X[np.random.default_rng(0).choice(len(X), max_points, replace=False)]
+    return X
 
 
 def _annulus(X, c, r, lo=0.8, hi=1.0):

@@ -17,7 +17,6 @@ scaled to 0.7 m wheels is as big as a house; its bar still sits above its front 
 Every finder returns None when there is nothing where it looks; validate() names it.
 """
 import numpy as np
-from .silhouette import thin
 
 SEAT_DEPTH = 0.004
 
@@ -31,7 +30,8 @@ def steering_axis(X, fa, R):
     P = X[m][:, :2]
     if len(P) < 10:
         return None
-    P = thin(P, 20000, 0.001)
+    if len(P) > 20000:
+        P = P[np.random.default_rng(0).choice(len(P), 20000, replace=False)]
     P = P - fa[:2]
     th = np.radians(np.arange(50, 89, 1.0))
     a = np.stack([-np.cos(th), np.sin(th)], 1)          # up and back

@@ -69,29 +69,6 @@ def surface_samples(P, TW, spacing):
     return np.concatenate(out)
 
 
-def thin(X, max_points, cell):
-    """At most max_points of X (n, d): one per cell of a grid, the mean of the points in it, the
-    cell grown from `cell` until they fit.  The subset depends on the shape alone, never on the
-    order of the file's triangles, as a random choice does: a model turned or re-exported kept
-    other random points, and a gap they left along a steering column moved its top 4 cm."""
-    X = np.asarray(X, float)
-    if len(X) <= max_points:
-        return X
-    lo = X.min(0)
-    c = cell
-    while True:
-        k = np.floor((X - lo) / c).astype(np.int64)
-        dims = k.max(0) + 1
-        key = np.ravel_multi_index(k.T, dims) if np.prod(dims.astype(float)) < 2 ** 62 else \
-            np.unique(k, axis=0, return_inverse=True)[1].reshape(-1)
-        uniq, inv = np.unique(key, return_inverse=True)
-        if len(uniq) <= max_points:
-            break
-        c *= max(1.05, 0.97 * np.sqrt(len(uniq) / max_points))   # a surface's cells ~ 1 / c^2
-    n = np.bincount(inv, minlength=len(uniq)).astype(float)
-    return np.stack([np.bincount(inv, X[:, j], len(uniq)) / n for j in range(X.shape[1])], 1)
-
-
 def principal_axes(X):
     mu = X.mean(0)
     w, v = np.linalg.eigh(np.cov((X - mu).T))
