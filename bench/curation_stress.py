@@ -30,8 +30,8 @@ if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
 from bench.curation_variants import VARIANTS  # noqa: E402
-from bench.provenance import code_version, not_measured, record  # noqa: E402
-from bench.real_bikes import CURATE_CODE, MODELS, input_hash, models_dir  # noqa: E402
+from bench.provenance import code_version, record  # noqa: E402
+from bench.real_bikes import CURATE_CODE, MODELS, input_hash, models_dir, models_dir_or_skip  # noqa: E402
 from cyclist_formats.atomic import read_json_or_none, write_json  # noqa: E402
 
 TOL_M = 0.03
@@ -154,11 +154,8 @@ def table(rows, variants, models):
 
 def run(results, out_dir, models=None, variants=None, log=print):
     """make bench's stage: every model's base curation, then the variants family by family."""
-    mdir = models_dir()
+    mdir = models_dir_or_skip(results, "curation_stress", log)
     if mdir is None:
-        why = "no ../shared/models beside the repository"
-        log(f"  curation_stress: {why} - skipped")
-        not_measured(results, "curation_stress", why)
         return None
     models = [m for m in (models or MODELS) if os.path.isfile(os.path.join(mdir, MODELS[m]))]
     variants = list(variants or DEFAULT_VARIANTS)
