@@ -65,6 +65,16 @@ def models_dir():
     return None
 
 
+def models_dir_or_skip(results, key, log=print):
+    """models_dir(), or None with the stage's `key` recorded as not measured (no shared models)."""
+    mdir = models_dir()
+    if mdir is None:
+        why = "no ../shared/models beside the repository"
+        log(f"  {key}: {why} - skipped")
+        not_measured(results, key, why)
+    return mdir
+
+
 def input_hash(path):
     """A model file's hash, or its folder's (a glTF's .bin and textures) when it sits in one."""
     folder = os.path.dirname(path)
@@ -164,11 +174,8 @@ def picture(pairs, path, h=300):
 
 def run(results, out_dir, models=None, poses=POSES, do_build=True, image=None, log=print):
     """make bench's stage: every development model (or `models`), one at a time."""
-    mdir = models_dir()
+    mdir = models_dir_or_skip(results, "real_bikes", log)
     if mdir is None:
-        why = "no ../shared/models beside the repository"
-        log(f"  real_bikes: {why} - skipped")
-        not_measured(results, "real_bikes", why)
         return None
     rows, pairs, reused = [], [], []
     for mid in models or MODELS:

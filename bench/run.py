@@ -48,6 +48,8 @@ STAGES = {
     "library": ("bench.library", lambda m, r, out: m.run(r, out)),  # library_build_s, dataset_ray_overhead
     # the real downloaded bikes: curated, built with the real-bike recipe, vs Blender (issue 27)
     "real_bikes": ("bench.real_bikes", lambda m, r, out: m.run(r, out)),
+    # the development models' curation under real files' transformations (axes, units, mirror, joined; issue 27)
+    "curation_stress": ("bench.curation_stress", lambda m, r, out: m.run(r, out)),
     # gaussian_vs_blender_equal_fidelity: the trained bike vs Cycles/Workbench, interleaved (issue 14)
     "blender_compare": ("bench.blender_compare", lambda m, r, out: m.run(r, out)),
 }
@@ -83,6 +85,7 @@ TARGETS = {
     "frames_geometry": "tyres_within_3cm_share 1.0, labelled_box_overlaps 0",
     "lod_psnr_drop_db": "≤ 0.5 dB",
     "real_bikes": "≥ 5 development models at box PSNR ≥ 30 dB and IoU ≥ 0.97 (10 random poses each; issue 27)",
+    "curation_stress": "usable share ≥ 0.8 (keypoints within 3 cm of the untransformed model's), 0 crashes (issue 27)",
     "bike_relit": "box PSNR ≥ 30 dB, IoU ≥ 0.97 (means)",
     "rider_relit": "box PSNR ≥ 30 dB, IoU ≥ 0.97 (means)",
     "relight_render_overhead": "≤ 0.2",

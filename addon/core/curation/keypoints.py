@@ -92,11 +92,18 @@ def seat(view, crank_axle, rear_axle):
     return np.array([xc, p[band, 1].max() - SEAT_DEPTH, 0.0])
 
 
+PEDAL_TWIN_AREA = 0.9     # pieces this close in area to the largest beside it are one pedal's pieces
+PEDAL_TWIN_GAP = 0.12     # m between their centres: at most a pedal's length
+
+
 def pedals(view, crank_axle):
-    """Centres of the largest components beyond the crank arms on each side."""
+    """Centres of the largest components beyond the crank arms on each side.  Pieces of about
+    the largest one's area next to it (a rat-trap pedal's two cages, a pedal of two mirrored
+    plates) are that pedal too: which of two equal pieces is 'the largest' is the file's
+    rounding, and changes when the model is turned or re-exported."""
     out = {}
     for name, sg in (("pedal_right", 1), ("pedal_left", -1)):
-        best = None
+        cands = []
         for c in view.comps:
             mu, lo, hi, _, _ = view.stats(c)
             r = np.hypot(mu[0] - crank_axle[0], mu[1] - crank_axle[1])
@@ -104,10 +111,11 @@ def pedals(view, crank_axle):
                 continue
             if np.hypot(*(view.pts(c)[:, :2] - crank_axle[:2]).T).max() > 0.35:
                 continue
-            if best is None or c.area > best.area:
-                best = c
-        if best is not None:
-            p = view.pts(best)
+            cands.append((c, mu))
+        if cands:
+            best, bmu = max(cands, key=lambda cm: cm[0].area)
+            p = np.concatenate([view.pts(c) for c, mu in cands if c.area >= PEDAL_TWIN_AREA * best.area
+                                and np.linalg.norm(mu - bmu) < PEDAL_TWIN_GAP])
             out[name] = 0.5 * (p.min(0) + p.max(0))
     return out
 
