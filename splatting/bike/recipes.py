@@ -17,6 +17,7 @@ are `train --antialiased` and `bike-posed-train --densify --densify-max 30000 --
 --lr-decay 0.03 --lr-tail 2000 --sh-degree 2 --eps2d 0.173`. `make bench` builds its bike with
 `fidelity`, so that bike_fidelity measures the recipe that claims the goal.
 """
+from cyclist_formats.errors import UserError
 
 DEFAULT = {"train": {}, "posed": {}}
 
@@ -34,6 +35,25 @@ REAL = {"train": {"antialiased": True, "iterations": 1000, "densify_max_gaussian
         "posed": {"poses": 48, "iterations": 1500, "densify": True, "densify_max": 30000, "eps2d": 0.173}}
 
 RECIPES = {"default": DEFAULT, "fidelity": FIDELITY, "real": REAL}
+
+# the library budget a recipe was measured at, used where `library build` is not given --size /
+# --samples (the default recipe: none, so procedural bikes keep the library's 512 px, renderer's samples)
+LIBRARY = {"real": {"view_size": 256, "samples": 128}}
+
+
+def for_bikes(metas):
+    """The recipe `library build` uses when none is named, from the meta.json of every bike it
+    builds: `real` when all were curated from downloaded models (generator "curated", what
+    curate.py writes), `default` when none was (procedural bikes, generator "procedural", and a
+    build of riders only).  A library keeps one budget, so a mix is refused: name --recipe."""
+    curated = [m.get("generator") == "curated" for m in metas]
+    if curated and all(curated):
+        return "real"
+    if not any(curated):
+        return "default"
+    raise UserError(f"the bikes mix {sum(curated)} curated and {len(curated) - sum(curated)} other ones, whose "
+                    f"default recipes differ (real, default); a library keeps one budget: name --recipe or build "
+                    f"them into two libraries")
 
 
 # the configs' modules load torch (~2.5 s, python -X importtime); imported where a config is made, so
