@@ -85,3 +85,13 @@ def test_default_recipe_is_real_for_curated_bikes_and_default_for_procedural(tmp
     with pytest.raises(UserError, match="name --recipe"):
         _settings(*out)
     assert _settings(*out, "--recipe", "default").record() == proc.record()
+
+
+def test_bench_builds_with_the_library_default(tmp_path):
+    """bench/real_bikes.py measures what `library build` does on a curated bike by default: its
+    command names no recipe, and its settings are the real recipe's."""
+    from bench.real_bikes import RECIPE, build_cmd
+    _bike(tmp_path, "real_one", "curated")
+    argv = build_cmd(str(tmp_path), "real_one", 10)[5:]   # after `python -m splatting library build`
+    assert "--recipe" not in argv and RECIPE == "real"
+    assert _settings(*argv).record() == _settings(*argv, "--recipe", "real").record()
