@@ -1,7 +1,7 @@
 """The asset recipes: which options make a bike's part Gaussians (docs/training.md).
 
-default   `python -m splatting train` per part, then `bike-posed-train`: what `library build` and
-          the demo-sized budgets use (31.07 dB / IoU 0.9755 against the 512-sample references at
+default   `python -m splatting train` per part, then `bike-posed-train`: what `library build` uses for
+          procedural bikes and the demo-sized budgets (31.07 dB / IoU 0.9755 against the 512-sample references at
           the 12 blender_compare poses).
 fidelity  issue 14's recipe, the one that reaches its 32 dB: parts trained with the mip filter,
           then a densified, longer fine-tune with degree-2 SH and Cycles' pixel filter (32.02 dB /
@@ -9,8 +9,9 @@ fidelity  issue 14's recipe, the one that reaches its 32 dB: parts trained with 
           on this machine) and 1.9x the Gaussians to store and render (83 787 against 44 881).
 
 real      downloaded bikes (docs/curation.md, "Real models against Blender"): antialiased parts,
-          1 000 steps, then a short densified fine-tune (48 poses, 1 500 steps, eps2d 0.173);
-          what bench/real_bikes.py builds with, `library build --recipe real`.
+          1 000 steps, then a short densified fine-tune (48 poses, 1 500 steps, eps2d 0.173), at
+          256 px views and 128 spp (LIBRARY).  `library build`'s default for bikes curated from
+          downloaded models (meta.json generator "curated", for_bikes); what bench/real_bikes.py measures.
 
 Each recipe is {"train": TrainConfig fields, "posed": PosedTrainConfig fields}; the command lines
 are `train --antialiased` and `bike-posed-train --densify --densify-max 30000 --iterations 10000
