@@ -94,14 +94,19 @@ def check_args(args):
     check_address(args.address)
 
 
+def _bike_ids(root):
+    """The bike folders under root (those holding a bike.blend), sorted."""
+    return sorted(b for b in os.listdir(root) if os.path.isfile(os.path.join(root, b, "bike.blend"))) \
+        if os.path.isdir(root) else []
+
+
 def recipe_of(args):
     """--recipe, else the one for the bikes this build takes (recipes.for_bikes over their meta.json:
     curated -> real, procedural -> default; the bikes as select() finds them, unknown ids left to it)."""
     if args.recipe is not None:
         return args.recipe
     root = os.path.join(args.out, "bikes")
-    have = sorted(b for b in os.listdir(root) if os.path.isfile(os.path.join(root, b, "bike.blend"))) \
-        if os.path.isdir(root) else []
+    have = _bike_ids(root)
     ids = have if args.bikes is None else [b for b in args.bikes if b in have]
     return for_bikes([bike_folder.read_meta(os.path.join(root, b)) for b in ids])
 
@@ -109,8 +114,7 @@ def recipe_of(args):
 def select(args):
     """({bike id: folder}, [rider ids]) named by the arguments, every one checked to exist."""
     root = os.path.join(args.out, "bikes")
-    have = sorted(b for b in os.listdir(root) if os.path.isfile(os.path.join(root, b, "bike.blend"))) \
-        if os.path.isdir(root) else []
+    have = _bike_ids(root)
     if args.bikes is None:
         bikes = have
     else:
