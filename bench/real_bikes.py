@@ -2,7 +2,8 @@
 
 For every development model in ../shared/models (SOURCES.md; or the ones named with --models):
 curate it (blender_scripts/curate.py), build its assets with the real-bike recipe through
-`python -m splatting library build --recipe RECIPE --size VIEW_SIZE` (views, part training, the
+`python -m splatting library build` with the library's default for curated bikes (the `real`
+recipe, its 256 px views and 128 spp; views, part training, the
 posed fine-tune, and the library's own ground-truth check: Blender's render of the articulated
 mesh against the composed part Gaussians at POSES random 8-DoF poses, seed 0, ring cameras; mask
 IoU at alpha 0.5, PSNR inside the box around both masks), and report per model: curated?,
@@ -33,6 +34,7 @@ if ROOT not in sys.path:
 
 from bench.provenance import code_version, file_hash, not_measured, record, tree_hash  # noqa: E402
 from cyclist_formats.atomic import read_json_or_none, write_json  # noqa: E402
+from splatting.bike.recipes import LIBRARY  # noqa: E402
 
 # the development set (../shared/models/SOURCES.md): id -> the file curate.py reads
 MODELS = {
@@ -47,12 +49,12 @@ MODELS = {
     "gow2023_jo_on_bike_rigged": "gow2023_jo_on_bike_rigged.glb",
     "diegor_scooter_rider_gltf": "diegor_scooter_rider_gltf/scene.gltf",
 }
-RECIPE = "real"     # splatting/bike/recipes.py: the one `library build` uses for real bikes
-VIEW_SIZE = 256     # views and ground truth at 256^2 (the CPU budget of docs/curation.md's table)
+RECIPE = "real"     # splatting/bike/recipes.py: the one `library build` picks for curated bikes (for_bikes)
+VIEW_SIZE = LIBRARY[RECIPE]["view_size"]   # views and ground truth at 256^2 (the CPU budget of docs/curation.md)
 POSES = 10          # random 8-DoF poses per bike (seed 0)
 # Cycles samples of views, posed renders and the reference: the library's default reference (16 spp +
 # denoiser) is itself 35.0 dB / IoU 0.959 from a 128-spp one on a spoked wheel (docs/curation.md)
-SAMPLES = 128
+SAMPLES = LIBRARY[RECIPE]["samples"]
 GOAL = {"box_psnr": 30.0, "iou": 0.97}
 CURATE_CODE = ("addon", "blender_scripts/curate.py", "cyclist_formats")
 
@@ -110,8 +112,10 @@ def curate(model_path, lib_root, mid, log=print):
 
 
 def build_cmd(lib_root, mid, poses):
+    """`library build` as a user runs it on a curated bike: no --recipe, --size or --samples, so the
+    library's default for curated bikes (RECIPE at VIEW_SIZE, SAMPLES) is what is measured."""
     return [sys.executable, "-m", "splatting", "library", "build", "--out", lib_root, "--bikes", mid,
-            "--size", str(VIEW_SIZE), "--samples", str(SAMPLES), "--recipe", RECIPE, "--gt-poses", str(poses),
+            "--gt-poses", str(poses),
             "--time-budget-s", "36000"]   # the recipe's iterations decide, never the machine's load
 
 
@@ -130,7 +134,8 @@ def build(lib_root, mid, poses, log=print):
     gt = read_json_or_none(os.path.join(lib_root, "library", "tasks", f"gt__{mid}.json"))
     posed = read_json_or_none(os.path.join(lib_root, "library", "tasks", f"posed__{mid}.json"))
     stamp = [(gt or {}).get("wall_s"), (posed or {}).get("wall_s")]
-    if rec.get("stamp") == stamp and rec.get("cmd") == cmd[3:]:
+    # the stamps name the build that made the assets (a changed setting reruns its tasks, new stamps)
+    if rec.get("stamp") == stamp:
         return {"cpu_s": rec["cpu_s"], "reused": True}
     write_json(rec_path, {"cmd": cmd[3:], "stamp": stamp, "cpu_s": round(cpu, 1), "wall_s": round(wall, 1)})
     return {"cpu_s": round(cpu, 1), "reused": False}

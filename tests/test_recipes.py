@@ -37,3 +37,14 @@ def test_default_recipe_is_the_configs_defaults():
 def test_unknown_recipe_is_refused():
     with pytest.raises(ValueError, match="unknown recipe 'best'.*fidelity"):
         recipes.posed_config("best")
+
+
+@pytest.mark.parametrize("name", sorted(recipes.RECIPES))
+def test_every_recipe_makes_its_configs(name):
+    """Each named recipe's train and posed blocks are valid configs (an unknown or mistyped field in
+    a recipe raises UserError), and the library reads the recipe's Gaussian cap where the trainer does."""
+    t = recipes.train_config(name)
+    recipes.posed_config(name)
+    cap = recipes.RECIPES[name]["train"].get("densify", {}).get("max_gaussians")
+    if cap is not None:
+        assert t.densify.max_gaussians == cap

@@ -16,7 +16,8 @@ import time
 from cyclist_formats import checks
 from cyclist_formats.atomic import remove_stale
 from cyclist_formats.errors import UserError
-from splatting.bike.recipes import RECIPES  # torch-free: names and option dicts
+from cyclist_formats import bike_folder
+from splatting.bike.recipes import LIBRARY, RECIPES, for_bikes  # torch-free: names and option dicts
 from splatting.library.ray_address import check_address
 from splatting.library import manifest
 
@@ -37,8 +38,10 @@ def add_arguments(p):
     p.add_argument("--workers", type=int, default=1, help="local engine: tasks at a time (default 1)")
     p.add_argument("--retries", type=int, default=1, help="retries of a failed task (default 1)")
     b = p.add_argument_group("budget (recorded in library.json; a library keeps one budget)")
-    b.add_argument("--size", type=int, default=512, help="view size in pixels (default 512)")
-    b.add_argument("--samples", type=int, default=None, help="Cycles samples (default: the renderer's)")
+    b.add_argument("--size", type=int, default=None,
+                   help="view size in pixels (default: the recipe's, 256 for real, else 512)")
+    b.add_argument("--samples", type=int, default=None,
+                   help="Cycles samples (default: the recipe's, 128 for real, else the renderer's)")
     b.add_argument("--iterations", type=int, default=None,
                    help="training iterations per part (default: the recipe's, else 3000)")
     b.add_argument("--time-budget-s", type=float, default=600.0, help="training wall-time cap per part (default 600)")
@@ -46,11 +49,12 @@ def add_arguments(p):
                    help="per part / avatar (default: the recipe's, else 15000)")
     b.add_argument("--rider-iterations", type=int, default=1500, help="avatar training iterations (default 1500)")
     b.add_argument("--gt-poses", type=int, default=3, help="ground-truth poses per bike (default 3)")
-    b.add_argument("--recipe", choices=tuple(RECIPES), default="default",
+    b.add_argument("--recipe", choices=tuple(RECIPES), default=None,
                    help="asset recipe (splatting/bike/recipes.py): fidelity = parts trained antialiased and issue "
                         "14's long fine-tune (32 dB at random poses; 3.1x the fine-tune's CPU, 1.9x the Gaussians); "
                         "real = downloaded bikes' (docs/curation.md); "
-                        "--posed-* options still override it (default: default)")
+                        "--posed-* options still override it (default: real when every bike built was curated "
+                        "from a downloaded model, meta.json generator 'curated'; default for procedural bikes)")
     f = p.add_argument_group("posed fine-tune (python -m splatting bike-posed-train; recorded like the budget)")
     f.add_argument("--no-posed-train", action="store_true",
                    help="skip the fine-tune: train tasks write gaussians/<part>.ply, no posed:<bike> task "
@@ -89,11 +93,27 @@ def check_args(args):
     check_address(args.address)
 
 
+def _bike_ids(root):
+    """The bike folders under root (those holding a bike.blend), sorted."""
+    return sorted(b for b in os.listdir(root) if os.path.isfile(os.path.join(root, b, "bike.blend"))) \
+        if os.path.isdir(root) else []
+
+
+def recipe_of(args):
+    """--recipe, else the one for the bikes this build takes (recipes.for_bikes over their meta.json:
+    curated -> real, procedural -> default; the bikes as select() finds them, unknown ids left to it)."""
+    if args.recipe is not None:
+        return args.recipe
+    root = os.path.join(args.out, "bikes")
+    have = _bike_ids(root)
+    ids = have if args.bikes is None else [b for b in args.bikes if b in have]
+    return for_bikes([bike_folder.read_meta(os.path.join(root, b)) for b in ids])
+
+
 def select(args):
     """({bike id: folder}, [rider ids]) named by the arguments, every one checked to exist."""
     root = os.path.join(args.out, "bikes")
-    have = sorted(b for b in os.listdir(root) if os.path.isfile(os.path.join(root, b, "bike.blend"))) \
-        if os.path.isdir(root) else []
+    have = _bike_ids(root)
     if args.bikes is None:
         bikes = have
     else:
@@ -119,10 +139,13 @@ def select(args):
 def budget_of(args):
     """The Budget of the flags (checked field by field; torch-free, so check_args runs it first)."""
     from splatting.library.settings import budget
-    train = RECIPES[args.recipe]["train"]  # the recipe's part budget unless given
-    return budget(view_size=args.size, samples=args.samples, iterations=args.iterations or train.get("iterations", 3000),
+    recipe = recipe_of(args)
+    train, lib = RECIPES[recipe]["train"], LIBRARY.get(recipe, {})  # the recipe's budget unless given
+    return budget(view_size=lib.get("view_size", 512) if args.size is None else args.size,
+                  samples=lib.get("samples") if args.samples is None else args.samples,
+                  iterations=args.iterations or train.get("iterations", 3000),
                   time_budget_s=args.time_budget_s,
-                  max_gaussians=args.max_gaussians or train.get("densify_max_gaussians", 15000),
+                  max_gaussians=args.max_gaussians or train.get("densify", {}).get("max_gaussians", 15000),
                   rider_iterations=args.rider_iterations, gt_poses=args.gt_poses, gt_seed=0,
                   riders_root=os.path.abspath(args.riders_root), posed_train=not args.no_posed_train,
                   antialiased=bool(train.get("antialiased")))
@@ -140,10 +163,12 @@ def posed_settings(args):
     in splatting/bike/posed_config.py is a settings change too (it is recorded as posed_<field>),
     never a silent one.  Resolved here, not in add_arguments: the module imports torch, --help should not."""
     from splatting.bike.recipes import posed_config
-    d = posed_config(args.recipe)
-    return d.model_copy(update=dict(poses=args.posed_poses or d.poses, iterations=args.posed_iterations or d.iterations,
-                                    samples=args.posed_samples or args.samples or d.samples,
-                                    sh_degree=d.sh_degree if args.posed_sh_degree is None else args.posed_sh_degree))
+    recipe = recipe_of(args)
+    d = posed_config(recipe)
+    return d.model_copy(update=dict(
+        poses=args.posed_poses or d.poses, iterations=args.posed_iterations or d.iterations,
+        samples=args.posed_samples or args.samples or LIBRARY.get(recipe, {}).get("samples") or d.samples,
+        sh_degree=d.sh_degree if args.posed_sh_degree is None else args.posed_sh_degree))
 
 
 def floors_of(args):
