@@ -24,7 +24,7 @@ def test_library_build_takes_the_recipe_part_budget():
     from splatting.bike.recipes import RECIPES
     real = RECIPES["real"]["train"]
     s = _settings("--recipe", "real")
-    assert s.budget.iterations == real["iterations"] and s.budget.max_gaussians == real["densify_max_gaussians"]
+    assert s.budget.iterations == real["iterations"] and s.budget.max_gaussians == real["densify"]["max_gaussians"]
     assert s.posed.iterations == RECIPES["real"]["posed"].get("iterations", 6000)
     d = _settings()   # the default recipe keeps the library's old budget
     assert (d.budget.iterations, d.budget.max_gaussians) == (3000, 15000)
