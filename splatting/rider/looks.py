@@ -23,10 +23,10 @@ import zlib
 import numpy as np
 
 from splatting.rider.kinematics import JOINT_INDEX
+from splatting.rider.look_names import HAIR_STYLES
 
 TOP_PATTERNS = ("plain", "stripes", "checks", "side_panels", "chest_band", "print")
 BOTTOM_PATTERNS = ("plain", "side_stripe")
-HAIR_STYLES = ("bald", "buzz", "short", "long", "bun")
 LOOK_FIELDS = {"top_pattern": TOP_PATTERNS, "bottom_pattern": BOTTOM_PATTERNS, "sleeves": ("short", "long"),
                "legs": ("shorts", "long"), "hair": HAIR_STYLES, "helmet": (True, False), "bag": ("none", "backpack")}
 COLOUR_FIELDS = ("accent", "hair_colour", "bag_colour")
