@@ -434,3 +434,26 @@ def test_tiny_library_build_killed_rerun_and_ray_give_the_same_files(tmp_path):
     assert all(after[f] == before[f] for f in before if "_rest." in f)
     assert all(after[f"{p}.ply"] != before[f"{p}.ply"] for p in PARTS)
     assert _records(w)[f"posed__{b}"]["settings"]["posed_iterations"] == 30
+
+
+def test_an_avatar_task_records_its_look_beside_its_gaussians(tmp_path, monkeypatch):
+    """The avatar task's files are what the manifest hashes and datasets read: look.json (what the
+    avatar wears, read when accessories are drawn) is one of them when rider-avatar wrote it."""
+    from splatting.library import tasks
+
+    folder = tmp_path / "riders" / "m_adult_average_185"
+
+    def fake_avatar(cmd, what, env_threads=1):  # what rider-avatar leaves in its --out folder
+        folder.mkdir(parents=True)
+        for n in (tasks.PLY_NAME, tasks.SKINNING_NAME):
+            (folder / n).write_bytes(b"x")
+        (folder / "rider.json").write_text(json.dumps({"psnr": 40.0, "psnr_crop": 35.0, "gaussians": 10}))
+        (folder / tasks.LOOK_NAME).write_text("{}")
+        return ""
+
+    monkeypatch.setattr(tasks, "_run", fake_avatar)
+    s = _settings(size=64, riders_root=str(tmp_path / "riders"))
+    rec = tasks.run_avatar(tasks.Task("avatar:m_adult_average_185", "avatar", "m_adult_average_185"), str(tmp_path), s)
+    assert sorted(os.path.basename(p) for p in rec["files"]) == sorted(
+        [tasks.PLY_NAME, tasks.SKINNING_NAME, "rider.json", "look.json"])
+    assert rec["metrics"] == {"psnr": 40.0, "box_psnr": 35.0, "gaussians": 10}

@@ -136,10 +136,11 @@ def select(args):
     return {b: os.path.join(root, b) for b in bikes}, riders
 
 
-def budget_of(args):
-    """The Budget of the flags (checked field by field; torch-free, so check_args runs it first)."""
+def budget_of(args, recipe=None):
+    """The Budget of the flags (checked field by field; torch-free, so check_args runs it first);
+    recipe: recipe_of(args) when the caller has it already (it reads every bike's meta.json)."""
     from splatting.library.settings import budget
-    recipe = recipe_of(args)
+    recipe = recipe or recipe_of(args)
     train, lib = RECIPES[recipe]["train"], LIBRARY.get(recipe, {})  # the recipe's budget unless given
     return budget(view_size=lib.get("view_size", 512) if args.size is None else args.size,
                   samples=lib.get("samples") if args.samples is None else args.samples,
@@ -154,16 +155,17 @@ def budget_of(args):
 def settings_of(args):
     """LibrarySettings of the flags: the budget and, with the posed stage on, its fine-tune."""
     from splatting.library.settings import LibrarySettings
-    return LibrarySettings(budget_of(args), posed_settings(args) if not args.no_posed_train else None)
+    recipe = recipe_of(args)
+    return LibrarySettings(budget_of(args, recipe), posed_settings(args, recipe) if not args.no_posed_train else None)
 
 
-def posed_settings(args):
+def posed_settings(args, recipe=None):
     """The fine-tune's whole configuration (a PosedTrainConfig): the options given here plus every
     other PosedTrainConfig default (rates, rest fraction, denoiser, ...), so that a default changed
     in splatting/bike/posed_config.py is a settings change too (it is recorded as posed_<field>),
     never a silent one.  Resolved here, not in add_arguments: the module imports torch, --help should not."""
     from splatting.bike.recipes import posed_config
-    recipe = recipe_of(args)
+    recipe = recipe or recipe_of(args)
     d = posed_config(recipe)
     return d.model_copy(update=dict(
         poses=args.posed_poses or d.poses, iterations=args.posed_iterations or d.iterations,

@@ -30,6 +30,7 @@ from cyclist_formats.errors import UserError
 from splatting.library import manifest
 from splatting.library.gt import ground_truth
 from splatting.rider.avatar import PLY_NAME, SKINNING_NAME
+from splatting.rider.avatar_look import LOOK_NAME
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 PARTS = ("frame", "steering", "crank")
@@ -184,6 +185,9 @@ def run_avatar(task, root, s):
     paths = [os.path.join(folder, n) for n in (PLY_NAME, SKINNING_NAME, "rider.json")]
     with open(paths[2]) as f:
         m = json.load(f)
+    look = os.path.join(folder, LOOK_NAME)  # what datasets dress the avatar from; absent only in an
+    if os.path.isfile(look):                # avatar folder begun before avatars recorded their look
+        paths.append(look)
     return {"files": {os.path.abspath(p): manifest.sha256(p) for p in paths}, "folder": os.path.abspath(folder),
             "metrics": {"psnr": m.get("psnr"), "box_psnr": m.get("psnr_crop"), "gaussians": m.get("gaussians")},
             "wall_s": round(wall, 2)}
