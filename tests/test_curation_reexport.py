@@ -177,7 +177,9 @@ def _shown_differs_at_rest(bpy, want, scale):
     return all(np.abs(rest[n + "_piece"].mean(0) - v.mean(0)).max() > 0.1 * scale for n, v in want.items())
 
 
-def test_a_gltf_whose_joints_rest_scattered_and_whose_animation_assembles_the_bike_curates_as_the_bike(tmp_path):
+@pytest.mark.parametrize("yaw,scale", [(37.0, 1.0), (251.0, 100.0)])
+def test_a_gltf_whose_joints_rest_scattered_and_whose_animation_assembles_the_bike_curates_as_the_bike(
+        tmp_path, yaw, scale):
     """How rigged glTFs are published: the joints' node transforms at the rest pose, the shown
     pose in the first animation.  The importer shows the animation's pose; the curation finds
     the bike's own keypoints there (truth: the generator's, under the model transform)."""
@@ -187,7 +189,6 @@ def test_a_gltf_whose_joints_rest_scattered_and_whose_animation_assembles_the_bi
     from addon.core.curation.scene_state import mesh_arrays
     from addon.core.scene import reset_scene
 
-    yaw, scale = 37.0, 1.0
     reset_scene()
     want = _rigged_bike(bpy, yaw, scale)
     arm = bpy.data.objects["rig"]
