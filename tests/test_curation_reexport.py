@@ -61,6 +61,33 @@ def test_a_way_round_that_validates_beats_a_refused_one_unless_its_cues_say_back
     assert pipeline._rank(_Res("forward", ["a"]), None) < pipeline._rank(_Res("forward", ["a"]), "refused")
 
 
+def _box(lo, hi, step=0.01):
+    axes = [np.arange(a, b + 1e-9, step) for a, b in zip(lo, hi)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+
+
+@pytest.mark.parametrize("left_reach", [0.20, 0.17])
+@pytest.mark.parametrize("plane_offset", [-0.004, 0.0, 0.004])
+def test_uneven_pedals_pair_the_same_whichever_side_of_the_symmetry_limit_the_plane_puts_them(left_reach, plane_offset):
+    """The robot bike's pedals reach 0.236 and 0.189 m out (4.7 cm uneven; a pair within 0.15
+    wheel radii, 5.25 cm), and its plane moves 4 mm between copies of the file: past the limit
+    the crank axle came from the outermost surface per side instead (here a long low bar further
+    out on the left: 8 cm off).  Canonical samples, the pedal bodies' side-view centres at
+    (0.12, 0.44) and (0.31, 0.27): the crank axle is their midpoint for every reach and offset."""
+    from addon.core.curation import shape_keypoints as sk
+
+    R = 0.35
+    fa, ra = np.array([0.7, R, 0.0]), np.array([-0.4, R, 0.0])
+    right = _box((0.08, 0.425, 0.15), (0.16, 0.455, 0.24))          # outer end 0.24 m out
+    left = _box((0.27, 0.255, -left_reach), (0.35, 0.285, -left_reach + 0.05))
+    bar = _box((-0.2, 0.2, -0.26), (0.5, 0.23, -0.23))                # a long low bar beside the bike
+    X = np.concatenate([right, left, bar]) + [0.0, 0.0, plane_offset]
+    ca, pl, pr, has_crank = sk.pedals(X, fa, ra, R, 0.02)
+    assert has_crank
+    assert np.allclose(ca[:2], [0.215, 0.355], atol=0.005), ca
+    assert np.allclose(pr[:2], [0.12, 0.44], atol=0.005) and np.allclose(pl[:2], [0.31, 0.27], atol=0.005), (pl, pr)
+
+
 # ---- the rig (bpy) ----
 
 def _rigged_bike(bpy, yaw, scale):
