@@ -91,8 +91,12 @@ def write(model, variant, out):
     bpy.context.view_layer.update()
     tmp = out + ".tmp" + spec["ext"]
     if spec["ext"] == ".glb":
+        # what the author shows: hidden helpers stay out, and an armature's joints are written at
+        # the pose the scene shows (the exporter's default writes its rest pose as the nodes'
+        # transforms: with the animation left out, a rigged bike's bone-parented pieces would
+        # lie scattered in the file itself, for every glTF viewer, not just for the curation)
         bpy.ops.export_scene.gltf(filepath=tmp, export_format="GLB", export_apply=True, export_animations=False,
-                                  use_visible=True)   # what the author shows: hidden helpers stay out
+                                  export_rest_position_armature=False, export_current_frame=True, use_visible=True)
     elif spec["ext"] == ".fbx":
         bpy.ops.export_scene.fbx(filepath=tmp, use_mesh_modifiers=True, bake_anim=False, use_visible=True)
     else:

@@ -202,6 +202,13 @@ def pedals(X, fa, ra, R, tyre_half_width):
     left = _pedal_candidates(X, fa, ra, R, zmin, -1)
     pairs = [(min(r[2], l[2]), r, l) for r in right for l in left if abs(r[2] - l[2]) < 0.15 * R]
     crank = [p for p in pairs if 0.35 * R < np.hypot(p[1][0] - p[2][0], p[1][1] - p[2][1]) < 1.6 * R]
+    if not pairs:
+        # uneven pedals (a toy's, 4.7 cm apart in reach) near the limit: the bike's plane comes
+        # from the tyre bands and moves a few mm between copies of one model (turned, other
+        # pixel grid), enough to cross it; a crank-like pair within 0.25 R is still taken
+        # rather than the outermost surface (the robot bike's crank axle moved 5.5 cm)
+        crank = [(min(r[2], l[2]), r, l) for r in right for l in left if abs(r[2] - l[2]) < 0.25 * R
+                 and 0.35 * R < np.hypot(r[0] - l[0], r[1] - l[1]) < 1.6 * R]
     pick = max(crank or pairs, key=lambda p: p[0], default=None)
     if pick is None and bool(right) != bool(left):
         # one side's pedal or peg is lost in something longer (an exhaust along it): mirror the

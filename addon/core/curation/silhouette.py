@@ -317,6 +317,15 @@ def refine(P, sv, circ, sectors=72, spread=0.15):
     return c, r, np.nonzero((rho > 0.9 * r) & (rho < 1.01 * r))[0]
 
 
+def outlines_alike(ra, rb):
+    """Two side-view circles the outline shows as the same size: radii within 5 %.  The
+    outline's radii are whole pixels (38 and 40 px are exactly 5 % apart), and the pixel size's
+    last bit follows the order the file lists its triangles in (the side view's axes are summed
+    over the surface samples): a tie is a difference, whatever the rounding (the robot bike's
+    wheels were refitted or not by its OBJ's and its glTF re-export's triangle order)."""
+    return abs(ra - rb) < 0.05 * (1 - 1e-9) * max(ra, rb)
+
+
 def _ransac_circle(xy, r0, tries=300, spread=0.15):
     """Least-squares circle on the inliers of the best 3-point circle: the outline points of a
     tyre, without the stays, fork legs and mudguard stays that cross the band around it."""
@@ -431,7 +440,7 @@ def wheel_rings(soup, skip=None):
             fits.append(refine(P, frame, Circle(c2, r, 1.0)))
         # wheels the outline shows equal stay equal: the better-seen tyre sets the size of one
         # half hidden (a rider's foot against it pulls its fit outwards)
-        if abs(a.radius - b.radius) < 0.05 * max(a.radius, b.radius) and \
+        if outlines_alike(a.radius, b.radius) and \
                 abs(fits[0][1] - fits[1][1]) > 0.05 * max(fits[0][1], fits[1][1]):
             good, bad = (0, 1) if a.support >= b.support else (1, 0)
             c3 = cents[bad]
