@@ -101,8 +101,16 @@ _VERDICT_RANK = {"forward": 0, "unknown": 1, "backwards": 2, "conflict": 2}
 
 def _rank(res, err):
     """Order of two curations of one model the two ways round: the one the geometry's cues say
-    faces forward, then the one with fewer problems (a refusal counts as one)."""
-    return _VERDICT_RANK[res.record["forward_check"]["verdict"]], (0 if err is None else 1) + len(res.problems)
+    faces forward, then the one with fewer problems (a refusal counts as one).  A front guessed
+    from the bar (the high wide parts' average place) that only the bar cue confirms is no
+    evidence (the cue measures what the guess did): it ranks as undecided, so the way that
+    validates wins (a motor scooter with a rider: which way its bar ends tipped the cue, 0.09 or
+    0.14 m from the middle, hung on which surface samples were kept)."""
+    v = res.record["forward_check"]["verdict"]
+    if v == "forward" and res.record.get("forward_cue", "").startswith("handlebar") \
+            and all(c.sign == 0 for c in res.cues if c.name != "bar"):
+        v = "unknown"
+    return _VERDICT_RANK[v], (0 if err is None else 1) + len(res.problems)
 
 
 def _sized(V, T, wheel_diameter, keypoints, hints, wheel_centres, extra):
