@@ -14,7 +14,7 @@ from .validate import validate
 def shape_samples(view, keep_tri, spacing=0.01, max_points=2000000):
     """Surface points of the kept triangles (canonical metres) no further than ~spacing apart.
 
-    All of them up to max_points (the ten development models give 0.5-1.3 M): a subset made the
+    All of them up to max_points (the ten development models give 0.17-1.9 M): a subset made the
     shape finders' near-ties (two steering lines, a bar end's place) depend on which points it
     kept; above it, a subset that depends on the shape alone (sample_subset.py)."""
     T = view.soup.TW[keep_tri]
