@@ -37,6 +37,16 @@ def _halved_pedals(V, T, kp):
     return V, T
 
 
+def _assert_near_truth(V, T, kp, yaw, scale, names, tol):
+    """Curate the canonical bike V, T written turned `yaw` degrees in `scale` units: no problems,
+    and each of `names` within tol metres of its true keypoint carried through the same transform."""
+    res = pipeline.curate_arrays(_model(V, yaw, scale, False), T, None)
+    assert res.problems == [], res.problems
+    for name in names:
+        truth = _model(kp[name][None], yaw, scale, False)[0] @ res.M[:3, :3].T + res.M[:3, 3]
+        assert np.linalg.norm(res.keypoints[name] - truth) < tol, (name, res.keypoints[name], truth)
+
+
 @pytest.mark.parametrize("yaw,scale", [(0.0, 1.0), (37.0, 100.0), (143.0, 1.0), (251.0, 1000.0), (90.0, 1.0)])
 def test_a_pedal_of_two_equal_pieces_is_found_at_its_middle_whichever_way_the_model_is_turned(yaw, scale):
     """Two pieces of one pedal have the same area up to the file's rounding, so 'the largest
@@ -45,14 +55,7 @@ def test_a_pedal_of_two_equal_pieces_is_found_at_its_middle_whichever_way_the_mo
     is both halves: its keypoint at the pedal's middle, the same for every turn and unit."""
     V, T, kp, _ = _procedural(0, 45.0)
     V, T = _halved_pedals(V, T, kp)
-    res = pipeline.curate_arrays(_model(V, yaw, scale, False), T, None)
-    assert res.problems == [], res.problems
-
-    def where(name):
-        return _model(kp[name][None], yaw, scale, False)[0] @ res.M[:3, :3].T + res.M[:3, 3]
-
-    for name in ("pedal_left", "pedal_right"):
-        assert np.linalg.norm(res.keypoints[name] - where(name)) < 0.01, (name, res.keypoints[name], where(name))
+    _assert_near_truth(V, T, kp, yaw, scale, ("pedal_left", "pedal_right"), 0.01)
 
 
 def _subdivided(V, T):
@@ -151,14 +154,7 @@ def test_a_tube_from_the_front_hub_up_the_fork_is_not_taken_for_the_head_tube(ya
     ax = (kp["steer_top"] - kp["steer_bottom"]) / np.linalg.norm(kp["steer_top"] - kp["steer_bottom"])
     Vs, Ts = _strut(fa + 0.02 * ax, fa + 0.32 * ax, 0.03)
     V, T = np.concatenate([V, Vs]), np.concatenate([T, Ts + len(V)])
-    res = pipeline.curate_arrays(_model(V, yaw, scale, False), T, None)
-    assert res.problems == [], res.problems
-
-    def where(name):
-        return _model(kp[name][None], yaw, scale, False)[0] @ res.M[:3, :3].T + res.M[:3, 3]
-
-    for name in ("steer_bottom", "steer_top"):
-        assert np.linalg.norm(res.keypoints[name] - where(name)) < 0.02, (name, res.keypoints[name], where(name))
+    _assert_near_truth(V, T, kp, yaw, scale, ("steer_bottom", "steer_top"), 0.02)
 
 
 def _ranked(cue, crank_sign, bar_sign, problems=()):
