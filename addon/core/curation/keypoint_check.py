@@ -18,6 +18,7 @@ A distance over 3 cm is a problem naming the keypoint and the distance."""
 import numpy as np
 
 from . import split
+from .sample_subset import thin
 from .silhouette import surface_samples
 
 TOL = 0.03   # metres
@@ -43,10 +44,7 @@ def part_samples(P, TW, tri_mask, spacing=0.01, max_points=150000):
     used = np.unique(T)
     remap = np.full(len(P), -1)
     remap[used] = np.arange(len(used))
-    S = surface_samples(P[used], remap[T], spacing)
-    if len(S) > max_points:
-        S = S[np.random.default_rng(0).choice(len(S), max_points, replace=False)]
-    return S
+    return thin(surface_samples(P[used], remap[T], spacing), max_points)
 
 
 def distances(P, TW, labels, kp, has_crank):

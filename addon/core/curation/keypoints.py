@@ -65,8 +65,14 @@ def head_tube(view, front_axle, crank_axle):
         length = t.max() - t.min()
         if length < 0.06 or length > 0.4:
             continue
+        # a head tube starts above the tyre: a piece reaching down into the front wheel (the
+        # axle's height is the wheel's radius) is a fork blade or a fender stay, not it (a
+        # decimated bicycle's coarse head tube failed the tube test and its fork won)
+        bot = mu + t.min() * a
+        if np.hypot(bot[0] - front_axle[0], bot[1] - front_axle[1]) < 0.9 * front_axle[1]:
+            continue
         if best is None or r > best[0]:
-            best = (r, mu + t.min() * a, mu + t.max() * a, a)
+            best = (r, bot, mu + t.max() * a, a)
     return best
 
 

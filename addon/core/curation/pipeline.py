@@ -106,10 +106,15 @@ def _rank(res, err):
     counts as one).  A clean way whose bar cue falls just inside the margin (undecided) beats a
     failing way the cues call forward: which surface samples reach the bar's ends, and so
     whether the cue decides, changes with the file's triangle order (the motor scooter's bar
-    sits 0.09-0.14 m from the middle, the margin 0.13 m, before and after a glTF round trip)."""
-    verdict = res.record["forward_check"]["verdict"]
+    sits 0.09-0.14 m from the middle, the margin 0.13 m, before and after a glTF round trip).
+    A front guessed from the bar (the high wide parts' average place) that only the bar cue
+    confirms is no evidence (the cue measures what the guess did): it ranks as undecided."""
+    v = res.record["forward_check"]["verdict"]
+    if v == "forward" and res.record.get("forward_cue", "").startswith("handlebar") \
+            and all(c.sign == 0 for c in res.cues if c.name != "bar"):
+        v = "unknown"
     failures = (0 if err is None else 1) + len(res.problems)
-    return _VERDICT_RANK[verdict] == 2, failures > 0, _VERDICT_RANK[verdict], failures
+    return _VERDICT_RANK[v] == 2, failures > 0, _VERDICT_RANK[v], failures
 
 
 def _sized(V, T, wheel_diameter, keypoints, hints, wheel_centres, extra):

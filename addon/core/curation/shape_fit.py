@@ -6,20 +6,22 @@ import numpy as np
 from ..contract import UserError
 from . import keypoints as kpmod
 from . import shape_keypoints as sk
+from .sample_subset import thin
 from .silhouette import surface_samples
 from .validate import validate
 
 
-def shape_samples(view, keep_tri, spacing=0.01, max_points=200000):
-    """Surface points of the kept triangles (canonical metres) no further than ~spacing apart."""
+def shape_samples(view, keep_tri, spacing=0.01, max_points=2000000):
+    """Surface points of the kept triangles (canonical metres) no further than ~spacing apart.
+
+    All of them up to max_points (the ten development models give 0.17-1.9 M): a subset made the
+    shape finders' near-ties (two steering lines, a bar end's place) depend on which points it
+    kept; above it, a subset that depends on the shape alone (sample_subset.py)."""
     T = view.soup.TW[keep_tri]
     used = np.unique(T)
     remap = np.full(len(view.P), -1)
     remap[used] = np.arange(len(used))
-    X = surface_samples(view.P[used], remap[T], spacing)
-    if len(X) > max_points:
-        X = X[np.random.default_rng(0).choice(len(X), max_points, replace=False)]
-    return X
+    return thin(surface_samples(view.P[used], remap[T], spacing), max_points)
 
 
 def _annulus(X, c, r, lo=0.8, hi=1.0):
