@@ -37,7 +37,8 @@ from cyclist_formats.atomic import read_json_or_none, write_json  # noqa: E402
 TOL_M = 0.03
 TIMEOUT_S = 900
 # the default sweep: the exporter alone (the control), then the variants most likely to break first (CPU: a curation is 5-45 s on two cores)
-DEFAULT_VARIANTS = ("glb", "z_up", "mirrored", "joined", "scale0.01", "scale100", "yaw143", "far", "decimated", "fbx", "obj")
+DEFAULT_VARIANTS = ("glb", "z_up", "mirrored", "joined", "scale0.01", "scale100", "yaw37", "yaw143", "yaw251", "far", "decimated",
+                    "fbx", "obj")
 STRESS_CODE = CURATE_CODE + ("bench/curation_variants.py",)
 
 
